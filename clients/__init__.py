@@ -1,0 +1,1 @@
+"""kinesphere.clients role package."""

@@ -1,0 +1,86 @@
+"""The ``kinesphere`` command: a dispatcher whose sub-commands the roles register.
+
+Roles plug in through the ``kinesphere.commands`` entry-point group, so this core module
+never imports a role; a role that is not installed simply has no commands.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+from collections.abc import Callable, Sequence
+from importlib.metadata import entry_points
+from pathlib import Path
+from typing import Any
+
+from kinesphere import __version__
+from kinesphere.errors import KinesphereError
+
+
+
+def _register_core(sub: Any) -> None:
+    p = sub.add_parser(
+        "label",
+        help="propose an eURDF (body_part labels) for a plain URDF file",
+        description="Derive the paper's hierarchical labels (c_1, limb_ij, distal_ij) from a "
+        "URDF tree and print the eURDF; edit it, then check it with 'kinesphere describe FILE'.",
+    )
+    p.add_argument("urdf", type=Path, help="a plain URDF file")
+    p.add_argument(
+        "--merge-distance", type=float, default=0.01, metavar="M",
+        help="joints closer than M metres form one joint location (default 0.01)",
+    )
+    p.add_argument("-o", "--output", type=Path, help="write to this file instead of stdout")
+    p.set_defaults(func=_label)
+
+
+def _label(args: argparse.Namespace) -> int:
+    from kinesphere.labeller import propose_eurdf
+
+    text = propose_eurdf(args.urdf, merge_distance=args.merge_distance)
+    if args.output:
+        args.output.write_text(text, encoding="utf-8")
+        print(f"wrote {args.output}", file=sys.stderr)
+    else:
+        sys.stdout.write(text)
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="kinesphere",
+        description="Steer any robot with Laban spatial commands: (limb, origin, direction, size).",
+    )
+    parser.add_argument("--version", action="version", version=f"kinesphere {__version__}")
+    parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    _register_core(sub)
+    for ep in sorted(entry_points(group="kinesphere.commands"), key=lambda e: e.name):
+        register: Callable[[Any], None] = ep.load()
+        register(sub)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    logging.basicConfig(
+        level=logging.DEBUG if args.verbose else logging.INFO,
+        format="%(asctime)s %(name)s %(levelname)s %(message)s",
+    )
+    func = getattr(args, "func", None)
+    if func is None:
+        parser.print_help()
+        return 2
+    try:
+        return int(func(args) or 0)
+    except KinesphereError as exc:
+        print(f"error: {exc.message} [{exc.code}]", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,430 @@
+"""eURDF: a URDF plus overlapping ``<body_part>`` labels, loaded as the paper's (C, J, L, P).
+
+The labels sit beside the URDF elements, so any URDF tool still reads the file. A limb label
+names a whole subtree, hence a link carries one label per limb that contains it; a distal label
+names the joint location (one or more joints) at the root of its limb. The loader checks every
+label against the kinematic tree, so a broken description fails at load time with the element
+and the problem named, never later in the middle of a motion.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import math
+import re
+import xml.etree.ElementTree as ET
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import yourdfpy
+
+from kinesphere.errors import KinesphereError
+
+PartSet = Literal["C", "L", "J"]
+ACTUATED_TYPES = ("revolute", "prismatic", "continuous")
+_NAME_RULES: dict[str, re.Pattern[str]] = {
+    "C": re.compile(r"^c_(\d+)$"),
+    "L": re.compile(r"^limb_(\d)(\d+)$"),
+    "J": re.compile(r"^distal_(\d+)$"),
+}
+
+
+def invalid(message: str) -> KinesphereError:
+    return KinesphereError("invalid_eurdf", message)
+
+
+@dataclass(frozen=True)
+class JointLimit:
+    """One axis of the configuration space P: limits in rad (or m) and rad/s (or m/s)."""
+
+    name: str
+    kind: str
+    lower: float
+    upper: float
+    velocity: float
+
+    def clamp(self, value: float, margin: float = 0.0) -> float:
+        lo, hi = self.lower + margin, self.upper - margin
+        if lo > hi:
+            lo = hi = (self.lower + self.upper) / 2
+        return min(max(value, lo), hi)
+
+
+@dataclass(frozen=True)
+class BodyPart:
+    """A label: core (C), limb (L) or distal joint location (J)."""
+
+    name: str
+    set: PartSet
+    alias: str | None
+    links: tuple[str, ...] = ()
+    joints: tuple[str, ...] = ()
+    distal: str | None = None
+
+    @property
+    def index(self) -> tuple[int, ...]:
+        """Hierarchy index: ``limb_12`` -> (1, 2), ``distal_51`` -> (5, 1), ``c_1`` -> (1,)."""
+        digits = self.name.split("_", 1)[1]
+        return tuple(int(ch) for ch in digits) if self.set != "C" else (int(digits),)
+
+
+@dataclass(frozen=True)
+class Eurdf:
+    """A loaded, validated eURDF: the platform's (C, J, L, P) plus the URDF it annotates."""
+
+    name: str
+    urdf: yourdfpy.URDF
+    core: tuple[BodyPart, ...]
+    distals: tuple[BodyPart, ...]
+    limbs: tuple[BodyPart, ...]
+    limits: dict[str, JointLimit]
+    sha256: str
+    path: Path | None = None
+    _children: dict[str, list[tuple[str, str]]] = field(default_factory=dict, repr=False)
+
+    @property
+    def C(self) -> tuple[str, ...]:  # noqa: N802 - the paper's names
+        return tuple(p.name for p in self.core)
+
+    @property
+    def J(self) -> tuple[str, ...]:  # noqa: N802
+        return tuple(p.name for p in self.distals)
+
+    @property
+    def L(self) -> tuple[str, ...]:  # noqa: N802
+        return tuple(p.name for p in self.limbs)
+
+    @property
+    def P(self) -> tuple[JointLimit, ...]:  # noqa: N802
+        return tuple(self.limits.values())
+
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        return tuple(self.limits)
+
+    @property
+    def root_link(self) -> str:
+        children = {j.child for j in self.urdf.robot.joints}
+        return next(str(link.name) for link in self.urdf.robot.links if link.name not in children)
+
+    @property
+    def aliases(self) -> dict[str, str]:
+        return {p.alias: p.name for p in (*self.core, *self.distals, *self.limbs) if p.alias}
+
+    def _find(self, name: str, parts: tuple[BodyPart, ...], code: str, what: str) -> BodyPart:
+        key = name.strip()
+        for p in parts:
+            if key in (p.name, p.alias):
+                return p
+        valid = ", ".join(f"{p.name} ({p.alias})" if p.alias else p.name for p in parts)
+        raise KinesphereError(
+            code, f"{self.name} has no {what} {name!r}; valid: {valid or 'none'}"
+        )
+
+    def limb(self, name: str) -> BodyPart:
+        """Resolve a limb label or alias (``right_arm`` -> ``limb_11``)."""
+        return self._find(name, self.limbs, "unknown_limb", "limb")
+
+    def origin(self, name: str) -> BodyPart:
+        """Resolve an origin: a distal label or alias; core labels are origins for translation."""
+        return self._find(name, (*self.distals, *self.core), "unknown_origin", "origin")
+
+    def origin_joint(self, distal: str) -> str:
+        """The URDF joint whose anchor is the origin of a distal label (its first joint)."""
+        return self.origin(distal).joints[0]
+
+    def limb_joints(self, limb: str) -> tuple[str, ...]:
+        """Actuated joints of a limb in P order: its distal's root joint and all below it."""
+        part = self.limb(limb)
+        links = set(part.links)
+        return tuple(
+            j.name
+            for j in self.urdf.robot.joints
+            if j.name in self.limits and j.child in links
+        )
+
+    def tip_link(self, limb: str) -> str:
+        """The limb's distal end: the deepest link of the subtree (first branch on ties)."""
+        part = self.limb(limb)
+        root = self.urdf.joint_map[self.origin_joint(str(part.distal))].child
+        best, depth = root, 0
+        stack = [(root, 0)]
+        while stack:
+            link, d = stack.pop()
+            if d > depth:
+                best, depth = link, d
+            stack.extend((c, d + 1) for _, c in reversed(self._children.get(link, [])))
+        return str(best)
+
+    def subtree_links(self, link: str) -> list[str]:
+        """``link`` and every link below it, depth first in document order."""
+        out: list[str] = []
+        stack = [link]
+        while stack:
+            cur = stack.pop()
+            out.append(cur)
+            stack.extend(c for _, c in reversed(self._children.get(cur, [])))
+        return out
+
+    def labels_of_link(self, link: str) -> tuple[str, ...]:
+        """Every label that covers a link (several for links deep in a limb)."""
+        return tuple(p.name for p in (*self.core, *self.limbs) if link in p.links)
+
+
+def load_eurdf(source: str | Path) -> Eurdf:
+    """Load and validate an eURDF file (or XML text starting with '<')."""
+    if isinstance(source, str) and source.lstrip().startswith("<"):
+        text, path = source, None
+    else:
+        path = Path(source)
+        if not path.is_file():
+            raise invalid(f"eURDF file not found: {path}")
+        text = path.read_text(encoding="utf-8")
+    try:
+        root = ET.fromstring(text)
+    except ET.ParseError as exc:
+        raise invalid(f"{path or 'eURDF'}: not well-formed XML ({exc})") from None
+    if root.tag != "robot":
+        raise invalid(f"root element must be <robot>, found <{root.tag}>")
+    name = root.get("name") or ""
+    if not name:
+        raise invalid("<robot> has no name attribute")
+    _check_urdf_elements(root)
+    try:
+        urdf = yourdfpy.URDF.load(
+            io.StringIO(text), load_meshes=False, build_scene_graph=False,
+            build_collision_scene_graph=False,
+        )
+    except Exception as exc:  # yourdfpy raises assorted types for broken URDF
+        raise invalid(f"URDF part is invalid: {exc}") from None
+    children = _children(urdf)
+    _check_tree(urdf)
+    limits = _limits(urdf)
+    parts = [_parse_part(el) for el in root.findall("body_part")]
+    _validate(urdf, children, limits, parts)
+    return Eurdf(
+        name=name,
+        urdf=urdf,
+        core=tuple(sorted((p for p in parts if p.set == "C"), key=_order)),
+        distals=tuple(sorted((p for p in parts if p.set == "J"), key=_order)),
+        limbs=tuple(sorted((p for p in parts if p.set == "L"), key=_order)),
+        limits=limits,
+        sha256=hashlib.sha256(text.encode("utf-8")).hexdigest(),
+        path=path,
+        _children=children,
+    )
+
+
+def _order(p: BodyPart) -> tuple[int, ...]:
+    """Chain, then depth: limb_11, limb_12, limb_13, limb_21, ...; core joints first."""
+    idx = p.index
+    return idx if len(idx) > 1 else (0, idx[0])
+
+
+def _check_urdf_elements(root: ET.Element) -> None:
+    links = [el.get("name") for el in root.findall("link")]
+    if not links:
+        raise invalid("<robot> has no <link>")
+    for i, link_name in enumerate(links):
+        if not link_name:
+            raise invalid(f"<link> number {i + 1} has no name")
+    seen: set[str] = set()
+    for link_name in links:
+        if link_name in seen:
+            raise invalid(f"<link name={link_name!r}> appears twice")
+        seen.add(str(link_name))
+    for el in root.findall("joint"):
+        jn = el.get("name")
+        if not jn:
+            raise invalid("a <joint> has no name")
+        for tag in ("parent", "child"):
+            ref = el.find(tag)
+            target = ref.get("link") if ref is not None else None
+            if not target:
+                raise invalid(f"<joint name={jn!r}> has no <{tag} link=...>")
+            if target not in seen:
+                raise invalid(f"<joint name={jn!r}> {tag} link {target!r} does not exist")
+        jtype = el.get("type")
+        if jtype in ("revolute", "prismatic") and el.find("mimic") is None:
+            lim = el.find("limit")
+            if lim is None or lim.get("lower") is None or lim.get("upper") is None:
+                raise invalid(f"<joint name={jn!r}> ({jtype}) needs <limit lower upper>")
+            if float(lim.get("lower", "0")) > float(lim.get("upper", "0")):
+                raise invalid(f"<joint name={jn!r}> has lower limit above upper limit")
+
+
+def _check_tree(urdf: yourdfpy.URDF) -> None:
+    parent_of: dict[str, str] = {}
+    for j in urdf.robot.joints:
+        if j.child in parent_of:
+            raise invalid(f"link {j.child!r} is the child of two joints; a URDF must be a tree")
+        parent_of[j.child] = j.name
+    roots = [str(link.name) for link in urdf.robot.links if link.name not in parent_of]
+    if len(roots) != 1:
+        raise invalid(f"a URDF has exactly one root link; found {roots or 'none (a cycle)'}")
+
+
+def _children(urdf: yourdfpy.URDF) -> dict[str, list[tuple[str, str]]]:
+    out: dict[str, list[tuple[str, str]]] = {}
+    for j in urdf.robot.joints:
+        out.setdefault(j.parent, []).append((j.name, j.child))
+    return out
+
+
+def _limits(urdf: yourdfpy.URDF) -> dict[str, JointLimit]:
+    out: dict[str, JointLimit] = {}
+    for j in urdf.robot.joints:
+        if j.type not in ACTUATED_TYPES or j.mimic is not None:
+            continue
+        lim = j.limit
+        velocity = float(lim.velocity) if lim is not None and lim.velocity else math.inf
+        if j.type == "continuous":
+            lower, upper = -math.inf, math.inf
+        else:
+            lower, upper = float(lim.lower), float(lim.upper)
+        out[j.name] = JointLimit(j.name, j.type, lower, upper, velocity)
+    return out
+
+
+def _parse_part(el: ET.Element) -> BodyPart:
+    name = el.get("name") or ""
+    pset = el.get("set") or ""
+    if not name:
+        raise invalid("a <body_part> has no name")
+    if pset not in _NAME_RULES:
+        raise invalid(f"<body_part name={name!r}> has set={pset!r}; use C, L or J")
+    if not _NAME_RULES[pset].match(name):
+        pattern = {"C": "c_<i>", "L": "limb_<i><j>", "J": "distal_<i>[<j>]"}[pset]
+        raise invalid(f"<body_part name={name!r}> in set {pset} must be named {pattern}")
+    links = tuple(str(c.get("name")) for c in el.findall("link"))
+    joints = tuple(str(c.get("name")) for c in el.findall("joint"))
+    for child in el:
+        if child.tag not in ("link", "joint") or not child.get("name"):
+            raise invalid(f"<body_part name={name!r}> has a bad child <{child.tag}> (need name)")
+    if pset == "J" and links:
+        raise invalid(f"<body_part name={name!r}> (J) lists links; joint labels list <joint>s")
+    if pset in "CL" and joints:
+        raise invalid(f"<body_part name={name!r}> ({pset}) lists joints; it should list <link>s")
+    return BodyPart(name, pset, el.get("alias") or None, links, joints, el.get("distal"))  # type: ignore[arg-type]
+
+
+def _validate(
+    urdf: yourdfpy.URDF,
+    children: dict[str, list[tuple[str, str]]],
+    limits: dict[str, JointLimit],
+    parts: list[BodyPart],
+) -> None:
+    link_names = set(urdf.link_map)
+    joint_map: dict[str, Any] = dict(urdf.joint_map)
+    names: dict[str, str] = {}
+    for p in parts:
+        for label in (p.name, p.alias):
+            if label is None:
+                continue
+            if label in names:
+                raise invalid(f"label {label!r} is used twice ({names[label]} and {p.name})")
+            names[label] = p.name
+        for ln in p.links:
+            if ln not in link_names:
+                raise invalid(f"<body_part name={p.name!r}> names link {ln!r}, which does not exist")
+        for jn in p.joints:
+            if jn not in joint_map:
+                raise invalid(f"<body_part name={p.name!r}> names joint {jn!r}, which does not exist")
+        if len(set(p.links)) != len(p.links) or len(set(p.joints)) != len(p.joints):
+            raise invalid(f"<body_part name={p.name!r}> lists the same element twice")
+    core = [p for p in parts if p.set == "C"]
+    if not core:
+        raise invalid("no core label: the set C needs at least one <body_part set=\"C\">")
+    distals = {p.name: p for p in parts if p.set == "J"}
+    _check_distals(distals, joint_map)
+    limbs = {p.name: p for p in parts if p.set == "L"}
+    for limb in limbs.values():
+        _check_limb(limb, distals, joint_map, children, limits)
+    _check_hierarchy(limbs)
+    in_limbs = {ln for p in limbs.values() for ln in p.links}
+    in_core = {ln for p in core for ln in p.links}
+    overlap = sorted(in_core & in_limbs)
+    if overlap:
+        raise invalid(f"link {overlap[0]!r} is labelled both core and limb")
+    unlabelled = [ln for ln in urdf.link_map if ln not in in_core | in_limbs]
+    if unlabelled:
+        raise invalid(f"link {unlabelled[0]!r} has no core or limb label")
+    for d in distals.values():
+        if len(d.index) > 1 and f"limb_{d.name.split('_', 1)[1]}" not in limbs:
+            raise invalid(f"<body_part name={d.name!r}> has no matching limb label")
+
+
+def _check_distals(distals: dict[str, BodyPart], joint_map: dict[str, Any]) -> None:
+    owner: dict[str, str] = {}
+    for d in distals.values():
+        if not d.joints:
+            raise invalid(f"<body_part name={d.name!r}> (J) lists no <joint>")
+        for jn in d.joints:
+            if jn in owner:
+                raise invalid(f"joint {jn!r} is labelled by both {owner[jn]} and {d.name}")
+            owner[jn] = d.name
+            if joint_map[jn].type == "fixed":
+                raise invalid(f"<body_part name={d.name!r}> names fixed joint {jn!r}")
+
+
+def _check_limb(
+    limb: BodyPart,
+    distals: dict[str, BodyPart],
+    joint_map: dict[str, Any],
+    children: dict[str, list[tuple[str, str]]],
+    limits: dict[str, JointLimit],
+) -> None:
+    expected_distal = "distal_" + limb.name.split("_", 1)[1]
+    if limb.distal is None:
+        raise invalid(f"<body_part name={limb.name!r}> needs distal={expected_distal!r}")
+    if limb.distal != expected_distal:
+        raise invalid(
+            f"<body_part name={limb.name!r}> has distal={limb.distal!r}; "
+            f"indices must match: {expected_distal}"
+        )
+    if limb.distal not in distals:
+        raise invalid(f"<body_part name={limb.name!r}> refers to missing {limb.distal!r}")
+    distal = distals[limb.distal]
+    root = joint_map[distal.joints[0]].child
+    subtree: list[str] = []
+    stack = [root]
+    while stack:
+        cur = stack.pop()
+        subtree.append(cur)
+        stack.extend(c for _, c in children.get(cur, []))
+    missing = sorted(set(subtree) - set(limb.links))
+    extra = sorted(set(limb.links) - set(subtree))
+    if missing or extra:
+        what = f"misses {missing[:3]}" if missing else f"has links outside it: {extra[:3]}"
+        raise invalid(
+            f"<body_part name={limb.name!r}> must list exactly the subtree below joint "
+            f"{distal.joints[0]!r} (root link {root!r}); it {what}"
+        )
+    for jn in distal.joints[1:]:
+        if joint_map[jn].child not in set(subtree):
+            raise invalid(f"{distal.name}: joint {jn!r} is not inside {limb.name}")
+    if not any(joint_map[j].child in set(subtree) for j in limits):
+        raise invalid(f"<body_part name={limb.name!r}> contains no actuated joint")
+
+
+def _check_hierarchy(limbs: dict[str, BodyPart]) -> None:
+    by_index = {p.index: p for p in limbs.values()}
+    for (chain, depth), limb in sorted(by_index.items()):
+        if depth > 1:
+            parent = by_index.get((chain, depth - 1))
+            if parent is None:
+                raise invalid(f"{limb.name} has no parent limb limb_{chain}{depth - 1}")
+            if not set(limb.links) < set(parent.links):
+                raise invalid(f"{limb.name} must be a strict subtree of {parent.name}")
+    firsts = [p for (_, depth), p in by_index.items() if depth == 1]
+    for i, a in enumerate(firsts):
+        for b in firsts[i + 1 :]:
+            if set(a.links) & set(b.links):
+                raise invalid(f"{a.name} and {b.name} overlap; first-level limbs are disjoint chains")
+
+
+def label_set_summary(parts: Iterable[BodyPart]) -> str:
+    return "{" + ", ".join(p.name for p in parts) + "}"

@@ -1,0 +1,53 @@
+"""Kinesphere sizes: near/mid/far reach as integers, and "beyond" as base translation.
+
+A VSAM stores integer sizes ``1..k_smax``. Users may ask for any finite size >= 0: fractions
+between stored sizes interpolate, sizes above ``k_smax`` keep the far pose and translate the
+base by the excess (``(s - k_smax) * step`` metres) when the platform can move.
+"""
+
+from __future__ import annotations
+
+import math
+
+from kinesphere.errors import KinesphereError
+
+NAMED_SIZES: dict[str, int] = {"near": 1, "mid": 2, "middle": 2, "far": 3}
+DEFAULT_SIZES: tuple[int, ...] = (1, 2, 3)
+
+
+def parse_size(value: object) -> float:
+    """Turn ``3``, ``"2.5"``, ``"far"`` into a finite non-negative float, or explain why not."""
+    if isinstance(value, bool):
+        raise KinesphereError("size_out_of_range", f"size must be a number, got {value!r}")
+    if isinstance(value, str):
+        named = NAMED_SIZES.get(value.strip().lower())
+        if named is not None:
+            return float(named)
+        try:
+            number = float(value)
+        except ValueError:
+            raise KinesphereError(
+                "size_out_of_range",
+                f"size {value!r} is not a number or one of near, mid, far",
+            ) from None
+    elif isinstance(value, (int, float)):
+        number = float(value)
+    else:
+        raise KinesphereError(
+            "size_out_of_range", f"size must be a number, got {type(value).__name__}"
+        )
+    if not math.isfinite(number) or number < 0:
+        raise KinesphereError(
+            "size_out_of_range", f"size must be finite and >= 0, got {value!r}"
+        )
+    return number
+
+
+def size_name(size: float) -> str:
+    """Human name of a size: near, mid, far, beyond(+x) or the number itself."""
+    names = {1.0: "near", 2.0: "mid", 3.0: "far"}
+    if size in names:
+        return names[size]
+    if size > 3.0:
+        return f"beyond (+{size - 3.0:g})"
+    return f"{size:g}"

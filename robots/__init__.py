@@ -1,0 +1,1 @@
+"""kinesphere.robots role package."""

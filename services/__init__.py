@@ -1,0 +1,1 @@
+"""kinesphere.services role package."""
