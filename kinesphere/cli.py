@@ -18,7 +18,6 @@ from kinesphere import __version__
 from kinesphere.errors import KinesphereError
 
 
-
 def _register_core(sub: Any) -> None:
     p = sub.add_parser(
         "label",
@@ -28,7 +27,10 @@ def _register_core(sub: Any) -> None:
     )
     p.add_argument("urdf", type=Path, help="a plain URDF file")
     p.add_argument(
-        "--merge-distance", type=float, default=0.01, metavar="M",
+        "--merge-distance",
+        type=float,
+        default=0.01,
+        metavar="M",
         help="joints closer than M metres form one joint location (default 0.01)",
     )
     p.add_argument("-o", "--output", type=Path, help="write to this file instead of stdout")

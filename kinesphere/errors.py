@@ -6,6 +6,8 @@ replies) and a ``message`` for people that says what was wrong and what would be
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+
 ERROR_CODES: frozenset[str] = frozenset(
     {
         "unknown_platform",
@@ -37,6 +39,6 @@ class KinesphereError(Exception):
         self.message = message
 
 
-def choices(values: object) -> str:
+def choices(values: Iterable[object]) -> str:
     """Format valid alternatives for an error message, sorted and comma separated."""
-    return ", ".join(sorted(str(v) for v in values))  # type: ignore[attr-defined]
+    return ", ".join(sorted(str(v) for v in values))

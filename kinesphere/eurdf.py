@@ -120,9 +120,7 @@ class Eurdf:
             if key in (p.name, p.alias):
                 return p
         valid = ", ".join(f"{p.name} ({p.alias})" if p.alias else p.name for p in parts)
-        raise KinesphereError(
-            code, f"{self.name} has no {what} {name!r}; valid: {valid or 'none'}"
-        )
+        raise KinesphereError(code, f"{self.name} has no {what} {name!r}; valid: {valid or 'none'}")
 
     def limb(self, name: str) -> BodyPart:
         """Resolve a limb label or alias (``right_arm`` -> ``limb_11``)."""
@@ -141,9 +139,7 @@ class Eurdf:
         part = self.limb(limb)
         links = set(part.links)
         return tuple(
-            j.name
-            for j in self.urdf.robot.joints
-            if j.name in self.limits and j.child in links
+            j.name for j in self.urdf.robot.joints if j.name in self.limits and j.child in links
         )
 
     def tip_link(self, limb: str) -> str:
@@ -195,7 +191,9 @@ def load_eurdf(source: str | Path) -> Eurdf:
     _check_urdf_elements(root)
     try:
         urdf = yourdfpy.URDF.load(
-            io.StringIO(text), load_meshes=False, build_scene_graph=False,
+            io.StringIO(text),
+            load_meshes=False,
+            build_scene_graph=False,
             build_collision_scene_graph=False,
         )
     except Exception as exc:  # yourdfpy raises assorted types for broken URDF
@@ -329,15 +327,19 @@ def _validate(
             names[label] = p.name
         for ln in p.links:
             if ln not in link_names:
-                raise invalid(f"<body_part name={p.name!r}> names link {ln!r}, which does not exist")
+                raise invalid(
+                    f"<body_part name={p.name!r}> names link {ln!r}, which does not exist"
+                )
         for jn in p.joints:
             if jn not in joint_map:
-                raise invalid(f"<body_part name={p.name!r}> names joint {jn!r}, which does not exist")
+                raise invalid(
+                    f"<body_part name={p.name!r}> names joint {jn!r}, which does not exist"
+                )
         if len(set(p.links)) != len(p.links) or len(set(p.joints)) != len(p.joints):
             raise invalid(f"<body_part name={p.name!r}> lists the same element twice")
     core = [p for p in parts if p.set == "C"]
     if not core:
-        raise invalid("no core label: the set C needs at least one <body_part set=\"C\">")
+        raise invalid('no core label: the set C needs at least one <body_part set="C">')
     distals = {p.name: p for p in parts if p.set == "J"}
     _check_distals(distals, joint_map)
     limbs = {p.name: p for p in parts if p.set == "L"}
@@ -423,7 +425,9 @@ def _check_hierarchy(limbs: dict[str, BodyPart]) -> None:
     for i, a in enumerate(firsts):
         for b in firsts[i + 1 :]:
             if set(a.links) & set(b.links):
-                raise invalid(f"{a.name} and {b.name} overlap; first-level limbs are disjoint chains")
+                raise invalid(
+                    f"{a.name} and {b.name} overlap; first-level limbs are disjoint chains"
+                )
 
 
 def label_set_summary(parts: Iterable[BodyPart]) -> str:

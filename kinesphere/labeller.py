@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import io
 import xml.etree.ElementTree as ET
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -88,13 +89,13 @@ def _proposal(urdf: yourdfpy.URDF, merge_distance: float) -> list[ET.Element]:
         if i > 9:
             break  # limb_<i><j> uses one digit per index; the super-user can relabel
         groups: list[list[yourdfpy.Joint]] = []
-        j: yourdfpy.Joint | None = first
-        while j is not None:
-            if groups and np.linalg.norm(anchor(j) - anchor(groups[-1][-1])) < merge_distance:
-                groups[-1].append(j)
+        cur: yourdfpy.Joint | None = first
+        while cur is not None:
+            if groups and np.linalg.norm(anchor(cur) - anchor(groups[-1][-1])) < merge_distance:
+                groups[-1].append(cur)
             else:
-                groups.append([j])
-            j = _next_actuated(j.child, children, n_actuated)
+                groups.append([cur])
+            cur = _next_actuated(cur.child, children, n_actuated)
         if len(groups) > 1 and n_actuated(groups[-1][-1].child) == 0:
             groups.pop()  # the end effector: no label of its own
         for depth, group in enumerate(groups[:9], start=1):
@@ -110,14 +111,15 @@ def _proposal(urdf: yourdfpy.URDF, merge_distance: float) -> list[ET.Element]:
 
 
 def _next_actuated(
-    link: str, children: dict[str, list[yourdfpy.Joint]], n_actuated: object
+    link: str,
+    children: dict[str, list[yourdfpy.Joint]],
+    n_actuated: Callable[[str], int],
 ) -> yourdfpy.Joint | None:
     """The next actuated joint down the chain, following the richest branch."""
-    count = n_actuated  # callable(link) -> int
     frontier = [link]
     while frontier:
         found = [j for ln in frontier for j in children.get(ln, []) if _actuated(j)]
         if found:
-            return max(found, key=lambda j: count(j.child))  # type: ignore[operator]
+            return max(found, key=lambda j: n_actuated(j.child))
         frontier = [j.child for ln in frontier for j in children.get(ln, [])]
     return None

@@ -37,9 +37,7 @@ def parse_size(value: object) -> float:
             "size_out_of_range", f"size must be a number, got {type(value).__name__}"
         )
     if not math.isfinite(number) or number < 0:
-        raise KinesphereError(
-            "size_out_of_range", f"size must be finite and >= 0, got {value!r}"
-        )
+        raise KinesphereError("size_out_of_range", f"size must be finite and >= 0, got {value!r}")
     return number
 
 

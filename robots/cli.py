@@ -8,8 +8,9 @@ import math
 from pathlib import Path
 from typing import Any
 
-from kinesphere.eurdf import Eurdf, load_eurdf
 from kinesphere.robots.platform import load_platform, platform_names
+
+from kinesphere.eurdf import Eurdf, load_eurdf
 
 
 def register(sub: Any) -> None:
@@ -31,8 +32,15 @@ def _platforms(args: argparse.Namespace) -> int:
     rows = []
     for name in platform_names():
         p = load_platform(name)
-        rows.append({"name": name, "title": p.title, "dof": len(p.joint_names),
-                     "base": p.base.kind, "limbs": len(p.eurdf.limbs)})
+        rows.append(
+            {
+                "name": name,
+                "title": p.title,
+                "dof": len(p.joint_names),
+                "base": p.base.kind,
+                "limbs": len(p.eurdf.limbs),
+            }
+        )
     if args.json:
         print(json.dumps(rows, indent=2))
     else:
@@ -54,13 +62,24 @@ def describe_dict(e: Eurdf, base: str | None = None) -> dict[str, Any]:
         "C": [{"label": p.name, "alias": p.alias, "links": list(p.links)} for p in e.core],
         "J": [{"label": p.name, "alias": p.alias, "joints": list(p.joints)} for p in e.distals],
         "L": [
-            {"label": p.name, "alias": p.alias, "distal": p.distal, "links": list(p.links),
-             "joints": list(e.limb_joints(p.name)), "tip": e.tip_link(p.name)}
+            {
+                "label": p.name,
+                "alias": p.alias,
+                "distal": p.distal,
+                "links": list(p.links),
+                "joints": list(e.limb_joints(p.name)),
+                "tip": e.tip_link(p.name),
+            }
             for p in e.limbs
         ],
         "P": [
-            {"joint": lim.name, "type": lim.kind, "lower": num(lim.lower),
-             "upper": num(lim.upper), "velocity": num(lim.velocity)}
+            {
+                "joint": lim.name,
+                "type": lim.kind,
+                "lower": num(lim.lower),
+                "upper": num(lim.upper),
+                "velocity": num(lim.velocity),
+            }
             for lim in e.P
         ],
     }

@@ -16,7 +16,6 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 import yourdfpy
-
 from kinesphere.robots.platform import Platform, load_platform
 
 BASE_JOINTS = ("base_x", "base_y", "base_yaw")
@@ -123,11 +122,17 @@ def build_spec(platform: Platform) -> mujoco.MjSpec:
     spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
     world = spec.worldbody
     floor = world.add_geom(
-        name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0, 0, 0.05], rgba=[0.82, 0.84, 0.86, 1]
+        name="floor",
+        type=mujoco.mjtGeom.mjGEOM_PLANE,
+        size=[0, 0, 0.05],
+        rgba=[0.82, 0.84, 0.86, 1],
     )
     floor.contype = floor.conaffinity = FLOOR_CONTYPE
     world.add_light(
-        name="sun", pos=[1, -1, 3], dir=[-0.3, 0.3, -1], type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL
+        name="sun",
+        pos=[1, -1, 3],
+        dir=[-0.3, 0.3, -1],
+        type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL,
     )
     root_name = platform.eurdf.root_link
     root = world.add_body(name=root_name, pos=[0, 0, platform.base.height])
@@ -154,7 +159,9 @@ def build_spec(platform: Platform) -> mujoco.MjSpec:
             axis = joint.axis if joint.axis is not None else [1, 0, 0]
             mj = body.add_joint(
                 name=joint.name,
-                type=mujoco.mjtJoint.mjJNT_SLIDE if joint.type == "prismatic" else mujoco.mjtJoint.mjJNT_HINGE,
+                type=mujoco.mjtJoint.mjJNT_SLIDE
+                if joint.type == "prismatic"
+                else mujoco.mjtJoint.mjJNT_HINGE,
                 axis=axis,
             )
             mj.armature = 0.01
