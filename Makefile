@@ -19,7 +19,7 @@ $(STAMP): pyproject.toml setup.py
 install: $(STAMP)
 
 demo: $(STAMP)
-	$(BIN)/kinesphere demo
+	$(BIN)/kinesphere describe all
 
 test: $(STAMP)
 	$(BIN)/ruff check kinesphere services clients robots tests bench

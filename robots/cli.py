@@ -23,7 +23,9 @@ def register(sub: Any) -> None:
         description="Print C (core), J (joint locations), L (limbs, with the links each covers), "
         "the DOF count and P (joint limits). PLATFORM is a shipped name or an .eurdf file.",
     )
-    d.add_argument("platform", help="platform name (see 'kinesphere platforms') or eURDF path")
+    d.add_argument(
+        "platform", help="platform name (see 'kinesphere platforms'), 'all', or an eURDF path"
+    )
     d.add_argument("--json", action="store_true", help="machine-readable output")
     d.set_defaults(func=_describe)
 
@@ -86,6 +88,12 @@ def describe_dict(e: Eurdf, base: str | None = None) -> dict[str, Any]:
 
 
 def _describe(args: argparse.Namespace) -> int:
+    if args.platform == "all":
+        for name in platform_names():
+            args.platform = name
+            _describe(args)
+            print()
+        return 0
     if args.platform.endswith((".eurdf", ".urdf", ".xml")) or Path(args.platform).is_file():
         eurdf, base = load_eurdf(args.platform), None
     else:
