@@ -17,7 +17,7 @@ import xml.etree.ElementTree as ET
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, cast
 
 import yourdfpy
 
@@ -63,6 +63,7 @@ class BodyPart:
     links: tuple[str, ...] = ()
     joints: tuple[str, ...] = ()
     distal: str | None = None
+    tip: str | None = None
 
     @property
     def index(self) -> tuple[int, ...]:
@@ -143,8 +144,10 @@ class Eurdf:
         )
 
     def tip_link(self, limb: str) -> str:
-        """The limb's distal end: the deepest link of the subtree (first branch on ties)."""
+        """The limb's distal end: its ``tip`` attribute, else the deepest link (first on ties)."""
         part = self.limb(limb)
+        if part.tip:
+            return part.tip
         root = self.urdf.joint_map[self.origin_joint(str(part.distal))].child
         best, depth = root, 0
         stack = [(root, 0)]
@@ -306,7 +309,11 @@ def _parse_part(el: ET.Element) -> BodyPart:
         raise invalid(f"<body_part name={name!r}> (J) lists links; joint labels list <joint>s")
     if pset in "CL" and joints:
         raise invalid(f"<body_part name={name!r}> ({pset}) lists joints; it should list <link>s")
-    return BodyPart(name, pset, el.get("alias") or None, links, joints, el.get("distal"))  # type: ignore[arg-type]
+    tip = el.get("tip") or None
+    if tip is not None and tip not in links:
+        raise invalid(f"<body_part name={name!r}> tip={tip!r} is not one of its links")
+    pset_typed = cast(PartSet, pset)
+    return BodyPart(name, pset_typed, el.get("alias") or None, links, joints, el.get("distal"), tip)
 
 
 def _validate(

@@ -204,3 +204,11 @@ def test_subtree_limb_must_nest_in_its_parent() -> None:
     ).replace('name="distal_12" set="J"', 'name="distal_13" set="J"')
     with pytest.raises(KinesphereError, match="no parent limb limb_12"):
         load_eurdf(text)
+
+
+def test_limb_tip_attribute_overrides_the_deepest_link() -> None:
+    text = TEXT.replace('alias="forearm" distal="distal_12"',
+                        'alias="forearm" distal="distal_12" tip="hand"')
+    assert load_eurdf(text).tip_link("limb_12") == "hand"
+    with pytest.raises(KinesphereError, match="tip='base' is not one of its links"):
+        load_eurdf(text.replace('tip="hand"', 'tip="base"'))
