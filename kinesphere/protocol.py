@@ -1,0 +1,347 @@
+"""Every message that crosses Zenoh: msgspec Structs, MessagePack maps keyed by field name.
+
+The single source of truth for the wire (``docs/protocol.md`` explains it to peers written
+without kinesphere). Unknown fields are ignored so newer peers may add fields; a change that
+breaks older peers bumps ``PROTOCOL_VERSION``. Top-level messages carry ``v`` and a ``type``
+tag, so :func:`decode_any` can read anything on ``kinesphere/**``. Decoding raises only
+KinesphereError: ``incompatible_version`` or ``malformed`` naming the bad field. Checks that
+have their own code (size out of range, unknown names) are left to the receiver.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Any, Final, SupportsBytes, TypeVar, get_args
+
+import msgspec
+
+from kinesphere.errors import ERROR_CODES, KinesphereError
+from kinesphere.sizes import parse_size
+
+PROTOCOL_VERSION: Final = 1
+COMPOUND: Final = "compound"
+"""limb, origin and direction of a :class:`Pose` that joins several parts."""
+NO_ID: Final = -1
+"""``Pose.k_id`` when no single VSAM row applies (compound poses)."""
+
+Vec3 = Annotated[list[float], msgspec.Meta(min_length=3, max_length=3)]
+Fraction = Annotated[float, msgspec.Meta(ge=0.0, le=1.0)]
+NonNegInt = Annotated[int, msgspec.Meta(ge=0)]
+
+
+class Status:
+    """Values of ``RobotState.status``; a plain ``str`` on the wire so new ones stay readable."""
+
+    IDLE: Final = "idle"
+    MOVING: Final = "moving"
+    HOLDING: Final = "holding"
+    STOPPED: Final = "stopped"
+    ESTOP: Final = "estop"
+    CLAMPED: Final = "clamped"
+    DATABANK_UNREACHABLE: Final = "databank_unreachable"
+    ERROR: Final = "error"
+
+
+STATUSES: Final = frozenset(v for k, v in vars(Status).items() if k.isupper())
+
+
+# Parts nested inside messages: no version, no tag.
+class SpatialCommand(msgspec.Struct, forbid_unknown_fields=False):
+    """One ``(l, o, d, s)`` user parameter: move ``limb`` from ``origin`` towards ``direction``.
+
+    ``size`` is a float (1 near, 2 mid, 3 far; fractions interpolate, above the largest stored
+    size translates the base). The ECL checks names and size, so decoding accepts any value.
+    """
+
+    limb: str
+    origin: str
+    direction: str
+    size: float
+
+
+class JointLimit(msgspec.Struct, forbid_unknown_fields=False):
+    """An actuated joint: limits in rad (m if prismatic), velocity limit in rad/s (m/s)."""
+
+    name: str
+    lower: float
+    upper: float
+    velocity: float
+
+
+class LimbEntry(msgspec.Struct, forbid_unknown_fields=False):
+    """A ``(limb, origin)`` pair of the VSAM with the directions and sizes that have poses."""
+
+    limb: str
+    origin: str
+    directions: list[str]
+    sizes: list[int]
+
+
+class Drive(msgspec.Struct, forbid_unknown_fields=False):
+    """Drive the base along a middle horizontal ``direction`` at ``speed`` x its maximum."""
+
+    direction: str
+    speed: Fraction
+
+
+class Message(msgspec.Struct, kw_only=True, tag_field="type", forbid_unknown_fields=False):
+    """Base of every top-level message: ``v`` first, a missing ``v`` reads as the current one."""
+
+    v: int = PROTOCOL_VERSION
+
+
+class Pose(Message, tag="pose", kw_only=True):
+    """Answer to a pose (or compound, or record) query: the joint targets for a command.
+
+    ``joints`` holds only the joints the pose moves (rad or m). ``translation`` is the base
+    displacement in metres, body frame ``[x, y, z]``, past the largest stored size (or for core
+    queries); None when the base stays. ``k_id`` is the ``vsam`` row and ``p_id`` the stored
+    pose's size index (the paper's p-id, 1 = near), None when computed (interpolated, beyond,
+    compound). A compound pose has limb, origin and direction ``"compound"``, ``k_id``
+    :data:`NO_ID` and its inputs in ``parts``.
+    """
+
+    platform: str
+    limb: str
+    origin: str
+    direction: str
+    size: float
+    joints: dict[str, float]
+    translation: Vec3 | None = None
+    k_id: int
+    p_id: int | None = None
+    parts: list[SpatialCommand] = []
+
+    @property
+    def is_compound(self) -> bool:
+        return self.limb == COMPOUND
+
+
+class Catalogue(Message, tag="catalogue", kw_only=True):
+    """What a platform's ECL can answer, so clients offer only valid commands.
+
+    ``core`` names the core body parts (``c_1``...), ``limbs`` the VSAM ``(limb, origin)`` pairs,
+    ``joints`` the actuated joints in eURDF order. ``translation_step`` is metres per size unit
+    beyond the largest size, ``directions_for_core`` the directions the base can translate in,
+    ``sizes`` every stored size, ``aliases`` maps aliases (``right_arm``) to label names, and
+    ``version`` identifies the ECL contents (changes when poses are recorded).
+    """
+
+    platform: str
+    core: list[str]
+    limbs: list[LimbEntry]
+    joints: list[JointLimit]
+    translation_step: float | None = None
+    can_translate: bool = False
+    directions_for_core: list[str] = []
+    sizes: list[int]
+    aliases: dict[str, str] = {}
+    version: str
+
+    def __post_init__(self) -> None:
+        if self.can_translate and not (self.translation_step and self.translation_step > 0):
+            raise ValueError("can_translate needs a translation_step > 0")
+
+
+class Command(Message, tag="command", kw_only=True):
+    """Operator input for one robot (or all, via a wildcard key).
+
+    ``seq`` grows per ``sender``; ``sent_ns`` is the sender's ``time.time_ns()`` (latency
+    only). ``deadman`` false means the operator let go: the robot holds. The robot holds when
+    no newer command arrives within ``ttl_ms`` of receiving this one. ``estop`` latches an
+    emergency stop; ``stop`` halts motion in a controlled way.
+    """
+
+    seq: NonNegInt
+    sent_ns: int
+    parts: list[SpatialCommand] = []
+    drive: Drive | None = None
+    deadman: bool
+    ttl_ms: NonNegInt
+    estop: bool = False
+    stop: bool = False
+    sender: str = ""
+
+
+class RobotState(Message, tag="robot_state", kw_only=True):
+    """What a robot publishes at >= 50 Hz.
+
+    ``q`` (rad or m) follows ``joint_names``; ``qd`` (rad/s or m/s) does too, or is empty when
+    unknown. ``base_pose`` is ``[x m, y m, yaw rad]`` in the odometry frame. ``stamp_ns`` is the
+    robot's ``time.time_ns()``; ``last_command_seq`` is -1 before the first command.
+    ``clamped`` names joints held at a limit; ``detail`` explains the status to people.
+    """
+
+    robot_id: str
+    platform: str
+    seq: int
+    stamp_ns: int
+    joint_names: list[str]
+    q: list[float]
+    qd: list[float]
+    base_pose: Vec3
+    status: str
+    last_command_seq: int
+    detail: str = ""
+    clamped: list[str] = []
+
+    def __post_init__(self) -> None:
+        n = len(self.joint_names)
+        if len(self.q) != n:
+            raise ValueError(f"q has {len(self.q)} values for {n} joint_names")
+        if self.qd and len(self.qd) != n:
+            raise ValueError(f"qd has {len(self.qd)} values for {n} joint_names")
+
+
+class Error(Message, tag="error", kw_only=True):
+    """A failed query, sent with ``query.reply_err``; ``code`` is one of ``ERROR_CODES``."""
+
+    code: str
+    message: str
+
+    @classmethod
+    def from_exception(cls, exc: KinesphereError) -> Error:
+        return cls(code=exc.code, message=exc.message)
+
+    def to_exception(self) -> KinesphereError:
+        """The error to raise locally; a code this version does not know becomes ``internal``."""
+        if self.code in ERROR_CODES:
+            return KinesphereError(self.code, self.message)
+        return KinesphereError("internal", f"{self.code}: {self.message}")
+
+
+class RecordRequest(Message, tag="record_request", kw_only=True):
+    """A super-user write: store ``joints`` as the pose for ``(limb, origin, direction, size)``."""
+
+    limb: str
+    origin: str
+    direction: str
+    size: int
+    joints: dict[str, float]
+
+
+class CompoundRequest(Message, tag="compound_request", kw_only=True):
+    """Join the poses of several parts; a joint set by two parts is a ``conflict`` unless
+    ``last_wins``, when the later part wins."""
+
+    parts: list[SpatialCommand]
+    last_wins: bool = False
+
+
+AnyMessage = Pose | Catalogue | Command | RobotState | Error | RecordRequest | CompoundRequest
+MESSAGE_TYPES: Final[tuple[type[Message], ...]] = get_args(AnyMessage)
+
+T = TypeVar("T")
+Payload = bytes | bytearray | memoryview | SupportsBytes
+"""Anything :func:`decode` reads: bytes, or an object with ``__bytes__`` such as ``ZBytes``."""
+
+ENCODER: Final = msgspec.msgpack.Encoder()
+_DECODERS: dict[Any, msgspec.msgpack.Decoder[Any]] = {
+    t: msgspec.msgpack.Decoder(t)
+    for t in (*MESSAGE_TYPES, AnyMessage, SpatialCommand, JointLimit, LimbEntry, Drive)
+}
+
+
+class _Envelope(msgspec.Struct):
+    """The fields every message shares, read leniently to explain a failed decode."""
+
+    v: Any = PROTOCOL_VERSION
+    type: Any = None
+
+
+_ENVELOPE: Final = msgspec.msgpack.Decoder(_Envelope)
+
+
+def encode(msg: msgspec.Struct) -> bytes:
+    """MessagePack bytes of a message (a map keyed by field name)."""
+    return ENCODER.encode(msg)
+
+
+def decoder(type_: type[T]) -> msgspec.msgpack.Decoder[T]:
+    """The cached decoder for ``type_``; building one per call would cost more than decoding."""
+    dec = _DECODERS.get(type_)
+    if dec is None:
+        dec = _DECODERS[type_] = msgspec.msgpack.Decoder(type_)
+    return dec
+
+
+def _buffer(data: Payload) -> bytes | bytearray | memoryview:
+    if isinstance(data, (bytes, bytearray, memoryview)):
+        return data
+    return bytes(data)
+
+
+def _name(type_: Any) -> str:
+    return getattr(type_, "__name__", None) or "message"
+
+
+def _version_error(type_: Any, v: object) -> KinesphereError:
+    return KinesphereError(
+        "incompatible_version",
+        f"{_name(type_)} has protocol version {v!r}, this peer speaks {PROTOCOL_VERSION}",
+    )
+
+
+def _explain(buf: bytes | bytearray | memoryview, type_: Any, exc: Exception) -> KinesphereError:
+    """Turn a msgspec failure into the error a peer can act on."""
+    try:
+        env = _ENVELOPE.decode(buf)
+    except (msgspec.ValidationError, msgspec.DecodeError):
+        env = None
+    if env is not None and env.v != PROTOCOL_VERSION:
+        return _version_error(type_, env.v)
+    tag = getattr(getattr(type_, "__struct_config__", None), "tag", None)
+    if env is not None and tag is not None and env.type is not None and env.type != tag:
+        return KinesphereError("malformed", f"expected a {tag!r} message, got {env.type!r}")
+    if isinstance(exc, msgspec.ValidationError):  # a subclass of DecodeError: test it first
+        return KinesphereError("malformed", f"bad {_name(type_)}: {exc}")
+    return KinesphereError("malformed", f"bad {_name(type_)}, not MessagePack: {exc}")
+
+
+def decode(data: Payload, type_: type[T]) -> T:
+    """Decode ``data`` as ``type_``; raises KinesphereError (malformed, incompatible_version)."""
+    buf = _buffer(data)
+    if len(buf) == 0:
+        raise KinesphereError("malformed", f"{_name(type_)} expected, got an empty payload")
+    try:
+        msg = decoder(type_).decode(buf)
+    except (msgspec.ValidationError, msgspec.DecodeError) as exc:
+        raise _explain(buf, type_, exc) from None
+    v = getattr(msg, "v", PROTOCOL_VERSION)
+    if v != PROTOCOL_VERSION:
+        raise _version_error(type_, v)
+    return msg
+
+
+def decode_any(data: Payload) -> AnyMessage:
+    """Decode any top-level message by its ``type`` tag (for taps, logs and tools)."""
+    return decode(data, AnyMessage)  # type: ignore[arg-type]
+
+
+def error_from_reply(data: Payload) -> KinesphereError:
+    """The error carried by a ``reply.err`` payload.
+
+    Kinesphere queryables send an :class:`Error`; Zenoh itself sends plain text (``Timeout``),
+    which becomes ``unavailable``.
+    """
+    buf = _buffer(data)
+    try:
+        return decode(buf, Error).to_exception()
+    except KinesphereError as exc:
+        if exc.code == "incompatible_version":
+            return exc
+        text = bytes(buf).decode("utf-8", "replace") or "empty error reply"
+        return KinesphereError("unavailable", text)
+
+
+def check_size(size: float) -> float:
+    """``size`` if finite and >= 0, else KinesphereError("size_out_of_range")."""
+    return parse_size(size)
+
+
+def check_spatial(cmd: SpatialCommand) -> SpatialCommand:
+    """Reject empty names (``malformed``) and bad sizes (``size_out_of_range``)."""
+    for field in ("limb", "origin", "direction"):
+        if not getattr(cmd, field).strip():
+            raise KinesphereError("malformed", f"spatial command has an empty {field}")
+    check_size(cmd.size)
+    return cmd

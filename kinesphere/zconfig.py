@@ -1,0 +1,242 @@
+"""Zenoh session configuration shared by every kinesphere process and test.
+
+Multicast scouting is off unless asked for: with it on, a session joins whatever other Zenoh
+process runs on the machine or LAN (another test run, another team's robot). Processes find
+each other through explicit ``connect`` endpoints instead. Gossip scouting stays on: it travels
+only over links a session already has, so it cannot reach strangers, and without it two peers
+connected to the same hub peer never see each other's data (peers do not route for peers).
+
+Sessions hold threads and sockets: close them (use :func:`session`) before the interpreter
+exits. A peer that vanishes is noticed after the link lease (10 s by default, ``lease_ms``).
+"""
+
+from __future__ import annotations
+
+import json
+import socket
+import threading
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any, Protocol
+
+import zenoh
+
+from kinesphere.errors import KinesphereError
+
+MODES = ("peer", "client", "router")
+LOOPBACK_HOST = "127.0.0.1"
+LOOPBACK_ANY_PORT = f"tcp/{LOOPBACK_HOST}:0"
+"""Listen on loopback only, on a port the OS picks."""
+
+
+class Undeclarable(Protocol):
+    """Anything Zenoh lets you undeclare: subscribers, queryables, publishers, tokens..."""
+
+    def undeclare(self) -> object: ...
+
+
+class Closable(Protocol):
+    def close(self) -> object: ...
+
+
+def undeclare(*entities: Undeclarable | None) -> None:
+    """Undeclare each entity (None is skipped); typed, unlike Zenoh's stubs."""
+    for entity in entities:
+        if entity is not None:
+            entity.undeclare()
+
+
+def close_session(s: Closable | None) -> None:
+    """Close a session (None is skipped); closing undeclares everything it declared."""
+    if s is not None:
+        s.close()
+
+
+def _zmsg(exc: Exception) -> str:
+    """Zenoh's message without the Rust source location it appends."""
+    return str(exc).split(" at /", 1)[0]
+
+
+def _set(config: zenoh.Config, key: str, value: Any) -> None:
+    try:
+        config.insert_json5(key, json.dumps(value))
+    except zenoh.ZError as exc:
+        msg = f"zenoh config {key} = {value!r}: {_zmsg(exc)}"
+        raise KinesphereError("malformed", msg) from None
+
+
+def session_config(
+    mode: str | None = None,
+    listen: Sequence[str] | None = None,
+    connect: Sequence[str] | None = None,
+    config_file: str | Path | None = None,
+    scouting: bool | None = None,
+    *,
+    gossip: bool | None = None,
+    lease_ms: int | None = None,
+) -> zenoh.Config:
+    """A Zenoh config: ``config_file`` (JSON5) if given, then every argument that is not None.
+
+    Defaults without a file: mode ``peer``, Zenoh's own listen endpoints (all interfaces,
+    random port), no connect endpoints, multicast scouting off, gossip on, 10 s lease.
+    ``scouting=None`` keeps a file's explicit multicast setting and turns it off otherwise.
+    Endpoints look like ``tcp/127.0.0.1:7447``. Bad values raise KinesphereError("malformed").
+    """
+    if config_file is not None:
+        try:
+            config = zenoh.Config.from_file(str(config_file))
+        except zenoh.ZError as exc:
+            raise KinesphereError(
+                "malformed", f"zenoh config file {config_file}: {_zmsg(exc)}"
+            ) from None
+    else:
+        config = zenoh.Config()
+    if mode is not None:
+        if mode not in MODES:
+            raise KinesphereError("malformed", f"zenoh mode {mode!r}; valid: {', '.join(MODES)}")
+        _set(config, "mode", mode)
+    elif config.get_json("mode") in (None, "null"):
+        _set(config, "mode", "peer")
+    if listen is not None:
+        _set(config, "listen/endpoints", list(listen))
+    if connect is not None:
+        _set(config, "connect/endpoints", list(connect))
+    if scouting is None:
+        scouting = json.loads(config.get_json("scouting/multicast/enabled")) is True
+    _set(config, "scouting/multicast/enabled", scouting)
+    if gossip is not None:
+        _set(config, "scouting/gossip/enabled", gossip)
+    if lease_ms is not None:
+        if lease_ms <= 0:
+            raise KinesphereError("malformed", f"lease_ms must be > 0, got {lease_ms}")
+        _set(config, "transport/link/tx/lease", lease_ms)
+    return config
+
+
+def open_session(
+    mode: str | None = None,
+    listen: Sequence[str] | None = None,
+    connect: Sequence[str] | None = None,
+    config_file: str | Path | None = None,
+    scouting: bool | None = None,
+    *,
+    gossip: bool | None = None,
+    lease_ms: int | None = None,
+    config: zenoh.Config | None = None,
+) -> zenoh.Session:
+    """Open a session from ``config`` or :func:`session_config` arguments; the caller closes it.
+
+    A session that cannot open (port taken, client without a router) raises
+    KinesphereError("unavailable").
+    """
+    if config is None:
+        config = session_config(
+            mode, listen, connect, config_file, scouting, gossip=gossip, lease_ms=lease_ms
+        )
+    try:
+        return zenoh.open(config)
+    except zenoh.ZError as exc:
+        raise KinesphereError("unavailable", f"cannot open zenoh session: {_zmsg(exc)}") from None
+
+
+@contextmanager
+def session(
+    mode: str | None = None,
+    listen: Sequence[str] | None = None,
+    connect: Sequence[str] | None = None,
+    config_file: str | Path | None = None,
+    scouting: bool | None = None,
+    *,
+    gossip: bool | None = None,
+    lease_ms: int | None = None,
+    config: zenoh.Config | None = None,
+) -> Iterator[zenoh.Session]:
+    """:func:`open_session` that closes the session (and all it declared) on exit."""
+    s = open_session(
+        mode,
+        listen,
+        connect,
+        config_file,
+        scouting,
+        gossip=gossip,
+        lease_ms=lease_ms,
+        config=config,
+    )
+    try:
+        yield s
+    finally:
+        close_session(s)
+
+
+def free_port(host: str = LOOPBACK_HOST) -> int:
+    """A TCP port free right now on ``host``; another process may still take it first."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
+        sock.bind((host, 0))
+        return int(sock.getsockname()[1])
+
+
+def loopback_endpoint(port: int | None = None) -> str:
+    """``tcp/127.0.0.1:<port>``, a free port when none is given."""
+    return f"tcp/{LOOPBACK_HOST}:{free_port() if port is None else port}"
+
+
+def open_hub(mode: str = "peer", attempts: int = 5) -> tuple[zenoh.Session, str]:
+    """A session listening on a free loopback port, and the endpoint others connect to.
+
+    Retries with a new port when another process took the probed one meanwhile.
+    """
+    last: KinesphereError | None = None
+    for _ in range(attempts):
+        endpoint = loopback_endpoint()
+        try:
+            return open_session(mode, listen=[endpoint], connect=[], scouting=False), endpoint
+        except KinesphereError as exc:
+            last = exc
+    assert last is not None
+    raise last
+
+
+def loopback_config(endpoint: str, mode: str = "peer") -> zenoh.Config:
+    """Config of a session joining the hub at ``endpoint``, reachable on loopback only."""
+    listen = [LOOPBACK_ANY_PORT] if mode == "peer" else []
+    return session_config(mode, listen=listen, connect=[endpoint], scouting=False)
+
+
+@contextmanager
+def loopback_hub(mode: str = "peer") -> Iterator[tuple[zenoh.Session, str]]:
+    """:func:`open_hub` as a context manager that closes the hub on exit."""
+    hub, endpoint = open_hub(mode)
+    try:
+        yield hub, endpoint
+    finally:
+        close_session(hub)
+
+
+@contextmanager
+def loopback_pair() -> Iterator[tuple[zenoh.Session, zenoh.Session]]:
+    """Two connected sessions on loopback (a hub and a peer joined to it); both closed on exit."""
+    with loopback_hub() as (hub, endpoint), session(config=loopback_config(endpoint)) as peer:
+        yield hub, peer
+
+
+def wait_matching(entity: zenoh.Publisher | zenoh.Querier, timeout: float = 5.0) -> bool:
+    """Wait until a subscriber (publisher) or queryable (querier) matches; False on timeout.
+
+    Declarations travel asynchronously, so a put right after a remote subscribe may be lost;
+    tests and start-up code wait here rather than sleeping.
+    """
+    matched = threading.Event()
+
+    def on_status(status: zenoh.MatchingStatus) -> None:
+        if status.matching:
+            matched.set()
+
+    listener = entity.declare_matching_listener(on_status)
+    try:
+        status: Any = entity.matching_status
+        if getattr(status, "matching", status) is True:
+            return True
+        return matched.wait(timeout)
+    finally:
+        undeclare(listener)

@@ -1,0 +1,296 @@
+"""Wire protocol: round trips, the version rule and useful errors for bad payloads."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import msgspec
+import pytest
+
+from kinesphere import protocol as pr
+from kinesphere.errors import ERROR_CODES, KinesphereError
+
+SPATIAL = pr.SpatialCommand("limb_11", "distal_11", "left-high", 2.5)
+
+SAMPLES: list[pr.Message] = [
+    pr.Pose(
+        platform="baxter",
+        limb="limb_11",
+        origin="distal_11",
+        direction="left-high",
+        size=3.5,
+        joints={"right_s0": -0.25, "right_s1": 0.5},
+        translation=[0.1, -0.2, 0.0],
+        k_id=7,
+        p_id=None,
+    ),
+    pr.Pose(
+        platform="nao",
+        limb=pr.COMPOUND,
+        origin=pr.COMPOUND,
+        direction=pr.COMPOUND,
+        size=0.0,
+        joints={"HeadYaw": 0.3},
+        k_id=pr.NO_ID,
+        p_id=None,
+        parts=[SPATIAL, pr.SpatialCommand("limb_51", "distal_51", "place-high", 1.0)],
+    ),
+    pr.Catalogue(
+        platform="youbot",
+        core=["c_1"],
+        limbs=[pr.LimbEntry("limb_11", "distal_11", ["forward-middle", "place-high"], [1, 2, 3])],
+        joints=[pr.JointLimit("arm_joint_1", -2.9, 2.9, 1.5)],
+        translation_step=0.25,
+        can_translate=True,
+        directions_for_core=["forward-middle", "left-middle"],
+        sizes=[1, 2, 3],
+        aliases={"arm": "limb_11"},
+        version="sha1:abc",
+    ),
+    pr.Command(
+        seq=42,
+        sent_ns=1_700_000_000_000_000_000,
+        parts=[SPATIAL],
+        drive=pr.Drive("left-forward-middle", 0.75),
+        deadman=True,
+        ttl_ms=250,
+        estop=False,
+        stop=True,
+        sender="pad-1",
+    ),
+    pr.RobotState(
+        robot_id="r1",
+        platform="baxter",
+        seq=9,
+        stamp_ns=123,
+        joint_names=["a", "b"],
+        q=[0.1, 0.2],
+        qd=[0.0, -1.0],
+        base_pose=[1.0, 2.0, math.pi / 2],
+        status=pr.Status.CLAMPED,
+        last_command_seq=41,
+        detail="b at upper limit",
+        clamped=["b"],
+    ),
+    pr.Error(code="unknown_limb", message="baxter has no limb 'tail'"),
+    pr.RecordRequest(
+        limb="limb_11", origin="distal_11", direction="forward-high", size=2, joints={"a": 1.25}
+    ),
+    pr.CompoundRequest(parts=[SPATIAL, SPATIAL], last_wins=True),
+]
+
+
+def raw(obj: Any) -> bytes:
+    return msgspec.msgpack.encode(obj)
+
+
+def as_map(msg: pr.Message) -> dict[str, Any]:
+    out = msgspec.msgpack.decode(pr.encode(msg))
+    assert isinstance(out, dict)
+    return out
+
+
+def malformed(data: Any, type_: Any) -> str:
+    with pytest.raises(KinesphereError) as info:
+        pr.decode(data, type_)
+    assert info.value.code == "malformed", info.value
+    return info.value.message
+
+
+@pytest.mark.parametrize("msg", SAMPLES, ids=lambda m: type(m).__name__)
+def test_round_trip(msg: pr.Message) -> None:
+    data = pr.encode(msg)
+    assert pr.decode(data, type(msg)) == msg
+    assert pr.decode_any(data) == msg
+
+
+@pytest.mark.parametrize("msg", SAMPLES, ids=lambda m: type(m).__name__)
+def test_wire_is_a_map_with_version_and_type(msg: pr.Message) -> None:
+    assert type(msg).__struct_fields__[0] == "v"
+    m = as_map(msg)
+    assert m["v"] == pr.PROTOCOL_VERSION == 1
+    assert m["type"] == type(msg).__struct_config__.tag
+    assert set(type(msg).__struct_fields__) <= set(m)
+
+
+def test_every_message_type_has_a_sample_and_a_distinct_tag() -> None:
+    assert {type(m) for m in SAMPLES} == set(pr.MESSAGE_TYPES)
+    tags = [t.__struct_config__.tag for t in pr.MESSAGE_TYPES]
+    assert len(set(tags)) == len(tags)
+
+
+def test_hand_written_map_decodes_without_type_or_v() -> None:
+    """A peer written without kinesphere may send a plain map; unknown fields are ignored."""
+    data = raw({"parts": [{"limb": "l", "origin": "o", "direction": "d", "size": 3}], "x": 1})
+    req = pr.decode(data, pr.CompoundRequest)
+    assert req.parts == [pr.SpatialCommand("l", "o", "d", 3.0)]
+    assert req.v == pr.PROTOCOL_VERSION and req.last_wins is False
+
+
+def test_zbytes_like_payload_is_accepted() -> None:
+    class Payload:
+        def __bytes__(self) -> bytes:
+            return pr.encode(SAMPLES[5])
+
+    assert pr.decode(Payload(), pr.Error) == SAMPLES[5]
+    assert pr.decode(memoryview(pr.encode(SAMPLES[5])), pr.Error) == SAMPLES[5]
+
+
+@pytest.mark.parametrize("msg", SAMPLES, ids=lambda m: type(m).__name__)
+def test_other_version_is_incompatible(msg: pr.Message) -> None:
+    m = as_map(msg)
+    m["v"] = 2
+    with pytest.raises(KinesphereError) as info:
+        pr.decode(raw(m), type(msg))
+    assert info.value.code == "incompatible_version"
+    assert "2" in info.value.message and type(msg).__name__ in info.value.message
+
+
+def test_other_version_wins_over_field_errors() -> None:
+    """A v2 peer may have changed field types: say so, not "malformed"."""
+    with pytest.raises(KinesphereError) as info:
+        pr.decode(raw({"v": 2, "platform": ["changed"]}), pr.Pose)
+    assert info.value.code == "incompatible_version"
+
+
+def test_garbage_bytes_are_malformed() -> None:
+    assert "not MessagePack" in malformed(b"\xc1\xff\x00", pr.Pose)
+    assert "empty payload" in malformed(b"", pr.Command)
+
+
+def test_wrong_field_type_names_the_field() -> None:
+    m = as_map(SAMPLES[0])
+    m["size"] = "far"
+    msg = malformed(raw(m), pr.Pose)
+    assert "$.size" in msg and "float" in msg and "Pose" in msg
+
+
+def test_nested_wrong_type_names_the_path() -> None:
+    m = as_map(SAMPLES[3])
+    m["parts"][0]["limb"] = 5
+    assert "$.parts[0].limb" in malformed(raw(m), pr.Command)
+
+
+def test_missing_field_is_named() -> None:
+    m = as_map(SAMPLES[4])
+    del m["joint_names"]
+    assert "joint_names" in malformed(raw(m), pr.RobotState)
+
+
+def test_not_a_map_is_malformed() -> None:
+    assert "Pose" in malformed(raw([1, 2, 3]), pr.Pose)
+
+
+def test_wrong_message_type_is_named() -> None:
+    msg = malformed(pr.encode(SAMPLES[0]), pr.Command)
+    assert "'command'" in msg and "'pose'" in msg
+
+
+def test_decode_any_rejects_unknown_type() -> None:
+    with pytest.raises(KinesphereError) as info:
+        pr.decode_any(raw({"type": "teleport"}))
+    assert info.value.code == "malformed" and "teleport" in info.value.message
+
+
+@pytest.mark.parametrize("speed", [1.5, -0.1, float("nan")])
+def test_drive_speed_outside_0_1_is_malformed(speed: float) -> None:
+    m = as_map(SAMPLES[3])
+    m["drive"]["speed"] = speed
+    assert "speed" in malformed(raw(m), pr.Command)
+
+
+@pytest.mark.parametrize("field", ["seq", "ttl_ms"])
+def test_negative_counters_are_malformed(field: str) -> None:
+    m = as_map(SAMPLES[3])
+    m[field] = -1
+    assert field in malformed(raw(m), pr.Command)
+
+
+def test_translation_must_have_three_components() -> None:
+    m = as_map(SAMPLES[0])
+    m["translation"] = [0.1, 0.2]
+    assert "translation" in malformed(raw(m), pr.Pose)
+
+
+def test_state_lengths_must_match_joint_names() -> None:
+    m = as_map(SAMPLES[4])
+    m["q"] = [0.1]
+    assert "q has 1 values for 2 joint_names" in malformed(raw(m), pr.RobotState)
+    m = as_map(SAMPLES[4])
+    m["qd"] = []  # unknown velocities are allowed
+    assert pr.decode(raw(m), pr.RobotState).qd == []
+    with pytest.raises(ValueError):
+        pr.RobotState(
+            robot_id="r",
+            platform="p",
+            seq=0,
+            stamp_ns=0,
+            joint_names=["a"],
+            q=[],
+            qd=[],
+            base_pose=[0.0, 0.0, 0.0],
+            status=pr.Status.IDLE,
+            last_command_seq=-1,
+        )
+
+
+def test_catalogue_that_translates_needs_a_step() -> None:
+    m = as_map(SAMPLES[2])
+    m["translation_step"] = None
+    assert "translation_step" in malformed(raw(m), pr.Catalogue)
+
+
+def test_statuses() -> None:
+    assert pr.STATUSES == {
+        "idle",
+        "moving",
+        "holding",
+        "stopped",
+        "estop",
+        "clamped",
+        "databank_unreachable",
+        "error",
+    }
+
+
+@pytest.mark.parametrize("size", [float("nan"), float("inf"), -0.5])
+def test_check_size_rejects(size: float) -> None:
+    with pytest.raises(KinesphereError) as info:
+        pr.check_size(size)
+    assert info.value.code == "size_out_of_range"
+
+
+def test_check_size_accepts_finite_non_negative() -> None:
+    assert pr.check_size(0) == 0.0
+    assert pr.check_size(2.5) == 2.5
+    assert pr.check_spatial(SPATIAL) is SPATIAL
+
+
+def test_check_spatial() -> None:
+    with pytest.raises(KinesphereError) as info:
+        pr.check_spatial(pr.SpatialCommand("limb", " ", "left-high", 1))
+    assert info.value.code == "malformed" and "origin" in info.value.message
+    with pytest.raises(KinesphereError) as info:
+        pr.check_spatial(pr.SpatialCommand("limb", "o", "left-high", math.nan))
+    assert info.value.code == "size_out_of_range"
+
+
+def test_error_to_and_from_exception() -> None:
+    exc = KinesphereError("forbidden", "writes are disabled")
+    err = pr.Error.from_exception(exc)
+    assert (err.code, err.message) == ("forbidden", "writes are disabled")
+    back = pr.decode(pr.encode(err), pr.Error).to_exception()
+    assert (back.code, back.message) == ("forbidden", "writes are disabled")
+    newer = pr.Error(code="some_future_code", message="m").to_exception()
+    assert newer.code == "internal" and "some_future_code" in newer.message
+    assert {"malformed", "incompatible_version", "forbidden"} <= ERROR_CODES
+
+
+def test_error_from_reply() -> None:
+    exc = pr.error_from_reply(pr.encode(pr.Error(code="conflict", message="two parts")))
+    assert (exc.code, exc.message) == ("conflict", "two parts")
+    timeout = pr.error_from_reply(b"Timeout")  # what Zenoh itself sends on a query timeout
+    assert (timeout.code, timeout.message) == ("unavailable", "Timeout")
+    newer = pr.error_from_reply(raw({"v": 9, "code": "x", "message": "y"}))
+    assert newer.code == "incompatible_version"
