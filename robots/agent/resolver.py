@@ -1,0 +1,230 @@
+"""Resolve spatial commands into joint targets by asking the databank over Zenoh.
+
+Why a cache: an operator streams the same command at 30 Hz and phrases repeat, so each
+distinct command costs one round trip per databank version, after which it is answered from
+memory in the control loop itself (no thread hop, no network). The cache is keyed by the
+parts and tagged with the catalogue ``version``; the catalogue is re-read periodically and
+whenever a reply fails, and a new version empties the cache. While the databank is
+unreachable cached poses keep working (they are the best knowledge there is).
+
+Why a worker thread: a Zenoh ``get`` blocks and must never run in the control loop or in a
+Zenoh callback. Requests are coalesced (only the newest pending one matters: an operator who
+moved on does not want the old pose), and the answer is handed back with its ticket so the
+loop can drop answers that a newer command has overtaken.
+
+Unreachable means no queryable answered (``get`` ended without replies), Zenoh's timeout, or
+an ``unavailable`` error; the worker then probes the catalogue every ``probe_s`` until it
+answers again, so recovery needs no restart and no new command.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import TypeVar
+
+import zenoh
+
+from kinesphere.errors import KinesphereError
+from kinesphere.keyexpr import Keys
+from kinesphere.laban import Direction
+from kinesphere.protocol import (
+    Catalogue,
+    CompoundRequest,
+    Pose,
+    SpatialCommand,
+    check_spatial,
+    decode,
+    encode,
+    error_from_reply,
+)
+
+log = logging.getLogger(__name__)
+T = TypeVar("T")
+
+PartsKey = tuple[tuple[str, str, str, float], ...]
+Answer = Pose | KinesphereError
+Callback = Callable[[int, Answer], None]
+
+
+def parts_key(parts: Sequence[SpatialCommand]) -> PartsKey:
+    """Canonical cache key: directions by slug, sizes as floats; raises on invalid parts."""
+    key = []
+    for p in parts:
+        check_spatial(p)
+        key.append((p.limb, p.origin, Direction.parse(p.direction).slug, float(p.size)))
+    return tuple(key)
+
+
+@dataclass
+class _Request:
+    ticket: int
+    key: PartsKey
+    callback: Callback
+
+
+class Resolver:
+    """Pose and compound queries for one platform, cached per databank version."""
+
+    def __init__(
+        self,
+        session: zenoh.Session,
+        platform: str,
+        keys: Keys | None = None,
+        timeout_s: float = 1.0,
+        refresh_s: float = 2.0,
+        probe_s: float = 0.25,
+    ) -> None:
+        self.session = session
+        self.platform = platform
+        self.keys = keys or Keys()
+        self.timeout_s = timeout_s
+        self.refresh_s = refresh_s
+        self.probe_s = probe_s
+        self.version: str | None = None
+        self.catalogue: Catalogue | None = None
+        self.reachable: bool | None = None  # None until the first answer or failure
+        self.last_error = ""
+        self.queries = 0  # round trips made for poses (cache misses), for tests and benches
+        self._cache: dict[PartsKey, Pose] = {}
+        self._lock = threading.Lock()
+        self._wake = threading.Condition(self._lock)
+        self._pending: _Request | None = None
+        self._closing = False
+        self._thread = threading.Thread(target=self._run, name=f"resolver-{platform}", daemon=True)
+
+    def start(self) -> None:
+        self._thread.start()
+
+    def close(self) -> None:
+        with self._wake:
+            self._closing = True
+            self._wake.notify()
+        if self._thread.is_alive():
+            self._thread.join(timeout=self.timeout_s + 1.0)
+
+    # --- called from the control loop -------------------------------------------------------
+
+    def cached(self, key: PartsKey) -> Pose | None:
+        """The answer for ``key`` if this databank version already gave it."""
+        return self._cache.get(key)
+
+    def submit(self, ticket: int, key: PartsKey, callback: Callback) -> None:
+        """Resolve ``key`` in the worker; ``callback(ticket, pose or error)`` runs there.
+
+        A request still waiting is replaced (its callback is never called).
+        """
+        with self._wake:
+            self._pending = _Request(ticket, key, callback)
+            self._wake.notify()
+
+    # --- the worker ---------------------------------------------------------------------------
+
+    def _run(self) -> None:
+        next_check = 0.0
+        while True:
+            with self._wake:
+                while not self._closing and self._pending is None:
+                    timeout = next_check - time.monotonic()
+                    if timeout <= 0:
+                        break
+                    self._wake.wait(timeout)
+                if self._closing:
+                    return
+                request, self._pending = self._pending, None
+            if request is not None:
+                answer = self._resolve(request.key)
+                try:
+                    request.callback(request.ticket, answer)
+                except Exception:  # the loop's inbox append cannot fail; never kill the worker
+                    log.exception("resolver callback failed")
+            if request is None or not self.reachable:
+                self.refresh()
+                next_check = time.monotonic() + (self.refresh_s if self.reachable else self.probe_s)
+
+    def refresh(self) -> bool:
+        """Read the catalogue; a new version empties the cache. Returns reachability."""
+        try:
+            cat = self._query(self.keys.catalogue(self.platform), None, Catalogue)
+        except KinesphereError as exc:
+            if exc.code == "unavailable":
+                self._unreachable(exc)
+            else:  # it answered, with an error (e.g. it does not serve this platform)
+                log.warning("catalogue of %s: %s", self.platform, exc)
+                self._reached()
+            return bool(self.reachable)
+        if cat.version != self.version:
+            if self.version is not None:
+                log.info("databank %s changed version %s -> %s; cache cleared",
+                         self.platform, self.version, cat.version)
+            with self._lock:
+                self._cache = {}
+            self.version = cat.version
+        self.catalogue = cat
+        self._reached()
+        return True
+
+    def resolve(self, key: PartsKey) -> Answer:
+        """Blocking resolution of ``key`` (cache first); errors are returned, not raised."""
+        hit = self._cache.get(key)
+        return hit if hit is not None else self._resolve(key)
+
+    def _resolve(self, key: PartsKey) -> Answer:
+        if self.version is None:
+            self.refresh()  # learn the version first, so the answer is cached under it
+        version = self.version
+        try:
+            if len(key) == 1:
+                limb, origin, direction, size = key[0]
+                pose = self._query(
+                    self.keys.pose(self.platform, limb, origin, direction, size), None, Pose
+                )
+            else:
+                parts = [SpatialCommand(*p) for p in key]
+                pose = self._query(
+                    self.keys.compound(self.platform), encode(CompoundRequest(parts=parts)), Pose
+                )
+        except KinesphereError as exc:
+            if exc.code == "unavailable":
+                self._unreachable(exc)
+            else:
+                self._reached()
+            return exc
+        self._reached()
+        self.queries += 1
+        if version is not None and version == self.version:
+            with self._lock:
+                self._cache[key] = pose
+        return pose
+
+    def _query(self, key: str, payload: bytes | None, type_: type[T]) -> T:
+        try:
+            replies = self.session.get(
+                key,
+                payload=payload,
+                timeout=self.timeout_s,
+                consolidation=zenoh.ConsolidationMode.NONE,
+            )
+            for reply in replies:  # the first answer wins; other replicas may answer too
+                if reply.ok is not None:
+                    return decode(reply.ok.payload, type_)
+                assert reply.err is not None
+                raise error_from_reply(reply.err.payload)
+        except zenoh.ZError as exc:
+            raise KinesphereError("unavailable", f"zenoh: {exc}") from None
+        raise KinesphereError("unavailable", f"no databank answers {key}")
+
+    def _unreachable(self, exc: KinesphereError) -> None:
+        if self.reachable or self.last_error != exc.message:
+            log.warning("databank unreachable for %s: %s", self.platform, exc.message)
+        self.reachable = False
+        self.last_error = exc.message
+
+    def _reached(self) -> None:
+        if not self.reachable:
+            log.info("databank reachable for %s", self.platform)
+        self.reachable = True
+        self.last_error = ""

@@ -1,0 +1,394 @@
+"""The robot agent: commands in, RobotState out, a real-time control loop in between.
+
+Threads: Zenoh callbacks only decode and append to an inbox (a deque: lock-free, never
+blocks the network); the resolver's worker does the blocking databank queries; the control
+loop alone touches the Controller, drains the inbox at the start of each step and publishes
+state every ``1/state_rate`` s of robot time. Commands whose poses are cached are applied in
+the very step that drains them.
+
+Clock: the loop's own simulated time drives the trajectories and the watchdog. ``speed`` sets
+how it is paced: 1 = real time (wall clock), k = k times faster, 0 = as fast as possible (tests
+and benchmarks). When a step overruns, the loop catches up; when it is more than
+:data:`BEHIND_S` late it gives up the lost time, counts a slip and logs that it fell behind.
+
+Ordering: per ``sender``, a command older than the newest one seen (lower or equal ``seq`` *and*
+no later ``sent_ns``) is dropped as stale; a restarted client (seq from 0, newer clock) is
+accepted. E-stop and stop are never dropped. See ``safety.py`` for the safety rules.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import zenoh
+from kinesphere.robots.agent.controller import Controller
+from kinesphere.robots.agent.resolver import Answer, Resolver, parts_key
+from kinesphere.robots.agent.safety import Safety, Verdict
+from kinesphere.robots.agent.trajectory import DEFAULT_MARGIN
+from kinesphere.robots.mjcf import platform_model
+
+from kinesphere.errors import KinesphereError
+from kinesphere.keyexpr import DEFAULT_PREFIX, Keys
+from kinesphere.laban import Direction
+from kinesphere.protocol import Command, Pose, RobotState, Status, decode, encode
+from kinesphere.zconfig import undeclare
+
+log = logging.getLogger(__name__)
+
+BEHIND_S = 0.05
+"""Lag after which the loop stops catching up and lets robot time slip behind wall time."""
+
+
+@dataclass(frozen=True)
+class AgentOptions:
+    rate: float = 500.0
+    state_rate: float = 50.0
+    speed: float = 1.0
+    prefix: str = DEFAULT_PREFIX
+    groups: tuple[str, ...] = ()
+    query_timeout_s: float = 1.0
+    margin: float = DEFAULT_MARGIN
+
+
+@dataclass
+class LoopStats:
+    """What the loop measured about itself (benchmarks and the falling-behind report)."""
+
+    steps: int = 0
+    late: int = 0  # steps that started after their deadline
+    slips: int = 0  # times the loop gave up catching up
+    max_lag_s: float = 0.0
+    costs_s: deque[float] = field(default_factory=lambda: deque(maxlen=20_000))
+
+
+@dataclass
+class _Received:
+    cmd: Command
+    recv_ns: int
+
+
+@dataclass
+class _Bad:
+    error: KinesphereError
+
+
+@dataclass
+class _Resolved:
+    ticket: int
+    answer: Answer
+
+
+class Agent:
+    """One robot: a Controller, its safety rules, its databank resolver, its Zenoh face."""
+
+    def __init__(
+        self, platform: str, robot_id: str, session: zenoh.Session,
+        options: AgentOptions | None = None,
+    ) -> None:
+        self.options = options or AgentOptions()
+        self.keys = Keys(self.options.prefix)
+        self.keys.command(robot_id)  # validates the id as a key segment
+        self.robot_id = robot_id
+        self.session = session
+        self.controller = Controller(platform_model(platform), self.options.rate,
+                                     self.options.margin)
+        self.platform = self.controller.platform.name
+        self.resolver = Resolver(session, self.platform, self.keys, self.options.query_timeout_s)
+        self.safety = Safety()
+        self.stats = LoopStats()
+        self.latencies: deque[tuple[int, int, int]] = deque(maxlen=10_000)
+        """(seq, sent_ns, first moving step ns) per pose command applied."""
+        self.last_state: RobotState | None = None
+        self._inbox: deque[_Received | _Bad | _Resolved] = deque()
+        self._ticket = 0
+        self._latest: dict[str, tuple[int, int]] = {}
+        self._last_seq = -1
+        self._pending_yaw: dict[int, float | None] = {}
+        self._pending_cmd: Command | None = None
+        self._probe: tuple[int, int] | None = None
+        self._status = Status.IDLE
+        self._detail = "no command yet"
+        self._state_seq = 0
+        self._publish_every = max(1, round(self.options.rate / self.options.state_rate))
+        self._entities: list[Any] = []
+        self._publisher: Any = None
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+
+    # --- lifetime ------------------------------------------------------------------------------
+
+    def declare(self) -> None:
+        """Subscribe to commands, declare the state publisher and liveliness token."""
+        s = self.session
+        keys = [self.keys.command(self.robot_id)]
+        keys += [self.keys.group_command(g) for g in self.options.groups]
+        self._entities = [s.declare_subscriber(k, self._on_sample) for k in keys]
+        self._publisher = s.declare_publisher(
+            self.keys.state(self.robot_id), congestion_control=zenoh.CongestionControl.DROP
+        )
+        self._entities.append(self._publisher)
+        self._entities.append(s.liveliness().declare_token(self.keys.alive_robot(self.robot_id)))
+        self.resolver.start()
+        log.info("agent %s (%s) up: %s", self.robot_id, self.platform, keys[0])
+
+    def start(self) -> Agent:
+        """Declare and run the loop in a thread; :meth:`close` ends both."""
+        self.declare()
+        self._thread = threading.Thread(target=self.run, name=f"agent-{self.robot_id}",
+                                        daemon=True)
+        self._thread.start()
+        return self
+
+    def close(self) -> None:
+        """Stop the loop, undeclare everything (the session stays open: the caller owns it)."""
+        self._stop.set()
+        if self._thread is not None and self._thread is not threading.current_thread():
+            self._thread.join(timeout=5.0)
+        self.resolver.close()
+        undeclare(*reversed(self._entities))
+        self._entities = []
+        log.info("agent %s down after %d steps (%d slips)", self.robot_id, self.stats.steps,
+                 self.stats.slips)
+
+    def __enter__(self) -> Agent:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # --- network callbacks (Zenoh threads) -----------------------------------------------------
+
+    def _on_sample(self, sample: zenoh.Sample) -> None:
+        now = time.time_ns()
+        try:
+            self._inbox.append(_Received(decode(sample.payload, Command), now))
+        except KinesphereError as exc:
+            self._inbox.append(_Bad(exc))
+
+    def _on_resolved(self, ticket: int, answer: Answer) -> None:
+        self._inbox.append(_Resolved(ticket, answer))
+
+    # --- the loop ------------------------------------------------------------------------------
+
+    def run(self, stop: threading.Event | None = None, on_tick: Callable[[], None] | None = None
+            ) -> None:
+        """Step paced by ``options.speed`` until :meth:`close` (or ``stop`` is set)."""
+        stop_event = self._stop
+        period = self.controller.dt / self.options.speed if self.options.speed > 0 else 0.0
+        stats = self.stats
+        clock = time.perf_counter
+        next_t = clock()
+        last_warn = -1e9
+        while not stop_event.is_set() and not (stop is not None and stop.is_set()):
+            t0 = clock()
+            self.tick()
+            if on_tick is not None:
+                on_tick()
+            stats.costs_s.append(clock() - t0)
+            if period == 0.0:
+                continue
+            next_t += period
+            delay = next_t - clock()
+            if delay > 0.0:
+                time.sleep(delay)
+                continue
+            stats.late += 1
+            stats.max_lag_s = max(stats.max_lag_s, -delay)
+            if -delay > BEHIND_S:
+                stats.slips += 1
+                next_t = clock()
+                if t0 - last_warn > 5.0:
+                    last_warn = t0
+                    log.warning("agent %s falls behind real time: %.0f ms late (%d slips)",
+                                self.robot_id, -delay * 1e3, stats.slips)
+
+    def tick(self) -> None:
+        """One control cycle: commands, watchdog, physics, and state when due."""
+        inbox = self._inbox
+        while inbox:
+            self._handle(inbox.popleft())
+        ctrl = self.controller
+        if self.safety.expired(ctrl.time) and ctrl.moving:
+            self._halt(Status.HOLDING, "no new command within ttl_ms: holding")
+        ctrl.step()
+        self.stats.steps += 1
+        if self._probe is not None:
+            seq, sent_ns = self._probe
+            self._probe = None
+            self.latencies.append((seq, sent_ns, time.time_ns()))
+        if ctrl.steps % self._publish_every == 0:
+            self.publish()
+
+    # --- commands (control thread) ------------------------------------------------------------
+
+    def _handle(self, item: _Received | _Bad | _Resolved) -> None:
+        if isinstance(item, _Resolved):
+            self._apply(item.ticket, item.answer)
+        elif isinstance(item, _Bad):
+            self._error(item.error, "command")
+        else:
+            try:
+                self._command(item.cmd)
+            except KinesphereError as exc:
+                self._error(exc, f"command {item.cmd.seq}")
+            except Exception as exc:  # a bug must not take the robot's control loop down
+                log.exception("agent %s: command %s failed", self.robot_id, item.cmd.seq)
+                self._error(KinesphereError("internal", repr(exc)), f"command {item.cmd.seq}")
+
+    def _stale(self, cmd: Command) -> bool:
+        last = self._latest.get(cmd.sender)
+        if last is not None and cmd.seq <= last[0] and cmd.sent_ns <= last[1]:
+            return not (cmd.estop or cmd.stop)
+        self._latest[cmd.sender] = (cmd.seq, cmd.sent_ns)
+        return False
+
+    def _command(self, cmd: Command) -> None:
+        if self._stale(cmd):
+            log.debug("stale command %s from %r dropped", cmd.seq, cmd.sender)
+            return
+        self._last_seq = cmd.seq
+        ctrl = self.controller
+        verdict = self.safety.on_command(cmd, ctrl.time)
+        if verdict is Verdict.ESTOP:
+            self._halt(Status.ESTOP, f"e-stop from {cmd.sender or 'a client'}; release with "
+                       "estop=false, stop=false, deadman=true")
+            log.warning("agent %s: e-stop (seq %d)", self.robot_id, cmd.seq)
+        elif verdict is Verdict.LATCHED:
+            self._set(Status.ESTOP, "e-stop latched; ignoring commands until released with "
+                      "estop=false, stop=false, deadman=true")
+        elif verdict is Verdict.RELEASE:
+            self._set(Status.IDLE, "e-stop released; send a command to move")
+            log.warning("agent %s: e-stop released (seq %d)", self.robot_id, cmd.seq)
+        elif verdict is Verdict.STOP:
+            self._halt(Status.STOPPED, "stop command")
+        elif verdict is Verdict.DEADMAN:
+            self._halt(Status.HOLDING, "deadman released: holding")
+        else:
+            self._move(cmd)
+
+    def _move(self, cmd: Command) -> None:
+        ctrl = self.controller
+        base = ctrl.base
+        if cmd.drive is not None:
+            d = Direction.parse(cmd.drive.direction)
+            if not d.is_translation:
+                raise KinesphereError(
+                    "malformed", f"drive direction {d.slug!r} is not a middle horizontal; valid: "
+                    + ", ".join(t.slug for t in Direction.translations()))
+            if base is None:
+                raise KinesphereError("cannot_translate", f"{self.platform} has a fixed base")
+            base.drive(d.vector[:2], cmd.drive.speed)
+            self._set(Status.MOVING, f"driving {d.slug} at {cmd.drive.speed:.2f}")
+        elif base is not None and base.driving:
+            base.stop()
+        if not cmd.parts:
+            return
+        key = parts_key(cmd.parts)
+        self._ticket += 1
+        hit = self.resolver.cached(key)
+        yaw = ctrl.commanded_base_yaw()
+        if hit is not None:
+            self._apply_pose(hit, yaw, cmd)
+        else:
+            self._pending_yaw = {self._ticket: yaw}
+            self._pending_cmd = cmd
+            self.resolver.submit(self._ticket, key, self._on_resolved)
+
+    def _apply(self, ticket: int, answer: Answer) -> None:
+        if ticket != self._ticket:
+            return  # overtaken by a newer command, a stop or an e-stop
+        yaw = self._pending_yaw.pop(ticket, None)
+        cmd = self._pending_cmd
+        assert cmd is not None
+        if isinstance(answer, KinesphereError):
+            self._error(answer, f"command {cmd.seq}")
+            return
+        self._apply_pose(answer, yaw, cmd)
+
+    def _apply_pose(self, pose: Pose, yaw: float | None, cmd: Command) -> None:
+        ctrl = self.controller
+        if pose.platform != self.platform:
+            raise KinesphereError("internal", f"databank answered for {pose.platform!r}")
+        try:
+            clamps = ctrl.joints.retarget(pose.joints)
+        except KeyError as exc:
+            self._error(KinesphereError(
+                "internal", f"databank pose names joints not in {self.platform}: {exc}"), "pose")
+            return
+        if pose.translation is not None and ctrl.base is not None and not ctrl.base.driving:
+            ctrl.base.translate(pose.translation, yaw)
+        if clamps:
+            detail = "clamped " + ", ".join(f"{c.joint} {c.requested:+.3f}->{c.target:+.3f}"
+                                             for c in clamps)
+            log.info("agent %s: %s", self.robot_id, detail)
+        else:
+            detail = f"to {pose.limb}/{pose.origin}/{pose.direction}/{pose.size:g}"
+        self._set(Status.MOVING, detail)
+        self._probe = (cmd.seq, cmd.sent_ns)
+
+    def _halt(self, status: str, detail: str) -> None:
+        self._ticket += 1  # pending resolutions no longer apply
+        self.controller.halt()
+        self._set(status, detail)
+
+    def _set(self, status: str, detail: str) -> None:
+        self._status, self._detail = status, detail
+
+    def _error(self, exc: KinesphereError, what: str) -> None:
+        log.warning("agent %s: %s rejected: %s", self.robot_id, what, exc)
+        if exc.code == "unavailable":
+            self._set(Status.DATABANK_UNREACHABLE, f"{what}: {exc.message}; holding last pose")
+        else:
+            self._set(Status.ERROR, f"{what}: {exc.code}: {exc.message}")
+
+    # --- state -----------------------------------------------------------------------------------
+
+    def status(self) -> tuple[str, str]:
+        """The status and detail to publish now."""
+        status, detail = self._status, self._detail
+        ctrl = self.controller
+        if self.safety.estopped:
+            return Status.ESTOP, detail
+        reachable = self.resolver.reachable
+        if reachable is False:
+            return Status.DATABANK_UNREACHABLE, self.resolver.last_error
+        if status == Status.DATABANK_UNREACHABLE:  # it answers again
+            status, detail = Status.MOVING, "databank reachable again"
+        if status == Status.MOVING and not ctrl.moving:
+            if ctrl.joints.clamped:
+                return Status.CLAMPED, detail
+            return Status.IDLE, "at target"
+        return status, detail
+
+    def publish(self) -> RobotState:
+        ctrl = self.controller
+        status, detail = self.status()
+        self._state_seq += 1
+        state = RobotState(
+            robot_id=self.robot_id, platform=self.platform, seq=self._state_seq,
+            stamp_ns=time.time_ns(), joint_names=list(ctrl.joint_names), q=ctrl.q(),
+            qd=ctrl.qd(), base_pose=ctrl.base_pose(), status=status,
+            last_command_seq=self._last_seq, detail=detail,
+            clamped=sorted(ctrl.joints.clamped),
+        )
+        self.last_state = state
+        if self._publisher is not None:
+            try:
+                self._publisher.put(encode(state))
+            except zenoh.ZError as exc:  # session closing or congested: the loop goes on
+                log.debug("state not published: %s", exc)
+        return state
+
+    def cost_percentiles(self) -> tuple[float, float]:
+        """Median and p99 step cost in seconds over the recent steps."""
+        costs = np.fromiter(self.stats.costs_s, dtype=float)
+        if costs.size == 0:
+            return 0.0, 0.0
+        return float(np.median(costs)), float(np.percentile(costs, 99))

@@ -1,0 +1,190 @@
+"""The agent's motion pieces without the network: Ruckig joints, the planar bases, safety rules.
+
+These pin down the properties the end-to-end tests rely on, quickly and deterministically.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from kinesphere.eurdf import JointLimit
+from kinesphere.protocol import Command, Drive
+from kinesphere.robots.agent.base import DiffBase, OmniBase, make_base, wrap_angle
+from kinesphere.robots.agent.controller import Controller
+from kinesphere.robots.agent.safety import DRIVE_TTL_S, Safety, Verdict
+from kinesphere.robots.agent.trajectory import DEFAULT_MARGIN, JointTrajectory
+from kinesphere.robots.mjcf import platform_model
+from kinesphere.robots.platform import BaseSpec
+
+DT = 0.002
+ACC, JERK = 4.0, 40.0
+LIMITS = [
+    JointLimit("a", "revolute", -1.0, 1.0, 1.5),
+    JointLimit("b", "revolute", -2.0, 2.0, 3.0),
+    JointLimit("c", "continuous", -math.inf, math.inf, math.inf),
+]
+
+
+def run(traj: JointTrajectory, steps: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    pos, vel, acc = [], [], []
+    for _ in range(steps):
+        traj.step()
+        pos.append(traj.position.copy())
+        vel.append(traj.velocity.copy())
+        acc.append(traj.acceleration.copy())
+    return np.array(pos), np.array(vel), np.array(acc)
+
+
+def test_retarget_mid_motion_is_continuous_and_jerk_limited() -> None:
+    traj = JointTrajectory(LIMITS, ACC, JERK, DT, [0.0, 0.0, 0.0])
+    traj.retarget({"a": 0.9, "b": -1.5, "c": 4.0})
+    p1, v1, a1 = run(traj, 150)
+    assert np.abs(v1[-1]).max() > 0.5, "should be well under way"
+    traj.retarget({"a": -0.8, "c": -3.0})  # b keeps its target
+    p2, v2, a2 = run(traj, 3000)
+    pos, vel, acc = np.vstack([p1, p2]), np.vstack([v1, v2]), np.vstack([a1, a2])
+    assert not traj.moving
+    np.testing.assert_allclose(traj.position, [-0.8, -1.5, -3.0], atol=1e-9)
+    jerk = np.abs(np.diff(acc, axis=0)) / DT
+    assert jerk.max() <= JERK * (1 + 1e-6)
+    assert np.abs(np.diff(vel, axis=0)).max() <= ACC * DT * (1 + 1e-6)  # no velocity jump
+    assert np.abs(acc).max() <= ACC * (1 + 1e-6)
+    vmax = np.array([1.5, 3.0, 1.0])  # c has no eURDF velocity: the default applies
+    assert (np.abs(vel) <= vmax * (1 + 1e-6)).all()
+    assert (pos[:, 0] <= 1.0).all() and (pos[:, 0] >= -1.0).all()
+
+
+def test_targets_are_clamped_with_margin_and_reported() -> None:
+    traj = JointTrajectory(LIMITS, ACC, JERK, DT, [0.0, 0.0, 0.0])
+    clamps = traj.retarget({"a": 1.7, "b": 0.5})
+    assert [c.joint for c in clamps] == ["a"]
+    assert clamps[0].target == pytest.approx(1.0 - DEFAULT_MARGIN)
+    assert set(traj.clamped) == {"a"}
+    run(traj, 2000)
+    assert traj.position[0] == pytest.approx(1.0 - DEFAULT_MARGIN)
+    traj.retarget({"a": 0.0})
+    assert not traj.clamped
+    with pytest.raises(KeyError):
+        traj.retarget({"nope": 0.0})
+
+
+def test_stop_brakes_in_place_within_limits() -> None:
+    traj = JointTrajectory(LIMITS, ACC, JERK, DT, [0.0, 0.0, 0.0])
+    traj.retarget({"a": -0.9, "b": 1.9})
+    run(traj, 200)
+    moving_at = traj.position.copy()
+    traj.stop()
+    _, vel, acc = run(traj, 1000)
+    assert not traj.moving
+    assert np.abs(vel[-1]).max() == 0.0
+    assert np.abs(np.diff(acc, axis=0)).max() / DT <= JERK * (1 + 1e-6)
+    np.testing.assert_allclose(traj.target[:2], traj.position[:2])
+    assert abs(traj.position[0]) > abs(moving_at[0])  # it braked, it did not go back
+
+
+OMNI = BaseSpec("omni", 0.1, max_speed=0.8, max_yaw_rate=1.0, max_acceleration=1.0, max_jerk=5.0)
+DIFF = BaseSpec("diff", 0.1, max_speed=0.5, max_yaw_rate=2.0, max_acceleration=1.0, max_jerk=5.0)
+
+
+def drive_base(base: OmniBase | DiffBase, steps: int) -> np.ndarray:
+    twists = []
+    for _ in range(steps):
+        base.step()
+        twists.append(base.twist.copy())
+    return np.array(twists)
+
+
+def test_omni_translation_is_straight_in_the_body_frame_of_the_command() -> None:
+    base = make_base(OMNI, DT)
+    assert isinstance(base, OmniBase)
+    base.translate([0.3, 0.4, 0.0], yaw=math.pi / 2)  # body x is world y
+    twists = drive_base(base, 3000)
+    assert not base.moving
+    np.testing.assert_allclose(base.pose, [-0.4, 0.3, 0.0], atol=1e-9)
+    speed = np.hypot(twists[:, 0], twists[:, 1])
+    assert speed.max() <= OMNI.max_speed * (1 + 1e-6)
+    moving = speed > 1e-6  # straight line: the velocity keeps one direction
+    heading = np.arctan2(twists[moving, 1], twists[moving, 0])
+    assert np.ptp(heading) < 1e-6
+
+
+def test_omni_drive_cruises_until_stopped_then_brakes() -> None:
+    base = make_base(OMNI, DT)
+    assert base is not None
+    base.drive((0.0, 1.0), 0.5)
+    twists = drive_base(base, 1500)
+    assert twists[-1][1] == pytest.approx(0.4)
+    assert base.driving and base.moving
+    base.stop()
+    twists = np.vstack([twists, drive_base(base, 1500)])
+    assert not base.moving and not base.driving
+    assert np.abs(np.diff(twists, axis=0)).max() <= OMNI.max_acceleration * DT * (1 + 1e-6)
+
+
+@pytest.mark.parametrize(("dx", "dy", "yaw"), [(0.0, 0.3, math.pi / 2), (-0.2, 0.0, 0.0),
+                                               (-0.2, 0.2, -math.pi / 4)])
+def test_diff_base_turns_then_drives(dx: float, dy: float, yaw: float) -> None:
+    base = make_base(DIFF, DT)
+    assert isinstance(base, DiffBase)
+    base.translate([dx, dy, 0.0])
+    drive_base(base, 6000)
+    assert not base.moving
+    np.testing.assert_allclose(base.pose[:2], [dx, dy], atol=1e-6)
+    assert wrap_angle(base.pose[2] - yaw) == pytest.approx(0.0, abs=1e-6)
+
+
+def test_diff_drive_lateral_component_turns() -> None:
+    base = make_base(DIFF, DT)
+    assert base is not None
+    base.drive((0.0, 1.0), 1.0)  # "left" on a tank: turn left in place
+    drive_base(base, 1000)
+    assert base.twist[2] == pytest.approx(DIFF.max_yaw_rate)
+    assert np.hypot(*base.pose[:2]) < 1e-9
+
+
+def cmd(**kw: object) -> Command:
+    fields: dict[str, object] = {"seq": 1, "sent_ns": 0, "deadman": True, "ttl_ms": 0}
+    fields.update(kw)
+    return Command(**fields)  # type: ignore[arg-type]
+
+
+def test_safety_estop_latches_until_an_explicit_release() -> None:
+    s = Safety()
+    assert s.on_command(cmd(), 0.0) is Verdict.MOVE
+    assert s.on_command(cmd(estop=True), 0.1) is Verdict.ESTOP
+    assert s.on_command(cmd(), 0.2) is Verdict.RELEASE  # deadman held, no stop: releases
+    s.on_command(cmd(estop=True), 0.3)
+    assert s.on_command(cmd(deadman=False), 0.4) is Verdict.LATCHED
+    assert s.on_command(cmd(stop=True), 0.5) is Verdict.LATCHED
+    assert s.estopped
+    assert s.on_command(cmd(), 0.6) is Verdict.RELEASE
+    assert not s.estopped
+
+
+def test_safety_watchdog_and_deadman() -> None:
+    s = Safety()
+    assert s.on_command(cmd(ttl_ms=100), 1.0) is Verdict.MOVE
+    assert not s.expired(1.05)
+    assert s.expired(1.1) and not s.expired(1.2)  # fires once
+    assert s.on_command(cmd(drive=Drive("forward", 1.0)), 2.0) is Verdict.MOVE
+    assert s.expired(2.0 + DRIVE_TTL_S)  # a drive never runs without a watchdog
+    s.on_command(cmd(ttl_ms=0, parts=[]), 3.0)
+    assert not s.expired(100.0)  # ttl 0: one-shot pose commands are not cut short
+    assert s.on_command(cmd(deadman=False), 4.0) is Verdict.DEADMAN
+    assert s.on_command(cmd(stop=True), 4.0) is Verdict.STOP
+
+
+def test_controller_tracks_ruckig_inside_limits() -> None:
+    c = Controller(platform_model("tests/data/toyarm"))
+    c.joints.retarget({"yaw": 1.99, "elbow": -1.0, "wrist": 1.4})
+    assert c.base is not None
+    c.base.translate([0.2, 0.0, 0.0])
+    c.settle(extra=250)
+    lim = c.platform.eurdf.limits
+    q = dict(zip(c.joint_names, c.q(), strict=True))
+    assert q["yaw"] == pytest.approx(lim["yaw"].upper - DEFAULT_MARGIN, abs=2e-3)
+    assert q["elbow"] == pytest.approx(-1.0, abs=2e-3)
+    assert c.base_pose()[0] == pytest.approx(0.2, abs=2e-3)

@@ -1,0 +1,249 @@
+"""Shared fixtures for the agent tests: a loopback hub, the real databank, agents, state watchers.
+
+Everything is real: Zenoh sessions on ``tcp/127.0.0.1:<free port>`` with scouting off, the
+databank service as a subprocess (``kinesphere databank serve``), MuJoCo and Ruckig in the
+agents, which run in this process so tests can record their Ruckig outputs. Tests wait on
+events (a state matching a predicate, a liveliness token), never on sleeps.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pytest
+import zenoh
+
+from kinesphere import zconfig
+from kinesphere.keyexpr import Keys
+from kinesphere.protocol import (
+    Catalogue,
+    Command,
+    Drive,
+    Pose,
+    RobotState,
+    SpatialCommand,
+    decode,
+    encode,
+    error_from_reply,
+)
+from kinesphere.robots.agent.controller import Controller
+from kinesphere.robots.agent.runtime import Agent, AgentOptions
+
+KEYS = Keys()
+ROOT = Path(__file__).resolve().parent.parent
+WAIT_S = 30.0
+"""Generous upper bound for events on a loaded 2-core machine; tests finish far sooner."""
+
+
+# --- the databank ---------------------------------------------------------------------------
+
+
+class Databank:
+    """The real databank service in a subprocess, connected to the test hub."""
+
+    def __init__(self, endpoint: str, watcher: zenoh.Session) -> None:
+        self.endpoint = endpoint
+        self.watcher = watcher
+        self.proc: subprocess.Popen[bytes] | None = None
+
+    def start(self) -> None:
+        up = threading.Event()
+
+        def on_token(sample: zenoh.Sample) -> None:
+            if sample.kind == zenoh.SampleKind.PUT:
+                up.set()
+
+        sub = self.watcher.liveliness().declare_subscriber(
+            KEYS.alive_databank_all(), on_token, history=True
+        )
+        try:
+            self.proc = subprocess.Popen(
+                [sys.executable, "-m", "kinesphere.cli", "databank", "serve",
+                 "--connect", self.endpoint, "--listen", zconfig.LOOPBACK_ANY_PORT],
+                cwd=ROOT, env={**os.environ, "PYTHONUNBUFFERED": "1"},
+                stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+            )
+            if not up.wait(WAIT_S):
+                self.stop()
+                raise RuntimeError("databank did not declare its liveliness token")
+        finally:
+            sub.undeclare()
+
+    def stop(self) -> None:
+        if self.proc is None:
+            return
+        self.proc.send_signal(signal.SIGTERM)
+        try:
+            self.proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait()
+        self.proc = None
+
+    def query(self, platform: str, part: SpatialCommand) -> Pose:
+        """Ask the databank directly (what the test expects the robot to reach)."""
+        key = KEYS.pose(platform, part.limb, part.origin, part.direction, part.size)
+        for reply in self.watcher.get(key, timeout=5.0):
+            if reply.ok is not None:
+                return decode(reply.ok.payload, Pose)
+            assert reply.err is not None
+            raise error_from_reply(reply.err.payload)
+        raise RuntimeError(f"no databank answers {key}")
+
+    def catalogue(self, platform: str) -> Catalogue:
+        for reply in self.watcher.get(KEYS.catalogue(platform), timeout=5.0):
+            assert reply.ok is not None, platform
+            return decode(reply.ok.payload, Catalogue)
+        raise RuntimeError(f"no catalogue for {platform}")
+
+
+@pytest.fixture(scope="module")
+def hub() -> Iterator[tuple[zenoh.Session, str]]:
+    with zconfig.loopback_hub() as pair:
+        yield pair
+
+
+@pytest.fixture(scope="module")
+def databank(hub: tuple[zenoh.Session, str]) -> Iterator[Databank]:
+    session, endpoint = hub
+    bank = Databank(endpoint, session)
+    bank.start()
+    try:
+        yield bank
+    finally:
+        bank.stop()
+
+
+# --- robots ------------------------------------------------------------------------------------
+
+
+@dataclass
+class Trace:
+    """The Ruckig outputs and the simulated joints at every control step."""
+
+    t: list[float] = field(default_factory=list)
+    pos: list[np.ndarray] = field(default_factory=list)
+    vel: list[np.ndarray] = field(default_factory=list)
+    acc: list[np.ndarray] = field(default_factory=list)
+    sim: list[np.ndarray] = field(default_factory=list)
+    base_vel: list[np.ndarray] = field(default_factory=list)
+
+    def __call__(self, c: Controller) -> None:
+        self.t.append(c.time)
+        self.pos.append(c.joints.position.copy())
+        self.vel.append(c.joints.velocity.copy())
+        self.acc.append(c.joints.acceleration.copy())
+        self.sim.append(np.array(c.q()))
+        if c.base is not None:
+            self.base_vel.append(c.base.twist.copy())
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        return (np.array(self.t), np.array(self.pos), np.array(self.vel), np.array(self.acc))
+
+
+class StateWatch:
+    """The RobotState stream of one robot, with waits on predicates."""
+
+    def __init__(self, session: zenoh.Session, robot_id: str) -> None:
+        self.states: list[RobotState] = []
+        self._cond = threading.Condition()
+        self._sub = session.declare_subscriber(KEYS.state(robot_id), self._on)
+
+    def _on(self, sample: zenoh.Sample) -> None:
+        state = decode(sample.payload, RobotState)
+        with self._cond:
+            self.states.append(state)
+            self._cond.notify_all()
+
+    def wait(self, pred: Callable[[RobotState], bool], what: str,
+             timeout: float = WAIT_S) -> RobotState:
+        """The first state from now on (or the latest) satisfying ``pred``."""
+        deadline = time.monotonic() + timeout
+        with self._cond:
+            seen = max(0, len(self.states) - 1)
+            while True:
+                for s in self.states[seen:]:
+                    if pred(s):
+                        return s
+                seen = len(self.states)
+                left = deadline - time.monotonic()
+                if left <= 0 or not self._cond.wait(left):
+                    last = self.states[-1] if self.states else None
+                    raise AssertionError(f"timed out waiting for {what}; last state {last}")
+
+    def after(self, seq: int, pred: Callable[[RobotState], bool], what: str,
+              timeout: float = WAIT_S) -> RobotState:
+        """A state acting on command ``seq`` (or later) that satisfies ``pred``."""
+        return self.wait(lambda s: s.last_command_seq >= seq and pred(s), what, timeout)
+
+    def close(self) -> None:
+        self._sub.undeclare()
+
+
+@contextmanager
+def running_agent(
+    endpoint: str, platform: str, robot_id: str | None = None, speed: float = 0.0,
+    trace: Trace | None = None, **options: object,
+) -> Iterator[tuple[Agent, StateWatch]]:
+    """An agent in this process with its own session joined to the hub, and its state."""
+    robot_id = robot_id or Path(platform).name
+    with zconfig.session(config=zconfig.loopback_config(endpoint)) as s:
+        agent = Agent(platform, robot_id, s, AgentOptions(speed=speed, **options))  # type: ignore[arg-type]
+        if trace is not None:
+            agent.controller.on_step = trace
+        watch = StateWatch(s, robot_id)
+        agent.start()
+        try:
+            watch.wait(lambda st: True, f"first state of {robot_id}")
+            yield agent, watch
+        finally:
+            agent.close()
+            watch.close()
+
+
+class Operator:
+    """A client putting Commands, as the gamepad client would."""
+
+    def __init__(self, session: zenoh.Session, robot_id: str = "*", sender: str = "test") -> None:
+        self.pub = session.declare_publisher(KEYS.command(robot_id))
+        self.sender = sender
+        self.seq = 0
+        zconfig.wait_matching(self.pub)
+
+    def send(self, *parts: tuple[str, str, str, float], drive: tuple[str, float] | None = None,
+             deadman: bool = True, ttl_ms: int = 0, estop: bool = False,
+             stop: bool = False) -> int:
+        self.seq += 1
+        self.pub.put(encode(Command(
+            seq=self.seq, sent_ns=time.time_ns(), parts=[SpatialCommand(*p) for p in parts],
+            drive=Drive(*drive) if drive else None, deadman=deadman, ttl_ms=ttl_ms,
+            estop=estop, stop=stop, sender=self.sender)))
+        return self.seq
+
+    def raw(self, payload: bytes) -> None:
+        self.pub.put(payload)
+
+    def close(self) -> None:
+        self.pub.undeclare()
+
+
+def joints_close(state: RobotState, pose: Pose, tol: float) -> bool:
+    q = dict(zip(state.joint_names, state.q, strict=True))
+    return all(abs(q[j] - v) <= tol for j, v in pose.joints.items())
+
+
+def finite_jerk(trace: Trace) -> tuple[np.ndarray, np.ndarray]:
+    """Jerk and velocity steps from finite differences of the Ruckig outputs."""
+    t, _, vel, acc = trace.arrays()
+    dt = np.diff(t)[:, None]
+    return np.abs(np.diff(acc, axis=0) / dt), np.abs(np.diff(vel, axis=0))
