@@ -1,0 +1,274 @@
+"""SQLite I/O of the ECL databank: the paper's schema, atomic whole-file writes, full reads.
+
+A build writes a complete new file next to the target in one transaction and ``os.replace``-s
+it over the old one, so a crash at any point leaves the previous databank serving. Readers load
+everything at once and close the connection, so no long-lived connection ever sees a file
+swapped underneath it. Joint columns follow P (eURDF order) and are quoted, so any joint name
+is a safe identifier.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import json
+import math
+import os
+import sqlite3
+import tempfile
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+from kinesphere.errors import KinesphereError
+
+META_KEYS = ("platform", "eurdf_sha256", "vsam", "generator_version", "created", "joints")
+
+Values = tuple[float | None, ...]
+
+
+@dataclass(frozen=True)
+class Tables:
+    """The whole content of a databank, as stored (values follow ``joints``)."""
+
+    meta: dict[str, str]
+    joints: tuple[str, ...]
+    vsam: tuple[tuple[int, str, str, str], ...]  # (k_id, origin, limb, direction)
+    pose: tuple[tuple[int, int, Values], ...]  # (p_id, k_id, values)
+    quality: tuple[tuple[int, int, float | None, float | None, float | None], ...]
+
+    def digest(self) -> str:
+        """SHA-256 of the content; ``created`` is left out so identical builds compare equal."""
+        meta = {k: v for k, v in self.meta.items() if k != "created"}
+        pose = [(p, k, [canon(v) for v in values]) for p, k, values in self.pose]
+        quality = [(p, k, *map(canon, q)) for p, k, *q in self.quality]
+        doc = [meta, list(self.joints), self.vsam, pose, quality]
+        text = json.dumps(doc, sort_keys=True, separators=(",", ":"), allow_nan=False)
+        return hashlib.sha256(text.encode("utf-8")).hexdigest()
+
+
+def canon(v: float | None) -> float | None:
+    """SQLite keeps no sign on zero, so -0.0 and 0.0 must hash alike; NaN means unknown."""
+    if v is None or not math.isfinite(v):
+        return None
+    return float(v) + 0.0
+
+
+def quote_ident(name: str) -> str:
+    """A joint name as an SQL identifier: double quotes doubled, so any name is safe."""
+    if "\x00" in name:
+        raise KinesphereError("malformed", f"joint name {name!r} contains a NUL character")
+    return '"' + name.replace('"', '""') + '"'
+
+
+def _schema(joints: Sequence[str]) -> list[str]:
+    lowered = [j.lower() for j in joints]
+    clash = sorted({j for j in lowered if lowered.count(j) > 1 or j in ("p_id", "k_id")})
+    if clash:
+        raise KinesphereError("malformed", f"joint name {clash[0]!r} clashes with another column")
+    cols = "".join(f"{quote_ident(j)} REAL, " for j in joints)
+    return [
+        "CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL)",
+        "CREATE TABLE vsam (k_id INTEGER PRIMARY KEY, origin TEXT NOT NULL, limb TEXT NOT NULL, "
+        "direction TEXT NOT NULL, UNIQUE (limb, origin, direction))",
+        "CREATE TABLE pose (p_id INTEGER NOT NULL, k_id INTEGER NOT NULL REFERENCES vsam (k_id), "
+        f"{cols}PRIMARY KEY (p_id, k_id))",
+        "CREATE TABLE quality (p_id INTEGER NOT NULL, k_id INTEGER NOT NULL, cosine REAL, "
+        "reach REAL, margin REAL, PRIMARY KEY (p_id, k_id), "
+        "FOREIGN KEY (p_id, k_id) REFERENCES pose (p_id, k_id))",
+    ]
+
+
+def connect(path: str | Path) -> sqlite3.Connection:
+    """A read-write connection in autocommit mode (we BEGIN ourselves), FKs on, WAL."""
+    conn = sqlite3.connect(path, isolation_level=None, timeout=10.0)
+    conn.execute("PRAGMA foreign_keys=ON")
+    conn.execute("PRAGMA journal_mode=WAL")
+    return conn
+
+
+def write_tables(path: str | Path, tables: Tables) -> None:
+    """Write ``tables`` to a temp file beside ``path`` in one transaction, then swap it in."""
+    target = Path(path)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp_name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
+    os.close(fd)
+    tmp = Path(tmp_name)
+    try:
+        conn = connect(tmp)
+        try:
+            conn.execute("BEGIN IMMEDIATE")
+            for ddl in _schema(tables.joints):
+                conn.execute(ddl)
+            conn.executemany("INSERT INTO meta VALUES (?, ?)", sorted(tables.meta.items()))
+            conn.executemany("INSERT INTO vsam VALUES (?, ?, ?, ?)", tables.vsam)
+            marks = ", ".join("?" * (2 + len(tables.joints)))
+            conn.executemany(
+                f"INSERT INTO pose VALUES ({marks})", [(p, k, *v) for p, k, v in tables.pose]
+            )
+            conn.executemany("INSERT INTO quality VALUES (?, ?, ?, ?, ?)", tables.quality)
+            conn.execute("COMMIT")
+            conn.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+        except BaseException:
+            if conn.in_transaction:
+                conn.execute("ROLLBACK")
+            raise
+        finally:
+            conn.close()
+        with open(tmp, "rb+") as fh:
+            os.fsync(fh.fileno())
+        os.chmod(tmp, _mode(target))
+        if target.exists():
+            _settle(target)
+        os.replace(tmp, target)
+        _fsync_dir(target.parent)
+    except sqlite3.Error as exc:
+        raise KinesphereError("internal", f"writing {target} failed: {exc}") from exc
+    finally:
+        for leftover in (tmp, Path(f"{tmp}-wal"), Path(f"{tmp}-shm")):
+            with contextlib.suppress(FileNotFoundError):
+                leftover.unlink()
+
+
+def _mode(target: Path) -> int:
+    """Keep the old file's permissions; a new file gets the usual 0666 & ~umask, not 0600."""
+    try:
+        return target.stat().st_mode & 0o777
+    except FileNotFoundError:
+        umask = os.umask(0)
+        os.umask(umask)
+        return 0o666 & ~umask
+
+
+def _settle(path: Path) -> None:
+    """Fold a leftover WAL into the old file so no stale ``-wal`` outlives the swap."""
+    with contextlib.suppress(sqlite3.Error):
+        conn = sqlite3.connect(path, isolation_level=None, timeout=10.0)
+        try:
+            conn.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+        finally:
+            conn.close()
+
+
+def _fsync_dir(folder: Path) -> None:
+    with contextlib.suppress(OSError):
+        fd = os.open(folder, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+
+
+def _open_read(path: Path) -> sqlite3.Connection:
+    """Read-write when possible (so WAL files are cleaned up), else immutable (read-only dirs)."""
+    conn = sqlite3.connect(f"file:{path}?mode=rw", uri=True, isolation_level=None)
+    try:
+        conn.execute("SELECT count(*) FROM sqlite_master").fetchone()
+        return conn
+    except sqlite3.OperationalError:
+        conn.close()
+        return sqlite3.connect(f"file:{path}?mode=ro&immutable=1", uri=True, isolation_level=None)
+
+
+def read_tables(path: str | Path) -> Tables:
+    """Load a whole databank; a missing or foreign file is a clear error."""
+    p = Path(path)
+    if not p.is_file():
+        raise KinesphereError(
+            "unavailable", f"no databank at {p}; build it with 'kinesphere ecl build PLATFORM'"
+        )
+    try:
+        conn = _open_read(p)
+        try:
+            conn.execute("BEGIN")  # one snapshot, even if a record commits meanwhile
+            meta = dict(conn.execute("SELECT key, value FROM meta ORDER BY key").fetchall())
+            cols = [r[1] for r in conn.execute("PRAGMA table_info(pose)").fetchall()]
+            vsam = conn.execute(
+                "SELECT k_id, origin, limb, direction FROM vsam ORDER BY k_id"
+            ).fetchall()
+            pose = conn.execute(
+                f"SELECT {', '.join(quote_ident(c) for c in cols)} FROM pose ORDER BY k_id, p_id"
+            ).fetchall()
+            quality = conn.execute(
+                "SELECT p_id, k_id, cosine, reach, margin FROM quality ORDER BY k_id, p_id"
+            ).fetchall()
+            conn.execute("COMMIT")
+        finally:
+            conn.close()
+    except sqlite3.DatabaseError as exc:
+        raise KinesphereError("malformed", f"{p} is not a kinesphere databank ({exc})") from None
+    missing = [k for k in META_KEYS if k not in meta]
+    if missing or cols[:2] != ["p_id", "k_id"]:
+        raise KinesphereError(
+            "malformed", f"{p} is not a kinesphere databank (missing {missing or 'pose keys'})"
+        )
+    joints = tuple(cols[2:])
+    if list(joints) != json.loads(meta["joints"]):
+        raise KinesphereError("malformed", f"{p}: pose columns do not match meta joints")
+    return Tables(
+        meta,
+        joints,
+        tuple((int(k), str(o), str(li), str(d)) for k, o, li, d in vsam),
+        tuple((int(r[0]), int(r[1]), tuple(_num(v) for v in r[2:])) for r in pose),
+        tuple((int(p_), int(k), _num(c), _num(r), _num(m)) for p_, k, c, r, m in quality),
+    )
+
+
+def _num(v: object) -> float | None:
+    return None if v is None else float(v)  # type: ignore[arg-type]
+
+
+def content_digest(path: str | Path) -> str:
+    """Hash of a databank's content (everything but ``meta.created``) for determinism checks."""
+    return read_tables(path).digest()
+
+
+def upsert_pose(
+    path: str | Path,
+    joint_order: Sequence[str],
+    cell: tuple[str, str, str],
+    size: int,
+    joints: Mapping[str, float],
+) -> None:
+    """Store one pose (already validated) in one transaction; its quality becomes unknown.
+
+    ``cell`` is ``(limb, origin, direction)`` in canonical names; a new cell gets a vsam row.
+    """
+    limb, origin, direction = cell
+    cols = ", ".join(quote_ident(j) for j in joint_order)
+    sets = ", ".join(f"{quote_ident(j)} = excluded.{quote_ident(j)}" for j in joint_order)
+    marks = ", ".join("?" * (2 + len(joint_order)))
+    conn = connect(path)
+    try:
+        conn.execute("BEGIN IMMEDIATE")
+        try:
+            found = conn.execute(
+                "SELECT k_id FROM vsam WHERE limb = ? AND origin = ? AND direction = ?",
+                (limb, origin, direction),
+            ).fetchone()
+            if found is None:
+                cur = conn.execute(
+                    "INSERT INTO vsam (origin, limb, direction) VALUES (?, ?, ?)",
+                    (origin, limb, direction),
+                )
+                k_id = int(cur.lastrowid or 0)
+            else:
+                k_id = int(found[0])
+            conn.execute(
+                f"INSERT INTO pose (p_id, k_id, {cols}) VALUES ({marks}) "
+                f"ON CONFLICT (p_id, k_id) DO UPDATE SET {sets}",
+                (size, k_id, *(joints.get(j) for j in joint_order)),
+            )
+            conn.execute(
+                "INSERT INTO quality (p_id, k_id) VALUES (?, ?) ON CONFLICT (p_id, k_id) "
+                "DO UPDATE SET cosine = NULL, reach = NULL, margin = NULL",
+                (size, k_id),
+            )
+            conn.execute("COMMIT")
+        except BaseException:
+            conn.execute("ROLLBACK")
+            raise
+    except sqlite3.Error as exc:
+        raise KinesphereError("internal", f"recording into {path} failed: {exc}") from exc
+    finally:
+        conn.close()
