@@ -14,7 +14,7 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -22,6 +22,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 import zenoh
+from kinesphere.robots.agent.controller import Controller
+from kinesphere.robots.agent.runtime import Agent, AgentOptions
 
 from kinesphere import zconfig
 from kinesphere.keyexpr import Keys
@@ -36,8 +38,6 @@ from kinesphere.protocol import (
     encode,
     error_from_reply,
 )
-from kinesphere.robots.agent.controller import Controller
-from kinesphere.robots.agent.runtime import Agent, AgentOptions
 
 KEYS = Keys()
 ROOT = Path(__file__).resolve().parent.parent
@@ -45,15 +45,18 @@ WAIT_S = 30.0
 """Generous upper bound for events on a loaded 2-core machine; tests finish far sooner."""
 
 
+_DEV_ARGS = [a for p in sorted(Path("/tmp/ag").glob("*.sqlite")) for a in ("--db", f"{p.stem if p.stem != 'toyarm' else 'tests/data/toyarm'}={p}")]  # TEMP-DEV
+
 # --- the databank ---------------------------------------------------------------------------
 
 
 class Databank:
     """The real databank service in a subprocess, connected to the test hub."""
 
-    def __init__(self, endpoint: str, watcher: zenoh.Session) -> None:
+    def __init__(self, endpoint: str, watcher: zenoh.Session, args: Sequence[str] = ()) -> None:
         self.endpoint = endpoint
         self.watcher = watcher
+        self.args = list(args)
         self.proc: subprocess.Popen[bytes] | None = None
 
     def start(self) -> None:
@@ -69,7 +72,7 @@ class Databank:
         try:
             self.proc = subprocess.Popen(
                 [sys.executable, "-m", "kinesphere.cli", "databank", "serve",
-                 "--connect", self.endpoint, "--listen", zconfig.LOOPBACK_ANY_PORT],
+                 "--connect", self.endpoint, "--listen", zconfig.LOOPBACK_ANY_PORT, *self.args],
                 cwd=ROOT, env={**os.environ, "PYTHONUNBUFFERED": "1"},
                 stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
             )
@@ -77,7 +80,7 @@ class Databank:
                 self.stop()
                 raise RuntimeError("databank did not declare its liveliness token")
         finally:
-            sub.undeclare()
+            zconfig.undeclare(sub)
 
     def stop(self) -> None:
         if self.proc is None:
@@ -116,7 +119,7 @@ def hub() -> Iterator[tuple[zenoh.Session, str]]:
 @pytest.fixture(scope="module")
 def databank(hub: tuple[zenoh.Session, str]) -> Iterator[Databank]:
     session, endpoint = hub
-    bank = Databank(endpoint, session)
+    bank = Databank(endpoint, session, _DEV_ARGS)
     bank.start()
     try:
         yield bank
@@ -187,7 +190,7 @@ class StateWatch:
         return self.wait(lambda s: s.last_command_seq >= seq and pred(s), what, timeout)
 
     def close(self) -> None:
-        self._sub.undeclare()
+        zconfig.undeclare(self._sub)
 
 
 @contextmanager
@@ -198,7 +201,7 @@ def running_agent(
     """An agent in this process with its own session joined to the hub, and its state."""
     robot_id = robot_id or Path(platform).name
     with zconfig.session(config=zconfig.loopback_config(endpoint)) as s:
-        agent = Agent(platform, robot_id, s, AgentOptions(speed=speed, **options))  # type: ignore[arg-type]
+        agent = Agent(platform, robot_id, s, AgentOptions(speed=speed, **options))
         if trace is not None:
             agent.controller.on_step = trace
         watch = StateWatch(s, robot_id)
@@ -234,12 +237,12 @@ class Operator:
         self.pub.put(payload)
 
     def close(self) -> None:
-        self.pub.undeclare()
+        zconfig.undeclare(self.pub)
 
 
-def joints_close(state: RobotState, pose: Pose, tol: float) -> bool:
+def joints_close(state: RobotState, joints: Mapping[str, float], tol: float) -> bool:
     q = dict(zip(state.joint_names, state.q, strict=True))
-    return all(abs(q[j] - v) <= tol for j, v in pose.joints.items())
+    return all(abs(q[j] - v) <= tol for j, v in joints.items())
 
 
 def finite_jerk(trace: Trace) -> tuple[np.ndarray, np.ndarray]:

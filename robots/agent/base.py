@@ -21,6 +21,7 @@ mid-motion starts from the current state, so the base never jumps in velocity.
 
 from __future__ import annotations
 
+import logging
 import math
 from collections.abc import Sequence
 
@@ -35,9 +36,22 @@ from ruckig import (
     Synchronization,
 )
 
-_FLOOR = 0.02
-"""Smallest per-axis share of a limit: Ruckig needs positive limits on every DoF."""
+_FLOOR = 0.3
+"""Smallest per-axis share of a limit. Ruckig needs positive limits on every DoF, and an axis
+the motion does not use may still carry velocity from the previous one, which it must brake
+in reasonable time; for axis-aligned motions this loosens the vector bound by at most 4 %."""
 _WORKING = (Result.Working, Result.Finished)
+log = logging.getLogger(__name__)
+
+
+def update(otg: Ruckig, inp: InputParameter, out: OutputParameter) -> Result | None:
+    """``otg.update``, None on failure (the binding raises ValueError on codes it lacks)."""
+    try:
+        result = otg.update(inp, out)
+    except (ValueError, RuntimeError) as exc:
+        log.debug("ruckig failed: %s", exc)
+        return None
+    return result if result in _WORKING else None
 
 
 def wrap_angle(a: float) -> float:
@@ -91,13 +105,20 @@ class _Otg:
         """Advance one cycle; True when the motion just finished."""
         if not self.active:
             return False
-        result = self.otg.update(self.inp, self.out)
-        if result not in _WORKING:  # scaled limits below the current state: use the full ones
+        result = update(self.otg, self.inp, self.out)
+        if result is None:  # scaled limits below the current state: use the full ones
             self.scale([1.0] * self.n)
             self.inp.synchronization = Synchronization.No
-            result = self.otg.update(self.inp, self.out)
-        if result not in _WORKING:
-            raise RuntimeError(f"ruckig failed on the base: {result}")
+            result = update(self.otg, self.inp, self.out)
+        if result is None:  # never seen; never let it take the control loop down either
+            log.error("ruckig cannot plan the base from %s; holding", list(self.position))
+            self.inp.current_velocity = [0.0] * self.n
+            self.inp.current_acceleration = [0.0] * self.n
+            self.go_to(list(self.position))
+            self.active = False
+            self.velocity[:] = 0.0
+            self.acceleration[:] = 0.0
+            return True
         out = self.out
         self.position[:] = out.new_position
         self.velocity[:] = out.new_velocity

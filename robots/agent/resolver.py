@@ -5,7 +5,8 @@ distinct command costs one round trip per databank version, after which it is an
 memory in the control loop itself (no thread hop, no network). The cache is keyed by the
 parts and tagged with the catalogue ``version``; the catalogue is re-read periodically and
 whenever a reply fails, and a new version empties the cache. While the databank is
-unreachable cached poses keep working (they are the best knowledge there is).
+unreachable cached poses keep working (they are the best knowledge there is). The databank
+also puts on ``{p}/ecl/{platform}/changed`` after every record, which triggers a re-read.
 
 Why a worker thread: a Zenoh ``get`` blocks and must never run in the control loop or in a
 Zenoh callback. Requests are coalesced (only the newest pending one matters: an operator who
@@ -24,7 +25,7 @@ import threading
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import TypeVar
+from typing import Any, TypeVar
 
 import zenoh
 
@@ -41,6 +42,7 @@ from kinesphere.protocol import (
     encode,
     error_from_reply,
 )
+from kinesphere.zconfig import undeclare, wait_matching
 
 log = logging.getLogger(__name__)
 T = TypeVar("T")
@@ -77,6 +79,7 @@ class Resolver:
         timeout_s: float = 1.0,
         refresh_s: float = 2.0,
         probe_s: float = 0.25,
+        ready_s: float = 2.0,
     ) -> None:
         self.session = session
         self.platform = platform
@@ -84,6 +87,7 @@ class Resolver:
         self.timeout_s = timeout_s
         self.refresh_s = refresh_s
         self.probe_s = probe_s
+        self.ready_s = ready_s
         self.version: str | None = None
         self.catalogue: Catalogue | None = None
         self.reachable: bool | None = None  # None until the first answer or failure
@@ -93,11 +97,40 @@ class Resolver:
         self._lock = threading.Lock()
         self._wake = threading.Condition(self._lock)
         self._pending: _Request | None = None
+        self._stale = False
         self._closing = False
+        self._changed: Any = None
+        self._catalogue: zenoh.Querier | None = None
         self._thread = threading.Thread(target=self._run, name=f"resolver-{platform}", daemon=True)
 
+    def changed_key(self) -> str:
+        """``{p}/ecl/{platform}/changed``, which the databank puts after every record."""
+        method = getattr(self.keys, "changed", None)
+        if method is not None:
+            return str(method(self.platform))
+        return f"{self.keys.prefix}/ecl/{self.platform}/changed"
+
     def start(self) -> None:
+        self._changed = self.session.declare_subscriber(self.changed_key(), self._on_changed)
         self._thread.start()
+
+    def wait_ready(self, timeout_s: float) -> bool:
+        """Wait until a databank queryable for this platform is known to the session.
+
+        Declarations travel asynchronously: a ``get`` right after joining finds no route and
+        ends at once without replies, which would read as an outage.
+        """
+        if self._catalogue is None:
+            self._catalogue = self.session.declare_querier(
+                self.keys.catalogue(self.platform), timeout=self.timeout_s,
+                consolidation=zenoh.ConsolidationMode.NONE,
+            )
+        return wait_matching(self._catalogue, timeout_s)
+
+    def _on_changed(self, sample: zenoh.Sample) -> None:
+        with self._wake:  # the worker re-reads the catalogue (and its version) right away
+            self._stale = True
+            self._wake.notify()
 
     def close(self) -> None:
         with self._wake:
@@ -105,6 +138,8 @@ class Resolver:
             self._wake.notify()
         if self._thread.is_alive():
             self._thread.join(timeout=self.timeout_s + 1.0)
+        undeclare(self._changed, self._catalogue)
+        self._changed = self._catalogue = None
 
     # --- called from the control loop -------------------------------------------------------
 
@@ -124,10 +159,11 @@ class Resolver:
     # --- the worker ---------------------------------------------------------------------------
 
     def _run(self) -> None:
+        self.wait_ready(self.ready_s)
         next_check = 0.0
         while True:
             with self._wake:
-                while not self._closing and self._pending is None:
+                while not self._closing and self._pending is None and not self._stale:
                     timeout = next_check - time.monotonic()
                     if timeout <= 0:
                         break
@@ -135,20 +171,21 @@ class Resolver:
                 if self._closing:
                     return
                 request, self._pending = self._pending, None
+                stale, self._stale = self._stale, False
             if request is not None:
                 answer = self._resolve(request.key)
                 try:
                     request.callback(request.ticket, answer)
                 except Exception:  # the loop's inbox append cannot fail; never kill the worker
                     log.exception("resolver callback failed")
-            if request is None or not self.reachable:
+            if request is None or stale or not self.reachable:
                 self.refresh()
                 next_check = time.monotonic() + (self.refresh_s if self.reachable else self.probe_s)
 
     def refresh(self) -> bool:
         """Read the catalogue; a new version empties the cache. Returns reachability."""
         try:
-            cat = self._query(self.keys.catalogue(self.platform), None, Catalogue)
+            cat = self._query(self.keys.catalogue(self.platform), None, Catalogue, self._catalogue)
         except KinesphereError as exc:
             if exc.code == "unavailable":
                 self._unreachable(exc)
@@ -200,14 +237,18 @@ class Resolver:
                 self._cache[key] = pose
         return pose
 
-    def _query(self, key: str, payload: bytes | None, type_: type[T]) -> T:
+    def _query(self, key: str, payload: bytes | None, type_: type[T],
+               querier: zenoh.Querier | None = None) -> T:
         try:
-            replies = self.session.get(
-                key,
-                payload=payload,
-                timeout=self.timeout_s,
-                consolidation=zenoh.ConsolidationMode.NONE,
-            )
+            if querier is not None:
+                replies = querier.get(payload=payload)
+            else:
+                replies = self.session.get(
+                    key,
+                    payload=payload,
+                    timeout=self.timeout_s,
+                    consolidation=zenoh.ConsolidationMode.NONE,
+                )
             for reply in replies:  # the first answer wins; other replicas may answer too
                 if reply.ok is not None:
                     return decode(reply.ok.payload, type_)

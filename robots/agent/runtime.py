@@ -234,13 +234,16 @@ class Agent:
         elif isinstance(item, _Bad):
             self._error(item.error, "command")
         else:
+            seq = item.cmd.seq
             try:
                 self._command(item.cmd)
             except KinesphereError as exc:
-                self._error(exc, f"command {item.cmd.seq}")
+                self._last_seq = seq
+                self._error(exc, f"command {seq}")
             except Exception as exc:  # a bug must not take the robot's control loop down
-                log.exception("agent %s: command %s failed", self.robot_id, item.cmd.seq)
-                self._error(KinesphereError("internal", repr(exc)), f"command {item.cmd.seq}")
+                log.exception("agent %s: command %s failed", self.robot_id, seq)
+                self._last_seq = seq
+                self._error(KinesphereError("internal", repr(exc)), f"command {seq}")
 
     def _stale(self, cmd: Command) -> bool:
         last = self._latest.get(cmd.sender)
@@ -253,9 +256,10 @@ class Agent:
         if self._stale(cmd):
             log.debug("stale command %s from %r dropped", cmd.seq, cmd.sender)
             return
-        self._last_seq = cmd.seq
         ctrl = self.controller
         verdict = self.safety.on_command(cmd, ctrl.time)
+        if verdict is not Verdict.MOVE or not cmd.parts:
+            self._last_seq = cmd.seq  # acted on now; poses count once resolved
         if verdict is Verdict.ESTOP:
             self._halt(Status.ESTOP, f"e-stop from {cmd.sender or 'a client'}; release with "
                        "estop=false, stop=false, deadman=true")
@@ -295,6 +299,7 @@ class Agent:
         hit = self.resolver.cached(key)
         yaw = ctrl.commanded_base_yaw()
         if hit is not None:
+            self._last_seq = cmd.seq
             self._apply_pose(hit, yaw, cmd)
         else:
             self._pending_yaw = {self._ticket: yaw}
@@ -307,6 +312,7 @@ class Agent:
         yaw = self._pending_yaw.pop(ticket, None)
         cmd = self._pending_cmd
         assert cmd is not None
+        self._last_seq = cmd.seq
         if isinstance(answer, KinesphereError):
             self._error(answer, f"command {cmd.seq}")
             return
@@ -351,14 +357,21 @@ class Agent:
     # --- state -----------------------------------------------------------------------------------
 
     def status(self) -> tuple[str, str]:
-        """The status and detail to publish now."""
+        """The status and detail to publish now.
+
+        Precedence: e-stop, then what the operator caused (stopped, holding, error), then
+        the databank's reachability, then motion (moving, idle, clamped).
+        """
         status, detail = self._status, self._detail
         ctrl = self.controller
         if self.safety.estopped:
             return Status.ESTOP, detail
+        if status in (Status.STOPPED, Status.HOLDING, Status.ERROR):
+            return status, detail
         reachable = self.resolver.reachable
         if reachable is False:
-            return Status.DATABANK_UNREACHABLE, self.resolver.last_error
+            return Status.DATABANK_UNREACHABLE, detail if status == Status.DATABANK_UNREACHABLE \
+                else self.resolver.last_error
         if status == Status.DATABANK_UNREACHABLE:  # it answers again
             status, detail = Status.MOVING, "databank reachable again"
         if status == Status.MOVING and not ctrl.moving:

@@ -20,6 +20,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from kinesphere.robots.agent.base import update
 from ruckig import (
     ControlInterface,
     InputParameter,
@@ -37,7 +38,6 @@ DEFAULT_MARGIN = 0.01
 """Target clamp margin inside each limit, rad (or m); shrunk for joints with a tiny range."""
 DEFAULT_VELOCITY = 1.0
 """Velocity limit for a joint whose eURDF gives none (rad/s or m/s)."""
-_WORKING = (Result.Working, Result.Finished)
 
 
 @dataclass(frozen=True)
@@ -167,9 +167,17 @@ class JointTrajectory:
         """Advance one control cycle along the current trajectory."""
         if self._otg is None or not self.active:
             return
-        result = self._otg.update(self._inp, self._out)
-        if result not in _WORKING:
-            result = self._recover(result)
+        result = update(self._otg, self._inp, self._out)
+        if result is None:
+            result = self._recover()
+        if result is None:  # never seen: hold where the last output was, rather than crash
+            log.error("ruckig cannot brake from %s; holding", list(self.position))
+            self._inp.current_position = list(self.position)
+            self._inp.current_velocity = [0.0] * self.dof
+            self._inp.current_acceleration = [0.0] * self.dof
+            self.stopping = True
+            self._settle()
+            return
         out = self._out
         self.position[:] = out.new_position
         self.velocity[:] = out.new_velocity
@@ -178,20 +186,20 @@ class JointTrajectory:
         if result == Result.Finished:
             self._settle()
 
-    def _recover(self, result: Result) -> Result:
+    def _recover(self) -> Result | None:
         """A profile Ruckig refused (limits, synchronisation): try looser ones, then brake."""
-        inp = self._inp
-        log.debug("ruckig %s; retrying without synchronisation", result)
+        inp, otg = self._inp, self._otg
+        assert otg is not None
         if inp.synchronization != Synchronization.No:
             inp.synchronization = Synchronization.No
-            result = self._otg.update(inp, self._out)  # type: ignore[union-attr]
-            if result in _WORKING:
+            result = update(otg, inp, self._out)
+            if result is not None:
                 return result
-        log.warning("ruckig %s for targets %s; braking instead", result, list(self.target))
+        log.warning("ruckig cannot reach targets %s; braking instead", list(self.target))
         inp.control_interface = ControlInterface.Velocity
         inp.target_velocity = [0.0] * self.dof
         self.stopping = True
-        return self._otg.update(inp, self._out)  # type: ignore[union-attr]
+        return update(otg, inp, self._out)
 
     def _settle(self) -> None:
         """At rest: hold here in position mode (after a stop, here is the new target)."""

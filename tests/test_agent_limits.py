@@ -1,0 +1,80 @@
+"""No joint ever leaves its limits while the robot is commanded to every pose of its ECL.
+
+Poses come from the real databank over Zenoh through the agent's own resolver; the
+controller (real Ruckig, real MuJoCo) is stepped in this thread, faster than real time.
+Each limb goes through all its poses in turn, each held for a fraction of a second before the
+next arrives, so most changes are retargets mid-motion (where braking could overshoot a
+limit). Between limbs the robot returns to neutral: the ECL's poses are per limb, and two
+limbs each at an extreme can collide, and a collision can shove a joint past its limit in
+simulation whatever the targets (that is a planning question for the ECL, not the agent's).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import zenoh
+from kinesphere.robots.agent.controller import Controller
+from kinesphere.robots.agent.resolver import Resolver, parts_key
+from kinesphere.robots.mjcf import platform_model
+from test_agent_support import WAIT_S, Databank, databank, hub
+
+from kinesphere import zconfig
+from kinesphere.errors import KinesphereError
+from kinesphere.protocol import SpatialCommand
+
+__all__ = ["databank", "hub"]  # fixtures
+PLATFORMS = ["baxter", "nao", "youbot", "packbot", "khepera"]
+HOLD_S = 0.25
+"""Robot time each pose is followed before the next command (shorter than most motions)."""
+
+
+@pytest.mark.parametrize("platform", PLATFORMS)
+def test_limits_hold_for_every_ecl_pose(
+    hub: tuple[zenoh.Session, str], databank: Databank, platform: str
+) -> None:
+    _, endpoint = hub
+    with zconfig.session(config=zconfig.loopback_config(endpoint)) as s:
+        resolver = Resolver(s, platform)
+        assert resolver.wait_ready(WAIT_S) and resolver.refresh(), "databank reachable"
+        cat = resolver.catalogue
+        assert cat is not None
+        sequences = [[SpatialCommand(e.limb, e.origin, d, float(size))
+                      for d in e.directions for size in e.sizes] for e in cat.limbs]
+        sequences += [[SpatialCommand(c, c, d, 2.0) for c in cat.core
+                       for d in cat.directions_for_core]]
+        parts = [p for seq in sequences for p in seq]
+        ctrl = Controller(platform_model(platform))
+        neutral = dict(zip(ctrl.joint_names, ctrl.joints.position.tolist(), strict=True))
+        limits = [ctrl.platform.eurdf.limits[j] for j in ctrl.joint_names]
+        lower = np.array([lim.lower for lim in limits])
+        upper = np.array([lim.upper for lim in limits])
+        hold = max(1, round(HOLD_S / ctrl.dt))
+        worst_sim = worst_cmd = -math.inf
+        commanded = 0
+        for sequence in sequences:
+            ctrl.joints.retarget(neutral)
+            ctrl.settle()
+            for part in sequence:
+                pose = resolver.resolve(parts_key([part]))
+                if isinstance(pose, KinesphereError):
+                    raise pose
+                ctrl.joints.retarget(pose.joints)
+                if pose.translation is not None and ctrl.base is not None:
+                    ctrl.base.translate(pose.translation)
+                commanded += 1
+                for _ in range(hold):
+                    ctrl.step()
+                    q = np.array(ctrl.q())
+                    worst_sim = max(worst_sim, float(np.max(np.maximum(lower - q, q - upper))))
+                    p = ctrl.joints.position
+                    worst_cmd = max(worst_cmd, float(np.max(np.maximum(lower - p, p - upper))))
+        ctrl.settle()
+        resolver.close()
+        resolver.close()
+    assert commanded == len(parts) > 0
+    assert resolver.queries == len({parts_key([p]) for p in parts})
+    assert worst_cmd <= 0.0, f"Ruckig went {worst_cmd} past a limit"
+    assert worst_sim <= 0.0, f"the simulated robot went {worst_sim} past a limit"

@@ -1,0 +1,64 @@
+"""Databank outage: the robot keeps its last pose and says so; it recovers on its own.
+
+Uses its own databank process (the module's others share one) because it kills it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+
+import pytest
+import zenoh
+from test_agent_support import _DEV_ARGS, Databank, Operator, hub, joints_close, running_agent  # TEMP-DEV
+
+from kinesphere.protocol import SpatialCommand
+
+__all__ = ["hub"]  # fixture
+
+
+@pytest.fixture
+def own_databank(hub: tuple[zenoh.Session, str]) -> Iterator[Databank]:
+    session, endpoint = hub
+    bank = Databank(endpoint, session, _DEV_ARGS)  # TEMP-DEV
+    bank.start()
+    try:
+        yield bank
+    finally:
+        bank.stop()
+
+
+def test_outage_keeps_last_pose_and_recovers_without_restart(
+    hub: tuple[zenoh.Session, str], own_databank: Databank
+) -> None:
+    session, endpoint = hub
+    entry = own_databank.catalogue("baxter").limbs[0]
+    pulls = [d for d in entry.directions if d != "place-middle"]
+    first = SpatialCommand(entry.limb, entry.origin, pulls[0], 2.0)
+    second = SpatialCommand(entry.limb, entry.origin, pulls[-1], 2.0)
+    pose1, pose2 = own_databank.query("baxter", first), own_databank.query("baxter", second)
+    with running_agent(endpoint, "baxter", speed=4.0) as (agent, watch):
+        target1, _ = agent.controller.joints.clamp(pose1.joints)
+        target2, _ = agent.controller.joints.clamp(pose2.joints)
+        op = Operator(session, agent.robot_id)
+        seq = op.send((first.limb, first.origin, first.direction, first.size))
+        watch.after(seq, lambda s: s.status == "idle" and joints_close(s, target1, 5e-3),
+                    "at the first pose")
+
+        own_databank.stop()
+        seq = op.send((second.limb, second.origin, second.direction, second.size))
+        down = watch.after(seq, lambda s: s.status == "databank_unreachable",
+                           "outage reported")
+        assert joints_close(down, target1, 5e-3), "keeps its last pose"
+        assert not agent.controller.moving
+
+        # a pose it already knows still works while the databank is away (cached)
+        seq = op.send((first.limb, first.origin, first.direction, first.size))
+        watch.after(seq, lambda s: joints_close(s, target1, 5e-3), "cached pose during outage")
+
+        own_databank.start()
+        watch.wait(lambda s: s.status not in ("databank_unreachable", "error"),
+                   "recovered without a new command")
+        seq = op.send((second.limb, second.origin, second.direction, second.size))
+        watch.after(seq, lambda s: s.status == "idle" and joints_close(s, target2, 5e-3),
+                    "the second pose after recovery")
+        op.close()

@@ -1,0 +1,137 @@
+"""Commands reach ECL poses: every platform, jerk-limited, continuous through retargets, and a
+wildcard command moving three different robots at once, each to its own platform's pose."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from contextlib import ExitStack
+
+import numpy as np
+import pytest
+import zenoh
+from kinesphere.robots.agent.runtime import Agent
+from test_agent_support import (
+    Databank,
+    Operator,
+    Trace,
+    databank,
+    finite_jerk,
+    hub,
+    joints_close,
+    running_agent,
+)
+
+from kinesphere.protocol import Catalogue, Pose, RobotState, SpatialCommand
+
+__all__ = ["databank", "hub"]  # fixtures
+PLATFORMS = ["baxter", "nao", "youbot", "packbot", "khepera"]
+TOL = 5e-3
+"""rad (m): how close the simulated joints come to the (clamped) target once at rest."""
+
+
+def far_part(cat: Catalogue, direction: str | None = None) -> SpatialCommand:
+    """A far reach of the first limb, in ``direction`` or its first real pull."""
+    entry = cat.limbs[0]
+    pulls = [d for d in entry.directions if d != "place-middle"]
+    d = direction if direction is not None else pulls[len(pulls) // 2]
+    return SpatialCommand(entry.limb, entry.origin, d, float(max(entry.sizes)))
+
+
+def as_tuple(p: SpatialCommand) -> tuple[str, str, str, float]:
+    return (p.limb, p.origin, p.direction, p.size)
+
+
+def reached(agent: Agent, pose: Pose) -> Callable[[RobotState], bool]:
+    """Predicate: at rest at the pose (as clamped by the agent's limit margin)."""
+    target, _ = agent.controller.joints.clamp(pose.joints)
+    goal = (pose.translation or [0.0, 0.0])[:2]
+
+    def pred(s: RobotState) -> bool:
+        return (s.status in ("idle", "clamped") and joints_close(s, target, TOL)
+                and math.dist(s.base_pose[:2], goal) <= TOL)
+
+    return pred
+
+
+def check_limits(trace: Trace, agent: Agent) -> None:
+    """Ruckig's output respects jerk, acceleration, velocity (finite differences, not sim)."""
+    p = agent.controller.platform
+    jerk, dv = finite_jerk(trace)
+    assert jerk.max() <= p.max_jerk * (1 + 1e-6)
+    assert dv.max() <= p.max_acceleration * agent.controller.dt * (1 + 1e-6)
+    vel = np.abs(np.array(trace.vel))
+    assert (vel <= agent.controller.joints.max_velocity * (1 + 1e-6)).all()
+
+
+@pytest.mark.parametrize("platform", PLATFORMS)
+def test_one_command_reaches_the_ecl_pose(
+    hub: tuple[zenoh.Session, str], databank: Databank, platform: str
+) -> None:
+    session, endpoint = hub
+    cat = databank.catalogue(platform)
+    if cat.limbs:
+        part = far_part(cat)
+    else:  # a limbless robot (khepera): its ECL is the core's translations
+        part = SpatialCommand(cat.core[0], cat.core[0], cat.directions_for_core[0], 3.0)
+    pose = databank.query(platform, part)
+    trace = Trace()
+    with running_agent(endpoint, platform, speed=4.0, trace=trace) as (agent, watch):
+        op = Operator(session, agent.robot_id)
+        seq = op.send(as_tuple(part))
+        state = watch.after(seq, reached(agent, pose), f"{platform} at {pose}")
+        op.close()
+    assert state.platform == platform
+    assert agent.resolver.queries == 1
+    if pose.joints:
+        moved = np.abs(np.array(trace.pos[-1]) - np.array(trace.pos[0])).max()
+        assert moved > 0.05, "the pose should be a real motion"
+    check_limits(trace, agent)
+
+
+def test_retarget_mid_motion_stays_continuous(
+    hub: tuple[zenoh.Session, str], databank: Databank
+) -> None:
+    session, endpoint = hub
+    cat = databank.catalogue("baxter")
+    entry = cat.limbs[0]
+    pulls = [d for d in entry.directions if d != "place-middle"]
+    first, second = far_part(cat, pulls[0]), far_part(cat, pulls[-1])
+    trace = Trace()
+    with running_agent(endpoint, "baxter", speed=2.0, trace=trace) as (agent, watch):
+        op = Operator(session, agent.robot_id)
+        seq = op.send(as_tuple(first))
+        watch.after(seq, lambda s: max(map(abs, s.qd)) > 0.3, "baxter under way")
+        at_retarget = len(trace.t)
+        seq = op.send(as_tuple(second))
+        pose = databank.query("baxter", second)
+        watch.after(seq, reached(agent, pose), "baxter at the second pose")
+        op.close()
+    vel = np.array(trace.vel)
+    assert np.abs(vel[at_retarget]).max() > 0.1, "the retarget happened mid-motion"
+    check_limits(trace, agent)  # includes: no velocity jump at the retarget
+
+
+def test_wildcard_command_moves_every_robot_to_its_own_pose(
+    hub: tuple[zenoh.Session, str], databank: Databank
+) -> None:
+    session, endpoint = hub
+    robots = ["baxter", "nao", "youbot"]
+    cats = {r: databank.catalogue(r) for r in robots}
+    shared = set.intersection(*(
+        {(e.limb, e.origin, d) for e in c.limbs for d in e.directions if d != "place-middle"}
+        for c in cats.values()
+    ))
+    assert shared, "no spatial command is valid on all three platforms"
+    limb, origin, direction = sorted(shared)[0]
+    part = SpatialCommand(limb, origin, direction, 2.0)
+    poses = {r: databank.query(r, part) for r in robots}
+    with ExitStack() as stack:
+        running = {r: stack.enter_context(running_agent(endpoint, r, speed=2.0)) for r in robots}
+        op = Operator(session, "*")
+        seq = op.send(as_tuple(part))
+        for r, (agent, watch) in running.items():
+            watch.after(seq, reached(agent, poses[r]), f"{r} at its own pose")
+        op.close()
+    names = {r: set(p.joints) for r, p in poses.items()}
+    assert not names["baxter"] & names["nao"], "different bodies, different joints"

@@ -1,0 +1,163 @@
+"""Safety over the wire: deadman release, command TTL, e-stop latch and release, bad commands.
+
+These run in real time (``speed=1``): the watchdog's timing against a client is the point.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from contextlib import ExitStack
+
+import numpy as np
+import zenoh
+from test_agent_support import (
+    Databank,
+    Operator,
+    Trace,
+    databank,
+    hub,
+    running_agent,
+)
+
+from kinesphere.protocol import Command, RobotState, encode
+from kinesphere.robots.agent.safety import DRIVE_TTL_S
+
+__all__ = ["databank", "hub"]  # fixtures
+
+
+def status(*names: str) -> Callable[[RobotState], bool]:
+    return lambda s: s.status in names
+
+
+def base_speed(s: RobotState, prev: list[RobotState]) -> float:
+    """Base speed between two states (m/s of robot time is close enough to wall time here)."""
+    if not prev:
+        prev.append(s)
+        return 0.0
+    a, prev[0] = prev[0], s
+    dt = (s.stamp_ns - a.stamp_ns) / 1e9
+    return float(np.hypot(s.base_pose[0] - a.base_pose[0], s.base_pose[1] - a.base_pose[1]) / dt)
+
+
+def driving(min_speed: float) -> Callable[[RobotState], bool]:
+    prev: list[RobotState] = []
+    return lambda s: base_speed(s, prev) > min_speed
+
+
+def check_braked(trace: Trace, max_acceleration: float, dt: float) -> None:
+    """The base came to rest along a jerk-limited profile (no velocity jump)."""
+    twist = np.array(trace.base_vel)
+    assert np.abs(twist[-1]).max() == 0.0
+    assert np.abs(np.diff(twist[:, :2], axis=0)).max() <= max_acceleration * dt * (1 + 1e-6)
+
+
+def test_deadman_release_stops_the_base(hub: tuple[zenoh.Session, str]) -> None:
+    session, endpoint = hub
+    trace = Trace()
+    with running_agent(endpoint, "youbot", speed=1.0, trace=trace) as (agent, watch):
+        op = Operator(session, agent.robot_id)
+        seq = op.send(drive=("forward", 1.0), ttl_ms=10_000)
+        watch.after(seq, driving(0.05), "youbot driving")
+        seq = op.send(drive=("forward", 1.0), deadman=False, ttl_ms=10_000)
+        held = watch.after(seq, status("holding"), "holding after deadman release")
+        assert "deadman" in held.detail
+        watch.after(seq, lambda s: not agent.controller.moving, "base at rest")
+        op.close()
+    spec = agent.controller.platform.base
+    check_braked(trace, spec.max_acceleration, agent.controller.dt)
+
+
+def test_ttl_expiry_stops_a_drive_when_the_client_goes_quiet(
+    hub: tuple[zenoh.Session, str],
+) -> None:
+    session, endpoint = hub
+    trace = Trace()
+    with running_agent(endpoint, "packbot", speed=1.0, trace=trace) as (agent, watch):
+        op = Operator(session, agent.robot_id)
+        seq = op.send(drive=("forward", 0.6), ttl_ms=300)
+        watch.after(seq, driving(0.02), "packbot driving")
+        op.close()  # the client dies: no stop, no deadman release, just silence
+        held = watch.after(seq, status("holding"), "holding after the ttl")
+        assert "ttl" in held.detail
+        watch.after(seq, lambda s: not agent.controller.moving, "base at rest")
+    spec = agent.controller.platform.base
+    check_braked(trace, spec.max_acceleration, agent.controller.dt)
+
+
+def test_drive_without_ttl_still_needs_fresh_commands(hub: tuple[zenoh.Session, str]) -> None:
+    session, endpoint = hub
+    with running_agent(endpoint, "youbot", speed=4.0) as (agent, watch):
+        op = Operator(session, agent.robot_id)
+        seq = op.send(drive=("left", 0.5), ttl_ms=0)
+        watch.after(seq, status("holding"), "holding after the default drive watchdog")
+        op.close()
+    assert DRIVE_TTL_S > 0
+
+
+def test_estop_halts_every_robot_latches_and_releases(
+    hub: tuple[zenoh.Session, str], databank: Databank,
+) -> None:
+    session, endpoint = hub
+    cat = databank.catalogue("baxter")
+    entry = cat.limbs[0]
+    pulls = [d for d in entry.directions if d != "place-middle"]
+    reach = (entry.limb, entry.origin, pulls[0], 3.0)
+    with ExitStack() as stack:
+        baxter, bw = stack.enter_context(running_agent(endpoint, "baxter", speed=1.0))
+        youbot, yw = stack.enter_context(running_agent(endpoint, "youbot", speed=1.0))
+        arm = Operator(session, "baxter", sender="arm")
+        base = Operator(session, "youbot", sender="base")
+        everyone = Operator(session, "*", sender="panic")
+        seq = arm.send(reach)
+        bw.after(seq, lambda s: max(map(abs, s.qd)) > 0.2, "baxter moving")
+        seq = base.send(drive=("forward", 1.0), ttl_ms=10_000)
+        yw.after(seq, driving(0.05), "youbot driving")
+
+        seq = everyone.send(estop=True)
+        for agent, watch in ((baxter, bw), (youbot, yw)):
+            watch.after(seq, lambda s, a=agent: s.status == "estop" and not a.controller.moving,
+                        f"{agent.robot_id} halted by the e-stop")
+
+        # latched: ordinary commands are ignored, even with deadman held and a stop
+        seq = base.send(drive=("forward", 1.0), ttl_ms=10_000, stop=True)
+        yw.after(seq, status("estop"), "youbot still latched")
+        assert not youbot.controller.moving
+
+        # release (estop=False, stop=False, deadman=True): clears the latch, moves nothing
+        seq = base.send(drive=("forward", 1.0), ttl_ms=10_000)
+        yw.after(seq, status("idle"), "youbot released")
+        assert not youbot.controller.moving
+        seq = base.send(drive=("forward", 1.0), ttl_ms=10_000)
+        yw.after(seq, driving(0.05), "youbot drives again after the release")
+        bw.wait(status("estop"), "baxter still latched (released separately)")
+        for op in (arm, base, everyone):
+            op.close()
+
+
+def test_bad_commands_are_reported_and_the_loop_goes_on(
+    hub: tuple[zenoh.Session, str], databank: Databank
+) -> None:
+    session, endpoint = hub
+    with running_agent(endpoint, "baxter", speed=4.0) as (agent, watch):
+        op = Operator(session, agent.robot_id)
+        op.raw(b"\x93not a command")
+        bad = watch.wait(status("error"), "malformed payload reported")
+        assert "malformed" in bad.detail
+        op.raw(encode(Command(seq=1, sent_ns=0, deadman=True, ttl_ms=0, v=99)))
+        bad = watch.wait(lambda s: "incompatible_version" in s.detail, "old peer reported")
+        seq = op.send(("no_such_limb", "distal_11", "left-high", 2.0))
+        bad = watch.after(seq, status("error"), "unknown limb reported")
+        assert "unknown_limb" in bad.detail
+        seq = op.send(("limb_11", "distal_11", "up-and-away", 2.0))
+        bad = watch.after(seq, status("error"), "unknown direction reported")
+        assert "unknown_direction" in bad.detail
+        seq = op.send(drive=("left-high", 1.0))
+        bad = watch.after(seq, status("error"), "a drive must be a middle horizontal")
+        seq = op.send(drive=("left", 1.0))
+        bad = watch.after(seq, status("error"), "a fixed base cannot drive")
+        assert "cannot_translate" in bad.detail
+        entry = databank.catalogue("baxter").limbs[0]
+        seq = op.send((entry.limb, entry.origin, entry.directions[-1], 1.0))
+        watch.after(seq, status("moving", "idle", "clamped"), "a good command still works")
+        op.close()
+        assert agent.stats.steps > 0 and agent._thread is not None and agent._thread.is_alive()

@@ -1,0 +1,110 @@
+"""Base motion with articulation: beyond-far reaches translate while the arm moves, drives
+carry on while the arm sweeps, and a limbless robot goes where a core command sends it."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import zenoh
+from test_agent_support import (
+    Databank,
+    Operator,
+    Trace,
+    databank,
+    hub,
+    joints_close,
+    running_agent,
+)
+
+from kinesphere.laban import Direction
+from kinesphere.protocol import SpatialCommand
+
+__all__ = ["databank", "hub"]  # fixtures
+
+
+def overlap(trace: Trace) -> tuple[float, float]:
+    """Robot-time spans (start, end) where joints and base both move."""
+    t = np.array(trace.t)
+    joints = np.abs(np.array(trace.vel)).max(axis=1) > 1e-3
+    base = np.hypot(*np.array(trace.base_vel)[:, :2].T) > 1e-3
+    both = t[joints & base]
+    return (float(both.min()), float(both.max())) if both.size else (math.nan, math.nan)
+
+
+def test_translation_and_articulation_overlap_in_time(
+    hub: tuple[zenoh.Session, str], databank: Databank
+) -> None:
+    session, endpoint = hub
+    cat = databank.catalogue("youbot")
+    assert cat.can_translate and cat.translation_step
+    entry = cat.limbs[0]
+    horizontal = [d for d in entry.directions
+                  if Direction.parse(d).horizontal.name != "PLACE"]
+    part = SpatialCommand(entry.limb, entry.origin, horizontal[0], max(entry.sizes) + 2.0)
+    pose = databank.query("youbot", part)
+    assert pose.translation is not None and pose.joints
+    trace = Trace()
+    with running_agent(endpoint, "youbot", speed=4.0, trace=trace) as (agent, watch):
+        target, _ = agent.controller.joints.clamp(pose.joints)
+        op = Operator(session, agent.robot_id)
+        seq = op.send((part.limb, part.origin, part.direction, part.size))
+        done = watch.after(
+            seq,
+            lambda s: s.status == "idle" and joints_close(s, target, 5e-3)
+            and math.dist(s.base_pose[:2], pose.translation[:2]) < 5e-3,  # type: ignore[index]
+            "arm at the pose and base translated",
+        )
+        op.close()
+    assert abs(done.base_pose[2]) < 1e-3, "an omni base translates without turning"
+    start, end = overlap(trace)
+    assert end - start > 0.2, f"joints and base should move together, overlap {start}..{end}"
+
+
+def test_drive_while_the_arm_sweeps(hub: tuple[zenoh.Session, str], databank: Databank) -> None:
+    """The PackBot sweep: drive forward while the arm goes low left, then low right."""
+    session, endpoint = hub
+    sweeps = [(e, pair) for pair in (("left-low", "right-low"),
+                                     ("left-forward-low", "right-forward-low"))
+              for e in databank.catalogue("packbot").limbs if set(pair) <= set(e.directions)]
+    assert sweeps, "the packbot cannot sweep low left-right"
+    entry, lows = sweeps[0]
+    trace = Trace()
+    with running_agent(endpoint, "packbot", speed=2.0, trace=trace) as (agent, watch):
+        op = Operator(session, agent.robot_id)
+        for d in (lows[0], lows[-1]):
+            pose = databank.query("packbot", SpatialCommand(entry.limb, entry.origin, d, 2.0))
+            target, _ = agent.controller.joints.clamp(pose.joints)
+            seq = op.send((entry.limb, entry.origin, d, 2.0), drive=("forward", 0.3),
+                          ttl_ms=2000)
+            while not joints_close(watch.after(seq, lambda s: True, "a state"), target, 5e-3):
+                seq = op.send((entry.limb, entry.origin, d, 2.0), drive=("forward", 0.3),
+                              ttl_ms=2000)  # streamed, like the gamepad client
+        seq = op.send(stop=True)
+        stopped = watch.after(seq, lambda s: s.status == "stopped"
+                              and not agent.controller.moving, "stopped")
+        op.close()
+    start, end = overlap(trace)
+    assert end - start > 0.2
+    assert stopped.base_pose[0] > 0.1, "drove forward"
+    assert abs(stopped.base_pose[1]) < 1e-3, "a skid base does not slide sideways"
+
+
+def test_limbless_robot_follows_a_core_command(
+    hub: tuple[zenoh.Session, str], databank: Databank
+) -> None:
+    session, endpoint = hub
+    cat = databank.catalogue("khepera")
+    core = cat.core[0]
+    part = SpatialCommand(core, core, "left-forward-middle", 3.0)
+    pose = databank.query("khepera", part)
+    assert pose.translation is not None
+    with running_agent(endpoint, "khepera", speed=4.0) as (agent, watch):
+        op = Operator(session, agent.robot_id)
+        seq = op.send((part.limb, part.origin, part.direction, part.size))
+        done = watch.after(
+            seq, lambda s: s.status == "idle"
+            and math.dist(s.base_pose[:2], pose.translation[:2]) < 5e-3,  # type: ignore[index]
+            "khepera at the translated position")
+        op.close()
+    assert abs(done.base_pose[2] - math.pi / 4) < 5e-3, "a diff base turns towards the goal"
