@@ -1,0 +1,231 @@
+"""The client's Zenoh side: put commands, watch robots, read catalogues.
+
+One :class:`RobotLink` per client process. Commands go through publishers cached per key (a
+stream at 30 Hz should not re-resolve its key every tick) with express delivery and blocking
+congestion control: a stop or an e-stop must never be dropped to make room. Robot states and
+liveliness arrive on Zenoh's threads and are kept behind a lock for the loop and the HUD.
+
+Zenoh's link lease is 10 s, so liveliness only tells who exists; safety comes from each
+command's ``ttl_ms``, which the robot enforces itself.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+import uuid
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+
+import zenoh
+
+from kinesphere import zconfig
+from kinesphere.errors import KinesphereError
+from kinesphere.keyexpr import Keys
+from kinesphere.protocol import (
+    Catalogue,
+    Command,
+    Drive,
+    RobotState,
+    SpatialCommand,
+    decode,
+    encode,
+    error_from_reply,
+)
+
+log = logging.getLogger(__name__)
+URGENT = zenoh.Priority.REAL_TIME
+
+
+def new_sender(kind: str) -> str:
+    """A sender id unique to this process: robots order commands per sender by ``seq``."""
+    return f"{kind}-{uuid.uuid4().hex[:8]}"
+
+
+class Sequencer:
+    """Builds Commands with a growing ``seq`` and this sender's id."""
+
+    def __init__(self, sender: str, ttl_ms: int) -> None:
+        self.sender = sender
+        self.ttl_ms = ttl_ms
+        self.seq = 0
+
+    def command(
+        self,
+        parts: Iterable[SpatialCommand] = (),
+        drive: Drive | None = None,
+        *,
+        deadman: bool = True,
+        estop: bool = False,
+        stop: bool = False,
+    ) -> Command:
+        cmd = Command(
+            seq=self.seq,
+            sent_ns=time.time_ns(),
+            parts=list(parts),
+            drive=drive,
+            deadman=deadman,
+            ttl_ms=self.ttl_ms,
+            estop=estop,
+            stop=stop,
+            sender=self.sender,
+        )
+        self.seq += 1
+        return cmd
+
+    def stop(self) -> Command:
+        """Controlled stop: everything brakes to rest and holds (operator let go)."""
+        return self.command(deadman=False, stop=True)
+
+    def estop(self) -> Command:
+        """Emergency stop; robots latch it until a release."""
+        return self.command(deadman=False, estop=True, stop=True)
+
+    def release(self) -> Command:
+        """Clears a robot's e-stop latch; robots move again only on the next command."""
+        return self.command(deadman=True)
+
+
+@dataclass(frozen=True)
+class Seen:
+    """A robot's latest state and when it arrived (monotonic seconds)."""
+
+    state: RobotState
+    at: float
+
+
+class RobotLink:
+    """Puts commands and watches robots on one Zenoh session (which the caller closes)."""
+
+    def __init__(self, session: zenoh.Session, keys: Keys, *, watch: bool = True) -> None:
+        self.session = session
+        self.keys = keys
+        self._lock = threading.RLock()  # wait_for predicates read states under it
+        self._publishers: dict[tuple[str, bool], zenoh.Publisher] = {}
+        self._states: dict[str, Seen] = {}
+        self._alive: set[str] = set()
+        self._catalogues: dict[str, Catalogue] = {}
+        self.changed = threading.Condition(self._lock)
+        self._subs: list[zenoh.Subscriber[None]] = []
+        if watch:
+            self._subs.append(session.declare_subscriber(keys.state("*"), self._on_state))
+            self._subs.append(
+                session.liveliness().declare_subscriber(
+                    keys.alive_robot("*"), self._on_alive, history=True
+                )
+            )
+
+    # --- watching -----------------------------------------------------------------------
+
+    def _on_state(self, sample: zenoh.Sample) -> None:
+        try:
+            st = decode(sample.payload, RobotState)
+        except KinesphereError as exc:
+            log.debug("ignoring state on %s: %s", sample.key_expr, exc)
+            return
+        with self.changed:
+            self._states[st.robot_id] = Seen(st, time.monotonic())
+            self.changed.notify_all()
+
+    def _on_alive(self, sample: zenoh.Sample) -> None:
+        try:
+            rid = self.keys.robot_id_of(str(sample.key_expr))
+        except KinesphereError:
+            return
+        with self.changed:
+            if sample.kind == zenoh.SampleKind.DELETE:
+                self._alive.discard(rid)
+            else:
+                self._alive.add(rid)
+            self.changed.notify_all()
+
+    def states(self) -> dict[str, Seen]:
+        """Latest state of every robot heard from."""
+        with self._lock:
+            return dict(self._states)
+
+    def robots(self) -> list[str]:
+        """Robot ids known alive (liveliness) or streaming state, sorted."""
+        with self._lock:
+            return sorted(self._alive | set(self._states))
+
+    def wait_for(self, predicate: Callable[[RobotLink], bool], timeout: float) -> bool:
+        """Wait until ``predicate(link)`` is true (re-checked on every state or liveliness)."""
+        deadline = time.monotonic() + timeout
+        with self.changed:
+            while not predicate(self):
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    return False
+                self.changed.wait(left)
+            return True
+
+    def platform_of(self, robot_id: str) -> str | None:
+        seen = self.states().get(robot_id)
+        return seen.state.platform if seen else None
+
+    # --- catalogues ---------------------------------------------------------------------
+
+    def catalogue(self, platform: str, timeout: float = 2.0) -> Catalogue:
+        """A platform's catalogue from the databank (cached); unavailable if none answers."""
+        with self._lock:
+            cached = self._catalogues.get(platform)
+        if cached is not None:
+            return cached
+        replies = self.session.get(self.keys.catalogue(platform), timeout=timeout)
+        for reply in replies:
+            if reply.ok is not None:
+                cat = decode(reply.ok.payload, Catalogue)
+                with self._lock:
+                    self._catalogues[platform] = cat
+                return cat
+            assert reply.err is not None
+            raise error_from_reply(reply.err.payload)
+        raise KinesphereError("unavailable", f"no databank answers for platform {platform!r}")
+
+    # --- commands -----------------------------------------------------------------------
+
+    def publisher(self, key: str, *, urgent: bool = False) -> zenoh.Publisher:
+        with self._lock:
+            pub = self._publishers.get((key, urgent))
+            if pub is None:
+                pub = self._publishers[key, urgent] = self.session.declare_publisher(
+                    key,
+                    congestion_control=zenoh.CongestionControl.BLOCK,
+                    priority=zenoh.Priority.REAL_TIME
+                    if urgent
+                    else zenoh.Priority.INTERACTIVE_HIGH,
+                    express=True,
+                )
+            return pub
+
+    def wait_subscribers(self, keys: Iterable[str], timeout: float) -> list[str]:
+        """Declare publishers for ``keys`` and wait until each has a subscriber; the unmatched."""
+        missing = []
+        deadline = time.monotonic() + timeout
+        for key in keys:
+            left = max(0.0, deadline - time.monotonic())
+            if not zconfig.wait_matching(self.publisher(key), left):
+                missing.append(key)
+        return missing
+
+    def put(self, keys: Iterable[str], cmd: Command) -> None:
+        """Put ``cmd`` on every key (the same seq: each robot sees it once)."""
+        payload = encode(cmd)
+        for key in keys:
+            self.publisher(key, urgent=cmd.estop).put(payload)
+
+    def estop_all(self, seq: Sequencer) -> Command:
+        """E-stop every robot under the prefix, whatever the current target."""
+        cmd = seq.estop()
+        self.put([self.keys.command("*")], cmd)
+        return cmd
+
+    def close(self) -> None:
+        """Undeclare everything this link declared (the session stays open)."""
+        with self._lock:
+            pubs = list(self._publishers.values())
+            self._publishers.clear()
+        zconfig.undeclare(*self._subs, *pubs)
+        self._subs.clear()

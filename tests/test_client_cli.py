@@ -1,0 +1,129 @@
+"""The operator commands end to end over real Zenoh: send, play, estop and a headless gamepad
+replay; user mistakes print ``error: ...`` and exit 2."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+import zenoh
+from kinesphere.clients.state import Action, ControllerState
+from test_client_support import KEYS, Inbox, hub
+
+from kinesphere.cli import main
+
+__all__ = ["hub"]  # fixtures
+
+ROBOTS = ("c1", "c2", "c3")
+
+
+@pytest.fixture
+def boxes(hub: tuple[zenoh.Session, str]) -> Iterator[dict[str, Inbox]]:
+    b = {r: Inbox(hub[0], KEYS.command(r)) for r in ROBOTS}
+    yield b
+    for x in b.values():
+        x.close()
+
+
+def cli(endpoint: str, *args: str) -> int:
+    return main([*args, "--connect", endpoint, "--prefix", KEYS.prefix])
+
+
+def test_help_lists_the_operator_commands(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit):
+        main(["--help"])
+    out = capsys.readouterr().out
+    for command in ("gamepad", "send", "play", "estop"):
+        assert command in out
+
+
+def test_send_one_command(hub: tuple[zenoh.Session, str], boxes: dict[str, Inbox]) -> None:
+    code = cli(hub[1], "send", "c1", "limb_11", "distal_11", "Left-High", "3",
+               "right_arm", "right_shoulder", "forward-low", "near")  # fmt: skip
+    assert code == 0
+    got = boxes["c1"].wait(lambda g: True, "the command").cmd
+    assert [(p.limb, p.direction, p.size) for p in got.parts] == [
+        ("limb_11", "left-high", 3.0), ("right_arm", "forward-low", 1.0)]  # fmt: skip
+    assert got.deadman and got.ttl_ms == 0 and got.drive is None
+
+
+def test_send_to_a_group_with_a_drive_held(
+    hub: tuple[zenoh.Session, str], boxes: dict[str, Inbox], tmp_path: Path
+) -> None:
+    groups = tmp_path / "fleet.toml"
+    groups.write_text('[groups]\npair = ["c1", "c2"]\n')
+    code = cli(hub[1], "send", "pair", "arm", "shoulder", "left-low", "far",
+               "--drive", "forward", "0.4", "--for", "0.2", "--groups", str(groups))  # fmt: skip
+    assert code == 0
+    for r in ("c1", "c2"):
+        stop = boxes[r].wait(lambda g: g.cmd.stop, "the stop").cmd
+        moves = [c for c in boxes[r].commands() if not c.stop]
+        assert len(moves) >= 3 and stop.seq == moves[-1].seq + 1
+        assert moves[0].drive is not None and moves[0].drive.speed == 0.4
+        assert moves[0].ttl_ms == 300
+    assert boxes["c3"].commands() == []  # (the stops above came after any stray command)
+
+
+def test_estop_reaches_every_robot_and_release_one(
+    hub: tuple[zenoh.Session, str], boxes: dict[str, Inbox]
+) -> None:
+    assert cli(hub[1], "estop") == 0
+    for r in ROBOTS:
+        boxes[r].wait(lambda g: g.cmd.estop and g.key == KEYS.command("*"), f"e-stop at {r}")
+    assert cli(hub[1], "estop", "--release", "--target", "c2") == 0
+    release = boxes["c2"].wait(lambda g: not g.cmd.estop, "the release").cmd
+    assert release.deadman and not release.stop and release.parts == []
+
+
+def test_play_a_phrase_file(
+    hub: tuple[zenoh.Session, str], boxes: dict[str, Inbox], tmp_path: Path
+) -> None:
+    f = tmp_path / "p.toml"
+    f.write_text("[[step]]\nduration = 0.2\nparts = ['limb_11 distal_11 left-high 2']\n")
+    assert cli(hub[1], "play", str(f), "--target", "c3") == 0
+    stop = boxes["c3"].wait(lambda g: g.cmd.stop, "the final stop")
+    moves = [g for g in boxes["c3"].got if not g.cmd.stop]
+    assert moves and all(g.cmd.parts[0].direction == "left-high" for g in moves)
+    assert stop.at >= moves[-1].at
+
+
+def test_gamepad_replays_a_recording_headless(
+    hub: tuple[zenoh.Session, str], boxes: dict[str, Inbox], tmp_path: Path
+) -> None:
+    rec = tmp_path / "r.jsonl"
+    push = ControllerState(rx=1.0, held=frozenset({Action.DEADMAN})).to_dict()
+    lines = [{"kinesphere": "gamepad-recording", "version": 1}]
+    lines += [{"t": k / 30, "state": push} for k in range(10)]
+    lines += [{"t": 10 / 30, "state": ControllerState().to_dict()}]
+    rec.write_text("\n".join(json.dumps(x) for x in lines) + "\n")
+    code = cli(hub[1], "gamepad", "--replay", str(rec), "--headless", "--target", "c2")
+    assert code == 0
+    boxes["c2"].wait(lambda g: g.cmd.stop, "the final stop")
+    moves = [c for c in boxes["c2"].commands() if not c.stop]
+    assert 8 <= len(moves) <= 11
+    assert {c.parts[0].direction for c in moves} == {"right-middle"}
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["send", "c1", "limb_11", "distal_11", "upwards", "3"], "unknown direction 'upwards'"),
+        (["send", "c1", "limb_11", "distal_11", "left"], "parts come in fours"),
+        (["send", "c1"], "nothing to send"),
+        (["send", "c/1", "a", "b", "left", "1"], "target 'c/1'"),
+        (["send", "c1", "a", "b", "left", "1", "--drive", "up", "1"], "unknown direction"),
+        (["send", "nobody", "a", "b", "left", "1", "--wait", "0.2"], "no robot listens"),
+        (["play", "nonexistent_phrase"], "shipped phrases"),
+        (["gamepad", "--replay", "/nonexistent.jsonl", "--headless"], "cannot read recording"),
+        (["gamepad", "--mapping", "/nonexistent.toml", "--headless"], "cannot read mapping"),
+    ],
+)
+def test_user_mistakes_are_explained(
+    hub: tuple[zenoh.Session, str], capsys: pytest.CaptureFixture[str],
+    args: list[str], message: str,
+) -> None:  # fmt: skip
+    assert cli(hub[1], *args) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and message in err

@@ -1,0 +1,112 @@
+"""The HUD renders under SDL's dummy driver: the commanded cell is lit, symbols and statuses
+are drawn, and a screenshot can be saved (``KINESPHERE_HUD_PNG=path`` keeps one to look at)."""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
+
+import pygame  # noqa: E402
+import pytest  # noqa: E402
+from kinesphere.clients import hud  # noqa: E402
+from kinesphere.clients import targets as tg  # noqa: E402
+from kinesphere.clients.link import Seen  # noqa: E402
+from kinesphere.clients.mapping import Intent  # noqa: E402
+from kinesphere.clients.teleop import View  # noqa: E402
+
+from kinesphere.laban import Direction, Horizontal, Level  # noqa: E402
+from kinesphere.protocol import Drive, RobotState  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def window() -> Iterator[hud.Hud]:
+    pygame.display.init()
+    yield hud.Hud()
+    pygame.quit()
+
+
+def state(robot_id: str, platform: str, status: str, **kw: object) -> Seen:
+    st = RobotState(robot_id=robot_id, platform=platform, seq=1, stamp_ns=time.time_ns(),
+                    joint_names=["a"], q=[0.0], qd=[0.0], base_pose=[0.0, 0.0, 0.0],
+                    status=status, last_command_seq=7, **kw)  # type: ignore[arg-type]  # fmt: skip
+    return Seen(st, time.monotonic())
+
+
+def view(**kw: object) -> View:
+    base = dict(
+        target=tg.Target("group", "sweepers", ("packbot-1", "packbot-2")),
+        limb="limb_11", origin="distal_11",
+        aliases={"limb_11": "arm", "distal_11": "shoulder"},
+        intent=Intent(direction=Direction.LEFT_LOW, size=2.4, deadman=True, reach=0.8,
+                      drive=Drive(direction="forward-middle", speed=0.6), drive_vec=(0.6, 0.0)),
+        engaged=True, deadman_required=True, estopped=False, remote_estop=[],
+        need_fresh_deadman=False, connected=True, source="controller",
+        robots={
+            "packbot-1": state("packbot-1", "packbot", "moving"),
+            "packbot-2": state("packbot-2", "packbot", "clamped", clamped=["turret"],
+                               detail="turret target clamped to its limit"),
+            "baxter-1": state("baxter-1", "baxter", "holding"),
+            "nao-1": state("nao-1", "nao", "databank_unreachable",
+                           detail="no databank answers kinesphere/ecl/nao/catalogue"),
+            "youbot-1": state("youbot-1", "youbot", "estop", detail="e-stop latched"),
+        },
+        seq=1234, message="target: group sweepers: packbot-1, packbot-2",
+    )  # fmt: skip
+    base.update(kw)
+    return View(**base)  # type: ignore[arg-type]
+
+
+def cell_centre(d: Direction) -> tuple[int, int]:
+    """Where the chart puts a direction (mirrors hud._chart's layout)."""
+    j, i = hud.COLUMNS.index(d.horizontal), hud.ROWS.index(d.level)
+    return 80 + j * 52 + 4, 110 + 20 + i * 74 + 4
+
+
+def test_the_commanded_cell_is_lit(window: hud.Hud, tmp_path: Path) -> None:
+    hud.render(window.screen, view(), window.fonts)
+    lit = window.screen.get_at(cell_centre(Direction.LEFT_LOW))[:3]
+    other = window.screen.get_at(cell_centre(Direction.RIGHT_HIGH))[:3]
+    assert lit == hud.LIT and other == hud.BG
+    hud.render(window.screen, view(engaged=False), window.fonts)
+    assert window.screen.get_at(cell_centre(Direction.LEFT_LOW))[:3] == hud.DIM
+    window.screenshot(tmp_path / "hud.png")
+    assert (tmp_path / "hud.png").stat().st_size > 5000
+    keep = os.environ.get("KINESPHERE_HUD_PNG")
+    if keep:
+        hud.render(window.screen, view(), window.fonts)
+        window.screenshot(keep)
+
+
+def test_level_shading_follows_laban(window: hud.Hud) -> None:
+    """Low filled, middle a dot, high striped: count ink inside each symbol."""
+    surf = pygame.Surface((60, 80))
+    inks = {}
+    for lvl in Level:
+        surf.fill(hud.BG)
+        hud.draw_symbol(surf, Direction((Horizontal.PLACE.value, lvl.value)),
+                        pygame.Rect(10, 10, 40, 60), hud.INK)  # fmt: skip
+        inks[lvl] = sum(surf.get_at((x, y))[:3] == hud.INK for x in range(13, 48)
+                        for y in range(13, 68))  # fmt: skip
+    assert inks[Level.LOW] > inks[Level.HIGH] > inks[Level.MIDDLE] > 0
+
+
+@pytest.mark.parametrize(
+    "kw",
+    [
+        {"estopped": True, "engaged": False},
+        {"remote_estop": ["youbot-1"], "engaged": False},
+        {"connected": False, "engaged": False},
+        {"deadman_required": False},
+        {"need_fresh_deadman": True, "engaged": False},
+        {"robots": {}, "intent": Intent(), "target": tg.ALL, "aliases": {}},
+        {"intent": Intent(direction=Direction.RIGHT_FORWARD_HIGH, size=4.5, beyond=True)},
+        {"catalogue_errors": {"nao": "no databank answers"}},
+    ],
+)
+def test_every_state_renders(window: hud.Hud, kw: dict[str, object]) -> None:
+    window._last = 0.0
+    window.draw(view(**kw))

@@ -1,0 +1,127 @@
+"""Recording a gamepad session and replaying it reproduces the same commands."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import replace
+from pathlib import Path
+
+import pygame
+import pytest
+import zenoh
+from kinesphere.clients import input as pad
+from kinesphere.clients import mapfile, record
+from kinesphere.clients import targets as tg
+from kinesphere.clients.state import NEUTRAL, Action, ControllerState
+from kinesphere.clients.teleop import Teleop, TeleopOptions, run
+from test_client_support import (
+    KEYS,
+    WAIT_S,
+    Inbox,
+    Pad,
+    Script,
+    client_link,
+    hub,
+    pygame_up,
+    sentinel,
+)
+
+from kinesphere.errors import KinesphereError
+
+__all__ = ["hub", "pygame_up"]  # fixtures
+
+
+@pytest.fixture
+def box(hub: tuple[zenoh.Session, str]) -> Iterator[Inbox]:
+    inbox = Inbox(hub[0], KEYS.command("rec"))
+    yield inbox
+    inbox.close()
+
+
+def test_a_replay_sends_what_the_recorded_session_sent(
+    hub: tuple[zenoh.Session, str], box: Inbox, pygame_up: None, tmp_path: Path
+) -> None:
+    pygame.event.clear()
+    inp = pad.PygameInput(mapfile.load())
+    p = Pad()
+    script = Script(inp, {
+        0: lambda: (p.plug(), p.deadman(), p.right(-1.0, 0.0)),
+        3: lambda: p.axis(pygame.CONTROLLER_AXIS_TRIGGERLEFT, 1.0),
+        5: lambda: (p.left(0.0, -0.7), p.tap(pygame.CONTROLLER_BUTTON_DPAD_UP)),
+        8: lambda: p.right(1.0, 0.0),
+        11: lambda: p.deadman(False),
+        13: lambda: None,
+    })  # fmt: skip
+    polled: list[ControllerState] = []
+
+    class Spy:
+        def poll(self) -> ControllerState:
+            polled.append(script.poll())
+            return polled[-1]
+
+    path = tmp_path / "session.jsonl"
+    with client_link(hub[1]) as link:
+        assert link.wait_subscribers([KEYS.command("rec")], WAIT_S) == []
+        with record.Recorder(path, target="rec") as rec:
+            op = Teleop(link, mapfile.load(), tg.robot("rec"), TeleopOptions(rate_hz=60.0))
+            run(op, Spy(), record=rec, finished=lambda: script.finished)
+        sentinel(link, [KEYS.command("rec")], [box])
+        first = box.commands()
+        header, ticks = record.load(path)
+        assert header["target"] == "rec" and header["version"] == record.VERSION
+        assert [cs for _, cs in ticks] == polled, "every tick is recorded as it was seen"
+        assert any(Action.ORIGIN_NEXT in cs.pressed for _, cs in ticks)
+
+        times = iter([t for t, _ in ticks] + [ticks[-1][0] + 1.0] * 5)
+        replay = record.Replay(ticks, clock=lambda: next(times))
+        op = Teleop(link, mapfile.load(), tg.robot("rec"), TeleopOptions(rate_hz=60.0))
+        run(op, replay, finished=lambda: replay.finished)
+        sentinel(link, [KEYS.command("rec")], [box])
+    second = box.commands()[len(first) :]
+
+    def content(cmds: list) -> list:  # type: ignore[type-arg]
+        return [(c.parts, c.drive, c.deadman, c.stop) for c in cmds]
+
+    assert len(first) == 12 and first[-1].stop
+    assert content(second) == content(first)
+    assert {c.parts[0].direction for c in first[:-1]} == {"left-middle", "left-low", "right-low"}
+
+
+def test_a_slower_replay_keeps_every_tap() -> None:
+    ticks = [
+        (0.00, ControllerState(held=frozenset({Action.DEADMAN}))),
+        (0.01, ControllerState(pressed=frozenset({Action.LIMB_NEXT}))),
+        (0.02, ControllerState(pressed=frozenset({Action.ORIGIN_NEXT}))),
+        (0.03, ControllerState(rx=0.5)),
+    ]
+    times = iter([0.0, 0.025, 0.5, 0.6])
+    replay = record.Replay(ticks, clock=lambda: next(times))
+    assert replay.poll().held == {Action.DEADMAN}
+    got = replay.poll()
+    assert got.pressed == {Action.LIMB_NEXT, Action.ORIGIN_NEXT}
+    assert not replay.finished
+    end = replay.poll()
+    assert replay.finished and replay_equal(end, NEUTRAL)
+    assert replay.poll().pressed == frozenset()
+
+
+def replay_equal(a: ControllerState, b: ControllerState) -> bool:
+    return replace(a, source="x") == replace(b, source="x")
+
+
+@pytest.mark.parametrize(
+    ("text", "match"),
+    [
+        ("", "is empty"),
+        ('{"kinesphere": "other"}\n', "header"),
+        ('{"kinesphere": "gamepad-recording", "version": 9}\n', "version 9"),
+        ('{"kinesphere": "gamepad-recording", "version": 1}\n{"t": 0}\n', "line 2"),
+        ('{"kinesphere": "gamepad-recording", "version": 1}\nnot json\n', "line 2"),
+    ],
+)
+def test_bad_recordings_are_explained(tmp_path: Path, text: str, match: str) -> None:
+    f = tmp_path / "bad.jsonl"
+    f.write_text(text)
+    with pytest.raises(KinesphereError, match=match) as info:
+        record.load(f)
+    assert info.value.code == "malformed"

@@ -1,0 +1,214 @@
+"""Shared helpers for the client tests: real Zenoh on loopback, posted pygame events.
+
+Nothing is mocked: robots are stood in for by real Zenoh subscribers (or, end to end, by real
+agent processes), input comes from events posted into pygame's queue under SDL's dummy video
+driver. Waits are on events (a message arriving, a state matching), never on sleeps; to show
+that nothing *else* arrives, a sentinel is put behind the traffic on the same publisher and
+awaited: Zenoh keeps one publisher's messages in order.
+"""
+
+from __future__ import annotations
+
+import itertools
+import os
+import threading
+import time
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass
+
+os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
+os.environ.setdefault("SDL_AUDIODRIVER", "dummy")
+
+import pygame  # noqa: E402
+import pytest  # noqa: E402
+import zenoh  # noqa: E402
+from kinesphere.clients import input as pad  # noqa: E402
+from kinesphere.clients.link import RobotLink  # noqa: E402
+from kinesphere.clients.state import ControllerState  # noqa: E402
+
+from kinesphere import zconfig  # noqa: E402
+from kinesphere.keyexpr import Keys  # noqa: E402
+from kinesphere.protocol import Catalogue, Command, RobotState, decode, encode  # noqa: E402
+
+KEYS = Keys("kstest")
+WAIT_S = 20.0
+"""Upper bound for events on a loaded 2-core machine; tests finish far sooner."""
+SENTINEL = "sentinel"
+MAX = 32767
+
+
+@dataclass(frozen=True)
+class Got:
+    """A command as a robot received it."""
+
+    at: float
+    key: str
+    cmd: Command
+
+
+class Inbox:
+    """Every Command put on ``key`` (may be a wildcard), with arrival times."""
+
+    def __init__(self, session: zenoh.Session, key: str) -> None:
+        self.got: list[Got] = []
+        self._cond = threading.Condition()
+        self._sub = session.declare_subscriber(key, self._on)
+
+    def _on(self, sample: zenoh.Sample) -> None:
+        cmd = decode(sample.payload, Command)
+        with self._cond:
+            self.got.append(Got(time.monotonic(), str(sample.key_expr), cmd))
+            self._cond.notify_all()
+
+    def wait(self, pred: Callable[[Got], bool], what: str, timeout: float = WAIT_S) -> Got:
+        """The first message so far or from now on that satisfies ``pred``."""
+        deadline = time.monotonic() + timeout
+        with self._cond:
+            while True:
+                for g in self.got:
+                    if pred(g):
+                        return g
+                left = deadline - time.monotonic()
+                if left <= 0 or not self._cond.wait(left):
+                    raise AssertionError(f"timed out waiting for {what}; got {len(self.got)}")
+
+    def commands(self, real: bool = True) -> list[Command]:
+        with self._cond:
+            return [g.cmd for g in self.got if (g.cmd.sender != SENTINEL) == real]
+
+    def close(self) -> None:
+        zconfig.undeclare(self._sub)
+
+
+_marks = itertools.count()
+
+
+def sentinel(link: RobotLink, keys: Sequence[str], inboxes: Sequence[Inbox]) -> None:
+    """Put a new sentinel behind everything sent so far and wait until every inbox has it.
+
+    Only messages of the same priority keep their order (an e-stop may overtake).
+    """
+    n = next(_marks)
+    mark = Command(seq=n, sent_ns=time.time_ns(), deadman=False, ttl_ms=0, sender=SENTINEL)
+    link.put(keys, mark)
+    for box in inboxes:
+        box.wait(lambda g: g.cmd.sender == SENTINEL and g.cmd.seq == n, "the sentinel")
+
+
+@pytest.fixture(scope="module")
+def hub() -> Iterator[tuple[zenoh.Session, str]]:
+    with zconfig.loopback_hub() as pair:
+        yield pair
+
+
+@contextmanager
+def client_link(endpoint: str, watch: bool = True) -> Iterator[RobotLink]:
+    """A client's own session joined to the hub, and its RobotLink."""
+    with zconfig.session(config=zconfig.loopback_config(endpoint)) as s:
+        link = RobotLink(s, KEYS, watch=watch)
+        try:
+            yield link
+        finally:
+            link.close()
+
+
+@pytest.fixture(scope="module")
+def pygame_up() -> Iterator[None]:
+    pad.init_pygame(headless=True)
+    yield
+    pygame.quit()
+
+
+def post(kind: int, **attrs: object) -> None:
+    pygame.event.post(pygame.event.Event(kind, **attrs))
+
+
+class Pad:
+    """A gamepad that exists only as events posted into pygame's queue."""
+
+    def __init__(self, iid: int = 3) -> None:
+        self.iid = iid
+
+    def plug(self) -> None:
+        post(pygame.CONTROLLERDEVICEADDED, device_index=90 + self.iid, instance_id=self.iid)
+
+    def unplug(self) -> None:
+        post(pygame.CONTROLLERDEVICEREMOVED, instance_id=self.iid)
+
+    def axis(self, a: int, value: float) -> None:
+        post(pygame.CONTROLLERAXISMOTION, instance_id=self.iid, axis=a, value=int(value * MAX))
+
+    def right(self, x: float, y: float) -> None:
+        self.axis(pygame.CONTROLLER_AXIS_RIGHTX, x)
+        self.axis(pygame.CONTROLLER_AXIS_RIGHTY, y)
+
+    def left(self, x: float, y: float) -> None:
+        self.axis(pygame.CONTROLLER_AXIS_LEFTX, x)
+        self.axis(pygame.CONTROLLER_AXIS_LEFTY, y)
+
+    def button(self, b: int, down: bool = True) -> None:
+        kind = pygame.CONTROLLERBUTTONDOWN if down else pygame.CONTROLLERBUTTONUP
+        post(kind, instance_id=self.iid, button=b)
+
+    def tap(self, b: int) -> None:
+        self.button(b)
+        self.button(b, down=False)
+
+    def deadman(self, down: bool = True) -> None:
+        self.button(pygame.CONTROLLER_BUTTON_LEFTSHOULDER, down)
+
+
+class Script:
+    """A Source that posts scheduled events before each tick, then reads the real queue."""
+
+    def __init__(self, inp: pad.PygameInput, steps: dict[int, Callable[[], None]]) -> None:
+        self.inp = inp
+        self.steps = steps
+        self.tick = 0
+
+    @property
+    def finished(self) -> bool:
+        return self.tick > max(self.steps, default=0)
+
+    def poll(self) -> ControllerState:
+        action = self.steps.get(self.tick)
+        if action is not None:
+            action()
+        self.tick += 1
+        return self.inp.poll()
+
+
+class FakeRobot:
+    """Publishes RobotState for one id, as an agent would (status chosen by the test)."""
+
+    def __init__(self, session: zenoh.Session, robot_id: str, platform: str) -> None:
+        self.session = session
+        self.robot_id = robot_id
+        self.platform = platform
+        self.seq = 0
+
+    def state(self, status: str = "idle") -> None:
+        self.seq += 1
+        st = RobotState(
+            robot_id=self.robot_id, platform=self.platform, seq=self.seq,
+            stamp_ns=time.time_ns(), joint_names=[], q=[], qd=[], base_pose=[0.0, 0.0, 0.0],
+            status=status, last_command_seq=-1,
+        )  # fmt: skip
+        self.session.put(KEYS.state(self.robot_id), encode(st))
+
+
+@contextmanager
+def fake_catalogue(session: zenoh.Session, cat: Catalogue) -> Iterator[None]:
+    """A catalogue queryable for ``cat.platform`` (the databank's catalogue key only)."""
+    payload = encode(cat)
+
+    def on_query(query: zenoh.Query) -> None:
+        with query:
+            query.reply(KEYS.catalogue(cat.platform), payload)
+
+    q = session.declare_queryable(KEYS.catalogue(cat.platform), on_query)
+    try:
+        yield
+    finally:
+        zconfig.undeclare(q)

@@ -1,0 +1,351 @@
+"""The streaming loop over real Zenoh, driven by posted pygame events: content, rate and TTL
+of the stream, deadman, final stops, targets and groups, e-stop, catalogue-driven cycling."""
+
+from __future__ import annotations
+
+import statistics
+from collections.abc import Iterator
+from dataclasses import replace
+
+import msgspec
+import pygame
+import pytest
+import zenoh
+from kinesphere.clients import input as pad
+from kinesphere.clients import mapfile
+from kinesphere.clients import targets as tg
+from kinesphere.clients.limbs import Selection, pairs_of
+from kinesphere.clients.link import RobotLink
+from kinesphere.clients.teleop import Teleop, TeleopOptions, run
+from test_client_support import (
+    KEYS,
+    WAIT_S,
+    FakeRobot,
+    Inbox,
+    Pad,
+    Script,
+    client_link,
+    fake_catalogue,
+    hub,
+    pygame_up,
+    sentinel,
+)
+
+from kinesphere import zconfig
+from kinesphere.protocol import Catalogue, LimbEntry, SpatialCommand
+
+__all__ = ["hub", "pygame_up"]  # fixtures
+
+ROBOTS = ("r1", "r2", "r3")
+GROUPS = {"arms": ("r1", "r2")}
+
+
+@pytest.fixture
+def inboxes(hub: tuple[zenoh.Session, str]) -> Iterator[dict[str, Inbox]]:
+    session, _ = hub
+    boxes = {r: Inbox(session, KEYS.command(r)) for r in ROBOTS}
+    yield boxes
+    for b in boxes.values():
+        b.close()
+
+
+@pytest.fixture
+def link(hub: tuple[zenoh.Session, str], inboxes: dict[str, Inbox]) -> Iterator[RobotLink]:
+    _, endpoint = hub
+    with client_link(endpoint) as lk:
+        assert lk.wait_subscribers([KEYS.command(r) for r in ROBOTS], WAIT_S) == []
+        yield lk
+
+
+@pytest.fixture
+def inp(pygame_up: None) -> pad.PygameInput:
+    pygame.event.clear()
+    return pad.PygameInput(mapfile.load())
+
+
+def teleop(link: RobotLink, target: tg.Target, **options: object) -> Teleop:
+    mapping = replace(mapfile.load(), groups=GROUPS)
+    return Teleop(link, mapping, target, TeleopOptions(**options))  # type: ignore[arg-type]
+
+
+def settle(link: RobotLink, boxes: dict[str, Inbox]) -> None:
+    """Everything sent so far has arrived at every robot."""
+    sentinel(link, [KEYS.command(r) for r in boxes], list(boxes.values()))
+
+
+def test_stream_content_rate_ttl_and_final_stop(
+    link: RobotLink, inboxes: dict[str, Inbox], inp: pad.PygameInput
+) -> None:
+    p = Pad()
+
+    def press() -> None:
+        p.plug()
+        p.deadman()
+        p.right(-1.0, 0.0)  # stick left
+        p.axis(pygame.CONTROLLER_AXIS_TRIGGERLEFT, 1.0)  # low
+        p.left(0.0, -1.0)  # drive forward
+
+    script = Script(inp, {0: press, 30: lambda: p.deadman(False), 34: lambda: None})
+    op = teleop(link, tg.robot("r1"), rate_hz=30.0, ttl_ms=300)
+    run(op, script, finished=lambda: script.finished)
+    settle(link, inboxes)
+    got = [g for g in inboxes["r1"].got if g.cmd.sender != "sentinel"]
+    stream, final = got[:-1], got[-1]
+    assert len(stream) == 30
+    for g in stream:
+        c = g.cmd
+        assert c.deadman and not c.stop and not c.estop and c.ttl_ms == 300
+        assert c.parts == [SpatialCommand("limb_11", "distal_11", "left-low", 3.0)]
+        assert c.drive is not None and (c.drive.direction, c.drive.speed) == ("forward-middle", 1.0)
+        assert c.sender == op.seq.sender
+    assert [g.cmd.seq for g in got] == list(range(31))
+    assert final.cmd.stop and not final.cmd.deadman and final.cmd.parts == []
+    gaps = [b.at - a.at for a, b in zip(stream, stream[1:], strict=False)]
+    assert statistics.median(gaps) == pytest.approx(1 / 30, abs=0.006)
+    assert stream[-1].at - stream[0].at == pytest.approx(29 / 30, abs=0.1)
+    assert max(gaps) < 0.3, "the stream never pauses longer than the TTL"
+    assert inboxes["r2"].commands() == [] and inboxes["r3"].commands() == []
+
+
+def test_nothing_moves_without_the_deadman(
+    link: RobotLink, inboxes: dict[str, Inbox], inp: pad.PygameInput
+) -> None:
+    p = Pad()
+    op = teleop(link, tg.robot("r1"))
+    p.right(0.0, -1.0)
+    p.left(1.0, 0.0)
+    for _ in range(5):
+        view = op.tick(inp.poll())
+        assert not view.engaged
+    settle(link, inboxes)
+    assert inboxes["r1"].commands() == []
+
+
+def test_without_a_deadman_a_deflected_stick_streams(
+    link: RobotLink, inboxes: dict[str, Inbox], inp: pad.PygameInput
+) -> None:
+    p = Pad()
+    op = teleop(link, tg.robot("r1"), deadman_required=False)
+    op.tick(inp.poll())  # centred: nothing
+    p.right(0.0, 1.0)  # stick down: back
+    op.tick(inp.poll())
+    op.tick(inp.poll())
+    p.right(0.0, 0.0)
+    op.tick(inp.poll())
+    settle(link, inboxes)
+    cmds = inboxes["r1"].commands()
+    assert [c.parts[0].direction for c in cmds[:2]] == ["back-middle"] * 2
+    assert cmds[2].stop and len(cmds) == 3
+
+
+def status_of(link: RobotLink, robot_id: str) -> str | None:
+    seen = link.states().get(robot_id)
+    return seen.state.status if seen else None
+
+
+def engage(op: Teleop, inp: pad.PygameInput, p: Pad, ticks: int = 2) -> None:
+    p.deadman()
+    p.right(0.0, -1.0)
+    for _ in range(ticks):
+        assert op.tick(inp.poll()).engaged
+
+
+def test_group_and_all_reach_every_intended_robot_and_no_other(
+    link: RobotLink, inboxes: dict[str, Inbox], inp: pad.PygameInput
+) -> None:
+    p = Pad()
+    op = teleop(link, tg.parse_target("arms", GROUPS))
+    engage(op, inp, p)
+    p.deadman(False)
+    op.tick(inp.poll())
+    settle(link, inboxes)
+    for r in ("r1", "r2"):
+        cmds = inboxes[r].commands()
+        assert len(cmds) == 3 and cmds[-1].stop
+        assert {g.key for g in inboxes[r].got if g.cmd.sender != "sentinel"} == {KEYS.command(r)}
+    assert inboxes["r3"].commands() == [], "a robot outside the group hears nothing"
+
+    op.target = tg.ALL
+    engage(op, inp, p)
+    p.deadman(False)
+    op.tick(inp.poll())
+    settle(link, inboxes)
+    for r in ROBOTS:
+        last = [g for g in inboxes[r].got if g.cmd.sender != "sentinel"][-3:]
+        assert [g.key for g in last] == [KEYS.command("*")] * 3
+        assert last[-1].cmd.stop
+
+
+def test_target_button_cycles_robot_group_all(
+    hub: tuple[zenoh.Session, str], link: RobotLink, inp: pad.PygameInput
+) -> None:
+    session, _ = hub
+    for r in ROBOTS:
+        FakeRobot(session, r, "fakebot").state()
+    assert link.wait_for(lambda lk: set(lk.robots()) >= set(ROBOTS), WAIT_S)
+    op = teleop(link, tg.robot("r1"))
+    p = Pad()
+    seen = []
+    for _ in range(5):
+        p.tap(pygame.CONTROLLER_BUTTON_Y)
+        seen.append(op.tick(inp.poll()).target.label)
+    assert seen == ["r2", "r3", "group arms: r1, r2", "all robots", "r1"]
+
+
+def test_switching_target_stops_the_old_one(
+    link: RobotLink, inboxes: dict[str, Inbox], inp: pad.PygameInput
+) -> None:
+    p = Pad()
+    op = teleop(link, tg.robot("r3"))
+    engage(op, inp, p, ticks=1)
+    p.tap(pygame.CONTROLLER_BUTTON_Y)  # no robots heard: r-less cycle goes to group arms
+    view = op.tick(inp.poll())
+    assert view.engaged and view.target.name == "arms"
+    settle(link, inboxes)
+    r3 = inboxes["r3"].commands()
+    assert len(r3) == 2 and r3[-1].stop
+    assert len(inboxes["r1"].commands()) == 1
+
+
+def test_estop_goes_to_all_latches_and_needs_release_and_fresh_deadman(
+    link: RobotLink, inboxes: dict[str, Inbox], inp: pad.PygameInput
+) -> None:
+    p = Pad()
+    op = teleop(link, tg.robot("r1"))
+    engage(op, inp, p)
+    p.tap(pygame.CONTROLLER_BUTTON_B)
+    view = op.tick(inp.poll())
+    assert view.estopped and not view.engaged
+    for r in ROBOTS:
+        inboxes[r].wait(lambda g: g.cmd.estop and g.key == KEYS.command("*"), f"e-stop at {r}")
+    for _ in range(3):  # deadman still held, stick still pushed: nothing goes out
+        assert not op.tick(inp.poll()).engaged
+    p.tap(pygame.CONTROLLER_BUTTON_START)
+    view = op.tick(inp.poll())
+    assert not view.estopped and not view.engaged and view.need_fresh_deadman
+    p.deadman(False)
+    op.tick(inp.poll())
+    p.deadman()
+    assert op.tick(inp.poll()).engaged
+    settle(link, inboxes)
+    cmds = sorted(inboxes["r1"].commands(), key=lambda c: c.seq)  # the e-stop may overtake
+    kinds = ["estop" if c.estop else "stop" if c.stop else "move" if c.parts else "release"
+             for c in cmds]  # fmt: skip
+    assert kinds == ["move", "move", "estop", "release", "move"]
+    assert cmds[3].deadman and not cmds[3].parts, "a release moves nothing by itself"
+    assert [c.estop for c in inboxes["r2"].commands()] == [True]
+
+
+def test_unplugging_sends_a_final_stop_and_replugging_needs_the_deadman_again(
+    link: RobotLink, inboxes: dict[str, Inbox], inp: pad.PygameInput
+) -> None:
+    p = Pad()
+    p.plug()
+    op = teleop(link, tg.robot("r1"))
+    engage(op, inp, p)
+    p.unplug()
+    view = op.tick(inp.poll())
+    assert not view.connected and not view.engaged
+    inboxes["r1"].wait(lambda g: g.cmd.stop, "the final stop")
+    p.plug()
+    p.right(0.0, -1.0)
+    assert not op.tick(inp.poll()).engaged
+    p.deadman()
+    assert op.tick(inp.poll()).engaged
+    settle(link, inboxes)
+    assert [c.stop for c in inboxes["r1"].commands()] == [False, False, True, False]
+
+
+def test_leaving_the_loop_sends_a_final_stop(
+    link: RobotLink, inboxes: dict[str, Inbox], inp: pad.PygameInput
+) -> None:
+    p = Pad()
+    script = Script(inp, {0: lambda: (p.deadman(), p.right(0.0, -1.0)), 3: lambda: None})
+    op = teleop(link, tg.robot("r2"), rate_hz=100.0)
+    run(op, script, finished=lambda: script.finished)  # ends with the deadman still held
+    settle(link, inboxes)
+    cmds = inboxes["r2"].commands()
+    assert len(cmds) == 5 and not any(c.stop for c in cmds[:-1]) and cmds[-1].stop
+
+
+def test_an_estop_reported_by_a_robot_pauses_the_stream(
+    hub: tuple[zenoh.Session, str], link: RobotLink, inboxes: dict[str, Inbox],
+    inp: pad.PygameInput,
+) -> None:  # fmt: skip
+    """Robots release a latch on any deadman command: never stream into someone's e-stop."""
+    session, _ = hub
+    robot = FakeRobot(session, "r1", "fakebot")
+    p = Pad()
+    op = teleop(link, tg.robot("r1"))
+    engage(op, inp, p, ticks=1)
+    robot.state("estop")
+    assert link.wait_for(lambda lk: status_of(lk, "r1") == "estop", WAIT_S)
+    view = op.tick(inp.poll())
+    assert not view.engaged and view.remote_estop == ["r1"]
+    settle(link, inboxes)
+    assert [c.stop for c in inboxes["r1"].commands()] == [False, True]
+
+
+FAKEBOT = Catalogue(
+    platform="fakebot",
+    core=["c_1"],
+    limbs=[
+        LimbEntry("limb_11", "distal_11", ["left-high", "place-middle"], [1, 2, 3]),
+        LimbEntry("limb_12", "distal_11", ["left-high"], [1, 2, 3]),
+        LimbEntry("limb_12", "distal_12", ["left-high"], [1, 2, 3]),
+        LimbEntry("limb_21", "distal_21", ["left-high"], [1, 2, 3]),
+        LimbEntry("c_1", "c_1", ["forward-middle"], [1, 2, 3]),
+    ],
+    joints=[],
+    sizes=[1, 2, 3],
+    aliases={"right_arm": "limb_11", "right_shoulder": "distal_11", "left_arm": "limb_21"},
+    version="test",
+)
+
+
+def test_shoulder_cycling_follows_the_robots_catalogue(
+    hub: tuple[zenoh.Session, str], link: RobotLink, inboxes: dict[str, Inbox],
+    inp: pad.PygameInput,
+) -> None:  # fmt: skip
+    session, _ = hub
+    FakeRobot(session, "r1", "fakebot").state()
+    assert link.wait_for(lambda lk: "r1" in lk.states(), WAIT_S)
+    with fake_catalogue(session, FAKEBOT):
+        querier = link.session.declare_querier(KEYS.catalogue("fakebot"))
+        assert zconfig.wait_matching(querier, WAIT_S)
+        zconfig.undeclare(querier)
+        op = teleop(link, tg.robot("r1"))
+        op.tick(inp.poll())
+        assert op.catalogues.arrived.wait(WAIT_S)
+        view = op.tick(inp.poll())
+        assert (view.limb, view.origin) == ("limb_11", "distal_11")
+        assert view.aliases["limb_11"] == "right_arm"
+        p = Pad()
+        seen = []
+        for b in ("DPAD_RIGHT", "DPAD_UP", "DPAD_UP", "DPAD_RIGHT", "DPAD_RIGHT", "DPAD_LEFT"):
+            p.tap(getattr(pygame, f"CONTROLLER_BUTTON_{b}"))
+            v = op.tick(inp.poll())
+            seen.append((v.limb, v.origin))
+        assert seen == [
+            ("limb_12", "distal_11"), ("limb_12", "distal_12"), ("limb_12", "distal_11"),
+            ("limb_21", "distal_21"), ("limb_11", "distal_11"), ("limb_21", "distal_21"),
+        ]  # fmt: skip
+        engage(op, inp, p, ticks=1)
+    settle(link, inboxes)
+    part = inboxes["r1"].commands()[-1].parts[0]
+    assert (part.limb, part.origin, part.direction) == ("limb_21", "distal_21", "forward-middle")
+
+
+def test_groups_of_different_platforms_offer_the_shared_pairs_first() -> None:
+    other = msgspec.structs.replace(FAKEBOT, platform="otherbot", limbs=FAKEBOT.limbs[2:])
+    assert pairs_of([FAKEBOT, other]) == [("limb_12", "distal_12"), ("limb_21", "distal_21")]
+    lone = msgspec.structs.replace(
+        FAKEBOT, platform="lone", limbs=[LimbEntry("limb_31", "distal_31", [], [1])]
+    )
+    assert pairs_of([other, lone])[0] == ("limb_12", "distal_12"), "no pair shared: the union"
+    assert pairs_of([]) == [("limb_11", "distal_11")]
+    sel = Selection()
+    sel.update(pairs_of([FAKEBOT]))
+    sel.limb, sel.origin = "limb_12", "distal_12"
+    sel.update(pairs_of([other]))
+    assert (sel.limb, sel.origin) == ("limb_12", "distal_12"), "a still valid choice is kept"
