@@ -1,6 +1,6 @@
 """Databank outage: the robot keeps its last pose and says so; it recovers on its own.
 
-Uses its own databank process (the module's others share one) because it kills it.
+Uses its own hub and databank process (the other tests share one) because it kills it.
 """
 
 from __future__ import annotations
@@ -9,16 +9,28 @@ from collections.abc import Iterator
 
 import pytest
 import zenoh
-from test_agent_support import _DEV_ARGS, Databank, Operator, hub, joints_close, running_agent  # TEMP-DEV
+from test_agent_support import (  # TEMP-DEV
+    _DEV_ARGS,
+    Databank,
+    Operator,
+    joints_close,
+    running_agent,
+)
 
+from kinesphere import zconfig
 from kinesphere.protocol import SpatialCommand
-
-__all__ = ["hub"]  # fixture
 
 
 @pytest.fixture
-def own_databank(hub: tuple[zenoh.Session, str]) -> Iterator[Databank]:
-    session, endpoint = hub
+def own_hub() -> Iterator[tuple[zenoh.Session, str]]:
+    """Not the shared hub: the shared databank must not answer while this one is down."""
+    with zconfig.loopback_hub() as pair:
+        yield pair
+
+
+@pytest.fixture
+def own_databank(own_hub: tuple[zenoh.Session, str]) -> Iterator[Databank]:
+    session, endpoint = own_hub
     bank = Databank(endpoint, session, _DEV_ARGS)  # TEMP-DEV
     bank.start()
     try:
@@ -28,9 +40,9 @@ def own_databank(hub: tuple[zenoh.Session, str]) -> Iterator[Databank]:
 
 
 def test_outage_keeps_last_pose_and_recovers_without_restart(
-    hub: tuple[zenoh.Session, str], own_databank: Databank
+    own_hub: tuple[zenoh.Session, str], own_databank: Databank
 ) -> None:
-    session, endpoint = hub
+    session, endpoint = own_hub
     entry = own_databank.catalogue("baxter").limbs[0]
     pulls = [d for d in entry.directions if d != "place-middle"]
     first = SpatialCommand(entry.limb, entry.origin, pulls[0], 2.0)

@@ -10,6 +10,8 @@ from contextlib import ExitStack
 
 import numpy as np
 import zenoh
+from kinesphere.robots.agent.runtime import Agent
+from kinesphere.robots.agent.safety import DRIVE_TTL_S
 from test_agent_support import (
     Databank,
     Operator,
@@ -20,7 +22,6 @@ from test_agent_support import (
 )
 
 from kinesphere.protocol import Command, RobotState, encode
-from kinesphere.robots.agent.safety import DRIVE_TTL_S
 
 __all__ = ["databank", "hub"]  # fixtures
 
@@ -42,6 +43,10 @@ def base_speed(s: RobotState, prev: list[RobotState]) -> float:
 def driving(min_speed: float) -> Callable[[RobotState], bool]:
     prev: list[RobotState] = []
     return lambda s: base_speed(s, prev) > min_speed
+
+
+def halted(agent: Agent) -> Callable[[RobotState], bool]:
+    return lambda s: s.status == "estop" and not agent.controller.moving
 
 
 def check_braked(trace: Trace, max_acceleration: float, dt: float) -> None:
@@ -115,8 +120,7 @@ def test_estop_halts_every_robot_latches_and_releases(
 
         seq = everyone.send(estop=True)
         for agent, watch in ((baxter, bw), (youbot, yw)):
-            watch.after(seq, lambda s, a=agent: s.status == "estop" and not a.controller.moving,
-                        f"{agent.robot_id} halted by the e-stop")
+            watch.after(seq, halted(agent), f"{agent.robot_id} halted by the e-stop")
 
         # latched: ordinary commands are ignored, even with deadman held and a stop
         seq = base.send(drive=("forward", 1.0), ttl_ms=10_000, stop=True)

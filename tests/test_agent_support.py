@@ -45,7 +45,10 @@ WAIT_S = 30.0
 """Generous upper bound for events on a loaded 2-core machine; tests finish far sooner."""
 
 
-_DEV_ARGS = [a for p in sorted(Path("/tmp/ag").glob("*.sqlite")) for a in ("--db", f"{p.stem if p.stem != 'toyarm' else 'tests/data/toyarm'}={p}")]  # TEMP-DEV
+_DEV_ARGS = [  # TEMP-DEV: until services/ecl/data ships
+    a for p in sorted(Path("/tmp/ag").glob("*.sqlite")) if p.stem != "toyarm"
+    for a in ("--db", f"{p.stem}={p}")
+]
 
 # --- the databank ---------------------------------------------------------------------------
 
@@ -110,21 +113,32 @@ class Databank:
         raise RuntimeError(f"no catalogue for {platform}")
 
 
-@pytest.fixture(scope="module")
-def hub() -> Iterator[tuple[zenoh.Session, str]]:
-    with zconfig.loopback_hub() as pair:
-        yield pair
+_SHARED: dict[str, object] = {}
+"""One hub and one databank for every agent test module (pytest would make one per module
+of a fixture imported from here); closed at the end of the test session."""
 
 
-@pytest.fixture(scope="module")
-def databank(hub: tuple[zenoh.Session, str]) -> Iterator[Databank]:
-    session, endpoint = hub
-    bank = Databank(endpoint, session, _DEV_ARGS)
-    bank.start()
-    try:
-        yield bank
-    finally:
-        bank.stop()
+@pytest.fixture
+def hub(request: pytest.FixtureRequest) -> tuple[zenoh.Session, str]:
+    """A loopback Zenoh hub every test process joins (shared by all agent tests)."""
+    if "hub" not in _SHARED:
+        session, endpoint = zconfig.open_hub()
+        request.config.add_cleanup(lambda: zconfig.close_session(session))
+        _SHARED["hub"] = (session, endpoint)
+    return _SHARED["hub"]  # type: ignore[return-value]
+
+
+@pytest.fixture
+def databank(request: pytest.FixtureRequest, hub: tuple[zenoh.Session, str]) -> Databank:
+    """The real databank serving every shipped platform (shared; stopped before the hub)."""
+    bank = _SHARED.get("databank")
+    if not isinstance(bank, Databank):
+        session, endpoint = hub
+        bank = Databank(endpoint, session, _DEV_ARGS)
+        bank.start()
+        request.config.add_cleanup(bank.stop)
+        _SHARED["databank"] = bank
+    return bank
 
 
 # --- robots ------------------------------------------------------------------------------------
@@ -217,8 +231,9 @@ def running_agent(
 class Operator:
     """A client putting Commands, as the gamepad client would."""
 
-    def __init__(self, session: zenoh.Session, robot_id: str = "*", sender: str = "test") -> None:
-        self.pub = session.declare_publisher(KEYS.command(robot_id))
+    def __init__(self, session: zenoh.Session, robot_id: str = "*", sender: str = "test",
+                 key: str | None = None) -> None:
+        self.pub = session.declare_publisher(key or KEYS.command(robot_id))
         self.sender = sender
         self.seq = 0
         zconfig.wait_matching(self.pub)

@@ -37,7 +37,7 @@ from kinesphere.robots.mjcf import platform_model
 from kinesphere.errors import KinesphereError
 from kinesphere.keyexpr import DEFAULT_PREFIX, Keys
 from kinesphere.laban import Direction
-from kinesphere.protocol import Command, Pose, RobotState, Status, decode, encode
+from kinesphere.protocol import Command, Payload, Pose, RobotState, Status, decode, encode
 from kinesphere.zconfig import undeclare
 
 log = logging.getLogger(__name__)
@@ -166,9 +166,13 @@ class Agent:
     # --- network callbacks (Zenoh threads) -----------------------------------------------------
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
+        self.receive(sample.payload)
+
+    def receive(self, payload: Payload) -> None:
+        """Queue an encoded Command for the next control step (any thread; never blocks)."""
         now = time.time_ns()
         try:
-            self._inbox.append(_Received(decode(sample.payload, Command), now))
+            self._inbox.append(_Received(decode(payload, Command), now))
         except KinesphereError as exc:
             self._inbox.append(_Bad(exc))
 

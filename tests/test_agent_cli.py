@@ -1,0 +1,65 @@
+"""``kinesphere agent`` as a process: it comes up, obeys its group, leaves cleanly on SIGTERM."""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+import threading
+
+import zenoh
+from test_agent_support import (
+    KEYS,
+    ROOT,
+    WAIT_S,
+    Databank,
+    Operator,
+    StateWatch,
+    databank,
+    hub,
+)
+
+from kinesphere import zconfig
+
+__all__ = ["databank", "hub"]  # fixtures
+
+
+def test_agent_process_obeys_its_group_and_stops_on_sigterm(
+    hub: tuple[zenoh.Session, str], databank: Databank
+) -> None:
+    session, endpoint = hub
+    alive, gone = threading.Event(), threading.Event()
+
+    def on_token(sample: zenoh.Sample) -> None:
+        (alive if sample.kind == zenoh.SampleKind.PUT else gone).set()
+
+    tokens = session.liveliness().declare_subscriber(KEYS.alive_robot("arm-7"), on_token,
+                                                     history=True)
+    watch = StateWatch(session, "arm-7")
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "kinesphere.cli", "agent", "youbot", "--id", "arm-7",
+         "--group", "arms", "--connect", endpoint, "--listen", zconfig.LOOPBACK_ANY_PORT],
+        cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+    )
+    try:
+        assert alive.wait(WAIT_S), "liveliness token declared"
+        first = watch.wait(lambda s: True, "state published")
+        assert first.platform == "youbot" and first.robot_id == "arm-7"
+        assert first.last_command_seq == -1
+
+        entry = databank.catalogue("youbot").limbs[0]
+        group = Operator(session, key=KEYS.group_command("arms"))
+        seq = group.send((entry.limb, entry.origin, entry.directions[-1], 2.0))
+        watch.after(seq, lambda s: s.status in ("moving", "idle", "clamped"), "group command")
+        group.close()
+
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=WAIT_S)
+        assert proc.returncode == 0, err.decode()
+        assert gone.wait(WAIT_S), "liveliness token undeclared on SIGTERM"
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        watch.close()
+        zconfig.undeclare(tokens)
