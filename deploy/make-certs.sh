@@ -1,0 +1,62 @@
+#!/usr/bin/env bash
+# Make a local test CA and one key + certificate per kinesphere role, for the TLS configs.
+#
+# Why: the router and every service authenticate each other with mutual TLS, and the
+# router's access control tells roles apart by certificate common name (CN = role name).
+# This is a test/lab PKI: for production, issue the same CNs from your own CA.
+#
+# usage: deploy/make-certs.sh [OUT_DIR] [EXTRA_ROUTER_NAME ...]
+#   OUT_DIR            where to write (default: deploy/certs)
+#   EXTRA_ROUTER_NAME  host names or IP addresses the router is reached by, besides
+#                      localhost and 127.0.0.1 (clients verify the router's name)
+# env: DAYS (validity, default 825), ROLES (default "router databank agent operator superuser")
+#
+# Writes OUT_DIR/ca.pem (the CA certificate every config trusts), ca.key (keep it
+# offline), and <role>.pem + <role>.key for each role. Existing files are kept, so
+# re-running only adds what is missing; delete OUT_DIR to start over.
+set -euo pipefail
+
+out=${1:-"$(dirname "$0")/certs"}
+shift || true
+days=${DAYS:-825}
+roles=${ROLES:-"router databank agent operator superuser"}
+command -v openssl >/dev/null || { echo "make-certs: openssl not found" >&2; exit 1; }
+
+mkdir -p "$out"
+umask 077
+
+if [[ ! -s "$out/ca.pem" ]]; then
+    openssl genpkey -algorithm EC -pkeyopt ec_paramgen_curve:P-256 -out "$out/ca.key" 2>/dev/null
+    openssl req -x509 -new -key "$out/ca.key" -sha256 -days "$days" \
+        -subj "/O=kinesphere/CN=kinesphere test CA" \
+        -addext "basicConstraints=critical,CA:TRUE" \
+        -addext "keyUsage=critical,keyCertSign,cRLSign" \
+        -out "$out/ca.pem"
+    echo "made CA $out/ca.pem"
+fi
+
+san="DNS:localhost,IP:127.0.0.1"
+for name in "$@"; do
+    if [[ $name =~ ^[0-9.]+$ || $name == *:* ]]; then san+=",IP:$name"; else san+=",DNS:$name"; fi
+done
+
+for role in $roles; do
+    [[ -s "$out/$role.pem" ]] && continue
+    ext=$(mktemp)
+    # Every role may both listen and connect (peers do both), so allow both usages.
+    # The CN is the role: the router's access_control matches it (cert_common_names).
+    {
+        echo "basicConstraints=critical,CA:FALSE"
+        echo "keyUsage=critical,digitalSignature,keyEncipherment"
+        echo "extendedKeyUsage=serverAuth,clientAuth"
+        if [[ $role == router ]]; then echo "subjectAltName=DNS:router,$san"; else echo "subjectAltName=DNS:$role,$san"; fi
+    } >"$ext"
+    openssl genpkey -algorithm EC -pkeyopt ec_paramgen_curve:P-256 -out "$out/$role.key" 2>/dev/null
+    openssl req -new -key "$out/$role.key" -subj "/O=kinesphere/CN=$role" -out "$out/$role.csr"
+    openssl x509 -req -in "$out/$role.csr" -CA "$out/ca.pem" -CAkey "$out/ca.key" \
+        -CAcreateserial -days "$days" -sha256 -extfile "$ext" -out "$out/$role.pem" 2>/dev/null
+    rm -f "$out/$role.csr" "$ext"
+    echo "made $role: $out/$role.pem (CN=$role)"
+done
+rm -f "$out/ca.srl"
+chmod 644 "$out"/*.pem

@@ -1,0 +1,191 @@
+"""Pictures of a demo run: every robot's final pose side by side, and joint trajectories.
+
+Poses are rendered off-screen by MuJoCo (``MUJOCO_GL=egl`` on a headless machine) from the
+q each robot last reported, so the picture shows what the robots did, not what was asked.
+Plots are drawn with Pillow (already a dependency of the stack), not matplotlib.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import os
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+from PIL import Image, ImageDraw, ImageFont
+
+from kinesphere.protocol import RobotState
+
+log = logging.getLogger(__name__)
+
+TILE = 360
+PALETTE = [
+    (31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40), (148, 103, 189),
+    (140, 86, 75), (227, 119, 194), (127, 127, 127), (188, 189, 34), (23, 190, 207),
+]
+MAX_LEGEND = 10
+
+
+def _font(size: int) -> ImageFont.FreeTypeFont | ImageFont.ImageFont:
+    try:
+        return ImageFont.load_default(size=size)
+    except TypeError:  # Pillow without FreeType sizing
+        return ImageFont.load_default()
+
+
+def render_pose(state: RobotState, size: int = TILE) -> Image.Image:
+    """Render ``state``'s platform at ``state.q`` (and its base pose) with MuJoCo."""
+    os.environ.setdefault("MUJOCO_GL", "egl")
+    import mujoco
+    from kinesphere.robots.mjcf import BASE_JOINTS, platform_model
+
+    pm = platform_model(state.platform)
+    data = pm.make_data()
+    for name, value in zip(state.joint_names, state.q, strict=True):
+        adr = pm.qpos_index.get(name)
+        if adr is not None:
+            data.qpos[adr] = value
+    for name, value in zip(BASE_JOINTS, state.base_pose, strict=False):
+        adr = pm.qpos_index.get(name)
+        if adr is not None:
+            data.qpos[adr] = value
+    mujoco.mj_forward(pm.model, data)
+    cam = mujoco.MjvCamera()
+    cam.type = mujoco.mjtCamera.mjCAMERA_FREE
+    centre, extent = _robot_bounds(pm.model, data)
+    cam.lookat[:] = centre
+    cam.distance = 1.4 * extent
+    cam.azimuth, cam.elevation = 150.0, -20.0
+    renderer = mujoco.Renderer(pm.model, size, size)
+    try:
+        renderer.update_scene(data, camera=cam)
+        renderer.scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = False  # shadow acne on floors
+        pixels = renderer.render()
+    finally:
+        renderer.close()
+    return Image.fromarray(np.asarray(pixels))
+
+
+def _robot_bounds(model: object, data: object) -> tuple[np.ndarray, float]:
+    """Centre and size of the robot's geoms (the floor plane excluded), to frame the camera."""
+    import mujoco
+
+    m: mujoco.MjModel = model  # type: ignore[assignment]
+    d: mujoco.MjData = data  # type: ignore[assignment]
+    keep = m.geom_type != mujoco.mjtGeom.mjGEOM_PLANE
+    if not keep.any():
+        return np.asarray(m.stat.center), float(m.stat.extent)
+    pos, r = d.geom_xpos[keep], m.geom_rbound[keep][:, None]
+    lo, hi = (pos - r).min(axis=0), (pos + r).max(axis=0)
+    return (lo + hi) / 2, max(float(np.linalg.norm(hi - lo)), 0.3)
+
+
+def _caption(img: Image.Image, lines: Sequence[str]) -> Image.Image:
+    font = _font(14)
+    out = Image.new("RGB", (img.width, img.height + 20 * len(lines) + 8), "white")
+    out.paste(img, (0, 0))
+    draw = ImageDraw.Draw(out)
+    for i, text in enumerate(lines):
+        draw.text((6, img.height + 4 + 20 * i), text, fill="black", font=font)
+    return out
+
+
+def final_poses_png(states: dict[str, RobotState], path: Path, size: int = TILE) -> Path:
+    """One tile per robot (sorted by id), captioned with id, platform and status."""
+    tiles = []
+    for rid in sorted(states):
+        st = states[rid]
+        try:
+            img = render_pose(st, size)
+        except Exception as exc:  # no GL here: still write the picture, say why
+            log.warning("cannot render %s (%s): %s", rid, st.platform, exc)
+            img = Image.new("RGB", (size, size), (235, 235, 235))
+            ImageDraw.Draw(img).text((10, size // 2), f"no render: {exc}"[:60], fill="black")
+        tiles.append(_caption(img, [f"{rid} ({st.platform})", f"{st.status}: {st.detail}"[:48]]))
+    if not tiles:
+        raise ValueError("no robot states to draw")
+    width = sum(t.width for t in tiles)
+    sheet = Image.new("RGB", (width, max(t.height for t in tiles)), "white")
+    x = 0
+    for t in tiles:
+        sheet.paste(t, (x, 0))
+        x += t.width
+    path.parent.mkdir(parents=True, exist_ok=True)
+    sheet.save(path)
+    return path
+
+
+def _ticks(lo: float, hi: float, n: int = 5) -> list[float]:
+    if hi - lo <= 0:
+        return [lo]
+    raw = (hi - lo) / n
+    mag = 10 ** math.floor(math.log10(raw))
+    step = min((m * mag for m in (1, 2, 5, 10) if m * mag >= raw), default=raw)
+    first = math.ceil(lo / step) * step
+    return [first + i * step for i in range(int((hi - first) / step) + 1)]
+
+
+def trajectory_png(
+    robot_id: str,
+    names: Sequence[str],
+    times: Sequence[float],
+    qs: Sequence[Sequence[float]],
+    path: Path,
+    width: int = 960,
+    height: int = 540,
+) -> Path:
+    """Joint positions against time; joints that moved are coloured and named in the legend."""
+    q = np.asarray(qs, dtype=float).reshape(len(times), len(names))
+    t = np.asarray(times, dtype=float)
+    img = Image.new("RGB", (width, height), "white")
+    draw = ImageDraw.Draw(img)
+    font = _font(13)
+    left, right, top, bottom = 70, width - 200, 40, height - 50
+    draw.text((left, 12), f"{robot_id}: joint positions (rad or m) vs time (s)", fill="black",
+              font=_font(16))
+    if t.size == 0:
+        draw.text((left, top + 20), "no states recorded", fill="black", font=font)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        img.save(path)
+        return path
+    t0, t1 = float(t[0]), float(max(t[-1], t[0] + 1e-3))
+    lo, hi = float(q.min()), float(q.max())
+    if hi - lo < 1e-6:
+        lo, hi = lo - 0.5, hi + 0.5
+    pad = 0.05 * (hi - lo)
+    lo, hi = lo - pad, hi + pad
+
+    def px(tt: float, v: float) -> tuple[float, float]:
+        return (left + (tt - t0) / (t1 - t0) * (right - left),
+                bottom - (v - lo) / (hi - lo) * (bottom - top))
+
+    draw.rectangle((left, top, right, bottom), outline="black")
+    for v in _ticks(lo, hi):
+        y = px(t0, v)[1]
+        draw.line((left, y, right, y), fill=(230, 230, 230))
+        draw.text((8, y - 7), f"{v:.2f}", fill="black", font=font)
+    for tt in _ticks(t0, t1):
+        x = px(tt, lo)[0]
+        draw.line((x, top, x, bottom), fill=(230, 230, 230))
+        draw.text((x - 8, bottom + 6), f"{tt:g}", fill="black", font=font)
+    span = q.max(axis=0) - q.min(axis=0)
+    moved = [i for i in np.argsort(-span) if span[i] > 1e-3][:MAX_LEGEND]
+    for i in range(len(names)):
+        if i in moved:
+            continue
+        draw.line([px(a, b) for a, b in zip(t, q[:, i], strict=True)], fill=(200, 200, 200))
+    for k, i in enumerate(moved):
+        colour = PALETTE[k % len(PALETTE)]
+        draw.line([px(a, b) for a, b in zip(t, q[:, i], strict=True)], fill=colour, width=2)
+        y = top + 18 * k
+        draw.line((right + 12, y + 7, right + 32, y + 7), fill=colour, width=3)
+        draw.text((right + 38, y), names[i][:20], fill="black", font=font)
+    rest = len(names) - len(moved)
+    if rest:
+        draw.text((right + 12, top + 18 * len(moved) + 4), f"{rest} more (grey)", fill="gray",
+                  font=font)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    img.save(path)
+    return path

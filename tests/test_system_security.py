@@ -1,0 +1,186 @@
+"""The deploy/ configs as shipped: mutual TLS and role-based access control (issue 7, test b).
+
+Certificates come from deploy/make-certs.sh; the JSON5 files are deploy/'s with only the
+certificate directory and the port rewritten. A real databank (writes enabled on a copy) and
+a real youBot agent run behind ``kinesphere router`` as TLS clients, so the rules are checked
+against the services' real traffic, not a stand-in.
+"""
+
+from __future__ import annotations
+
+import shutil
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+import zenoh
+from kinesphere.services.system.procs import Supervisor
+from test_system_support import (
+    DEPLOY,
+    KEYS,
+    SHIPPED_DBS,
+    WAIT_S,
+    Observer,
+    at_pose,
+    databank_args,
+    localize,
+    make_certs,
+    port_open,
+    query_pose,
+    supervisor,
+    until,
+)
+
+from kinesphere.errors import KinesphereError
+from kinesphere.protocol import Command, Pose, RecordRequest, SpatialCommand, decode, encode
+from kinesphere.zconfig import close_session, free_port, open_session, session, session_config
+
+ROBOT = "youbot-1"
+POSE_A = ("limb_11", "distal_11", "left-high", 2)
+POSE_B = ("limb_11", "distal_11", "right-high", 2)
+
+
+@dataclass
+class Secured:
+    sup: Supervisor
+    configs: dict[str, Path]
+    certs: Path
+    port: int
+    router_log: Path
+    obs: Observer
+
+    def denied(self, text: str) -> bool:
+        return any("access denied" in line and text in line
+                   for line in self.router_log.read_text(errors="replace").splitlines())
+
+
+def _db_copy(tmp: Path) -> str:
+    """A private copy of the youBot databank, so an ECL write never touches shipped data."""
+    args = databank_args(["youbot"])
+    src = SHIPPED_DBS / "youbot.sqlite" if args[0] == "--platform" else Path(args[1].split("=")[1])
+    dst = tmp / "youbot.sqlite"
+    shutil.copy(src, dst)
+    return f"youbot={dst}"
+
+
+@pytest.fixture(scope="module")
+def secured(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Secured]:
+    tmp = tmp_path_factory.mktemp("secured")
+    db = _db_copy(tmp)
+    certs = make_certs(tmp / "certs")
+    port = free_port()
+    configs = localize(tmp / "conf", certs, port)
+    for sup in supervisor(tmp / "logs"):
+        router = sup.spawn("router", ["router", "--config", str(configs["router"])])
+        until(lambda s=sup: s.check() or port_open(port), WAIT_S, "the TLS router to listen")
+        sup.spawn("databank", ["databank", "serve", "--db", db, "--allow-writes", "--replica",
+                               "db-1", "--zenoh-config", str(configs["databank"])])
+        sup.spawn("agent", ["agent", "youbot", "--id", ROBOT, "--rate", "250",
+                            "--zenoh-config", str(configs["agent"])])
+        obs = Observer(session_config(config_file=configs["operator"]))
+        try:
+            obs.wait_alive({ROBOT}, databank=True, sup=sup)
+            yield Secured(sup, configs, certs, port, router.log_path, obs)
+        finally:
+            obs.close()
+
+
+def test_every_deploy_config_loads() -> None:
+    files = sorted(DEPLOY.glob("*.json5"))
+    assert {f.stem for f in files} >= {"router", "databank", "agent", "operator", "superuser"}
+    for f in files:
+        config = zenoh.Config.from_file(str(f))
+        assert config.get_json("transport/link/tls/root_ca_certificate")
+    router = zenoh.Config.from_file(str(DEPLOY / "router.json5"))
+    assert router.get_json("access_control/enabled") == "true"
+    assert router.get_json("transport/link/tls/enable_mtls") == "true"
+
+
+def _send(s: Secured, role: str, pose: tuple[str, str, str, int]) -> None:
+    """``kinesphere send`` with a role's deploy config, as an operator would run it."""
+    name = f"send-{role}-{pose[2]}"
+    child = s.sup.spawn(name, ["send", ROBOT, *map(str, pose), "--zenoh-config",
+                               str(s.configs[role]), "--wait", "20"], expect_exit=True)
+    assert s.sup.wait(name, WAIT_S) == 0, child.tail()
+
+
+def test_only_the_operator_moves_robots(secured: Secured) -> None:
+    s, obs = secured, secured.obs
+    a = query_pose(obs.session, "youbot", *POSE_A).joints
+    b = query_pose(obs.session, "youbot", *POSE_B).joints
+    _send(s, "operator", POSE_A)
+    until(lambda: at_pose(obs.states.last(ROBOT), a), WAIT_S, "the operator's pose")
+    before = obs.states.last(ROBOT)
+    assert before is not None
+
+    _send(s, "superuser", POSE_B)
+    for role in ("agent", "databank"):
+        cmd = Command(seq=0, sent_ns=time.time_ns(), parts=[SpatialCommand(*POSE_B)],
+                      deadman=True, ttl_ms=0, sender=f"intruding-{role}")
+        with session(config_file=s.configs[role]) as intruder:
+            intruder.put(KEYS.command(ROBOT), encode(cmd))
+            intruder.put(KEYS.command("*"), encode(cmd))
+    for cn, key in (("superuser", KEYS.command(ROBOT)), ("agent", KEYS.command("*")),
+                    ("databank", KEYS.command(ROBOT))):
+        until(lambda cn=cn, key=key: s.denied(f"Put (ingress) on {key} by CN={cn}"), WAIT_S,
+              f"the router to log the denied command of CN={cn}")
+
+    # the robot never saw those commands: same command seq, same pose, long after
+    assert obs.states.wait_fresh([ROBOT], time.time_ns() + 300_000_000, WAIT_S)
+    after = obs.states.last(ROBOT)
+    assert after is not None and after.last_command_seq == before.last_command_seq
+    assert at_pose(after, a) and not at_pose(after, b, tol=1e-3)
+
+
+def _record(role_config: Path, pose: Pose) -> list[zenoh.Reply]:
+    req = RecordRequest(limb=pose.limb, origin=pose.origin, direction=pose.direction,
+                        size=int(pose.size), joints=pose.joints)
+    with session(config_file=role_config) as s:
+        return list(s.get(KEYS.record("youbot"), payload=encode(req), timeout=3.0))
+
+
+def test_only_the_superuser_writes_the_ecl(secured: Secured) -> None:
+    s = secured
+    pose = query_pose(s.obs.session, "youbot", *POSE_A)
+    assert all(r.ok is None for r in _record(s.configs["operator"], pose))
+    until(lambda: s.denied("Query (ingress) on kinesphere/ecl/youbot/record by CN=operator"),
+          WAIT_S, "the router to log the operator's denied write")
+    replies = _record(s.configs["superuser"], pose)
+    ok = [r.ok for r in replies if r.ok is not None]
+    assert ok, [r.err.payload.to_bytes() for r in replies if r.err is not None]
+    stored = decode(ok[0].payload.to_bytes(), Pose)
+    assert stored.p_id == 2 and stored.joints == pytest.approx(pose.joints)
+
+
+def _refused(config: zenoh.Config) -> bool:
+    try:
+        s = open_session(config=config)
+    except KinesphereError:
+        return True
+    close_session(s)
+    return False
+
+
+def test_tls_refuses_sessions_without_a_ca_certificate(secured: Secured, tmp_path: Path) -> None:
+    s = secured
+    tls = "transport/link/tls"
+    # no client certificate at all
+    bare = session_config(config_file=s.configs["operator"])
+    bare.insert_json5(f"{tls}/enable_mtls", "false")
+    bare.insert_json5(f"{tls}/connect_certificate", "null")
+    bare.insert_json5(f"{tls}/connect_private_key", "null")
+    assert _refused(bare)
+    # a certificate with the right role name, signed by another CA
+    other = make_certs(tmp_path / "intruder", roles="operator")
+    forged = session_config(config_file=s.configs["operator"])
+    forged.insert_json5(f"{tls}/connect_certificate", f'"{other / "operator.pem"}"')
+    forged.insert_json5(f"{tls}/connect_private_key", f'"{other / "operator.key"}"')
+    assert _refused(forged)
+    # plain tcp to the TLS port
+    plain = session_config("client", connect=[f"tcp/127.0.0.1:{s.port}"], scouting=False)
+    plain.insert_json5("connect/timeout_ms", "0")
+    assert _refused(plain)
+    # while the genuine operator certificate still connects
+    assert not _refused(session_config(config_file=s.configs["operator"]))

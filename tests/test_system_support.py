@@ -1,0 +1,138 @@
+"""Helpers for the system tests: real processes, real routers, waits on events with deadlines.
+
+Not a test module itself (pytest collects nothing here); the system tests import it.
+"""
+
+from __future__ import annotations
+
+import os
+import socket
+import subprocess
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import pytest
+import zenoh
+from kinesphere.services.system.procs import Supervisor
+from kinesphere.services.system.watch import Alive, StateRecorder, watch_alive
+
+from kinesphere.keyexpr import Keys
+from kinesphere.protocol import Pose, RobotState, decode, error_from_reply
+from kinesphere.zconfig import close_session, open_session, undeclare
+
+ROOT = Path(__file__).resolve().parent.parent
+DEPLOY = ROOT / "deploy"
+SHIPPED_DBS = ROOT / "services" / "ecl" / "data"
+KEYS = Keys()
+WAIT_S = 60.0
+"""Upper bound for start-up events on a loaded 2-core machine; healthy runs take seconds."""
+
+
+def databank_args(platforms: list[str]) -> list[str]:
+    """The shipped databanks, or prebuilt ones from $KINESPHERE_TEST_DBS (DIR/<platform>.sqlite)."""
+    if all((SHIPPED_DBS / f"{p}.sqlite").exists() for p in platforms):
+        return [a for p in platforms for a in ("--platform", p)]
+    dev = os.environ.get("KINESPHERE_TEST_DBS")
+    if dev and all((Path(dev) / f"{p}.sqlite").exists() for p in platforms):
+        return [a for p in platforms for a in ("--db", f"{p}={Path(dev) / p}.sqlite")]
+    pytest.skip(f"no {'/'.join(platforms)} databanks in {SHIPPED_DBS} (or $KINESPHERE_TEST_DBS)")
+
+
+def until(cond: Callable[[], bool], timeout: float, what: str, every: float = 0.05) -> None:
+    """Poll ``cond`` until it holds; fail naming ``what`` after ``timeout`` seconds."""
+    deadline = time.monotonic() + timeout
+    while not cond():
+        if time.monotonic() > deadline:
+            pytest.fail(f"timed out after {timeout:g} s waiting for {what}")
+        time.sleep(every)
+
+
+def port_open(port: int, host: str = "127.0.0.1") -> bool:
+    with socket.socket() as s:
+        s.settimeout(0.2)
+        return s.connect_ex((host, port)) == 0
+
+
+def make_certs(out: Path, *extra: str, roles: str | None = None) -> Path:
+    env = dict(os.environ)
+    if roles is not None:
+        env["ROLES"] = roles
+    subprocess.run([str(DEPLOY / "make-certs.sh"), str(out), *extra], check=True, env=env,
+                   capture_output=True, timeout=60)
+    return out
+
+
+def localize(out: Path, certs: Path, port: int) -> dict[str, Path]:
+    """Copies of deploy/*.json5 with this machine's cert paths and a loopback port."""
+    out.mkdir(parents=True, exist_ok=True)
+    files = {}
+    for src in sorted(DEPLOY.glob("*.json5")):
+        text = (src.read_text()
+                .replace("/etc/kinesphere/certs", str(certs))
+                .replace("tls/0.0.0.0:7447", f"tls/127.0.0.1:{port}")
+                .replace("tls/router:7447", f"tls/localhost:{port}"))
+        dst = out / src.name
+        dst.write_text(text)
+        files[src.stem] = dst
+    return files
+
+
+def client_config(path: Path, endpoint: str) -> Path:
+    """A plain (tcp) client-mode config: every byte goes through the router."""
+    path.write_text(
+        f'{{ mode: "client", connect: {{ endpoints: ["{endpoint}"] }}, '
+        "scouting: { multicast: { enabled: false } } }\n"
+    )
+    return path
+
+
+def query_pose(s: zenoh.Session, platform: str, limb: str, origin: str, direction: str,
+               size: float) -> Pose:
+    for reply in s.get(KEYS.pose(platform, limb, origin, direction, size), timeout=10.0):
+        if reply.ok is not None:
+            return decode(reply.ok.payload.to_bytes(), Pose)
+        raise error_from_reply(reply.err.payload.to_bytes())
+    raise AssertionError(f"no databank answered for {platform}")
+
+
+def at_pose(state: RobotState | None, joints: dict[str, float], tol: float = 0.02) -> bool:
+    if state is None:
+        return False
+    q = dict(zip(state.joint_names, state.q, strict=True))
+    return all(abs(q[name] - value) <= tol for name, value in joints.items())
+
+
+class Observer:
+    """A session that watches liveliness and every robot's state."""
+
+    def __init__(self, config: zenoh.Config | None = None, **kw: object) -> None:
+        self.session = open_session(config=config, **kw)  # type: ignore[arg-type]
+        self.states = StateRecorder(KEYS, history=False).start(self.session)
+        self.alive: Alive
+        self.alive, self._subs = watch_alive(self.session, KEYS)
+
+    def wait_alive(self, robots: set[str], databank: bool, sup: Supervisor,
+                   timeout: float = WAIT_S) -> None:
+        def up() -> bool:
+            sup.check()
+            return robots <= self.alive.robots and (bool(self.alive.databanks) or not databank)
+
+        until(up, timeout, f"liveliness of {sorted(robots)} and databank={databank}")
+        until(lambda: robots <= set(self.states.snapshot()), timeout, "first robot states")
+
+    def close(self) -> None:
+        undeclare(*self._subs)  # type: ignore[arg-type]
+        self.states.close()
+        close_session(self.session)
+
+
+def supervisor(log_dir: Path) -> Iterator[Supervisor]:
+    """A Supervisor that stops everything and checks for leftovers at teardown."""
+    sup = Supervisor(log_dir)
+    try:
+        yield sup
+    finally:
+        sup.stop_all()
+        left = sup.leftovers()
+        assert not left, f"processes left behind: {left}"

@@ -1,0 +1,166 @@
+"""``kinesphere up`` end to end, and the pieces of the system role that need no processes.
+
+The two runs use one youBot and a short phrase: what is checked is the orchestration (exit
+code, pictures, summary, no process left behind, Ctrl-C mid-phrase), not the robots.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from kinesphere.services.system.router import DenialFilter, describe_subject
+from kinesphere.services.system.up import (
+    default_phrases,
+    parse_phrase,
+    parse_robots,
+)
+from test_system_support import ROOT, SHIPPED_DBS, WAIT_S, until
+
+from kinesphere.errors import KinesphereError
+
+PHRASE = (
+    'name = "short"\n[[step]]\nduration = 1.5\nparts = ["limb_11 distal_11 left-high 2"]\n'
+)
+
+
+def _db_args() -> list[str]:
+    if (SHIPPED_DBS / "youbot.sqlite").exists():
+        return []
+    dev = os.environ.get("KINESPHERE_TEST_DBS")
+    if dev and (Path(dev) / "youbot.sqlite").exists():
+        return ["--db", f"youbot={Path(dev) / 'youbot.sqlite'}"]
+    pytest.skip(f"no youbot databank in {SHIPPED_DBS} (or $KINESPHERE_TEST_DBS)")
+
+
+def _up(tmp_path: Path, *extra: str) -> tuple[subprocess.Popen[bytes], Path]:
+    phrase = tmp_path / "short.toml"
+    phrase.write_text(PHRASE)
+    out = tmp_path / "out"
+    log = tmp_path / "up.log"
+    env = dict(os.environ, MUJOCO_GL=os.environ.get("MUJOCO_GL", "egl"))
+    with open(log, "wb") as f:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "kinesphere.cli", "up", "--headless", "--robots", "youbot",
+             "--phrase", str(phrase), "--out", str(out), *_db_args(), *extra],
+            stdout=f, stderr=subprocess.STDOUT, cwd=ROOT, env=env,
+        )
+    return proc, log
+
+
+def _endpoint(log: Path) -> str | None:
+    m = re.search(r"hub (tcp/127\.0\.0\.1:\d+)", log.read_text(errors="replace"))
+    return m[1] if m else None
+
+
+def _processes_using(endpoint: str) -> list[int]:
+    """PIDs whose command line mentions ``endpoint`` (every child is given it)."""
+    found = []
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                cmd = Path(f"/proc/{entry}/cmdline").read_bytes().replace(b"\0", b" ")
+            except OSError:
+                continue
+            if endpoint.encode() in cmd:
+                found.append(int(entry))
+    return found
+
+
+def test_up_runs_the_demo_and_leaves_nothing_behind(tmp_path: Path) -> None:
+    proc, log = _up(tmp_path)
+    code = proc.wait(timeout=180)
+    text = log.read_text(errors="replace")
+    assert code == 0, text
+    endpoint = _endpoint(log)
+    assert endpoint is not None, text
+    assert _processes_using(endpoint) == []
+    out = tmp_path / "out"
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["endpoint"] == endpoint
+    assert summary["robots"]["youbot"]["platform"] == "youbot"
+    assert summary["problems"] == {}
+    for name in ("final_poses.png", "peak_poses.png", "trajectory_youbot.png"):
+        assert (out / name).stat().st_size > 1000, name
+    assert "all processes stopped" in text
+
+
+def test_ctrl_c_mid_phrase_stops_everything(tmp_path: Path) -> None:
+    proc, log = _up(tmp_path, "--keep-running")
+    logs = tmp_path / "out" / "logs"
+    try:
+        until(lambda: proc.poll() is None and any(logs.glob("play-*.log")), WAIT_S * 2,
+              "the phrase to start")
+        endpoint = _endpoint(log)
+        assert endpoint is not None
+        assert len(_processes_using(endpoint)) >= 3  # databank, agent, play
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(timeout=30) == 130, log.read_text(errors="replace")
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert _processes_using(endpoint) == []
+    assert "all processes stopped" in log.read_text(errors="replace")
+
+
+# --- no processes -------------------------------------------------------------------------------
+
+
+def test_robot_and_phrase_options() -> None:
+    robots = parse_robots("baxter,nao,baxter,youbot:yb")
+    assert [(r.platform, r.robot_id) for r in robots] == [
+        ("baxter", "baxter"), ("nao", "nao"), ("baxter", "baxter-2"), ("youbot", "yb")]
+    for bad in ("", "baxter:x,nao:x", "baxter:a/b"):
+        with pytest.raises(KinesphereError):
+            parse_robots(bad)
+    shipped = ROOT / "clients" / "phrases"
+    phrases = default_phrases(parse_robots("baxter,packbot"), shipped)
+    assert [(p.path.name, p.target) for p in phrases] == [
+        ("left_high.toml", "all"), ("packbot_sweep.toml", "packbot")]
+    assert parse_phrase(f"{shipped / 'left_high.toml'}@nao").target == "nao"
+    with pytest.raises(KinesphereError):
+        parse_phrase(str(shipped / "nope.toml"))
+
+
+ACL = "zenoh::net::routing::interceptor::access_control"
+Z = "2d1d14328b9e10d7"
+
+
+def _line(thread: str, msg: str, target: str = ACL) -> str:
+    stamp = "\x1b[2m2026-01-01T00:00:00.000000Z\x1b[0m"
+    return f"{stamp} \x1b[35mTRACE\x1b[0m {thread} {target}: {msg}"
+
+
+def test_router_reports_each_denial_once_with_the_role() -> None:
+    denials: list[str] = []
+    other: list[str] = []
+    now = [0.0]
+    f = DenialFilter(report=denials.append, passthrough=other.append, clock=lambda: now[0])
+    subject = f"Interface(lo)+CertCommonName(superuser)+Transport(Tls)+{Z}"
+    rx = "rx-0 ThreadId(09)"
+    # a key's permissions computed at declaration: not a denial
+    f.feed(_line(rx, f"{Z} on {subject} is unauthorized to Put (ingress) on k/robot/a/command"))
+    f.feed(_line(rx, f"{Z} on {subject} is authorized to Declare Subscriber (ingress) on k/x"))
+    assert denials == []
+    # a message dropped with the cached permission
+    for _ in range(3):
+        f.feed(_line(rx, f"Using cached result: {Z} is unauthorized to Put (ingress) on "
+                         "k/robot/a/command"))
+        f.feed(_line(rx, "Msg intercepted!", "zenoh::net::routing::interceptor"))
+    assert denials == [
+        f"access denied: Put (ingress) on k/robot/a/command by CN=superuser (interface=lo, "
+        f"link=Tls, zid={Z})"]
+    now[0] = 5.0
+    f.feed(_line(rx, f"Using cached result: {Z} is unauthorized to Put (ingress) on "
+                     "k/robot/a/command"))
+    f.feed(_line(rx, "Msg intercepted!", "zenoh::net::routing::interceptor"))
+    assert denials[-1].endswith("(+2 more)") and f.denials == 4
+    f.feed("2026-01-01T00:00:00Z  WARN acc-0 ThreadId(05) zenoh_link_tls::unicast: no certs")
+    assert other and "no certs" in other[-1]
+    assert describe_subject("Transport(Tcp)+abc", "abc") == "no certificate (link=Tcp, zid=abc)"
