@@ -2,7 +2,8 @@
 
 Left: the 27 Laban directions as a 3 x 9 chart (rows high / middle / low, columns place and
 the 8 horizontals clockwise from forward), each cell a Laban direction symbol shaded by level
-as in Laban notation (high striped, middle a dot, low filled); the commanded cell is lit.
+as in Laban notation (high striped, middle a dot, low filled); the commanded cell is lit and
+directions the selected limb has no poses for are greyed out.
 Right: the size as near / mid / far rings with the current reach, the drive vector, deadman
 and e-stop state, then one line per robot with its live ``RobotState`` status.
 
@@ -46,6 +47,7 @@ BG = (24, 26, 30)
 FG = (225, 228, 232)
 DIM = (120, 126, 134)
 INK = (235, 235, 235)
+UNAVAILABLE = (72, 76, 84)
 LIT = (250, 200, 60)
 GOOD = (70, 190, 110)
 WARN = (235, 160, 50)
@@ -173,11 +175,17 @@ def _chart(
             lit = d is active
             if lit:
                 pygame.draw.rect(surf, LIT if view.engaged else DIM, cell, border_radius=4)
-            ink = BG if lit else INK
+            if view.asked is d:  # the stick's own choice, replaced by the nearest available
+                pygame.draw.rect(surf, LIT, cell, 2, border_radius=4)
+            missing = view.available is not None and d.slug not in view.available
+            ink = BG if lit else UNAVAILABLE if missing and d is not Direction.PLACE_MIDDLE else INK
             draw_symbol(surf, d, cell.inflate(-18, -16), ink)
     size = view.intent.size
     label = f"{active.slug}   size {size:.2f} ({size_name(size if size > 3 else round(size))})"
+    if view.asked is not None:
+        label = f"{view.asked.slug} -> {label}"
     _text(surf, fonts["big"], label, (x, y + 20 + 3 * ch + 6), LIT if view.engaged else FG)
+    _text(surf, fonts["tiny"], "grey: no pose stored for this limb", (x, y + 20 + 3 * ch + 38), DIM)
 
 
 def _rings(

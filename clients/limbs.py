@@ -42,6 +42,24 @@ def pairs_of(catalogues: Sequence[Catalogue]) -> list[tuple[str, str]]:
     return common or union or [DEFAULT_PAIR]
 
 
+def available_directions(
+    catalogues: Sequence[Catalogue], limb: str, origin: str
+) -> frozenset[str] | None:
+    """Directions with poses for (limb, origin) on every platform that has the pair.
+
+    None when no catalogue knows the pair (nothing to go by: send what was asked).
+    """
+    sets = [
+        frozenset(e.directions)
+        for c in catalogues
+        for e in c.limbs
+        if (e.limb, e.origin) == (limb, origin)
+    ]
+    if not sets:
+        return None
+    return frozenset.intersection(*sets)
+
+
 def aliases_of(catalogues: Sequence[Catalogue]) -> dict[str, str]:
     """Label -> alias, when every catalogue that has the label calls it the same."""
     seen: dict[str, set[str]] = {}

@@ -11,6 +11,9 @@ latch on any deadman command, so a client that kept streaming would release an e
 not press: the loop stops streaming while any targeted robot reports ``estop``, and after an
 e-stop, a release or a disconnect it streams again only after the deadman was let go and
 pressed anew.
+
+A direction the selected limb has no poses for (per the targets' catalogues) is replaced by
+the nearest available one, and the HUD shows both, so the robot never just refuses a stick.
 """
 
 from __future__ import annotations
@@ -18,16 +21,29 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Protocol
 
 from kinesphere.clients import targets as tg
-from kinesphere.clients.limbs import CatalogueCache, Selection, aliases_of, pairs_of
+from kinesphere.clients.limbs import (
+    CatalogueCache,
+    Selection,
+    aliases_of,
+    available_directions,
+    pairs_of,
+)
 from kinesphere.clients.link import RobotLink, Seen, Sequencer, new_sender
 from kinesphere.clients.mapfile import MapFile
-from kinesphere.clients.mapping import NEUTRAL_INTENT, Intent, MapperState, map_controls
+from kinesphere.clients.mapping import (
+    NEUTRAL_INTENT,
+    Intent,
+    MapperState,
+    map_controls,
+    nearest_available,
+)
 from kinesphere.clients.state import Action, ControllerState
 
+from kinesphere.laban import Direction
 from kinesphere.protocol import SpatialCommand, Status
 
 log = logging.getLogger(__name__)
@@ -69,6 +85,10 @@ class View:
     seq: int
     message: str
     catalogue_errors: dict[str, str] = field(default_factory=dict)
+    available: frozenset[str] | None = None
+    """Directions the limb has poses for (None: no catalogue yet)."""
+    asked: Direction | None = None
+    """The direction the stick asked for, when the nearest available one replaced it."""
 
 
 class Teleop:
@@ -99,6 +119,8 @@ class Teleop:
         self.message = ""
         self._last: float | None = None
         self._aliases: dict[str, str] = {}
+        self._available: frozenset[str] | None = None
+        self._asked: Direction | None = None
 
     # --- decisions ----------------------------------------------------------------------
 
@@ -160,6 +182,12 @@ class Teleop:
         cats = self.catalogues.get(self._platforms())
         self.selection.update(pairs_of(cats))
         self._aliases = aliases_of(cats)
+        self._available = available_directions(cats, self.selection.limb, self.selection.origin)
+        asked = self.intent.direction
+        snapped = nearest_available(asked, self._available)
+        self._asked = asked if snapped is not asked else None
+        if snapped is not asked:
+            self.intent = replace(self.intent, direction=snapped)
         remote = self._remote_estop()
         required = self.options.deadman_required
         wants = self.intent.deadman if required else self.intent.moving
@@ -204,6 +232,8 @@ class Teleop:
             seq=self.seq.seq,
             message=self.message,
             catalogue_errors=self.catalogues.errors(),
+            available=self._available,
+            asked=self._asked,
         )
 
     def shutdown(self) -> None:

@@ -105,6 +105,11 @@ def test_level_shading_follows_laban(window: hud.Hud) -> None:
         {"robots": {}, "intent": Intent(), "target": tg.ALL, "aliases": {}},
         {"intent": Intent(direction=Direction.RIGHT_FORWARD_HIGH, size=4.5, beyond=True)},
         {"catalogue_errors": {"nao": "no databank answers"}},
+        {
+            "available": frozenset({"left-forward-low", "back-high"}),
+            "asked": Direction.LEFT_LOW,
+            "intent": Intent(direction=Direction.LEFT_FORWARD_LOW, size=3.0, deadman=True),
+        },
     ],
 )
 def test_every_state_renders(window: hud.Hud, kw: dict[str, object]) -> None:

@@ -12,6 +12,7 @@ from kinesphere.clients.mapping import (
     MapperState,
     Tuning,
     map_controls,
+    nearest_available,
 )
 from kinesphere.clients.state import Action, ControllerState
 
@@ -162,6 +163,17 @@ def test_both_sticks_at_once() -> None:
     assert i.deadman and i.moving
 
 
+def test_a_missing_direction_becomes_the_nearest_available_one() -> None:
+    packbot_arm = frozenset({"left-forward-low", "right-forward-low", "left-middle", "back-high"})
+    assert nearest_available(Direction.LEFT_LOW, packbot_arm) is Direction.LEFT_FORWARD_LOW
+    assert nearest_available(Direction.RIGHT_LOW, packbot_arm) is Direction.RIGHT_FORWARD_LOW
+    assert nearest_available(Direction.LEFT_MIDDLE, packbot_arm) is Direction.LEFT_MIDDLE
+    assert nearest_available(Direction.PLACE_MIDDLE, packbot_arm) is Direction.PLACE_MIDDLE
+    assert nearest_available(Direction.LEFT_LOW, None) is Direction.LEFT_LOW, "no catalogue yet"
+    only_up = frozenset({"place-high"})
+    assert nearest_available(Direction.PLACE_LOW, only_up) is Direction.PLACE_LOW, "opposite"
+
+
 def test_disconnected_is_neutral() -> None:
     cs = ControllerState(rx=-1.0, held=frozenset({Action.DEADMAN}), connected=False)
     i, state = map_controls(cs, MapperState(limb_sector=2, extra=1.0), 0.1, T)
@@ -207,7 +219,7 @@ def test_a_user_mapping_overrides_only_what_it_names(tmp_path: Path) -> None:
         ('[controller.buttons]\ndeadman = ["lb"]', "'lb'; valid: a, b, back"),
         ('[controller]\nlow = "trigger"', "lefttrigger"),
         ('[controller.buttons]\ndeadmen = ["a"]', "unknown deadmen"),
-        ("[tuning]\nrim = \"far\"", "rim must be a number"),
+        ('[tuning]\nrim = "far"', "rim must be a number"),
         ('[joystick.buttons]\nestop = ["hat0_sideways"]', "hatN_left"),
         ('[groups]\narms = "baxter-1"', "non-empty list"),
         ('[groups]\n"a/b" = ["x"]', "may not contain '/'"),

@@ -34,7 +34,7 @@ def test_shipped_phrases_parse() -> None:
 def test_packbot_sweep_drives_forward_while_sweeping_low_left_and_right() -> None:
     sweep = phrases.load_phrase("packbot_sweep")
     dirs = [s.parts[0].direction for s in sweep.steps]
-    assert dirs == ["left-low", "right-low"] * 2
+    assert dirs == ["left-forward-low", "right-forward-low"] * 2
     for s in sweep.steps:
         assert s.drive is not None and s.drive.direction == "forward-middle" and s.drive.speed > 0
         assert s.parts[0].size == 3.0 and s.parts[0].limb == "arm"

@@ -32,6 +32,7 @@ from test_client_support import (
 )
 
 from kinesphere import zconfig
+from kinesphere.laban import Direction
 from kinesphere.protocol import Catalogue, LimbEntry, SpatialCommand
 
 __all__ = ["hub", "pygame_up"]  # fixtures
@@ -349,3 +350,27 @@ def test_groups_of_different_platforms_offer_the_shared_pairs_first() -> None:
     sel.limb, sel.origin = "limb_12", "distal_12"
     sel.update(pairs_of([other]))
     assert (sel.limb, sel.origin) == ("limb_12", "distal_12"), "a still valid choice is kept"
+
+
+def test_a_direction_the_limb_lacks_becomes_the_nearest_it_has(
+    hub: tuple[zenoh.Session, str], link: RobotLink, inboxes: dict[str, Inbox],
+    inp: pad.PygameInput,
+) -> None:  # fmt: skip
+    session, _ = hub
+    FakeRobot(session, "r2", "fakebot").state()
+    assert link.wait_for(lambda lk: "r2" in lk.states(), WAIT_S)
+    with fake_catalogue(session, FAKEBOT):
+        querier = link.session.declare_querier(KEYS.catalogue("fakebot"))
+        assert zconfig.wait_matching(querier, WAIT_S)
+        zconfig.undeclare(querier)
+        op = teleop(link, tg.robot("r2"))
+        op.tick(inp.poll())
+        assert op.catalogues.arrived.wait(WAIT_S)
+        p = Pad()
+        p.deadman()
+        p.right(-1.0, 0.0)  # left-middle: limb_11 only has left-high
+        view = op.tick(inp.poll())
+    assert view.asked is Direction.LEFT_MIDDLE and view.intent.direction is Direction.LEFT_HIGH
+    assert view.available == {"left-high", "place-middle"}
+    settle(link, inboxes)
+    assert inboxes["r2"].commands()[-1].parts[0].direction == "left-high"

@@ -1,0 +1,339 @@
+"""The gamepad client against real robots: the databank and two agents (a PackBot and a youBot)
+run as processes on loopback, the client in this process reads posted pygame events.
+
+The sweep gesture makes the base translate while the arm sweeps sideways, at the same time;
+letting go of the deadman stops within the TTL; a killed client's robots stop by themselves;
+group targets reach only their members; the e-stop halts everyone.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import pygame
+import pytest
+import zenoh
+from kinesphere.clients import input as pad
+from kinesphere.clients import mapfile
+from kinesphere.clients import targets as tg
+from kinesphere.clients.link import RobotLink
+from kinesphere.clients.state import Action, ControllerState
+from kinesphere.clients.teleop import Teleop, TeleopOptions, run
+from test_client_support import Pad, Script, pygame_up
+
+from kinesphere import zconfig
+from kinesphere.keyexpr import Keys
+from kinesphere.protocol import RobotState, decode
+
+__all__ = ["pygame_up"]  # fixtures
+
+ROOT = Path(__file__).resolve().parent.parent
+KEYS = Keys()
+WAIT_S = 60.0
+"""Upper bound for start-up and events on a loaded 2-core machine; tests finish far sooner."""
+TTL_MS = 300
+PB, YB = "pb-1", "yb-1"
+PLATFORMS = {PB: "packbot", YB: "youbot"}
+
+
+def databank_args() -> list[str]:
+    """The shipped databanks, or prebuilt ones from $KINESPHERE_TEST_DBS (DIR/<platform>.sqlite)."""
+    shipped = ROOT / "services" / "ecl" / "data"
+    if all((shipped / f"{p}.sqlite").exists() for p in PLATFORMS.values()):
+        return [a for p in PLATFORMS.values() for a in ("--platform", p)]
+    dev = os.environ.get("KINESPHERE_TEST_DBS")
+    if dev and all((Path(dev) / f"{p}.sqlite").exists() for p in PLATFORMS.values()):
+        return [a for p in PLATFORMS.values() for a in ("--db", f"{p}={Path(dev) / p}.sqlite")]
+    pytest.skip("no packbot/youbot databanks in services/ecl/data (or $KINESPHERE_TEST_DBS)")
+
+
+class Child:
+    """A kinesphere process joined to the hub; ready once its liveliness token appears."""
+
+    def __init__(self, hub: zenoh.Session, endpoint: str, args: list[str], token: str,
+                 log: Path) -> None:  # fmt: skip
+        up = threading.Event()
+
+        def on_token(sample: zenoh.Sample) -> None:
+            if sample.kind == zenoh.SampleKind.PUT:
+                up.set()
+
+        sub = hub.liveliness().declare_subscriber(token, on_token, history=True)
+        self.log = log.open("wb")
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "kinesphere.cli", *args,
+             "--connect", endpoint, "--listen", zconfig.LOOPBACK_ANY_PORT],
+            cwd=ROOT, env={**os.environ, "PYTHONUNBUFFERED": "1"},
+            stdout=self.log, stderr=subprocess.STDOUT,
+        )  # fmt: skip
+        try:
+            if not up.wait(WAIT_S):
+                self.stop()
+                raise RuntimeError(f"{args[:2]} did not come up; see {log}")
+        finally:
+            zconfig.undeclare(sub)
+
+    def stop(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGTERM)
+            try:
+                self.proc.wait(timeout=15)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        self.log.close()
+
+
+@dataclass(frozen=True)
+class Heard:
+    at: float
+    state: RobotState
+
+
+class Track:
+    """Every RobotState of every robot, with arrival times and waits on predicates."""
+
+    def __init__(self, session: zenoh.Session) -> None:
+        self.heard: dict[str, list[Heard]] = {}
+        self._cond = threading.Condition()
+        self._sub = session.declare_subscriber(KEYS.state("*"), self._on)
+
+    def _on(self, sample: zenoh.Sample) -> None:
+        st = decode(sample.payload, RobotState)
+        with self._cond:
+            self.heard.setdefault(st.robot_id, []).append(Heard(time.monotonic(), st))
+            self._cond.notify_all()
+
+    def wait(self, robot: str, pred: Callable[[Heard], bool], what: str,
+             after: float = 0.0) -> Heard:  # fmt: skip
+        """The first state of ``robot`` heard after ``after`` that satisfies ``pred``."""
+        deadline = time.monotonic() + WAIT_S
+        with self._cond:
+            while True:
+                for h in self.heard.get(robot, []):
+                    if h.at > after and pred(h):
+                        return h
+                left = deadline - time.monotonic()
+                if left <= 0 or not self._cond.wait(left):
+                    last = self.heard.get(robot, [None])[-1]
+                    raise AssertionError(f"{robot}: timed out waiting for {what}; last {last}")
+
+    def since(self, robot: str, t: float) -> list[Heard]:
+        with self._cond:
+            return [h for h in self.heard.get(robot, []) if h.at >= t]
+
+    def close(self) -> None:
+        zconfig.undeclare(self._sub)
+
+
+def speeds(hs: list[Heard]) -> list[tuple[float, float]]:
+    """(robot time s, base speed m/s) between consecutive states."""
+    out = []
+    for a, b in zip(hs, hs[1:], strict=False):
+        dt = (b.state.stamp_ns - a.state.stamp_ns) / 1e9
+        if dt > 0:
+            dx = b.state.base_pose[0] - a.state.base_pose[0]
+            dy = b.state.base_pose[1] - a.state.base_pose[1]
+            out.append((b.state.stamp_ns / 1e9, (dx * dx + dy * dy) ** 0.5 / dt))
+    return out
+
+
+def at_rest(robot: str, track: Track, after: float) -> Heard:
+    """The first state after ``after`` where the base has not moved since the previous one."""
+    prev: list[Heard] = []
+
+    def still(h: Heard) -> bool:
+        v = speeds([prev[-1], h]) if prev else []
+        prev.append(h)
+        return bool(v) and v[0][1] < 1e-3 and max(map(abs, h.state.qd)) < 1e-3
+
+    return track.wait(robot, still, "the robot at rest", after)
+
+
+@dataclass
+class Fleet:
+    hub: zenoh.Session
+    endpoint: str
+    track: Track
+
+
+@pytest.fixture(scope="module")
+def fleet(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Fleet]:
+    args = databank_args()
+    logs = tmp_path_factory.mktemp("logs")
+    with zconfig.loopback_hub() as (hub, endpoint):
+        track = Track(hub)
+        children: list[Child] = []
+        try:
+            children.append(Child(hub, endpoint, ["databank", "serve", *args],
+                                  KEYS.alive_databank_all(), logs / "databank.log"))  # fmt: skip
+            for rid, platform in PLATFORMS.items():
+                children.append(Child(hub, endpoint, ["agent", platform, "--id", rid],
+                                      KEYS.alive_robot(rid), logs / f"{rid}.log"))  # fmt: skip
+            for rid in PLATFORMS:
+                track.wait(rid, lambda h: True, "a first state")
+            yield Fleet(hub, endpoint, track)
+        finally:
+            for c in reversed(children):
+                c.stop()
+            track.close()
+
+
+@contextmanager
+def operator(fleet: Fleet, target: tg.Target) -> Iterator[tuple[Teleop, pad.PygameInput]]:
+    """A gamepad client on its own session, with its catalogues loaded."""
+    pygame.event.clear()
+    inp = pad.PygameInput(mapfile.load())
+    with zconfig.session(config=zconfig.loopback_config(fleet.endpoint)) as s:
+        link = RobotLink(s, KEYS)
+        try:
+            members = list(PLATFORMS) if target.is_all else list(target.members)
+            assert link.wait_subscribers([KEYS.command(r) for r in members], WAIT_S) == []
+            assert link.wait_for(lambda lk: set(lk.states()) >= set(members), WAIT_S)
+            mapping = replace(mapfile.load(), groups={"sweepers": (PB,)})
+            op = Teleop(link, mapping, target, TeleopOptions(rate_hz=30.0, ttl_ms=TTL_MS))
+            op.tick(inp.poll())
+            assert op.catalogues.arrived.wait(WAIT_S)
+            yield op, inp
+        finally:
+            link.close()
+
+
+def test_sweep_gesture_translates_the_base_while_the_arm_sweeps(
+    fleet: Fleet, pygame_up: None
+) -> None:
+    p = Pad()
+
+    def sweep_left() -> None:
+        p.plug()
+        p.deadman()
+        p.axis(pygame.CONTROLLER_AXIS_TRIGGERLEFT, 1.0)  # low
+        p.right(-1.0, 0.0)  # arm: left-low, far
+        p.left(0.0, -0.6)  # base: forward
+
+    with operator(fleet, tg.robot(PB)) as (op, inp):
+        assert (op.selection.limb, op.selection.origin) == ("limb_11", "distal_11")
+        t0 = time.monotonic()
+        script = Script(inp, {0: sweep_left, 50: lambda: p.right(1.0, 0.0),  # arm: right-low
+                              100: lambda: p.deadman(False), 101: lambda: None})  # fmt: skip
+        run(op, script, finished=lambda: script.finished)
+    rest = at_rest(PB, fleet.track, time.monotonic())
+    hs = fleet.track.since(PB, t0)
+    hs = [h for h in hs if h.at <= rest.at]
+    turret = [h.state.q[h.state.joint_names.index("turret")] for h in hs]
+    tqd = [h.state.qd[h.state.joint_names.index("turret")] for h in hs]
+    v = dict(speeds(hs))
+    both = [h.state.stamp_ns / 1e9 for h, w in zip(hs, tqd, strict=True)
+            if abs(w) > 0.05 and v.get(h.state.stamp_ns / 1e9, 0.0) > 0.05]  # fmt: skip
+    assert both and max(both) - min(both) > 1.0, "base and arm move at the same time"
+    peak = max(range(len(turret)), key=lambda i: turret[i])
+    assert turret[peak] > 0.3, "the arm swept left (turret positive)"
+    assert min(turret[peak:]) < turret[peak] - 0.6, "then right"
+    x0, x1 = hs[0].state.base_pose, rest.state.base_pose
+    assert ((x1[0] - x0[0]) ** 2 + (x1[1] - x0[1]) ** 2) ** 0.5 > 0.5, "the base drove"
+
+
+def test_deadman_release_stops_within_the_ttl(fleet: Fleet, pygame_up: None) -> None:
+    p = Pad()
+    released: list[float] = []
+
+    def release() -> None:
+        released.append(time.monotonic())
+        p.deadman(False)
+
+    with operator(fleet, tg.robot(PB)) as (op, inp):
+        script = Script(inp, {0: lambda: (p.deadman(), p.left(0.0, 1.0)),  # drive back
+                              25: release, 26: lambda: None})  # fmt: skip
+        run(op, script, finished=lambda: script.finished)
+    moving = [h for h in fleet.track.since(PB, released[0] - 0.3) if h.at < released[0]]
+    assert moving and moving[-1].state.status == "moving"
+    halted = fleet.track.wait(PB, lambda h: h.state.status in ("stopped", "holding"),
+                              "the stop", after=released[0])  # fmt: skip
+    assert halted.at - released[0] < TTL_MS / 1000
+    rest = at_rest(PB, fleet.track, halted.at)
+    (x0, y0, _), (x1, y1, _) = halted.state.base_pose, rest.state.base_pose
+    assert ((x1 - x0) ** 2 + (y1 - y0) ** 2) ** 0.5 < 1.0, "a brake, not a run-on"
+    assert (rest.state.stamp_ns - halted.state.stamp_ns) / 1e9 < 3.0
+
+
+def test_a_killed_client_leaves_its_robots_stopping_on_their_own(
+    fleet: Fleet, tmp_path: Path
+) -> None:
+    rec = tmp_path / "drive.jsonl"
+    drive = ControllerState(ly=-0.8, rx=-1.0, held=frozenset({Action.DEADMAN})).to_dict()
+    lines = [{"kinesphere": "gamepad-recording", "version": 1}]
+    lines += [{"t": k / 10, "state": drive} for k in range(600)]  # a minute of driving
+    rec.write_text("\n".join(json.dumps(x) for x in lines) + "\n")
+    client = subprocess.Popen(
+        [sys.executable, "-m", "kinesphere.cli", "gamepad", "--replay", str(rec), "--headless",
+         "--target", PB, "--ttl-ms", str(TTL_MS), "--connect", fleet.endpoint,
+         "--listen", zconfig.LOOPBACK_ANY_PORT],
+        cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+    )  # fmt: skip
+    try:
+        start = time.monotonic()
+        driving = fleet.track.wait(PB, lambda h: h.state.status == "moving"
+                                   and h.state.last_command_seq >= 10, "the client driving",
+                                   after=start)  # fmt: skip
+        client.kill()
+        killed = time.monotonic()
+        client.wait()
+        assert fleet.track.since(PB, driving.at)[-1].state.status == "moving"
+        halted = fleet.track.wait(PB, lambda h: h.state.status == "holding",
+                                  "the watchdog", after=killed)  # fmt: skip
+    finally:
+        if client.poll() is None:
+            client.kill()
+            client.wait()
+    assert "ttl" in halted.state.detail
+    assert halted.at - killed < TTL_MS / 1000 + 0.2
+    at_rest(PB, fleet.track, halted.at)
+
+
+def test_groups_reach_their_members_only_and_estop_halts_all(fleet: Fleet, pygame_up: None) -> None:
+    p = Pad()
+    before = fleet.track.wait(YB, lambda h: True, "a youbot state").state.last_command_seq
+    with operator(fleet, tg.parse_target("sweepers", {"sweepers": (PB,)})) as (op, inp):
+        p.deadman()
+        p.left(0.0, -0.5)
+        for _ in range(3):
+            assert op.tick(inp.poll()).engaged
+        sent = op.seq.seq - 1
+        t = time.monotonic()
+        fleet.track.wait(PB, lambda h: h.state.last_command_seq == sent, "the group's command", t)
+        late = fleet.track.wait(YB, lambda h: True, "a later youbot state", after=t + 0.1)
+        assert late.state.last_command_seq == before, "the youbot is not in the group"
+
+        op.target = tg.ALL
+        t = time.monotonic()
+        for _ in range(6):
+            op.tick(inp.poll())
+        sent = op.seq.seq - 1
+        for rid in PLATFORMS:
+            fleet.track.wait(rid, lambda h: h.state.last_command_seq >= sent
+                             and h.state.status == "moving", f"{rid} moving", t)  # fmt: skip
+        p.tap(pygame.CONTROLLER_BUTTON_B)
+        t = time.monotonic()
+        assert op.tick(inp.poll()).estopped
+        for rid in PLATFORMS:
+            halted = fleet.track.wait(rid, lambda h: h.state.status == "estop", "the e-stop", t)
+            assert halted.at - t < 0.3
+        for _ in range(3):  # the deadman is still held: nothing may release the latch
+            assert not op.tick(inp.poll()).engaged
+        for rid in PLATFORMS:
+            rest = at_rest(rid, fleet.track, t)
+            assert rest.state.status == "estop"
+        p.tap(pygame.CONTROLLER_BUTTON_START)  # release, so the fleet is usable again
+        op.tick(inp.poll())
+        for rid in PLATFORMS:
+            fleet.track.wait(rid, lambda h: h.state.status == "idle", "released", time.monotonic())
