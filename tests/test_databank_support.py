@@ -1,0 +1,172 @@
+"""Helpers for the databank tests: small databanks, raw queries, waits with deadlines.
+
+Everything runs on real Zenoh sessions on ``tcp/127.0.0.1:<free port>`` with multicast
+scouting off. Waits are bounded retries of a real query or liveliness events, never sleeps
+standing in for synchronisation.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
+from pathlib import Path
+
+import zenoh
+from kinesphere.robots.platform import load_platform
+from kinesphere.services.ecl.store import PoseRow, write_databank
+from kinesphere.services.ecl.vsam import load_vsam
+
+from kinesphere import protocol as pr
+from kinesphere.keyexpr import Keys
+from kinesphere.zconfig import loopback_config, open_session
+
+ROOT = Path(__file__).resolve().parents[1]
+TOY = ROOT / "tests" / "data" / "toyarm"
+KEYS = Keys("kstest")
+Raw = list[tuple[bool, bytes]]
+
+
+def toy_rows(offset: float = 0.0) -> list[PoseRow]:
+    """Hand-made toyarm poses: three directions of the arm, one of the tail."""
+    rows = []
+    for i, d in enumerate(("left-high", "forward-middle", "right-low")):
+        for s in (1, 2, 3):
+            rows.append(PoseRow("limb_11", "distal_11", d, s, {
+                "yaw": 0.1 * i + 0.01 * s + offset, "elbow": 0.3 + 0.1 * s, "wrist": -0.1 * s}))
+    rows += [PoseRow("limb_21", "distal_21", "left-middle", s, {"tail_joint": 0.5 * s})
+             for s in (1, 2, 3)]
+    return rows
+
+
+def build_toy(path: Path, offset: float = 0.0) -> Path:
+    plat = load_platform(str(TOY))
+    write_databank(path, plat, load_vsam(plat), toy_rows(offset), "test")
+    return path
+
+
+def build_baxter(path: Path) -> Path:
+    """Baxter's right arm, left-high at three sizes: what docs/protocol.md's example asks."""
+    plat = load_platform("baxter")
+    rows = [
+        PoseRow("limb_11", "distal_11", "left-high", s, {
+            "right_s0": 0.2 * s, "right_s1": -0.3 * s, "right_e0": 0.1, "right_e1": 0.5 * s,
+            "right_w0": 0.0, "right_w1": 0.4, "right_w2": -0.1 * s})
+        for s in (1, 2, 3)
+    ]
+    write_databank(path, plat, load_vsam(plat), rows, "test")
+    return path
+
+
+def peer(endpoint: str) -> zenoh.Session:
+    """A peer session joined to the hub at ``endpoint``."""
+    return open_session(config=loopback_config(endpoint))
+
+
+def raw_get(
+    session: zenoh.Session,
+    key: str,
+    payload: bytes | None = None,
+    timeout: float = 2.0,
+    target: zenoh.QueryTarget | None = None,
+) -> Raw:
+    """Every reply to one ``get``: (ok, payload bytes)."""
+    out: Raw = []
+    for reply in session.get(key, payload=payload, timeout=timeout, target=target,
+                             consolidation=zenoh.ConsolidationMode.NONE):
+        if reply.ok is not None:
+            out.append((True, reply.ok.payload.to_bytes()))
+        else:
+            assert reply.err is not None
+            out.append((False, reply.err.payload.to_bytes()))
+    return out
+
+
+def answered(session: zenoh.Session, key: str, payload: bytes | None = None,
+             timeout: float = 10.0) -> Raw:
+    """Retry ``get`` until someone replies (declarations travel asynchronously)."""
+    deadline = time.monotonic() + timeout
+    while True:
+        replies = raw_get(session, key, payload)
+        if replies or time.monotonic() > deadline:
+            return replies
+        time.sleep(0.02)  # pause between retries of a real query, not synchronisation
+
+
+def error_code(replies: Raw) -> str:
+    """The code of the single error reply."""
+    assert len(replies) == 1, replies
+    ok, data = replies[0]
+    assert not ok, pr.decode_any(data)
+    return pr.decode(data, pr.Error).code
+
+
+def pose_of(replies: Raw) -> pr.Pose:
+    """The single good reply, as a Pose."""
+    assert len(replies) == 1, replies
+    ok, data = replies[0]
+    assert ok, pr.decode(data, pr.Error)
+    return pr.decode(data, pr.Pose)
+
+
+def wait_until(cond: Callable[[], bool], timeout: float = 10.0) -> bool:
+    """Poll ``cond`` until true or the deadline; for state changed by another thread."""
+    deadline = time.monotonic() + timeout
+    while not cond():
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.01)
+    return True
+
+
+class Tokens:
+    """Databank liveliness tokens seen by a subscriber (with history), as events."""
+
+    def __init__(self, session: zenoh.Session, keys: Keys = KEYS) -> None:
+        self.keys = keys
+        self.alive: set[str] = set()
+        self._cond = threading.Condition()
+        self._sub = session.liveliness().declare_subscriber(
+            keys.alive_databank_all(), self._on_sample, history=True
+        )
+
+    def _on_sample(self, sample: zenoh.Sample) -> None:
+        name = self.keys.replica_of(str(sample.key_expr))
+        with self._cond:
+            if sample.kind == zenoh.SampleKind.PUT:
+                self.alive.add(name)
+            else:
+                self.alive.discard(name)
+            self._cond.notify_all()
+
+    def wait(self, name: str, present: bool = True, timeout: float = 20.0) -> bool:
+        with self._cond:
+            return self._cond.wait_for(lambda: (name in self.alive) == present, timeout)
+
+    def close(self) -> None:
+        self._sub.undeclare()  # type: ignore[no-untyped-call]
+
+
+def cli(*args: str) -> list[str]:
+    """argv of the kinesphere CLI run as a module, like a user's shell would."""
+    return [sys.executable, "-m", "kinesphere.cli", *args]
+
+
+@contextmanager
+def serve_process(args: Sequence[str], name: str) -> Iterator[subprocess.Popen[str]]:
+    """``kinesphere databank serve ARGS --replica NAME`` as a subprocess; killed on exit."""
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    proc = subprocess.Popen(
+        cli("databank", "serve", "--replica", name, *args),
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT, env=env,
+    )
+    try:
+        yield proc
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        proc.communicate(timeout=20)
