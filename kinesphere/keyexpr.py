@@ -99,6 +99,14 @@ class Keys:
         """Super-user write, payload a RecordRequest: ``{p}/ecl/{platform}/record``."""
         return f"{self._ecl(platform)}/record"
 
+    def changed(self, platform: str) -> str:
+        """Put by the databank after every successful record: ``{p}/ecl/{platform}/changed``.
+
+        The payload is the recorded Pose; ``*`` watches every platform. Agents drop their
+        cached poses on it.
+        """
+        return f"{self._ecl(platform)}/changed"
+
     def alive_databank(self, replica: str) -> str:
         """Liveliness token of one databank replica: ``{p}/alive/databank/{replica}``."""
         return f"{self.prefix}/alive/databank/{check_segment(replica, 'replica', wildcard=True)}"

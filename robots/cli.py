@@ -6,11 +6,10 @@ import argparse
 import json
 import math
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from kinesphere.robots.platform import load_platform, platform_names
-
-from kinesphere.eurdf import Eurdf, load_eurdf
+if TYPE_CHECKING:  # imported lazily: yourdfpy/trimesh cost ~1 s at every CLI start
+    from kinesphere.eurdf import Eurdf
 
 
 def register(sub: Any) -> None:
@@ -31,6 +30,9 @@ def register(sub: Any) -> None:
 
 
 def _platforms(args: argparse.Namespace) -> int:
+    from kinesphere.robots.platform import load_platform, platform_names
+
+
     rows = []
     for name in platform_names():
         p = load_platform(name)
@@ -88,6 +90,10 @@ def describe_dict(e: Eurdf, base: str | None = None) -> dict[str, Any]:
 
 
 def _describe(args: argparse.Namespace) -> int:
+    from kinesphere.robots.platform import load_platform, platform_names
+
+    from kinesphere.eurdf import load_eurdf
+
     if args.platform == "all":
         for name in platform_names():
             args.platform = name
