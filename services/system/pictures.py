@@ -12,6 +12,7 @@ import math
 import os
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
@@ -19,6 +20,7 @@ from PIL import Image, ImageDraw, ImageFont
 from kinesphere.protocol import RobotState
 
 log = logging.getLogger(__name__)
+logging.getLogger("OpenGL").setLevel(logging.WARNING)  # MuJoCo's renderer imports PyOpenGL
 
 TILE = 360
 PALETTE = [
@@ -35,22 +37,47 @@ def _font(size: int) -> ImageFont.FreeTypeFont | ImageFont.ImageFont:
         return ImageFont.load_default()
 
 
+def _qpos(pm: Any, state: RobotState) -> np.ndarray:
+    """The model configuration of a reported state: its joints and its base pose."""
+    from kinesphere.robots.mjcf import BASE_JOINTS
+
+    q = pm.neutral_qpos()
+    for name, value in zip(state.joint_names, state.q, strict=True):
+        if name in pm.qpos_index:
+            q[pm.qpos_index[name]] = value
+    for name, value in zip(BASE_JOINTS, state.base_pose, strict=False):
+        if name in pm.qpos_index:
+            q[pm.qpos_index[name]] = value
+    return q
+
+
 def render_pose(state: RobotState, size: int = TILE) -> Image.Image:
-    """Render ``state``'s platform at ``state.q`` (and its base pose) with MuJoCo."""
+    """Render ``state``'s platform at ``state.q`` (and its base pose) with MuJoCo.
+
+    Uses the ECL's camera (same framing as its contact sheets) following the base; falls
+    back to a plain free camera where that module is not installed.
+    """
     os.environ.setdefault("MUJOCO_GL", "egl")
-    import mujoco
-    from kinesphere.robots.mjcf import BASE_JOINTS, platform_model
+    from kinesphere.robots.mjcf import platform_model
 
     pm = platform_model(state.platform)
-    data = pm.make_data()
-    for name, value in zip(state.joint_names, state.q, strict=True):
-        adr = pm.qpos_index.get(name)
-        if adr is not None:
-            data.qpos[adr] = value
-    for name, value in zip(BASE_JOINTS, state.base_pose, strict=False):
-        adr = pm.qpos_index.get(name)
-        if adr is not None:
-            data.qpos[adr] = value
+    qpos = _qpos(pm, state)
+    try:
+        from kinesphere.services.ecl.render import Camera, View, platform_view
+    except ImportError:
+        return _render_plain(pm, qpos, size)
+    v = platform_view(pm)
+    x, y = state.base_pose[0], state.base_pose[1]
+    with Camera(pm, size, size, View((v.lookat[0] + x, v.lookat[1] + y, v.lookat[2]),
+                                     v.distance)) as cam:
+        return cam.shoot(qpos)
+
+
+def _render_plain(pm: Any, qpos: np.ndarray, size: int) -> Image.Image:
+    import mujoco
+
+    data = mujoco.MjData(pm.model)
+    data.qpos[:] = qpos
     mujoco.mj_forward(pm.model, data)
     cam = mujoco.MjvCamera()
     cam.type = mujoco.mjtCamera.mjCAMERA_FREE

@@ -18,7 +18,7 @@ from rich.console import Console
 from kinesphere.keyexpr import Keys
 from kinesphere.zconfig import session
 
-from .table import robot_table, state_dict
+from .table import robot_table, state_dict, wide_console
 from .watch import StateRecorder, query_alive
 
 DEFAULT_CONNECT = "tcp/127.0.0.1:7447"
@@ -67,7 +67,7 @@ def print_status(info: dict[str, Any], as_json: bool, console: Console | None = 
         print(json.dumps(info, indent=2))
     else:
         alive = [rid for rid, r in info["robots"].items() if r["alive"]]
-        (console or Console()).print(
+        (console or wide_console()).print(
             robot_table(states, alive=alive, databanks=info["databanks"], title="kinesphere status")
         )
     return 0 if info["databanks"] or info["robots"] else 1

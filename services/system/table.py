@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import math
+import os
 import time
 from collections.abc import Iterable, Mapping
 from typing import Any
 
+from rich.console import Console
 from rich.table import Table
 
 from kinesphere.protocol import RobotState
@@ -77,3 +79,11 @@ def state_dict(st: RobotState) -> dict[str, Any]:
         "joints": dict(zip(st.joint_names, st.q, strict=True)),
         "clamped": list(st.clamped),
     }
+
+
+def wide_console() -> Console:
+    """A console; when output is not a terminal (make demo, CI logs), wide enough for tables."""
+    console = Console(log_path=False)
+    if not console.is_terminal and "COLUMNS" not in os.environ:
+        console = Console(width=140, log_path=False)
+    return console

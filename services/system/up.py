@@ -31,7 +31,7 @@ from kinesphere.zconfig import LOOPBACK_ANY_PORT, close_session, open_hub, undec
 
 from .pictures import final_poses_png, trajectory_png
 from .procs import ChildFailed, Supervisor
-from .table import robot_table, state_dict
+from .table import robot_table, state_dict, wide_console
 from .watch import Alive, StateRecorder, is_settled, watch_alive
 
 log = logging.getLogger(__name__)
@@ -148,21 +148,13 @@ def _signals_raise() -> Iterator[None]:
             signal.signal(s, h)
 
 
-def _console() -> Console:
-    """A console; when output is not a terminal (make demo, CI logs), wide enough for the table."""
-    console = Console()
-    if not console.is_terminal and "COLUMNS" not in os.environ:
-        console = Console(width=140)
-    return console
-
-
 class Demo:
     """One ``kinesphere up`` run: children, hub session, recorder, and what it writes."""
 
     def __init__(self, opts: UpOptions, console: Console | None = None) -> None:
         self.opts = opts
         self.keys = Keys(opts.prefix)
-        self.console = console or _console()
+        self.console = console or wide_console()
         self.sup = Supervisor(opts.out / "logs")
         self.recorder = StateRecorder(self.keys)
         self.alive: Alive | None = None
