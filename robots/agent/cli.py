@@ -12,6 +12,7 @@ from types import FrameType
 from typing import Any
 
 from kinesphere.keyexpr import DEFAULT_PREFIX
+from kinesphere.zconfig import DEFAULT_ENDPOINT, LOOPBACK_ANY_PORT
 
 log = logging.getLogger(__name__)
 
@@ -37,9 +38,14 @@ def register(sub: Any) -> None:
                    help="also obey {prefix}/group/NAME/command (repeatable)")
     p.add_argument("--viewer", action="store_true", help="open a MuJoCo viewer window")
     p.add_argument("--zenoh-config", type=Path, metavar="FILE", help="Zenoh JSON5 config file")
-    p.add_argument("--listen", action="append", metavar="EP", help="listen endpoint (repeatable)")
+    p.add_argument("--listen", action="append", metavar="EP",
+                   help="listen endpoint (repeatable; default: loopback, any port, unless "
+                   "--connect or --zenoh-config is given)")
     p.add_argument("--connect", action="append", metavar="EP",
-                   help="connect endpoint, e.g. tcp/127.0.0.1:7447 (repeatable)")
+                   help=f"connect endpoint (repeatable; default {DEFAULT_ENDPOINT}, where "
+                   "'kinesphere databank serve' listens, unless --listen or --zenoh-config)")
+    p.add_argument("--mode", choices=("peer", "client"), default=None,
+                   help="Zenoh session mode (default peer)")
     p.add_argument("--prefix", default=DEFAULT_PREFIX, help="key prefix (default kinesphere)")
     p.set_defaults(func=_agent)
 
@@ -73,7 +79,10 @@ def _agent(args: argparse.Namespace) -> int:
         stop.set()
 
     previous = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
-    session = open_session(listen=args.listen, connect=args.connect,
+    listen, connect = args.listen, args.connect
+    if listen is None and connect is None and args.zenoh_config is None:
+        listen, connect = [LOOPBACK_ANY_PORT], [DEFAULT_ENDPOINT]  # one machine, no set-up
+    session = open_session(args.mode, listen=listen, connect=connect,
                            config_file=args.zenoh_config)
     agent: Agent | None = None
     viewer = None

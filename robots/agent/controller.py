@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import copy
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 
 import mujoco
 import numpy as np
@@ -116,8 +116,3 @@ class Controller:
         for _ in range(extra):
             self.step()
         return n + extra
-
-    def joint_values(self, names: Sequence[str]) -> list[float]:
-        index = {j: i for i, j in enumerate(self.joint_names)}
-        q = self.data.qpos[self._qadr]
-        return [float(q[index[j]]) for j in names]

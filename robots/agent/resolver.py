@@ -103,15 +103,10 @@ class Resolver:
         self._catalogue: zenoh.Querier | None = None
         self._thread = threading.Thread(target=self._run, name=f"resolver-{platform}", daemon=True)
 
-    def changed_key(self) -> str:
-        """``{p}/ecl/{platform}/changed``, which the databank puts after every record."""
-        method = getattr(self.keys, "changed", None)
-        if method is not None:
-            return str(method(self.platform))
-        return f"{self.keys.prefix}/ecl/{self.platform}/changed"
-
     def start(self) -> None:
-        self._changed = self.session.declare_subscriber(self.changed_key(), self._on_changed)
+        self._changed = self.session.declare_subscriber(
+            self.keys.changed(self.platform), self._on_changed
+        )
         self._thread.start()
 
     def wait_ready(self, timeout_s: float) -> bool:
