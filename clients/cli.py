@@ -10,9 +10,11 @@ import argparse
 from typing import Any
 
 from kinesphere.clients import commands
-from kinesphere.clients.commands import DEFAULT_ENDPOINT
 
 from kinesphere.keyexpr import DEFAULT_PREFIX
+
+DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
+"""For the help text only (``kinesphere.zconfig.DEFAULT_ENDPOINT``; importing it loads Zenoh)."""
 
 KEYS_HELP = """keys (keyboard fallback, the HUD window needs focus):
   arrows      right stick: the limb's horizontal direction (diagonals: two arrows)
@@ -62,7 +64,7 @@ def _zenoh(p: argparse.ArgumentParser) -> None:
     )
 
 
-def _targeting(p: argparse.ArgumentParser, ttl_default: str = "300") -> None:
+def _targeting(p: argparse.ArgumentParser, ttl_default: str = "300", wait: bool = True) -> None:
     p.add_argument(
         "--groups",
         metavar="FILE",
@@ -75,13 +77,14 @@ def _targeting(p: argparse.ArgumentParser, ttl_default: str = "300") -> None:
         metavar="MS",
         help=f"robots hold if no newer command arrives within MS (default {ttl_default})",
     )
-    p.add_argument(
-        "--wait",
-        type=float,
-        default=5.0,
-        metavar="S",
-        help="wait up to S seconds for the target robots to be reachable (default 5)",
-    )
+    if wait:
+        p.add_argument(
+            "--wait",
+            type=float,
+            default=5.0,
+            metavar="S",
+            help="wait up to S seconds for the target robots to be reachable (default 5)",
+        )
 
 
 def register(sub: Any) -> None:
@@ -127,7 +130,7 @@ def register(sub: Any) -> None:
     )
     g.add_argument("--duration", type=float, metavar="S", help="quit after S seconds")
     g.add_argument("--screenshot", metavar="PNG", help="save the HUD to PNG when quitting")
-    _targeting(g)
+    _targeting(g, wait=False)
     _zenoh(g)
     g.set_defaults(func=commands.gamepad)
 

@@ -20,11 +20,11 @@ from typing import Any
 
 from kinesphere.errors import KinesphereError
 
-DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
 ESTOP_REPEATS = 3
 ESTOP_SPACING_S = 0.1
-"""A one-shot e-stop is repeated: it latches, so copies are harmless, and a robot whose
-subscription reached this fresh session a moment after the first match still gets one."""
+"""``kinesphere estop`` sends at once, then again once a robot is matched, then once more: it
+latches, so copies are harmless, and a robot whose subscription reached this fresh session a
+moment later still gets one."""
 
 
 # --- shared plumbing --------------------------------------------------------------------------
@@ -36,7 +36,7 @@ def _session(args: argparse.Namespace) -> Iterator[Any]:
 
     connect = args.connect
     if connect is None and args.listen is None and args.zenoh_config is None:
-        connect = [DEFAULT_ENDPOINT]
+        connect = [zconfig.DEFAULT_ENDPOINT]
     with zconfig.session(args.mode, args.listen, connect, args.zenoh_config) as s:
         yield s
 
@@ -116,7 +116,7 @@ def gamepad(args: argparse.Namespace) -> int:
             if not args.headless:
                 from kinesphere.clients.hud import Hud
 
-                hud = Hud()
+                hud = Hud()  # raises KinesphereError without a display
             deadline = None if args.duration is None else time.monotonic() + args.duration
 
             def finished() -> bool:
@@ -132,7 +132,13 @@ def gamepad(args: argparse.Namespace) -> int:
                         pygame.event.pump()  # keep the window responsive
                     hud.draw(view)
 
-            recorder = record.Recorder(args.record, target=target.name) if args.record else None
+            recorder = (
+                record.Recorder(
+                    args.record, target=target.name, rate_hz=args.rate, mapping=mapping.source
+                )
+                if args.record
+                else None
+            )
 
             def stop() -> None:
                 op.quit = True
@@ -245,12 +251,11 @@ def estop(args: argparse.Namespace) -> int:
             link.put(keys, seq.release())
             print(f"released the e-stop of {target.label}", file=sys.stderr)
         else:
-            keys = [link.keys.command("*")]
-            missing = link.wait_subscribers(keys, args.wait)  # send even if nobody listens yet
-            for i in range(ESTOP_REPEATS):  # robots still being discovered get a later copy
-                if i:
-                    time.sleep(ESTOP_SPACING_S)
+            link.estop_all(seq)  # at once: an e-stop never waits for discovery
+            missing = link.wait_subscribers([link.keys.command("*")], args.wait)
+            for _ in range(ESTOP_REPEATS - 1):  # robots discovered a moment later get a copy
                 link.estop_all(seq)
+                time.sleep(ESTOP_SPACING_S)
             note = " (no robot was listening)" if missing else ""
             print(f"E-STOP sent to every robot{note}", file=sys.stderr)
     return 0

@@ -23,6 +23,7 @@ os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
 import pygame  # noqa: E402
 from kinesphere.clients.teleop import View  # noqa: E402
 
+from kinesphere.errors import KinesphereError  # noqa: E402
 from kinesphere.laban import Direction, Horizontal, Level  # noqa: E402
 from kinesphere.protocol import Status  # noqa: E402
 from kinesphere.sizes import size_name  # noqa: E402
@@ -320,7 +321,12 @@ class Hud:
     """The HUD window; :meth:`draw` at most ``fps`` times a second."""
 
     def __init__(self, size: tuple[int, int] = SIZE, fps: float = 30.0) -> None:
-        self.screen = pygame.display.set_mode(size)
+        try:
+            self.screen = pygame.display.set_mode(size)
+        except pygame.error as exc:
+            raise KinesphereError(
+                "unavailable", f"cannot open the HUD window ({exc}); use --headless"
+            ) from None
         pygame.display.set_caption("kinesphere gamepad")
         self.fonts = load_fonts()
         self.min_dt = 1.0 / fps

@@ -6,7 +6,8 @@ platform has come first, since labels like ``limb_11`` are meant to be platform-
 the platforms share none, the union is offered and robots without the pair report it.
 
 Catalogues are fetched over Zenoh on a worker thread: a databank that is slow or down must not
-stall the 30 Hz loop, and the client keeps working with the default pair meanwhile.
+stall the 30 Hz loop, and the client keeps working with the default pair meanwhile. They are
+fetched again after a databank announces a recorded pose (``{p}/ecl/{platform}/changed``).
 """
 
 from __future__ import annotations
@@ -121,6 +122,7 @@ class CatalogueCache:
         self._have: dict[str, Catalogue] = {}
         self._failed: dict[str, tuple[float, str]] = {}
         self._busy: set[str] = set()
+        self._epoch = link.catalogue_epoch
         self.arrived = threading.Event()
         """Set whenever a catalogue arrives (lets tests and tools await it)."""
 
@@ -128,6 +130,9 @@ class CatalogueCache:
         """Catalogues already here for ``platforms``; starts fetching the missing ones."""
         out, now = [], time.monotonic()
         with self._lock:
+            if self._epoch != self.link.catalogue_epoch:  # a pose was recorded: fetch again
+                self._epoch = self.link.catalogue_epoch
+                self._have.clear()
             for p in dict.fromkeys(platforms):
                 if p in self._have:
                     out.append(self._have[p])

@@ -106,6 +106,8 @@ class RobotLink:
         self._states: dict[str, Seen] = {}
         self._alive: set[str] = set()
         self._catalogues: dict[str, Catalogue] = {}
+        self.catalogue_epoch = 0
+        """Grows whenever a databank reports a recorded pose (catalogues may have changed)."""
         self.changed = threading.Condition(self._lock)
         self._subs: list[zenoh.Subscriber[None]] = []
         if watch:
@@ -115,6 +117,7 @@ class RobotLink:
                     keys.alive_robot("*"), self._on_alive, history=True
                 )
             )
+            self._subs.append(session.declare_subscriber(keys.changed("*"), self._on_changed))
 
     # --- watching -----------------------------------------------------------------------
 
@@ -138,6 +141,12 @@ class RobotLink:
                 self._alive.discard(rid)
             else:
                 self._alive.add(rid)
+            self.changed.notify_all()
+
+    def _on_changed(self, sample: zenoh.Sample) -> None:
+        with self.changed:
+            self._catalogues.clear()
+            self.catalogue_epoch += 1
             self.changed.notify_all()
 
     def states(self) -> dict[str, Seen]:

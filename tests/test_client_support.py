@@ -180,13 +180,18 @@ class Script:
 
 
 class FakeRobot:
-    """Publishes RobotState for one id, as an agent would (status chosen by the test)."""
+    """Publishes RobotState for one id, as an agent would (status chosen by the test).
+
+    The first state waits until a subscriber (the client under test) is matched, so it is
+    not put before the client's subscription has reached the hub.
+    """
 
     def __init__(self, session: zenoh.Session, robot_id: str, platform: str) -> None:
-        self.session = session
         self.robot_id = robot_id
         self.platform = platform
         self.seq = 0
+        self.pub = session.declare_publisher(KEYS.state(robot_id))
+        assert zconfig.wait_matching(self.pub, WAIT_S), "no state subscriber"
 
     def state(self, status: str = "idle") -> None:
         self.seq += 1
@@ -195,7 +200,7 @@ class FakeRobot:
             stamp_ns=time.time_ns(), joint_names=[], q=[], qd=[], base_pose=[0.0, 0.0, 0.0],
             status=status, last_command_seq=-1,
         )  # fmt: skip
-        self.session.put(KEYS.state(self.robot_id), encode(st))
+        self.pub.put(encode(st))
 
 
 @contextmanager

@@ -14,7 +14,7 @@ import zenoh
 from kinesphere.clients import input as pad
 from kinesphere.clients import mapfile
 from kinesphere.clients import targets as tg
-from kinesphere.clients.limbs import Selection, pairs_of
+from kinesphere.clients.limbs import CatalogueCache, Selection, pairs_of
 from kinesphere.clients.link import RobotLink
 from kinesphere.clients.teleop import Teleop, TeleopOptions, run
 from test_client_support import (
@@ -374,3 +374,24 @@ def test_a_direction_the_limb_lacks_becomes_the_nearest_it_has(
     assert view.available == {"left-high", "place-middle"}
     settle(link, inboxes)
     assert inboxes["r2"].commands()[-1].parts[0].direction == "left-high"
+
+
+def test_a_recorded_pose_makes_the_client_fetch_catalogues_again(
+    hub: tuple[zenoh.Session, str], link: RobotLink
+) -> None:
+    session, _ = hub
+    with fake_catalogue(session, FAKEBOT):
+        querier = link.session.declare_querier(KEYS.catalogue("fakebot"))
+        assert zconfig.wait_matching(querier, WAIT_S)
+        zconfig.undeclare(querier)
+        cache = CatalogueCache(link)
+        cache.get(["fakebot"])
+        assert cache.arrived.wait(WAIT_S) and cache.get(["fakebot"]) == [FAKEBOT]
+        pub = session.declare_publisher(KEYS.changed("fakebot"))
+        assert zconfig.wait_matching(pub, WAIT_S)
+        cache.arrived.clear()
+        pub.put(b"")  # the payload (the recorded Pose) does not matter here
+        assert link.wait_for(lambda lk: lk.catalogue_epoch == 1, WAIT_S)
+        assert cache.get(["fakebot"]) == [], "dropped, fetching again"
+        assert cache.arrived.wait(WAIT_S) and cache.get(["fakebot"]) == [FAKEBOT]
+        zconfig.undeclare(pub)
