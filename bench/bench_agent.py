@@ -7,6 +7,7 @@ The databank is the real service (``kinesphere databank serve``) in a subprocess
 
 from __future__ import annotations
 
+import logging
 import os
 import signal
 import subprocess
@@ -241,6 +242,8 @@ FLEET_PARTS: dict[str, list[SpatialCommand]] = {}
 
 
 def main() -> None:
+    # the agents' own "falls behind" warnings would bury the table; the table reports it
+    logging.getLogger("kinesphere.robots.agent").setLevel(logging.ERROR)
     with zconfig.loopback_hub() as (hub, endpoint), databank(endpoint, hub):
         step_cost(endpoint)
         latency(endpoint, hub)

@@ -110,8 +110,8 @@ class Agent:
         self._ticket = 0
         self._latest: dict[str, tuple[int, int]] = {}
         self._last_seq = -1
-        self._pending_yaw: dict[int, float | None] = {}
-        self._pending_cmd: Command | None = None
+        self._pending: tuple[int, Command, float | None] | None = None
+        """(ticket, command, base yaw at receipt) of the command waiting for the databank."""
         self._probe: tuple[int, int] | None = None
         self._status = Status.IDLE
         self._detail = "no command yet"
@@ -233,21 +233,29 @@ class Agent:
     # --- commands (control thread) ------------------------------------------------------------
 
     def _handle(self, item: _Received | _Bad | _Resolved) -> None:
-        if isinstance(item, _Resolved):
-            self._apply(item.ticket, item.answer)
-        elif isinstance(item, _Bad):
-            self._error(item.error, "command")
-        else:
-            seq = item.cmd.seq
-            try:
+        """Act on one inbox item; whatever goes wrong is reported, never raised into the loop."""
+        what = "command" if isinstance(item, _Bad) else f"command {self._seq_of(item)}"
+        try:
+            if isinstance(item, _Resolved):
+                self._apply(item.ticket, item.answer)
+            elif isinstance(item, _Bad):
+                raise item.error
+            else:
                 self._command(item.cmd)
-            except KinesphereError as exc:
-                self._last_seq = seq
-                self._error(exc, f"command {seq}")
-            except Exception as exc:  # a bug must not take the robot's control loop down
-                log.exception("agent %s: command %s failed", self.robot_id, seq)
-                self._last_seq = seq
-                self._error(KinesphereError("internal", repr(exc)), f"command {seq}")
+        except KinesphereError as exc:
+            self._last_seq = max(self._last_seq, self._seq_of(item))
+            self._error(exc, what)
+        except Exception as exc:  # a bug must not take the robot's control loop down
+            log.exception("agent %s: %s failed", self.robot_id, what)
+            self._last_seq = max(self._last_seq, self._seq_of(item))
+            self._error(KinesphereError("internal", repr(exc)), what)
+
+    def _seq_of(self, item: _Received | _Bad | _Resolved) -> int:
+        if isinstance(item, _Received):
+            return item.cmd.seq
+        if isinstance(item, _Resolved) and self._pending is not None:
+            return self._pending[1].seq
+        return self._last_seq
 
     def _stale(self, cmd: Command) -> bool:
         last = self._latest.get(cmd.sender)
@@ -306,16 +314,13 @@ class Agent:
             self._last_seq = cmd.seq
             self._apply_pose(hit, yaw, cmd)
         else:
-            self._pending_yaw = {self._ticket: yaw}
-            self._pending_cmd = cmd
+            self._pending = (self._ticket, cmd, yaw)
             self.resolver.submit(self._ticket, key, self._on_resolved)
 
     def _apply(self, ticket: int, answer: Answer) -> None:
-        if ticket != self._ticket:
+        if ticket != self._ticket or self._pending is None or self._pending[0] != ticket:
             return  # overtaken by a newer command, a stop or an e-stop
-        yaw = self._pending_yaw.pop(ticket, None)
-        cmd = self._pending_cmd
-        assert cmd is not None
+        _, cmd, yaw = self._pending
         self._last_seq = cmd.seq
         if isinstance(answer, KinesphereError):
             self._error(answer, f"command {cmd.seq}")
