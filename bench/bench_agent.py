@@ -46,11 +46,9 @@ def databank(endpoint: str, watcher: zenoh.Session) -> Iterator[None]:
     up = threading.Event()
     sub = watcher.liveliness().declare_subscriber(
         KEYS.alive_databank_all(), lambda s: up.set(), history=True)
-    extra = [a for p in sorted(Path("/tmp/ag").glob("*.sqlite")) if p.stem != "toyarm"
-             for a in ("--db", f"{p.stem}={p}")]  # TEMP-DEV: until services/ecl/data ships
     proc = subprocess.Popen(
         [sys.executable, "-m", "kinesphere.cli", "databank", "serve", "--connect", endpoint,
-         "--listen", zconfig.LOOPBACK_ANY_PORT, *extra],
+         "--listen", zconfig.LOOPBACK_ANY_PORT],
         cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
         if not up.wait(60):

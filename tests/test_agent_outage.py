@@ -9,8 +9,7 @@ from collections.abc import Iterator
 
 import pytest
 import zenoh
-from test_agent_support import (  # TEMP-DEV
-    _DEV_ARGS,
+from test_agent_support import (
     Databank,
     Operator,
     joints_close,
@@ -31,7 +30,7 @@ def own_hub() -> Iterator[tuple[zenoh.Session, str]]:
 @pytest.fixture
 def own_databank(own_hub: tuple[zenoh.Session, str]) -> Iterator[Databank]:
     session, endpoint = own_hub
-    bank = Databank(endpoint, session, _DEV_ARGS)  # TEMP-DEV
+    bank = Databank(endpoint, session)
     bank.start()
     try:
         yield bank

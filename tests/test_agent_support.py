@@ -45,11 +45,6 @@ WAIT_S = 30.0
 """Generous upper bound for events on a loaded 2-core machine; tests finish far sooner."""
 
 
-_DEV_ARGS = [  # TEMP-DEV: until services/ecl/data ships
-    a for p in sorted(Path("/tmp/ag").glob("*.sqlite")) if p.stem != "toyarm"
-    for a in ("--db", f"{p.stem}={p}")
-]
-
 # --- the databank ---------------------------------------------------------------------------
 
 
@@ -134,7 +129,7 @@ def databank(request: pytest.FixtureRequest, hub: tuple[zenoh.Session, str]) -> 
     bank = _SHARED.get("databank")
     if not isinstance(bank, Databank):
         session, endpoint = hub
-        bank = Databank(endpoint, session, _DEV_ARGS)
+        bank = Databank(endpoint, session)
         bank.start()
         request.config.add_cleanup(bank.stop)
         _SHARED["databank"] = bank
