@@ -126,10 +126,12 @@ def gamepad(args: argparse.Namespace) -> int:
 
             def draw(view: teleop.View) -> None:
                 if hud is not None:
-                    if replay is not None:
+                    if replay is not None:  # no input reads the queue: watch for a close
                         import pygame
 
-                        pygame.event.pump()  # keep the window responsive
+                        if pygame.event.get(pygame.QUIT):
+                            op.quit = True
+                        pygame.event.pump()
                     hud.draw(view)
 
             recorder = (
