@@ -11,11 +11,13 @@ import numpy as np
 import pytest
 from kinesphere.robots.agent.base import DiffBase, OmniBase, make_base, wrap_angle
 from kinesphere.robots.agent.controller import Controller
+from kinesphere.robots.agent.runtime import SETTLE_S, Agent
 from kinesphere.robots.agent.safety import DRIVE_TTL_S, Safety, Verdict
 from kinesphere.robots.agent.trajectory import DEFAULT_MARGIN, JointTrajectory
 from kinesphere.robots.mjcf import platform_model
 from kinesphere.robots.platform import BaseSpec
 
+from kinesphere import zconfig
 from kinesphere.eurdf import JointLimit
 from kinesphere.protocol import Command, Drive
 
@@ -188,3 +190,24 @@ def test_controller_tracks_ruckig_inside_limits() -> None:
     assert q["yaw"] == pytest.approx(lim["yaw"].upper - DEFAULT_MARGIN, abs=2e-3)
     assert q["elbow"] == pytest.approx(-1.0, abs=2e-3)
     assert c.base_pose()[0] == pytest.approx(0.2, abs=2e-3)
+
+
+BEHIND_THE_LEFT_ARM = {  # baxter's right hand reaching high to the left, across the left arm
+    "right_s0": 0.853342, "right_s1": -0.55553, "right_e0": 1.354911, "right_e1": 1.745115,
+    "right_w0": 1.092002, "right_w1": 1.403733, "right_w2": -0.039479,
+}
+
+
+def test_a_body_caught_on_itself_is_reported_not_called_at_target() -> None:
+    with zconfig.session(listen=[zconfig.LOOPBACK_ANY_PORT], connect=[]) as s:
+        agent = Agent("baxter", "blocked", s)
+        agent.controller.joints.retarget(BEHIND_THE_LEFT_ARM)
+        agent._set("moving", "test")
+        while agent.controller.moving:
+            agent.tick()
+        for _ in range(round(SETTLE_S / agent.controller.dt) + 1):
+            agent.tick()
+        status, detail = agent.status()
+        agent.close()
+    assert status == "error"
+    assert detail.startswith("blocked: right_w") and "self-contact" in detail

@@ -32,7 +32,7 @@ from kinesphere.robots.agent.controller import Controller
 from kinesphere.robots.agent.resolver import Answer, Resolver, parts_key
 from kinesphere.robots.agent.safety import Safety, Verdict
 from kinesphere.robots.agent.trajectory import DEFAULT_MARGIN
-from kinesphere.robots.mjcf import platform_model
+from kinesphere.robots.mjcf import platform_model, robot_contacts
 
 from kinesphere.errors import KinesphereError
 from kinesphere.keyexpr import DEFAULT_PREFIX, Keys
@@ -44,6 +44,10 @@ log = logging.getLogger(__name__)
 
 BEHIND_S = 0.05
 """Lag after which the loop stops catching up and lets robot time slip behind wall time."""
+BLOCKED_TOL = 0.05
+"""rad (m): a joint this far from where its finished trajectory ended is blocked."""
+SETTLE_S = 0.2
+"""Robot time the servos get after a trajectory ends before the body is held to it."""
 
 
 @dataclass(frozen=True)
@@ -116,6 +120,7 @@ class Agent:
         self._status = Status.IDLE
         self._detail = "no command yet"
         self._state_seq = 0
+        self._moved_at = 0.0
         self._publish_every = max(1, round(self.options.rate / self.options.state_rate))
         self._entities: list[Any] = []
         self._publisher: Any = None
@@ -223,6 +228,8 @@ class Agent:
             self._halt(Status.HOLDING, "no new command within ttl_ms: holding")
         ctrl.step()
         self.stats.steps += 1
+        if ctrl.moving:
+            self._moved_at = ctrl.time
         if self._probe is not None:
             seq, sent_ns = self._probe
             self._probe = None
@@ -384,10 +391,29 @@ class Agent:
         if status == Status.DATABANK_UNREACHABLE:  # it answers again
             status, detail = Status.MOVING, "databank reachable again"
         if status == Status.MOVING and not ctrl.moving:
-            if ctrl.joints.clamped:
-                return Status.CLAMPED, detail
-            return Status.IDLE, "at target"
+            status, detail = (Status.CLAMPED, detail) if ctrl.joints.clamped else (
+                Status.IDLE, "at target")
+        if status in (Status.IDLE, Status.CLAMPED) and ctrl.time - self._moved_at >= SETTLE_S:
+            blocked = self._blocked()
+            if blocked:
+                return Status.ERROR, blocked
         return status, detail
+
+    def _blocked(self) -> str:
+        """Why the body is not where the trajectory ended, or "" when it is.
+
+        The ECL checks its poses, not the joint-space path to them: an arm can catch on the
+        other one on the way and stay there. Saying "at target" then would be a lie.
+        """
+        ctrl = self.controller
+        error = np.abs(np.asarray(ctrl.q()) - ctrl.joints.target)
+        worst = int(np.argmax(error)) if error.size else 0
+        if not error.size or error[worst] <= BLOCKED_TOL:
+            return ""
+        contacts = sorted({f"{a}/{b}" for a, b in robot_contacts(ctrl.model, ctrl.data)})
+        touching = f"; self-contact {', '.join(contacts[:3])}" if contacts else ""
+        return (f"blocked: {ctrl.joint_names[worst]} is {error[worst]:.3f} from its target"
+                f"{touching}")
 
     def publish(self) -> RobotState:
         ctrl = self.controller
