@@ -71,6 +71,9 @@ def test_targets_are_clamped_with_margin_and_reported() -> None:
     assert not traj.clamped
     with pytest.raises(KeyError):
         traj.retarget({"nope": 0.0})
+    with pytest.raises(ValueError):
+        traj.retarget({"a": math.nan})
+    assert traj.target[0] == 0.0
 
 
 def test_stop_brakes_in_place_within_limits() -> None:

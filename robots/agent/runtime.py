@@ -52,6 +52,10 @@ SETTLE_S = 0.2
 
 @dataclass(frozen=True)
 class AgentOptions:
+    """How an agent runs: control ``rate`` and ``state_rate`` in Hz, ``speed`` (robot seconds
+    per wall second, 0 = unpaced), key ``prefix``, ``groups`` it obeys, databank query timeout,
+    joint-limit clamp ``margin``."""
+
     rate: float = 500.0
     state_rate: float = 50.0
     speed: float = 1.0
@@ -75,7 +79,6 @@ class LoopStats:
 @dataclass
 class _Received:
     cmd: Command
-    recv_ns: int
 
 
 @dataclass
@@ -175,9 +178,8 @@ class Agent:
 
     def receive(self, payload: Payload) -> None:
         """Queue an encoded Command for the next control step (any thread; never blocks)."""
-        now = time.time_ns()
         try:
-            self._inbox.append(_Received(decode(payload, Command), now))
+            self._inbox.append(_Received(decode(payload, Command)))
         except KinesphereError as exc:
             self._inbox.append(_Bad(exc))
 
@@ -194,12 +196,18 @@ class Agent:
         stats = self.stats
         clock = time.perf_counter
         next_t = clock()
-        last_warn = -1e9
+        last_warn = last_error = -1e9
         while not stop_event.is_set() and not (stop is not None and stop.is_set()):
             t0 = clock()
-            self.tick()
-            if on_tick is not None:
-                on_tick()
+            try:
+                self.tick()
+                if on_tick is not None:
+                    on_tick()
+            except Exception as exc:  # a robot that stops stepping must still say why
+                if t0 - last_error > 5.0:
+                    last_error = t0
+                    log.exception("agent %s: control step failed", self.robot_id)
+                self._set(Status.ERROR, f"internal: control step failed: {exc!r}")
             stats.costs_s.append(clock() - t0)
             if period == 0.0:
                 continue
@@ -340,9 +348,10 @@ class Agent:
             raise KinesphereError("internal", f"databank answered for {pose.platform!r}")
         try:
             clamps = ctrl.joints.retarget(pose.joints)
-        except KeyError as exc:
+        except (KeyError, ValueError) as exc:
             self._error(KinesphereError(
-                "internal", f"databank pose names joints not in {self.platform}: {exc}"), "pose")
+                "internal", f"databank pose has joints {self.platform} cannot take: {exc}"),
+                f"command {cmd.seq}")
             return
         if pose.translation is not None and ctrl.base is not None and not ctrl.base.driving:
             ctrl.base.translate(pose.translation, yaw)

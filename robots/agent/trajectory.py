@@ -124,6 +124,8 @@ class JointTrajectory:
         clamps: list[Clamp] = []
         for name, value in joints.items():
             i = self.index[name]
+            if not math.isfinite(value):
+                raise ValueError(f"{name} = {value}")
             target = float(min(max(value, self._lo[i]), self._hi[i]))
             if abs(target - value) > 1e-9:
                 clamps.append(Clamp(name, float(value), target))
@@ -133,7 +135,7 @@ class JointTrajectory:
     def retarget(self, joints: Mapping[str, float]) -> list[Clamp]:
         """Move the named joints to ``joints`` (clamped); the others keep their last target.
 
-        Unknown joint names raise KeyError so the caller can report them; nothing changes then.
+        Unknown joint names (KeyError) and non-finite values (ValueError) change nothing.
         """
         unknown = sorted(set(joints) - set(self.index))
         if unknown:
