@@ -11,13 +11,14 @@ import numpy as np
 import pytest
 from kinesphere.robots.agent.base import DiffBase, OmniBase, make_base, wrap_angle
 from kinesphere.robots.agent.controller import Controller
-from kinesphere.robots.agent.runtime import SETTLE_S, Agent
+from kinesphere.robots.agent.runtime import SETTLE_S, Agent, AgentOptions
 from kinesphere.robots.agent.safety import DRIVE_TTL_S, Safety, Verdict
 from kinesphere.robots.agent.trajectory import DEFAULT_MARGIN, JointTrajectory
 from kinesphere.robots.mjcf import platform_model
 from kinesphere.robots.platform import BaseSpec
 
 from kinesphere import zconfig
+from kinesphere.errors import KinesphereError
 from kinesphere.eurdf import JointLimit
 from kinesphere.protocol import Command, Drive
 
@@ -214,3 +215,11 @@ def test_a_body_caught_on_itself_is_reported_not_called_at_target() -> None:
         agent.close()
     assert status == "error"
     assert detail.startswith("blocked: right_w") and "self-contact" in detail
+
+
+@pytest.mark.parametrize("bad", [{"rate": 0.0}, {"state_rate": 1000.0}, {"speed": -1.0},
+                                 {"rate": math.inf}])
+def test_bad_options_are_user_errors(bad: dict[str, float]) -> None:
+    with pytest.raises(KinesphereError) as err:
+        AgentOptions(**bad)
+    assert err.value.code == "malformed"

@@ -19,6 +19,7 @@ accepted. E-stop and stop are never dropped. See ``safety.py`` for the safety ru
 from __future__ import annotations
 
 import logging
+import math
 import threading
 import time
 from collections import deque
@@ -63,6 +64,20 @@ class AgentOptions:
     groups: tuple[str, ...] = ()
     query_timeout_s: float = 1.0
     margin: float = DEFAULT_MARGIN
+
+    def __post_init__(self) -> None:
+        checks = (
+            (math.isfinite(self.rate) and self.rate > 0, f"rate must be > 0 Hz, got {self.rate}"),
+            (0 < self.state_rate <= self.rate,
+             f"state rate must be in (0, rate], got {self.state_rate}"),
+            (math.isfinite(self.speed) and self.speed >= 0,
+             f"speed must be >= 0 (0 = unpaced), got {self.speed}"),
+            (self.query_timeout_s > 0, f"query timeout must be > 0, got {self.query_timeout_s}"),
+            (self.margin >= 0, f"margin must be >= 0, got {self.margin}"),
+        )
+        for ok, message in checks:
+            if not ok:
+                raise KinesphereError("malformed", message)
 
 
 @dataclass
