@@ -32,8 +32,8 @@ from kinesphere.protocol import Command, SpatialCommand, encode
 from kinesphere.zconfig import free_port
 
 ROBOTS = {"baxter-1": "baxter", "nao-1": "nao", "youbot-1": "youbot"}
-POSE_A = ("limb_11", "distal_11", "left-high", 2)
-POSE_B = ("limb_11", "distal_11", "right-high", 2)
+POSE_A = ("limb_11", "distal_11", "right-high", 2)
+POSE_B = ("limb_11", "distal_11", "forward-high", 2)
 TTL_MS = 300
 AGENT_HZ = "250"  # three real-time agents, a databank and a router share two cores in CI
 
@@ -79,7 +79,7 @@ def test_fleet_through_router(tmp_path: Path, sup: Supervisor) -> None:
         # 1. a scripted client moves every robot to its own pose for the same command
         _send(sup, "send-a", cfg, POSE_A)
         until(lambda: all(at_pose(obs.states.last(r), a[r]) for r in ROBOTS), WAIT_S,
-              "every robot at pose A")
+              "every robot at pose A", explain=lambda: f"{obs.describe()}\nwanted {a}")
 
         # 2. the databank dies: robots keep running and holding their pose
         sup.kill("databank")
@@ -101,7 +101,8 @@ def test_fleet_through_router(tmp_path: Path, sup: Supervisor) -> None:
         until(lambda: sup.check() or "db-2" in obs.alive.databanks, WAIT_S, "databank back")
         _put(obs, POSE_B, seq=1)
         until(lambda: all(at_pose(obs.states.last(r), b[r]) for r in ROBOTS), WAIT_S,
-              "every robot at pose B after the restart")
+              "every robot at pose B after the restart",
+              explain=lambda: f"{obs.describe()}\nwanted {b}")
 
         # 5. a streaming client is killed: its robot stops within the TTL
         phrase = tmp_path / "drive.toml"

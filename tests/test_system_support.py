@@ -39,12 +39,14 @@ def databank_args(platforms: list[str]) -> list[str]:
     pytest.skip(f"no {'/'.join(platforms)} databanks in {SHIPPED_DBS} (or $KINESPHERE_TEST_DBS)")
 
 
-def until(cond: Callable[[], bool], timeout: float, what: str, every: float = 0.05) -> None:
-    """Poll ``cond`` until it holds; fail naming ``what`` after ``timeout`` seconds."""
+def until(cond: Callable[[], bool], timeout: float, what: str, every: float = 0.05,
+          explain: Callable[[], object] | None = None) -> None:
+    """Poll ``cond`` until it holds; fail naming ``what`` (and ``explain()``) after ``timeout``."""
     deadline = time.monotonic() + timeout
     while not cond():
         if time.monotonic() > deadline:
-            pytest.fail(f"timed out after {timeout:g} s waiting for {what}")
+            extra = f"\n{explain()}" if explain is not None else ""
+            pytest.fail(f"timed out after {timeout:g} s waiting for {what}{extra}")
         time.sleep(every)
 
 
@@ -120,6 +122,13 @@ class Observer:
 
         until(up, timeout, f"liveliness of {sorted(robots)} and databank={databank}")
         until(lambda: robots <= set(self.states.snapshot()), timeout, "first robot states")
+
+    def describe(self) -> str:
+        """The robots' last states, for failure messages."""
+        return "\n".join(
+            f"{rid}: {st.status} ({st.detail}) cmd {st.last_command_seq} "
+            f"q={dict(zip(st.joint_names, (round(v, 3) for v in st.q), strict=True))}"
+            for rid, st in sorted(self.states.snapshot().items()))
 
     def close(self) -> None:
         undeclare(*self._subs)  # type: ignore[arg-type]

@@ -117,7 +117,7 @@ def test_robot_and_phrase_options() -> None:
     robots = parse_robots("baxter,nao,baxter,youbot:yb")
     assert [(r.platform, r.robot_id) for r in robots] == [
         ("baxter", "baxter"), ("nao", "nao"), ("baxter", "baxter-2"), ("youbot", "yb")]
-    for bad in ("", "baxter:x,nao:x", "baxter:a/b"):
+    for bad in ("", "baxter:x,nao:x", "baxter:a/b", "nosuch"):
         with pytest.raises(KinesphereError):
             parse_robots(bad)
     shipped = ROOT / "clients" / "phrases"

@@ -41,7 +41,7 @@ def _qpos(pm: Any, state: RobotState) -> np.ndarray:
     """The model configuration of a reported state: its joints and its base pose."""
     from kinesphere.robots.mjcf import BASE_JOINTS
 
-    q = pm.neutral_qpos()
+    q: np.ndarray = pm.neutral_qpos()
     for name, value in zip(state.joint_names, state.q, strict=True):
         if name in pm.qpos_index:
             q[pm.qpos_index[name]] = value
@@ -51,26 +51,31 @@ def _qpos(pm: Any, state: RobotState) -> np.ndarray:
     return q
 
 
-def render_pose(state: RobotState, size: int = TILE) -> Image.Image:
-    """Render ``state``'s platform at ``state.q`` (and its base pose) with MuJoCo.
+def render_poses(states: Sequence[RobotState], size: int = TILE) -> list[Image.Image]:
+    """Render states of one platform (its joints and base pose) with MuJoCo, one camera.
 
     Uses the ECL's camera (same framing as its contact sheets) following the base; falls
-    back to a plain free camera where that module is not installed.
+    back to a plain free camera where that module is not installed. A software GL context
+    costs about as much as a frame, hence one camera for all of a robot's pictures.
     """
     os.environ.setdefault("MUJOCO_GL", "egl")
     from kinesphere.robots.mjcf import platform_model
 
-    pm = platform_model(state.platform)
-    qpos = _qpos(pm, state)
+    if not states:
+        return []
+    pm = platform_model(states[0].platform)
     try:
         from kinesphere.services.ecl.render import Camera, View, platform_view
     except ImportError:
-        return _render_plain(pm, qpos, size)
+        return [_render_plain(pm, _qpos(pm, st), size) for st in states]
     v = platform_view(pm)
-    x, y = state.base_pose[0], state.base_pose[1]
-    with Camera(pm, size, size, View((v.lookat[0] + x, v.lookat[1] + y, v.lookat[2]),
-                                     v.distance)) as cam:
-        return cam.shoot(qpos)
+    images: list[Image.Image] = []
+    with Camera(pm, size, size, View(v.lookat, v.distance)) as cam:
+        for st in states:
+            x, y = st.base_pose[0], st.base_pose[1]
+            cam.cam.lookat[:] = (v.lookat[0] + x, v.lookat[1] + y, v.lookat[2])
+            images.append(cam.shoot(_qpos(pm, st)))
+    return images
 
 
 def _render_plain(pm: Any, qpos: np.ndarray, size: int) -> Image.Image:
@@ -95,12 +100,10 @@ def _render_plain(pm: Any, qpos: np.ndarray, size: int) -> Image.Image:
     return Image.fromarray(np.asarray(pixels))
 
 
-def _robot_bounds(model: object, data: object) -> tuple[np.ndarray, float]:
+def _robot_bounds(m: Any, d: Any) -> tuple[np.ndarray, float]:
     """Centre and size of the robot's geoms (the floor plane excluded), to frame the camera."""
     import mujoco
 
-    m: mujoco.MjModel = model  # type: ignore[assignment]
-    d: mujoco.MjData = data  # type: ignore[assignment]
     keep = m.geom_type != mujoco.mjtGeom.mjGEOM_PLANE
     if not keep.any():
         return np.asarray(m.stat.center), float(m.stat.extent)
@@ -119,29 +122,40 @@ def _caption(img: Image.Image, lines: Sequence[str]) -> Image.Image:
     return out
 
 
-def final_poses_png(states: dict[str, RobotState], path: Path, size: int = TILE) -> Path:
-    """One tile per robot (sorted by id), captioned with id, platform and status."""
-    tiles = []
-    for rid in sorted(states):
-        st = states[rid]
+def pose_sheets(sheets: dict[Path, dict[str, RobotState]], size: int = TILE) -> list[Path]:
+    """Write each sheet: one tile per robot (sorted by id), captioned with id and status."""
+    ids = sorted({rid for states in sheets.values() for rid in states})
+    images: dict[tuple[Path, str], Image.Image] = {}
+    for rid in ids:
+        wanted = [(path, states[rid]) for path, states in sheets.items() if rid in states]
         try:
-            img = render_pose(st, size)
-        except Exception as exc:  # no GL here: still write the picture, say why
-            log.warning("cannot render %s (%s): %s", rid, st.platform, exc)
-            img = Image.new("RGB", (size, size), (235, 235, 235))
-            ImageDraw.Draw(img).text((10, size // 2), f"no render: {exc}"[:60], fill="black")
-        tiles.append(_caption(img, [f"{rid} ({st.platform})", f"{st.status}: {st.detail}"[:48]]))
-    if not tiles:
-        raise ValueError("no robot states to draw")
-    width = sum(t.width for t in tiles)
-    sheet = Image.new("RGB", (width, max(t.height for t in tiles)), "white")
-    x = 0
-    for t in tiles:
-        sheet.paste(t, (x, 0))
-        x += t.width
-    path.parent.mkdir(parents=True, exist_ok=True)
-    sheet.save(path)
-    return path
+            shots = render_poses([st for _, st in wanted], size)
+        except Exception as exc:  # no GL here: still write the pictures, say why
+            log.warning("cannot render %s: %s", rid, exc)
+            blank = Image.new("RGB", (size, size), (235, 235, 235))
+            ImageDraw.Draw(blank).text((10, size // 2), f"no render: {exc}"[:60], fill="black")
+            shots = [blank] * len(wanted)
+        for (path, st), img in zip(wanted, shots, strict=True):
+            images[path, rid] = _caption(
+                img, [f"{rid} ({st.platform})", f"{st.status}: {st.detail}"[:48]])
+    for path, states in sheets.items():
+        tiles = [images[path, rid] for rid in sorted(states)]
+        if not tiles:
+            raise ValueError(f"no robot states to draw in {path}")
+        sheet = Image.new("RGB", (sum(t.width for t in tiles), max(t.height for t in tiles)),
+                          "white")
+        x = 0
+        for t in tiles:
+            sheet.paste(t, (x, 0))
+            x += t.width
+        path.parent.mkdir(parents=True, exist_ok=True)
+        sheet.save(path)
+    return list(sheets)
+
+
+def final_poses_png(states: dict[str, RobotState], path: Path, size: int = TILE) -> Path:
+    """One sheet of every robot's pose, side by side."""
+    return pose_sheets({path: states}, size)[0]
 
 
 def _ticks(lo: float, hi: float, n: int = 5) -> list[float]:

@@ -16,12 +16,10 @@ from typing import Any
 from rich.console import Console
 
 from kinesphere.keyexpr import Keys
-from kinesphere.zconfig import session
+from kinesphere.zconfig import DEFAULT_ENDPOINT, session
 
 from .table import robot_table, state_dict, wide_console
 from .watch import StateRecorder, query_alive
-
-DEFAULT_CONNECT = "tcp/127.0.0.1:7447"
 
 
 def collect(
@@ -34,7 +32,7 @@ def collect(
     """Liveliness plus each robot's last state, as a JSON-ready dict."""
     keys = Keys(prefix)
     if connect is None and zenoh_config is None:
-        connect = [DEFAULT_CONNECT]
+        connect = [DEFAULT_ENDPOINT]
     if mode is None and zenoh_config is None:
         mode = "peer"
     listen: list[str] | None = [] if zenoh_config is None else None

@@ -29,7 +29,7 @@ from kinesphere.keyexpr import DEFAULT_PREFIX, Keys
 from kinesphere.protocol import RobotState
 from kinesphere.zconfig import LOOPBACK_ANY_PORT, close_session, open_hub, undeclare
 
-from .pictures import final_poses_png, trajectory_png
+from .pictures import pose_sheets, trajectory_png
 from .procs import ChildFailed, Supervisor
 from .table import robot_table, state_dict, wide_console
 from .watch import Alive, StateRecorder, is_settled, watch_alive
@@ -84,8 +84,14 @@ def parse_robots(text: str) -> list[Robot]:
     ids = [r.robot_id for r in robots]
     if not robots or len(set(ids)) != len(ids):
         raise KinesphereError("malformed", f"--robots needs distinct robots, got {text!r}")
+    from kinesphere.robots.platform import platform_names
+
+    known = platform_names()
     for r in robots:
         Keys().command(r.robot_id)  # a valid key segment
+        if r.platform not in known and not Path(r.platform).is_dir():
+            raise KinesphereError(
+                "unknown_platform", f"unknown platform {r.platform!r}; valid: {', '.join(known)}")
     return robots
 
 
@@ -162,6 +168,7 @@ class Demo:
         self.timings: dict[str, float] = {}
         self._t0 = time.monotonic()
         self._live: Live | None = None
+        self._stopped: list[int] | None = None
 
     # --- phases -----------------------------------------------------------------------------
 
@@ -264,12 +271,12 @@ class Demo:
     def pictures(self) -> dict[str, str]:
         out = self.opts.out
         states = self.recorder.snapshot()
-        files = {"final_poses": str(final_poses_png(states, out / "final_poses.png"))}
+        final, peak = out / "final_poses.png", out / "peak_poses.png"
+        pose_sheets({final: states, peak: peak_states(self.recorder)})
+        files = {"final_poses": str(final), "peak_poses": str(peak)}
         with self.recorder.changed:
             tracks = {rid: (t.last.joint_names, list(t.times), list(t.qs))
                       for rid, t in self.recorder.tracks.items()}
-        files["peak_poses"] = str(final_poses_png(peak_states(self.recorder),
-                                                  out / "peak_poses.png"))
         for rid, (names, times, qs) in tracks.items():
             files[f"trajectory_{rid}"] = str(
                 trajectory_png(rid, names, times, qs, out / f"trajectory_{rid}.png"))
@@ -290,6 +297,8 @@ class Demo:
 
         A second Ctrl-C is ignored meanwhile: cleaning up takes at most the grace period.
         """
+        if self._stopped is not None:
+            return self._stopped
         previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
         try:
             codes = self.sup.stop_all()
@@ -298,7 +307,7 @@ class Demo:
         undeclare(*getattr(self, "_subs", []))
         self.recorder.close()
         close_session(getattr(self, "_session", None))
-        left = self.sup.leftovers()
+        left = self._stopped = self.sup.leftovers()
         bad = {n: c for n, c in codes.items() if c not in (0, None) and not n.startswith("play")}
         if bad:
             self.console.log(f"[yellow]exit codes on shutdown: {bad}")
@@ -328,6 +337,8 @@ class Demo:
                     self._live.stop()
                     self._live = None
                 self.console.print(self._table())
+                if not o.keep_running:
+                    self.shutdown()  # the states are recorded: render on a quiet machine
                 self.pictures()
                 for rid, seen in self.recorder.problems().items():
                     for status, detail in seen.items():

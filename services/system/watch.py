@@ -10,6 +10,7 @@ import threading
 import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
+from typing import Any
 
 import zenoh
 
@@ -51,7 +52,7 @@ class Alive:
             return self.changed.wait_for(lambda: pred(self), timeout)
 
 
-def watch_alive(session: zenoh.Session, keys: Keys) -> tuple[Alive, list[object]]:
+def watch_alive(session: zenoh.Session, keys: Keys) -> tuple[Alive, list[Any]]:
     """Subscribe (with history) to every databank and robot token; undeclare the list after."""
     alive = Alive(keys)
     lv = session.liveliness()
