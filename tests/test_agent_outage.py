@@ -1,15 +1,21 @@
-"""Databank outage: the robot keeps its last pose and says so; it recovers on its own.
+"""The agent and the databank's life: outages, recovery, and poses recorded while it runs.
 
-Uses its own hub and databank process (the other tests share one) because it kills it.
+These use their own hub and databank process (the other tests share one): they stop it, or
+write to it.
 """
 
 from __future__ import annotations
 
+import shutil
 from collections.abc import Iterator
+from pathlib import Path
 
 import pytest
 import zenoh
 from test_agent_support import (
+    KEYS,
+    ROOT,
+    WAIT_S,
     Databank,
     Operator,
     joints_close,
@@ -17,7 +23,7 @@ from test_agent_support import (
 )
 
 from kinesphere import zconfig
-from kinesphere.protocol import SpatialCommand
+from kinesphere.protocol import RecordRequest, SpatialCommand, encode
 
 
 @pytest.fixture
@@ -73,3 +79,42 @@ def test_outage_keeps_last_pose_and_recovers_without_restart(
         watch.after(seq, lambda s: s.status == "idle" and joints_close(s, target2, 5e-3),
                     "the second pose after recovery")
         op.close()
+
+
+def test_cache_is_per_databank_version(
+    own_hub: tuple[zenoh.Session, str], tmp_path: Path
+) -> None:
+    """A repeated command needs no round trip; a recorded pose reaches the robot at once."""
+    session, endpoint = own_hub
+    db = tmp_path / "youbot.sqlite"
+    shutil.copy(ROOT / "services" / "ecl" / "data" / "youbot.sqlite", db)
+    bank = Databank(endpoint, session, ["--db", f"youbot={db}", "--allow-writes"])
+    bank.start()
+    try:
+        entry = bank.catalogue("youbot").limbs[0]
+        direction = [d for d in entry.directions if d != "place-middle"][0]
+        part = (entry.limb, entry.origin, direction, 2.0)
+        old = bank.query("youbot", SpatialCommand(*part))
+        with running_agent(endpoint, "youbot", speed=4.0) as (agent, watch):
+            op = Operator(session, agent.robot_id)
+            for _ in range(3):
+                seq = op.send(part)
+                watch.after(seq, lambda s: s.status == "idle"
+                            and joints_close(s, old.joints, 5e-3), "at the stored pose")
+            assert agent.resolver.queries == 1, "repeats are answered from the cache"
+            version = agent.resolver.version
+
+            new = {j: v + (0.2 if v < 0.5 else -0.2) for j, v in old.joints.items()}
+            request = RecordRequest(limb=part[0], origin=part[1], direction=direction, size=2,
+                                    joints=new)
+            replies = list(session.get(KEYS.record("youbot"), payload=encode(request),
+                                       timeout=WAIT_S))
+            assert replies and replies[0].ok is not None, "recorded"
+            seq = op.send(part)
+            watch.after(seq, lambda s: s.status == "idle" and joints_close(s, new, 5e-3),
+                        "at the newly recorded pose")
+            assert agent.resolver.version != version
+            assert agent.resolver.queries == 2
+            op.close()
+    finally:
+        bank.stop()

@@ -123,7 +123,11 @@ class Resolver:
         return wait_matching(self._catalogue, timeout_s)
 
     def _on_changed(self, sample: zenoh.Sample) -> None:
-        with self._wake:  # the worker re-reads the catalogue (and its version) right away
+        """A record happened: forget now (a command right behind must miss the cache), and let
+        the worker re-read the catalogue for the new version."""
+        with self._wake:
+            self._cache = {}
+            self.version = None
             self._stale = True
             self._wake.notify()
 
