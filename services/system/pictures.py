@@ -23,6 +23,8 @@ log = logging.getLogger(__name__)
 logging.getLogger("OpenGL").setLevel(logging.WARNING)  # MuJoCo's renderer imports PyOpenGL
 
 TILE = 360
+MARGIN = 1.35
+"""Camera distance relative to the ECL's tight framing of the pose."""
 PALETTE = [
     (31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40), (148, 103, 189),
     (140, 86, 75), (227, 119, 194), (127, 127, 127), (188, 189, 34), (23, 190, 207),
@@ -54,27 +56,40 @@ def _qpos(pm: Any, state: RobotState) -> np.ndarray:
 def render_poses(states: Sequence[RobotState], size: int = TILE) -> list[Image.Image]:
     """Render states of one platform (its joints and base pose) with MuJoCo, one camera.
 
-    Uses the ECL's camera (same framing as its contact sheets) following the base; falls
-    back to a plain free camera where that module is not installed. A software GL context
-    costs about as much as a frame, hence one camera for all of a robot's pictures.
+    Uses the ECL's camera (the look of its contact sheets), framed on the robot as if at the
+    origin and then moved with its base; falls back to a plain free camera where that module
+    is not available. A software GL context costs about a frame: one camera per robot.
     """
     os.environ.setdefault("MUJOCO_GL", "egl")
-    from kinesphere.robots.mjcf import platform_model
+    from kinesphere.robots.mjcf import BASE_JOINTS, platform_model
 
     if not states:
         return []
     pm = platform_model(states[0].platform)
     try:
-        from kinesphere.services.ecl.render import Camera, View, platform_view
-    except ImportError:
+        from kinesphere.services.ecl.render import Camera, View, frame
+    except ImportError as exc:
+        log.info("ECL camera not available (%s): plain camera", exc)
         return [_render_plain(pm, _qpos(pm, st), size) for st in states]
-    v = platform_view(pm)
     images: list[Image.Image] = []
-    with Camera(pm, size, size, View(v.lookat, v.distance)) as cam:
+    cam = None
+    try:
         for st in states:
-            x, y = st.base_pose[0], st.base_pose[1]
-            cam.cam.lookat[:] = (v.lookat[0] + x, v.lookat[1] + y, v.lookat[2])
-            images.append(cam.shoot(_qpos(pm, st)))
+            qpos = _qpos(pm, st)
+            at_origin = qpos.copy()
+            for name in BASE_JOINTS:
+                if name in pm.qpos_index:
+                    at_origin[pm.qpos_index[name]] = 0.0
+            v = frame(pm, [at_origin])
+            if cam is None:
+                cam = Camera(pm, size, size, View(v.lookat, v.distance))
+            cam.cam.lookat[:] = (v.lookat[0] + st.base_pose[0], v.lookat[1] + st.base_pose[1],
+                                 v.lookat[2])
+            cam.cam.distance = MARGIN * v.distance  # room for the arm to move in peak poses
+            images.append(cam.shoot(qpos))
+    finally:
+        if cam is not None:
+            cam.close()
     return images
 
 

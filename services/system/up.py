@@ -275,7 +275,9 @@ class Demo:
         pose_sheets({final: states, peak: peak_states(self.recorder)})
         files = {"final_poses": str(final), "peak_poses": str(peak)}
         with self.recorder.changed:
-            tracks = {rid: (t.last.joint_names, list(t.times), list(t.qs))
+            # the base's x and y ride along as two more series (the sweep drives while reaching)
+            tracks = {rid: ([*t.last.joint_names, "base x", "base y"], list(t.times),
+                            [[*q, b[0], b[1]] for q, b in zip(t.qs, t.bases, strict=True)])
                       for rid, t in self.recorder.tracks.items()}
         for rid, (names, times, qs) in tracks.items():
             files[f"trajectory_{rid}"] = str(
