@@ -173,7 +173,8 @@ def scale(endpoint: str, hub: zenoh.Session) -> None:
         states.setdefault(st.robot_id, []).append(st.stamp_ns)
 
     sub = hub.declare_subscriber(KEYS.state("*"), on_state)
-    for mode, counts in (("process", (1, 2, 4, 8, 12, 16)), ("thread", (1, 4, 8, 16, 24, 32, 48))):
+    for mode, counts in (("process", (1, 2, 4, 8, 12, 16, 24)),
+                         ("thread", (1, 4, 8, 16, 24, 32, 48))):
         best = 0
         for n in counts:
             ids = [f"scale-{mode}-{n}-{i}" for i in range(n)]
