@@ -114,7 +114,7 @@ class Supervisor:
             raise ValueError(f"child {name!r} is already running")
         self.log_dir.mkdir(parents=True, exist_ok=True)
         log_path = self.log_dir / f"{name}.log"
-        log_file = open(log_path, "ab")  # noqa: SIM115 - closed in stop()
+        log_file = open(log_path, "ab")  # closed in stop()
         argv = kinesphere_argv(*args)
         proc = subprocess.Popen(
             argv,
@@ -123,7 +123,7 @@ class Supervisor:
             stderr=subprocess.STDOUT,
             env=self.env,
             start_new_session=True,
-            preexec_fn=_PREEXEC,  # noqa: PLW1509 - only a prctl syscall, see _pdeathsig
+            preexec_fn=_PREEXEC,  # only a prctl syscall, see _pdeathsig
         )
         child = Child(name, argv, proc, log_path, log_file)
         self.children[name] = child

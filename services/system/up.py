@@ -29,7 +29,6 @@ from kinesphere.keyexpr import DEFAULT_PREFIX, Keys
 from kinesphere.protocol import RobotState
 from kinesphere.zconfig import LOOPBACK_ANY_PORT, close_session, open_hub, undeclare
 
-from .pictures import pose_sheets, trajectory_png
 from .procs import ChildFailed, Supervisor
 from .table import robot_table, state_dict, wide_console
 from .watch import Alive, StateRecorder, is_settled, watch_alive
@@ -269,6 +268,8 @@ class Demo:
             self.console.log("[yellow]some robots still moving; pictures show them mid-motion")
 
     def pictures(self) -> dict[str, str]:
+        from .pictures import pose_sheets, trajectory_png  # Pillow and MuJoCo rendering
+
         out = self.opts.out
         states = self.recorder.snapshot()
         final, peak = out / "final_poses.png", out / "peak_poses.png"
