@@ -19,7 +19,7 @@ $(STAMP): pyproject.toml setup.py
 install: $(STAMP)
 
 demo: $(STAMP)
-	$(BIN)/kinesphere describe all
+	$(BIN)/kinesphere up --headless
 
 test: $(STAMP)
 	$(BIN)/ruff check kinesphere services clients robots tests bench
