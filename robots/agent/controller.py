@@ -14,7 +14,7 @@ from collections.abc import Callable
 
 import mujoco
 import numpy as np
-from kinesphere.robots.agent.base import BaseController, make_base
+from kinesphere.robots.agent.base import BaseController, make_base, wrap_angle
 from kinesphere.robots.agent.trajectory import DEFAULT_MARGIN, JointTrajectory
 from kinesphere.robots.mjcf import BASE_JOINTS, PlatformModel
 
@@ -99,10 +99,11 @@ class Controller:
         return self.data.qvel[self._dadr].tolist()  # type: ignore[no-any-return]
 
     def base_pose(self) -> list[float]:
-        """Measured ``[x, y, yaw]`` of the base (zeros for a fixed base)."""
+        """Measured ``[x, y, yaw]`` of the base, yaw in (-pi, pi] (zeros for a fixed base)."""
         if self.base is None:
             return [0.0, 0.0, 0.0]
-        return self.data.qpos[self._base_q].tolist()  # type: ignore[no-any-return]
+        x, y, yaw = self.data.qpos[self._base_q].tolist()
+        return [x, y, wrap_angle(yaw)]
 
     def commanded_base_yaw(self) -> float | None:
         return None if self.base is None else float(self.base.pose[2])
