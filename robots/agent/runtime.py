@@ -7,9 +7,8 @@ state every ``1/state_rate`` s of robot time. Commands whose poses are cached ar
 the very step that drains them.
 
 Clock: the loop's own simulated time drives the trajectories and the watchdog. ``speed`` sets
-how it is paced: 1 = real time (wall clock), k = k times faster, 0 = as fast as possible (tests
-and benchmarks). When a step overruns, the loop catches up; when it is more than
-:data:`BEHIND_S` late it gives up the lost time, counts a slip and logs that it fell behind.
+how it is paced (``pacing.py``): 1 = real time (wall clock), k = k times faster, 0 = as fast
+as possible (tests and benchmarks).
 
 Ordering: per ``sender``, a command older than the newest one seen (lower or equal ``seq`` *and*
 no later ``sent_ns``) is dropped as stale; a restarted client (seq from 0, newer clock) is
@@ -24,12 +23,13 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 import zenoh
 from kinesphere.robots.agent.controller import Controller
+from kinesphere.robots.agent.pacing import LoopStats, run_paced
 from kinesphere.robots.agent.resolver import Answer, Resolver, parts_key
 from kinesphere.robots.agent.safety import Safety, Verdict
 from kinesphere.robots.agent.trajectory import DEFAULT_MARGIN
@@ -43,8 +43,6 @@ from kinesphere.zconfig import undeclare
 
 log = logging.getLogger(__name__)
 
-BEHIND_S = 0.05
-"""Lag after which the loop stops catching up and lets robot time slip behind wall time."""
 BLOCKED_TOL = 0.05
 """rad (m): a joint this far from where its finished trajectory ended is blocked."""
 SETTLE_S = 0.2
@@ -78,17 +76,6 @@ class AgentOptions:
         for ok, message in checks:
             if not ok:
                 raise KinesphereError("malformed", message)
-
-
-@dataclass
-class LoopStats:
-    """What the loop measured about itself (benchmarks and the falling-behind report)."""
-
-    steps: int = 0
-    late: int = 0  # steps that started after their deadline
-    slips: int = 0  # times the loop gave up catching up
-    max_lag_s: float = 0.0
-    costs_s: deque[float] = field(default_factory=lambda: deque(maxlen=20_000))
 
 
 @dataclass
@@ -206,40 +193,20 @@ class Agent:
     def run(self, stop: threading.Event | None = None, on_tick: Callable[[], None] | None = None
             ) -> None:
         """Step paced by ``options.speed`` until :meth:`close` (or ``stop`` is set)."""
-        stop_event = self._stop
         period = self.controller.dt / self.options.speed if self.options.speed > 0 else 0.0
-        stats = self.stats
-        clock = time.perf_counter
-        next_t = clock()
-        last_warn = last_error = -1e9
-        while not stop_event.is_set() and not (stop is not None and stop.is_set()):
-            t0 = clock()
-            try:
-                self.tick()
-                if on_tick is not None:
-                    on_tick()
-            except Exception as exc:  # a robot that stops stepping must still say why
-                if t0 - last_error > 5.0:
-                    last_error = t0
-                    log.exception("agent %s: control step failed", self.robot_id)
-                self._set(Status.ERROR, f"internal: control step failed: {exc!r}")
-            stats.costs_s.append(clock() - t0)
-            if period == 0.0:
-                continue
-            next_t += period
-            delay = next_t - clock()
-            if delay > 0.0:
-                time.sleep(delay)
-                continue
-            stats.late += 1
-            stats.max_lag_s = max(stats.max_lag_s, -delay)
-            if -delay > BEHIND_S:
-                stats.slips += 1
-                next_t = clock()
-                if t0 - last_warn > 5.0:
-                    last_warn = t0
-                    log.warning("agent %s falls behind real time: %.0f ms late (%d slips)",
-                                self.robot_id, -delay * 1e3, stats.slips)
+
+        def step() -> None:
+            self.tick()
+            if on_tick is not None:
+                on_tick()
+
+        def stopped() -> bool:
+            return self._stop.is_set() or (stop is not None and stop.is_set())
+
+        def failed(exc: Exception) -> None:
+            self._set(Status.ERROR, f"internal: control step failed: {exc!r}")
+
+        run_paced(step, period, stopped, self.stats, f"agent {self.robot_id}", failed)
 
     def tick(self) -> None:
         """One control cycle: commands, watchdog, physics, and state when due."""
