@@ -70,6 +70,9 @@ def test_targets_are_clamped_with_margin_and_reported() -> None:
     assert traj.position[0] == pytest.approx(1.0 - DEFAULT_MARGIN)
     traj.retarget({"a": 0.0})
     assert not traj.clamped
+    at_limit = traj.retarget({"b": 2.0})  # a pose at a limit: moved off it, not "clamped"
+    assert at_limit[0].target == pytest.approx(2.0 - DEFAULT_MARGIN) and not at_limit[0].beyond
+    assert not traj.clamped
     with pytest.raises(KeyError):
         traj.retarget({"nope": 0.0})
     with pytest.raises(ValueError):

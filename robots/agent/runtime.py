@@ -337,9 +337,10 @@ class Agent:
             return
         if pose.translation is not None and ctrl.base is not None and not ctrl.base.driving:
             ctrl.base.translate(pose.translation, yaw)
-        if clamps:
-            detail = "clamped " + ", ".join(f"{c.joint} {c.requested:+.3f}->{c.target:+.3f}"
-                                             for c in clamps)
+        beyond = [c for c in clamps if c.beyond]
+        if beyond:
+            detail = "clamped " + ", ".join(f"{c.joint} {c.requested:+.4f}->{c.target:+.4f}"
+                                             for c in beyond)
             log.info("agent %s: %s", self.robot_id, detail)
         else:
             detail = f"to {pose.limb}/{pose.origin}/{pose.direction}/{pose.size:g}"

@@ -36,17 +36,24 @@ log = logging.getLogger(__name__)
 
 DEFAULT_MARGIN = 0.01
 """Target clamp margin inside each limit, rad (or m); shrunk for joints with a tiny range."""
+LIMIT_SLACK = 1e-6
+"""A request this close outside a limit is rounding, not a bad target."""
 DEFAULT_VELOCITY = 1.0
 """Velocity limit for a joint whose eURDF gives none (rad/s or m/s)."""
 
 
 @dataclass(frozen=True)
 class Clamp:
-    """A target moved inside the limits: what was asked and what will be reached."""
+    """A target moved inside the limits: what was asked and what will be reached.
+
+    ``beyond`` is true when the request lay outside the joint's limits themselves; moving an
+    in-limit target off the margin is routine (ECL poses often sit at a limit) and not news.
+    """
 
     joint: str
     requested: float
     target: float
+    beyond: bool
 
 
 def clamp_margin(limit: JointLimit, margin: float = DEFAULT_MARGIN) -> float:
@@ -128,7 +135,9 @@ class JointTrajectory:
                 raise ValueError(f"{name} = {value}")
             target = float(min(max(value, self._lo[i]), self._hi[i]))
             if abs(target - value) > 1e-9:
-                clamps.append(Clamp(name, float(value), target))
+                lim = self.limits[i]
+                beyond = not lim.lower - LIMIT_SLACK <= value <= lim.upper + LIMIT_SLACK
+                clamps.append(Clamp(name, float(value), target, beyond))
             out[name] = target
         return out, clamps
 
@@ -145,7 +154,7 @@ class JointTrajectory:
             self.target[self.index[name]] = value
         for name in targets:
             self.clamped.pop(name, None)
-        self.clamped.update({c.joint: c for c in clamps})
+        self.clamped.update({c.joint: c for c in clamps if c.beyond})
         self.stopping = False
         self._inp.control_interface = ControlInterface.Position
         self._inp.synchronization = Synchronization.Time
