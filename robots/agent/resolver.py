@@ -177,7 +177,7 @@ class Resolver:
                     request.callback(request.ticket, answer)
                 except Exception:  # the loop's inbox append cannot fail; never kill the worker
                     log.exception("resolver callback failed")
-            if request is None or stale or not self.reachable:
+            if request is None or stale or not self.reachable or time.monotonic() >= next_check:
                 self.refresh()
                 next_check = time.monotonic() + (self.refresh_s if self.reachable else self.probe_s)
 
