@@ -59,6 +59,7 @@ class Sequencer:
         deadman: bool = True,
         estop: bool = False,
         stop: bool = False,
+        release: bool = False,
     ) -> Command:
         cmd = Command(
             seq=self.seq,
@@ -69,6 +70,7 @@ class Sequencer:
             ttl_ms=self.ttl_ms,
             estop=estop,
             stop=stop,
+            release=release,
             sender=self.sender,
         )
         self.seq += 1
@@ -84,7 +86,7 @@ class Sequencer:
 
     def release(self) -> Command:
         """Clears a robot's e-stop latch; robots move again only on the next command."""
-        return self.command(deadman=True)
+        return self.command(deadman=True, release=True)
 
 
 @dataclass(frozen=True)

@@ -7,10 +7,9 @@ robot that stops hearing it holds within ``ttl_ms``. When the operator lets go, 
 disconnects, the target changes or the client exits, one final stop goes out.
 
 E-stop goes to every robot (``{p}/robot/*/command``) and latches here too. Robots clear their
-latch on any deadman command, so a client that kept streaming would release an e-stop it did
-not press: the loop stops streaming while any targeted robot reports ``estop``, and after an
-e-stop, a release or a disconnect it streams again only after the deadman was let go and
-pressed anew.
+latch only on a command with ``release=True``; the loop also stops streaming while any targeted
+robot reports ``estop`` (pointless commands would only be ignored), and after an e-stop, a
+release or a disconnect it streams again only after the deadman was let go and pressed anew.
 
 A direction the selected limb has no poses for (per the targets' catalogues) is replaced by
 the nearest available one, and the HUD shows both, so the robot never just refuses a stick.

@@ -148,7 +148,9 @@ class Command(Message, tag="command", kw_only=True):
     ``seq`` grows per ``sender``; ``sent_ns`` is the sender's ``time.time_ns()`` (latency
     only). ``deadman`` false means the operator let go: the robot holds. The robot holds when
     no newer command arrives within ``ttl_ms`` of receiving this one. ``estop`` latches an
-    emergency stop; ``stop`` halts motion in a controlled way.
+    emergency stop; ``stop`` halts motion in a controlled way. Only a command with
+    ``release`` clears a latched e-stop (and moves nothing): a client that keeps streaming
+    ordinary commands can never release an e-stop it did not mean to.
     """
 
     seq: NonNegInt
@@ -159,6 +161,7 @@ class Command(Message, tag="command", kw_only=True):
     ttl_ms: NonNegInt
     estop: bool = False
     stop: bool = False
+    release: bool = False
     sender: str = ""
 
 

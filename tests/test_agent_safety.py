@@ -127,8 +127,12 @@ def test_estop_halts_every_robot_latches_and_releases(
         yw.after(seq, status("estop"), "youbot still latched")
         assert not youbot.controller.moving
 
-        # release (estop=False, stop=False, deadman=True): clears the latch, moves nothing
+        # a streaming client (deadman held, no release flag) can never undo the e-stop
         seq = base.send(drive=("forward", 1.0), ttl_ms=10_000)
+        yw.after(seq, status("estop"), "youbot still latched under a deadman stream")
+        assert not youbot.controller.moving
+        # release=True clears the latch and moves nothing
+        seq = base.send(drive=("forward", 1.0), ttl_ms=10_000, release=True)
         yw.after(seq, status("idle"), "youbot released")
         assert not youbot.controller.moving
         seq = base.send(drive=("forward", 1.0), ttl_ms=10_000)

@@ -235,12 +235,12 @@ class Operator:
 
     def send(self, *parts: tuple[str, str, str, float], drive: tuple[str, float] | None = None,
              deadman: bool = True, ttl_ms: int = 0, estop: bool = False,
-             stop: bool = False) -> int:
+             stop: bool = False, release: bool = False) -> int:
         self.seq += 1
         self.pub.put(encode(Command(
             seq=self.seq, sent_ns=time.time_ns(), parts=[SpatialCommand(*p) for p in parts],
             drive=Drive(*drive) if drive else None, deadman=deadman, ttl_ms=ttl_ms,
-            estop=estop, stop=stop, sender=self.sender)))
+            estop=estop, stop=stop, release=release, sender=self.sender)))
         return self.seq
 
     def raw(self, payload: bytes) -> None:

@@ -75,7 +75,7 @@ def test_estop_reaches_every_robot_and_release_one(
         boxes[r].wait(lambda g: g.cmd.estop and g.key == KEYS.command("*"), f"e-stop at {r}")
     assert cli(hub[1], "estop", "--release", "--target", "c2") == 0
     release = boxes["c2"].wait(lambda g: not g.cmd.estop, "the release").cmd
-    assert release.deadman and not release.stop and release.parts == []
+    assert release.release and release.deadman and not release.stop and release.parts == []
 
 
 def test_play_a_phrase_file(

@@ -8,10 +8,10 @@ The rules (also in ``docs/protocol.md`` terms):
 * ``estop=True`` halts everything in place — joints and base brake with the fastest
   jerk-limited stop — and **latches**. Wildcard puts on ``{prefix}/robot/*/command`` reach
   every robot, so one message stops the fleet. While latched every command is ignored except
-  the release: a Command with ``estop=False``, ``stop=False`` and ``deadman=True``. The release
-  only clears the latch; its parts and drive are *not* executed, so the robot moves again only
-  on the next command (a deliberate second message, never a stale stream that happened to be
-  in flight when the e-stop was pressed).
+  the release: a Command with ``release=True`` (and ``estop=False``). Ordinary commands, even
+  with the deadman held, never release it, so a client that keeps streaming cannot undo an
+  e-stop somebody else pressed. The release only clears the latch; its parts and drive are
+  *not* executed, so the robot moves again only on the next command.
 * ``stop=True`` halts everything in place the same way, without latching.
 * ``deadman=False`` means the operator let go: everything brakes to rest and holds; the
   command's parts and drive are ignored.
@@ -58,7 +58,7 @@ class Safety:
             self.deadline = None
             return Verdict.ESTOP
         if self.estopped:
-            if not cmd.stop and cmd.deadman:
+            if cmd.release:
                 self.estopped = False
                 return Verdict.RELEASE
             return Verdict.LATCHED
