@@ -1,0 +1,195 @@
+"""mink building blocks for the ECL generator: the tip point, its task and two limits.
+
+Why custom limits: mink's CollisionAvoidanceLimit keeps only geom pairs that pass the
+contype/conaffinity test and ignores the model's excluded body pairs; the generator needs
+exactly the compiled model's self-collision rules, plus the floor, which the robot never
+touches in simulation (so it fails that test) but which a pose must not dip below. The floor
+is handled with sample points on each geom, because a single witness point per pair lets a
+flat foot rotate its toe into the ground.
+"""
+
+from __future__ import annotations
+
+import mink
+import mujoco
+import numpy as np
+from mink.limits.collision_avoidance_limit import compute_contact_normal_jacobian
+
+MAX_STEP = 0.4  # limb spans: the point task's error is clipped so big jumps cannot fly off
+CLEARANCE = 0.01  # metres kept between the limb and other geoms (less if closer at neutral)
+DETECT = 0.08  # metres at which a distance constraint becomes active (> one step)
+GAIN = 0.5  # task gains below 1 damp the period-2 dither of dead-beat steps
+LIMIT_GAIN = 0.85  # fraction of the remaining gap a limit lets one step close
+TIE = 0.01  # metres: geom ends this close to the farthest one count as the same end
+
+
+def tip_point(model: mujoco.MjModel, body: int) -> np.ndarray:
+    """The distal end of a link, in its body frame.
+
+    Each collision geom offers the two ends of its main axis; the end farthest from the body
+    origin wins, and ends within TIE metres of it are averaged, so a symmetric link (a pair
+    of flippers on one axle) gets its end on the plane of symmetry, not on one side. A
+    zero-size frame (no collision geometry) is its own end: the body origin.
+    """
+    ends: list[np.ndarray] = []
+    for g in range(model.ngeom):
+        if model.geom_bodyid[g] != body or model.geom_contype[g] == 0:
+            continue
+        centre, size, kind = model.geom_pos[g], model.geom_size[g], model.geom_type[g]
+        rot = _rotation(model, g)
+        if kind == mujoco.mjtGeom.mjGEOM_SPHERE:
+            norm = float(np.linalg.norm(centre))
+            axis = centre / norm if norm > 1e-9 else np.array([0.0, 0.0, 1.0])
+            half = float(size[0])
+        elif kind == mujoco.mjtGeom.mjGEOM_BOX:
+            k = int(np.argmax(size))
+            axis, half = rot[:, k], float(size[k])
+        else:  # cylinder, capsule, ellipsoid: the local z axis
+            cap = float(size[0]) if kind == mujoco.mjtGeom.mjGEOM_CAPSULE else 0.0
+            axis, half = rot[:, 2], float(size[1]) + cap
+        ends += [centre + axis * half, centre - axis * half]
+    if not ends:
+        return np.zeros(3)
+    norms = np.array([float(np.linalg.norm(e)) for e in ends])
+    chosen = [e for e, n in zip(ends, norms, strict=True) if n >= norms.max() - TIE]
+    return np.asarray(np.mean(chosen, axis=0))
+
+
+class PointTask(mink.Task):
+    """Drive a point fixed on a body to a world position (position only, clipped steps).
+
+    The error is measured in units of ``scale`` (the limb's span), so the same weights and
+    damping behave alike on a 0.2 m NAO forearm and a 1.2 m Baxter arm.
+    """
+
+    def __init__(
+        self, model: mujoco.MjModel, body: int, point: np.ndarray, scale: float = 1.0
+    ) -> None:
+        super().__init__(cost=np.full(3, 1.0 / scale), gain=GAIN, lm_damping=1e-3)
+        self.max_step = MAX_STEP * scale
+        self.body = body
+        self.point = point
+        self.target = np.zeros(3)
+        self._jac = np.zeros((3, model.nv))
+
+    def position(self, configuration: mink.Configuration) -> np.ndarray:
+        data = configuration.data
+        return np.asarray(data.xpos[self.body] + data.xmat[self.body].reshape(3, 3) @ self.point)
+
+    def compute_error(self, configuration: mink.Configuration) -> np.ndarray:
+        err = self.position(configuration) - self.target
+        norm = float(np.linalg.norm(err))
+        return err if norm <= self.max_step else err * (self.max_step / norm)
+
+    def compute_jacobian(self, configuration: mink.Configuration) -> np.ndarray:
+        pos = self.position(configuration)
+        mujoco.mj_jac(configuration.model, configuration.data, self._jac, None, pos, self.body)
+        return self._jac
+
+
+class PairDistanceLimit(mink.Limit):
+    """Keep listed geom pairs apart, like mink's CollisionAvoidanceLimit.
+
+    The caller lists the pairs (the compiled model's collision rules); the constraint rows are
+    built with mink's own Jacobian helper.
+    """
+
+    def __init__(
+        self, model: mujoco.MjModel, data: mujoco.MjData, pairs: list[tuple[int, int]]
+    ) -> None:
+        self.model = model
+        self.pairs = np.array(pairs, dtype=int).reshape(-1, 2)
+        self._rsum = model.geom_rbound[self.pairs[:, 0]] + model.geom_rbound[self.pairs[:, 1]]
+        self._fromto = np.zeros(6)
+        self._clearance = np.array([  # pairs already close at neutral keep half that gap
+            min(CLEARANCE, 0.5 * mujoco.mj_geomDistance(model, data, int(a), int(b),
+                                                        CLEARANCE * 2, self._fromto))
+            for a, b in self.pairs
+        ])
+        self._normal = np.zeros(3)
+        self._jac1 = np.zeros((3, model.nv))
+        self._jac2 = np.zeros((3, model.nv))
+
+    def compute_qp_inequalities(
+        self, configuration: mink.Configuration, dt: float
+    ) -> mink.Constraint:
+        model, data = self.model, configuration.data
+        xpos = data.geom_xpos
+        g1, g2 = self.pairs[:, 0], self.pairs[:, 1]
+        gap = np.linalg.norm(xpos[g1] - xpos[g2], axis=1) - self._rsum
+        near = np.where(gap <= DETECT)[0]
+        rows, bounds = [], []
+        for idx in near:
+            a, b = int(g1[idx]), int(g2[idx])
+            dist = mujoco.mj_geomDistance(model, data, a, b, DETECT, self._fromto)
+            if dist >= DETECT - 1e-12:
+                continue
+            row = compute_contact_normal_jacobian(
+                model, data, a, b, self._fromto, self._normal, self._jac1, self._jac2
+            )
+            sign = -1.0 if dist >= 0 else 1.0
+            rows.append(sign * row)
+            bounds.append(max(dist - self._clearance[idx], 0.0) * LIMIT_GAIN / dt)
+        if not rows:
+            return mink.Constraint()
+        return mink.Constraint(G=np.vstack(rows), h=np.array(bounds))
+
+
+class FloorLimit(mink.Limit):
+    """Keep sample points of the limb's geoms at or above z = 0 (corners, rims, lowest points)."""
+
+    def __init__(self, model: mujoco.MjModel, geoms: list[int]) -> None:
+        bodies, points, offsets = [], [], []
+        for g in geoms:
+            for p, r in _samples(model, g):
+                bodies.append(int(model.geom_bodyid[g]))
+                points.append(p)
+                offsets.append(r)
+        self.bodies = np.array(bodies, dtype=int)
+        self.points = np.array(points, dtype=float).reshape(-1, 3)
+        self.offsets = np.array(offsets, dtype=float)
+        self._jac = np.zeros((3, model.nv))
+
+    def compute_qp_inequalities(
+        self, configuration: mink.Configuration, dt: float
+    ) -> mink.Constraint:
+        if len(self.bodies) == 0:
+            return mink.Constraint()
+        data = configuration.data
+        rot = data.xmat[self.bodies].reshape(-1, 3, 3)
+        world = data.xpos[self.bodies] + np.einsum("nij,nj->ni", rot, self.points)
+        height = world[:, 2] - self.offsets
+        rows, bounds = [], []
+        for i in np.where(height < DETECT)[0]:
+            mujoco.mj_jac(configuration.model, data, self._jac, None, world[i], self.bodies[i])
+            rows.append(-self._jac[2].copy())  # -dz <= gain * height: never below the floor
+            bounds.append(max(float(height[i]), 0.0) * LIMIT_GAIN / dt)
+        if not rows:
+            return mink.Constraint()
+        return mink.Constraint(G=np.vstack(rows), h=np.array(bounds))
+
+
+def _samples(model: mujoco.MjModel, g: int) -> list[tuple[np.ndarray, float]]:
+    """Points of a geom in its body frame, each with the radius to subtract from its height."""
+    rot = _rotation(model, g)
+    pos, size, kind = model.geom_pos[g], model.geom_size[g], model.geom_type[g]
+    if kind == mujoco.mjtGeom.mjGEOM_SPHERE:
+        return [(pos.copy(), float(size[0]))]
+    if kind == mujoco.mjtGeom.mjGEOM_CAPSULE:
+        return [(pos + s * size[1] * rot[:, 2], float(size[0])) for s in (-1.0, 1.0)]
+    if kind == mujoco.mjtGeom.mjGEOM_CYLINDER:
+        angles = np.linspace(0.0, 2 * np.pi, 8, endpoint=False)
+        return [
+            (pos + rot @ np.array([size[0] * np.cos(a), size[0] * np.sin(a), s * size[1]]), 0.0)
+            for s in (-1.0, 1.0) for a in angles
+        ]
+    half = size if kind == mujoco.mjtGeom.mjGEOM_BOX else np.full(3, float(np.max(size)))
+    signs = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], float)
+    return [(pos + rot @ (s * half), 0.0) for s in signs]
+
+
+def _rotation(model: mujoco.MjModel, g: int) -> np.ndarray:
+    """A geom's orientation in its body frame, as a 3x3 matrix."""
+    flat = np.zeros(9)
+    mujoco.mju_quat2Mat(flat, model.geom_quat[g])
+    return flat.reshape(3, 3)
