@@ -23,6 +23,7 @@ TIMESTEP = 0.002
 ROBOT_CONTYPE = 1  # robot geoms collide with each other ...
 FLOOR_CONTYPE = 2  # ... but not with the floor: the planar base is driven kinematically
 TRACKING_HZ = 12.0  # bandwidth of the joint position servos
+LIMIT_TIMECONST = 2 * TIMESTEP
 
 
 @dataclass(frozen=True)
@@ -169,6 +170,9 @@ def build_spec(platform: Platform) -> mujoco.MjSpec:
             if joint.type != "continuous" and joint.limit is not None:
                 mj.limited = mujoco.mjtLimited.mjLIMITED_TRUE
                 mj.range = [joint.limit.lower, joint.limit.upper]
+                # Stiffest stable limit (time constant 2 dt): contacts between limbs then
+                # push a joint at most a few mrad past its limit instead of centiradians.
+                mj.solref_limit = [LIMIT_TIMECONST, 1.0]
             else:
                 mj.limited = mujoco.mjtLimited.mjLIMITED_FALSE
         body.gravcomp = 1.0

@@ -146,3 +146,25 @@ def test_neutral_pose_is_inside_limits(name: str) -> None:
     for joint, value in zip(p.joint_names, p.neutral_vector(), strict=True):
         lim = p.eurdf.limits[joint]
         assert lim.lower <= value <= lim.upper
+
+
+def test_joint_limits_hold_when_the_arms_push_into_each_other() -> None:
+    """Both Baxter arms swung inward at full stretch collide; no joint leaves its range."""
+    pm = platform_model("baxter")
+    model, data = pm.model, pm.make_data()
+    # shoulders swung fully inward (0.01 rad inside the limit, as the agent clamps), arms straight
+    targets = {"right_s0": 1.6917, "left_s0": -1.6917, "right_s1": 0.0, "left_s1": 0.0,
+               "right_e1": 0.0, "left_e1": 0.0, "right_w1": 0.0, "left_w1": 0.0}
+    for joint, value in targets.items():
+        data.ctrl[pm.actuator_index[joint]] = value
+    touched, worst = False, 0.0
+    for _ in range(1500):
+        mujoco.mj_step(model, data)
+        touched |= data.ncon > 0
+        for joint in pm.platform.joint_names:
+            jid = model.joint(joint).id
+            q = data.qpos[model.jnt_qposadr[jid]]
+            lo, hi = model.jnt_range[jid]
+            worst = max(worst, lo - q, q - hi)
+    assert touched, "the arms were meant to collide"
+    assert worst < 0.01  # the agent keeps targets 0.01 rad inside the limits
