@@ -65,9 +65,23 @@ def register(sub: Any) -> None:
     r.add_argument("--origin", required=True, help="origin label or alias paired with the limb")
     r.add_argument("--direction", required=True, help="Laban direction")
     r.add_argument("--size", required=True, help="integer size (1 near, 2 mid, 3 far, ...)")
-    r.add_argument(
-        "--joints", nargs="+", required=True, metavar="NAME=VALUE",
+    source = r.add_mutually_exclusive_group(required=True)
+    source.add_argument(
+        "--joints", nargs="+", metavar="NAME=VALUE",
         help="joint values in rad (m for prismatic joints), e.g. right_s0=-0.4 right_e1=1.2",
+    )
+    source.add_argument(
+        "--from-robot", metavar="ID",
+        help="capture the limb's joints from the running agent ID (its next RobotState)",
+    )
+    r.add_argument(
+        "--connect", action="append", metavar="EP",
+        help="with --from-robot: Zenoh endpoint to join (default tcp/127.0.0.1:7447)",
+    )
+    r.add_argument("--zenoh-config", metavar="FILE", help="with --from-robot: Zenoh config file")
+    r.add_argument("--prefix", default="kinesphere", help="key prefix (default kinesphere)")
+    r.add_argument(
+        "--timeout", type=float, default=5.0, help="with --from-robot: seconds to wait (default 5)"
     )
     r.add_argument("--json", action="store_true", help="print the stored Pose as JSON")
     r.set_defaults(func=_record)
@@ -162,8 +176,22 @@ def _get(args: argparse.Namespace) -> int:
 
 
 def _record(args: argparse.Namespace) -> int:
-    joints = parse_joints(args.joints)
     ecl = _open(args)
+    if args.from_robot:
+        from kinesphere.keyexpr import Keys
+        from kinesphere.services.ecl.capture import capture_state, limb_joints_of
+
+        state = capture_state(args.from_robot, Keys(args.prefix), connect=args.connect,
+                              zenoh_config=args.zenoh_config, timeout=args.timeout)
+        if state.platform != ecl.platform.name:
+            raise KinesphereError(
+                "unknown_platform",
+                f"robot {args.from_robot!r} is a {state.platform}, not a {ecl.platform.name}",
+            )
+        eurdf = ecl.platform.eurdf
+        joints = limb_joints_of(state, eurdf.limb_joints(eurdf.limb(args.limb).name))
+    else:
+        joints = parse_joints(args.joints)
     pose = ecl.record(args.limb, args.origin, args.direction, args.size, joints)
     _print_pose(pose, args.json)
     if not args.json:
