@@ -178,8 +178,9 @@ def _get(args: argparse.Namespace) -> int:
 def _record(args: argparse.Namespace) -> int:
     ecl = _open(args)
     if args.from_robot:
-        from kinesphere.keyexpr import Keys
         from kinesphere.services.ecl.capture import capture_state, limb_joints_of
+
+        from kinesphere.keyexpr import Keys
 
         state = capture_state(args.from_robot, Keys(args.prefix), connect=args.connect,
                               zenoh_config=args.zenoh_config, timeout=args.timeout)
