@@ -11,10 +11,7 @@ from typing import Any
 
 from kinesphere.clients import commands
 
-from kinesphere.keyexpr import DEFAULT_PREFIX
-
-DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
-"""For the help text only (``kinesphere.zconfig.DEFAULT_ENDPOINT``; importing it loads Zenoh)."""
+from kinesphere.cliargs import DEFAULT_ENDPOINT, add_zenoh_arguments
 
 KEYS_HELP = """keys (keyboard fallback, the HUD window needs focus):
   arrows      right stick: the limb's horizontal direction (diagonals: two arrows)
@@ -35,32 +32,10 @@ gamepad (SDL layout, see clients/mappings/default.toml):
 
 
 def _zenoh(p: argparse.ArgumentParser) -> None:
-    g = p.add_argument_group("zenoh")
-    g.add_argument(
-        "--connect",
-        action="append",
-        metavar="EP",
-        help=f"endpoint to join (repeatable; default {DEFAULT_ENDPOINT} unless "
-        "--listen or --zenoh-config is given)",
-    )
-    g.add_argument(
-        "--listen",
-        action="append",
-        metavar="EP",
-        help="endpoint to listen on, e.g. tcp/0.0.0.0:7448 (repeatable)",
-    )
-    g.add_argument(
-        "--zenoh-config",
-        metavar="FILE",
-        help="Zenoh JSON5 config file; the options above override it",
-    )
-    g.add_argument(
-        "--mode", choices=("peer", "client"), default=None, help="Zenoh session mode (default peer)"
-    )
-    g.add_argument(
-        "--prefix",
-        default=DEFAULT_PREFIX,
-        help=f"key prefix of the deployment (default {DEFAULT_PREFIX})",
+    add_zenoh_arguments(
+        p,
+        default_help=f"Without --connect, --listen or --zenoh-config: connect to "
+        f"{DEFAULT_ENDPOINT},\nwhere 'kinesphere databank serve' listens.",
     )
 
 

@@ -22,14 +22,12 @@ from typing import Any, Protocol
 
 import zenoh
 
+from kinesphere.endpoints import DEFAULT_ENDPOINT as DEFAULT_ENDPOINT
+from kinesphere.endpoints import LOOPBACK_ANY_PORT as LOOPBACK_ANY_PORT
+from kinesphere.endpoints import LOOPBACK_HOST as LOOPBACK_HOST
 from kinesphere.errors import KinesphereError
 
 MODES = ("peer", "client", "router")
-LOOPBACK_HOST = "127.0.0.1"
-LOOPBACK_ANY_PORT = f"tcp/{LOOPBACK_HOST}:0"
-DEFAULT_ENDPOINT = f"tcp/{LOOPBACK_HOST}:7447"
-"""Where a service listens (and a client connects) when no endpoint is given: one machine."""
-"""Listen on loopback only, on a port the OS picks."""
 
 
 class Undeclarable(Protocol):

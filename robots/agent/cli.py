@@ -11,8 +11,7 @@ from pathlib import Path
 from types import FrameType
 from typing import Any
 
-from kinesphere.keyexpr import DEFAULT_PREFIX
-from kinesphere.zconfig import DEFAULT_ENDPOINT, LOOPBACK_ANY_PORT
+from kinesphere.cliargs import DEFAULT_ENDPOINT, add_zenoh_arguments
 
 log = logging.getLogger(__name__)
 
@@ -37,16 +36,12 @@ def register(sub: Any) -> None:
     p.add_argument("--group", action="append", default=[], metavar="NAME",
                    help="also obey {prefix}/group/NAME/command (repeatable)")
     p.add_argument("--viewer", action="store_true", help="open a MuJoCo viewer window")
-    p.add_argument("--zenoh-config", type=Path, metavar="FILE", help="Zenoh JSON5 config file")
-    p.add_argument("--listen", action="append", metavar="EP",
-                   help="listen endpoint (repeatable; default: loopback, any port, unless "
-                   "--connect or --zenoh-config is given)")
-    p.add_argument("--connect", action="append", metavar="EP",
-                   help=f"connect endpoint (repeatable; default {DEFAULT_ENDPOINT}, where "
-                   "'kinesphere databank serve' listens, unless --listen or --zenoh-config)")
-    p.add_argument("--mode", choices=("peer", "client"), default=None,
-                   help="Zenoh session mode (default peer)")
-    p.add_argument("--prefix", default=DEFAULT_PREFIX, help="key prefix (default kinesphere)")
+    add_zenoh_arguments(
+        p,
+        default_help=f"Without --listen, --connect or --zenoh-config: connect to "
+        f"{DEFAULT_ENDPOINT}, where 'kinesphere databank serve' listens, and listen on "
+        "loopback, any port.",
+    )
     p.set_defaults(func=_agent)
 
 
@@ -67,7 +62,7 @@ def _viewer(controller: Any) -> Any:
 def _agent(args: argparse.Namespace) -> int:
     from kinesphere.robots.agent.runtime import Agent, AgentOptions
 
-    from kinesphere.zconfig import close_session, open_session
+    from kinesphere.zconfig import LOOPBACK_ANY_PORT, close_session, open_session
 
     robot_id = args.robot_id or Path(args.platform).name
     options = AgentOptions(rate=args.rate, state_rate=args.state_rate, speed=args.speed,

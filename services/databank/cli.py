@@ -10,33 +10,8 @@ import json
 import sys
 from typing import Any
 
+from kinesphere.cliargs import DEFAULT_ENDPOINT, add_zenoh_arguments
 from kinesphere.errors import KinesphereError
-
-_ENDPOINTS_HELP = "tcp/127.0.0.1:7447"
-
-
-def _zenoh_options(p: argparse.ArgumentParser, default_mode: str) -> None:
-    g = p.add_argument_group("zenoh")
-    g.add_argument(
-        "--connect", action="append", metavar="ENDPOINT",
-        help="connect to this Zenoh endpoint, e.g. tcp/10.0.0.5:7447 (repeatable)",
-    )
-    g.add_argument(
-        "--listen", action="append", metavar="ENDPOINT",
-        help="listen on this endpoint, e.g. tcp/0.0.0.0:7447 (repeatable)",
-    )
-    g.add_argument(
-        "--zenoh-config", metavar="FILE",
-        help="Zenoh JSON5 config file (access control, TLS...); the options above override it",
-    )
-    g.add_argument(
-        "--mode", choices=("peer", "client"), default=None,
-        help=f"Zenoh session mode (default {default_mode})",
-    )
-    g.add_argument(
-        "--prefix", default="kinesphere",
-        help="key prefix shared by every process of a deployment (default kinesphere)",
-    )
 
 
 def register(sub: Any) -> None:
@@ -53,7 +28,7 @@ def register(sub: Any) -> None:
         description="Serve every shipped databank (embedded SQLite, no set-up), or those "
         "named. Several replicas may serve the same platforms: each query gets one answer, and "
         "when a replica stops the others answer. Without --listen/--connect/--zenoh-config it "
-        f"listens on {_ENDPOINTS_HELP}, or connects there if that port is taken. Logs one line "
+        f"listens on {DEFAULT_ENDPOINT}, or connects there if that port is taken. Logs one line "
         "on start and one on stop; exits 0 on SIGTERM/SIGINT.",
     )
     s.add_argument(
@@ -80,7 +55,11 @@ def register(sub: Any) -> None:
         help="a platform other replicas serve: never answer unknown_platform for it "
         "(shipped platforms are always known)",
     )
-    _zenoh_options(s, "peer")
+    add_zenoh_arguments(
+        s,
+        default_help=f"Without --listen, --connect or --zenoh-config: listen on "
+        f"{DEFAULT_ENDPOINT}, or connect there if that port is taken.",
+    )
     s.set_defaults(func=_serve)
 
     q = sub.add_parser(
@@ -89,7 +68,7 @@ def register(sub: Any) -> None:
         description="Print the joint targets f_SB(L, O, D, S) of PLATFORM, plus the base "
         "translation when S is beyond the largest stored size. L and O are labels or aliases "
         "(limb_11, right_arm), D a Laban direction (left-high), S a size (1, 2.5, far). "
-        f"Connects to {_ENDPOINTS_HELP} unless told otherwise. Exit 2 with the error code when "
+        f"Connects to {DEFAULT_ENDPOINT} unless told otherwise. Exit 2 with the error code when "
         "the databank refuses or nobody answers.",
     )
     q.add_argument("platform", help="platform name, e.g. baxter")
@@ -99,7 +78,12 @@ def register(sub: Any) -> None:
     q.add_argument("--json", action="store_true", help="print the reply message as JSON")
     q.add_argument("--timeout", type=float, default=2.0, metavar="S",
                    help="seconds to wait for an answer (default 2)")
-    _zenoh_options(q, "client")
+    add_zenoh_arguments(
+        q,
+        default_help=f"Without --connect or --zenoh-config: connect to {DEFAULT_ENDPOINT} "
+        "as a Zenoh client.",
+        default_mode="client",
+    )
     q.set_defaults(func=_query)
 
 
@@ -141,7 +125,6 @@ def _query(args: argparse.Namespace) -> int:
     from kinesphere.zconfig import session
 
     from . import client
-    from .serve import DEFAULT_ENDPOINT
 
     zargs = _session_args(args)
     if args.connect is None and args.zenoh_config is None:

@@ -25,13 +25,11 @@ from kinesphere.services.ecl.store import DATA_DIR
 
 from kinesphere.errors import KinesphereError
 from kinesphere.keyexpr import Keys
-from kinesphere.zconfig import close_session, open_session
+from kinesphere.zconfig import DEFAULT_ENDPOINT, LOOPBACK_ANY_PORT, close_session, open_session
 
 from .service import DatabankService
 
 log = logging.getLogger("kinesphere.databank")
-DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
-"""Where ``serve`` listens (or, if taken, connects) and ``query`` connects by default."""
 
 
 def shipped_platforms() -> list[str]:
@@ -96,7 +94,7 @@ def open_default_session(mode: str | None) -> zenoh.Session:
     try:
         return open_session(mode, listen=[DEFAULT_ENDPOINT], connect=[])
     except KinesphereError:
-        return open_session(mode, listen=["tcp/127.0.0.1:0"], connect=[DEFAULT_ENDPOINT])
+        return open_session(mode, listen=[LOOPBACK_ANY_PORT], connect=[DEFAULT_ENDPOINT])
 
 
 def run(

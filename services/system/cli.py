@@ -10,6 +10,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
+from kinesphere.cliargs import DEFAULT_ENDPOINT, add_zenoh_arguments
 from kinesphere.keyexpr import DEFAULT_PREFIX
 
 
@@ -51,15 +52,15 @@ def register(sub: Any) -> None:
         description="Ask the network who is alive (liveliness) and listen briefly to every "
         "robot's state. Exit 0 when something answered, 1 when nothing did.",
     )
-    st.add_argument("--connect", action="append", metavar="EP",
-                    help="endpoint to join, e.g. tcp/10.0.0.5:7447 (default tcp/127.0.0.1:7447)")
-    st.add_argument("--zenoh-config", type=Path, metavar="FILE",
-                    help="Zenoh JSON5 config (e.g. deploy/operator.json5 for a TLS deployment)")
-    st.add_argument("--mode", choices=("peer", "client"), help="session mode (default peer)")
     st.add_argument("--timeout", type=float, default=2.0, metavar="S",
                     help="seconds to wait for answers (default 2)")
     st.add_argument("--json", action="store_true", help="print JSON instead of a table")
-    st.add_argument("--prefix", default=DEFAULT_PREFIX, help="key prefix (default kinesphere)")
+    add_zenoh_arguments(
+        st,
+        default_help=f"Without --connect or --zenoh-config: connect to {DEFAULT_ENDPOINT} "
+        "(peer mode, listening nowhere).",
+        listen=False,
+    )
     st.set_defaults(func=_status)
 
     rt = sub.add_parser(
