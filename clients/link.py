@@ -31,8 +31,8 @@ from kinesphere.protocol import (
     SpatialCommand,
     decode,
     encode,
-    error_from_reply,
 )
+from kinesphere.query import get_one
 
 log = logging.getLogger(__name__)
 URGENT = zenoh.Priority.REAL_TIME
@@ -184,16 +184,16 @@ class RobotLink:
             cached = self._catalogues.get(platform)
         if cached is not None:
             return cached
-        replies = self.session.get(self.keys.catalogue(platform), timeout=timeout)
-        for reply in replies:
-            if reply.ok is not None:
-                cat = decode(reply.ok.payload, Catalogue)
-                with self._lock:
-                    self._catalogues[platform] = cat
-                return cat
-            assert reply.err is not None
-            raise error_from_reply(reply.err.payload)
-        raise KinesphereError("unavailable", f"no databank answers for platform {platform!r}")
+        cat = get_one(
+            self.session,
+            self.keys.catalogue(platform),
+            Catalogue,
+            timeout=timeout,
+            no_answer=f"no databank answers for platform {platform!r}",
+        )
+        with self._lock:
+            self._catalogues[platform] = cat
+        return cat
 
     # --- commands -----------------------------------------------------------------------
 

@@ -38,10 +38,9 @@ from kinesphere.protocol import (
     Pose,
     SpatialCommand,
     check_spatial,
-    decode,
     encode,
-    error_from_reply,
 )
+from kinesphere.query import get_one
 from kinesphere.zconfig import undeclare, wait_matching
 
 log = logging.getLogger(__name__)
@@ -238,24 +237,10 @@ class Resolver:
 
     def _query(self, key: str, payload: bytes | None, type_: type[T],
                querier: zenoh.Querier | None = None) -> T:
-        try:
-            if querier is not None:
-                replies = querier.get(payload=payload)
-            else:
-                replies = self.session.get(
-                    key,
-                    payload=payload,
-                    timeout=self.timeout_s,
-                    consolidation=zenoh.ConsolidationMode.NONE,
-                )
-            for reply in replies:  # the first answer wins; other replicas may answer too
-                if reply.ok is not None:
-                    return decode(reply.ok.payload, type_)
-                assert reply.err is not None
-                raise error_from_reply(reply.err.payload)
-        except zenoh.ZError as exc:
-            raise KinesphereError("unavailable", f"zenoh: {exc}") from None
-        raise KinesphereError("unavailable", f"no databank answers {key}")
+        """One ``get`` (the first answer wins; other replicas may answer too), no retry: the
+        worker's schedule does the retrying."""
+        return get_one(querier if querier is not None else self.session, key, type_, payload,
+                       timeout=self.timeout_s, no_answer=f"no databank answers {key}")
 
     def _unreachable(self, exc: KinesphereError) -> None:
         if self.reachable or self.last_error != exc.message:

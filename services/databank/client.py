@@ -2,20 +2,19 @@
 
 A ``get`` that ends without any reply means no queryable was reachable at that moment (the
 replica that had the query died, or declarations have not arrived yet), so it is retried
-until the deadline; a reply, good or bad, ends the request. Errors come back as
-KinesphereError with the databank's code, ``unavailable`` when nobody answered in time.
+until the deadline (:func:`kinesphere.query.get_one`); a reply, good or bad, ends the
+request. Errors come back as KinesphereError with the databank's code, ``unavailable`` when
+nobody answered in time.
 """
 
 from __future__ import annotations
 
-import time
 from collections.abc import Mapping, Sequence
 from typing import TypeVar
 
 import msgspec
 import zenoh
 
-from kinesphere.errors import KinesphereError
 from kinesphere.keyexpr import KEYS, Keys
 from kinesphere.protocol import (
     Catalogue,
@@ -23,15 +22,13 @@ from kinesphere.protocol import (
     Pose,
     RecordRequest,
     SpatialCommand,
-    decode,
     encode,
-    error_from_reply,
 )
+from kinesphere.query import get_one
 from kinesphere.sizes import parse_size
 
 T = TypeVar("T")
 DEFAULT_TIMEOUT = 2.0
-_RETRY_PAUSE = 0.02
 
 
 def request(
@@ -48,37 +45,17 @@ def request(
     ``every_replica`` sends the query to every complete queryable (all replicas) and returns
     the first good reply, or raises the first error when none is good.
     """
-    deadline = time.monotonic() + timeout
-    target = zenoh.QueryTarget.ALL_COMPLETE if every_replica else zenoh.QueryTarget.BEST_MATCHING
-    while True:
-        remaining = deadline - time.monotonic()
-        if remaining <= 0:
-            raise KinesphereError(
-                "unavailable",
-                f"no databank answered {key} within {timeout:g} s; is 'kinesphere databank "
-                "serve' running for this platform and reachable (--connect)?",
-            )
-        first_error: KinesphereError | None = None
-        try:
-            replies = session.get(
-                key,
-                payload=payload,
-                target=target,
-                consolidation=zenoh.ConsolidationMode.NONE,
-                timeout=remaining,
-            )
-            for reply in replies:
-                if reply.ok is not None:
-                    return decode(reply.ok.payload, type_)
-                assert reply.err is not None
-                first_error = first_error or error_from_reply(reply.err.payload)
-                if not every_replica:
-                    break
-        except zenoh.ZError as exc:
-            raise KinesphereError("unavailable", f"zenoh: {exc}") from None
-        if first_error is not None:
-            raise first_error
-        time.sleep(min(_RETRY_PAUSE, max(0.0, deadline - time.monotonic())))
+    return get_one(
+        session,
+        key,
+        type_,
+        payload,
+        timeout=timeout,
+        retry=True,
+        every_replica=every_replica,
+        no_answer=f"no databank answered {key} within {timeout:g} s; is 'kinesphere databank "
+        "serve' running for this platform and reachable (--connect)?",
+    )
 
 
 def query_pose(
