@@ -49,14 +49,9 @@ Routed = Answer | Deferred | None  # None: answered already (wildcards) or silen
 
 
 def changed_key(keys: Keys, platform: str) -> str:
-    """``{p}/ecl/{platform}/changed``: a put after every successful record.
-
-    Built here until ``Keys`` has it; ``platform`` may be ``*`` to watch every platform.
-    """
-    method: Callable[[str], str] | None = getattr(keys, "changed", None)
-    if method is not None:
-        return method(platform)
-    return f"{keys.prefix}/ecl/{check_segment(platform, 'platform', wildcard=True)}/changed"
+    """``{p}/ecl/{platform}/changed``: a put after every successful record (``keys.changed``);
+    ``platform`` may be ``*`` to watch every platform."""
+    return keys.changed(platform)
 
 
 @dataclass(eq=False)
@@ -105,7 +100,7 @@ class DatabankService:
                 )
             self.served[name] = Served(
                 name, ecl, keys.catalogue(name), keys.compound(name), keys.record(name),
-                changed_key(keys, name),
+                keys.changed(name),
             )
         known = platform_names() if known_platforms is None else known_platforms
         self.known = frozenset(known) | set(self.served)

@@ -15,6 +15,7 @@ import msgspec
 from rich.console import Console
 from rich.table import Table
 
+from kinesphere.endpoints import DEFAULT_ENDPOINT
 from kinesphere.errors import KinesphereError
 from kinesphere.protocol import Pose
 
@@ -76,7 +77,7 @@ def register(sub: Any) -> None:
     )
     r.add_argument(
         "--connect", action="append", metavar="EP",
-        help="with --from-robot: Zenoh endpoint to join (default tcp/127.0.0.1:7447)",
+        help=f"with --from-robot: Zenoh endpoint to join (default {DEFAULT_ENDPOINT})",
     )
     r.add_argument("--zenoh-config", metavar="FILE", help="with --from-robot: Zenoh config file")
     r.add_argument("--prefix", default="kinesphere", help="key prefix (default kinesphere)")
