@@ -16,7 +16,10 @@ import mujoco
 import numpy as np
 from kinesphere.robots.agent.base import BaseController, make_base, wrap_angle
 from kinesphere.robots.agent.trajectory import DEFAULT_MARGIN, JointTrajectory
-from kinesphere.robots.mjcf import BASE_JOINTS, PlatformModel
+from kinesphere.robots.mjcf import BASE_JOINTS, PlatformModel, robot_contacts
+
+BLOCKED_TOL = 0.05
+"""rad (m): a joint this far from where its finished trajectory ended is blocked."""
 
 
 class Controller:
@@ -117,3 +120,18 @@ class Controller:
         for _ in range(extra):
             self.step()
         return n + extra
+
+    def blocked(self, tol: float = BLOCKED_TOL) -> str:
+        """Why the body is not where the trajectory ended, or "" when it is.
+
+        The ECL checks its poses, not the joint-space path to them: an arm can catch on the
+        other one on the way and stay there. Saying "at target" then would be a lie.
+        """
+        error = np.abs(np.asarray(self.q()) - self.joints.target)
+        worst = int(np.argmax(error)) if error.size else 0
+        if not error.size or error[worst] <= tol:
+            return ""
+        contacts = sorted({f"{a}/{b}" for a, b in robot_contacts(self.model, self.data)})
+        touching = f"; self-contact {', '.join(contacts[:3])}" if contacts else ""
+        return (f"blocked: {self.joint_names[worst]} is {error[worst]:.3f} from its target"
+                f"{touching}")

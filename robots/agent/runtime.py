@@ -18,7 +18,6 @@ accepted. E-stop and stop are never dropped. See ``safety.py`` for the safety ru
 from __future__ import annotations
 
 import logging
-import math
 import threading
 import time
 from collections import deque
@@ -28,54 +27,25 @@ from typing import Any
 
 import numpy as np
 import zenoh
+from kinesphere.robots.agent.controller import BLOCKED_TOL as BLOCKED_TOL
 from kinesphere.robots.agent.controller import Controller
+from kinesphere.robots.agent.options import AgentOptions as AgentOptions
 from kinesphere.robots.agent.pacing import LoopStats, run_paced
 from kinesphere.robots.agent.resolver import Answer, Resolver, parts_key
 from kinesphere.robots.agent.safety import Safety, Verdict
-from kinesphere.robots.agent.trajectory import DEFAULT_MARGIN
-from kinesphere.robots.mjcf import platform_model, robot_contacts
+from kinesphere.robots.agent.status import reported_status
+from kinesphere.robots.mjcf import platform_model
 
 from kinesphere.errors import KinesphereError
-from kinesphere.keyexpr import DEFAULT_PREFIX, Keys
+from kinesphere.keyexpr import Keys
 from kinesphere.laban import Direction
 from kinesphere.protocol import Command, Payload, Pose, RobotState, Status, decode, encode
 from kinesphere.zconfig import undeclare
 
 log = logging.getLogger(__name__)
 
-BLOCKED_TOL = 0.05
-"""rad (m): a joint this far from where its finished trajectory ended is blocked."""
 SETTLE_S = 0.2
 """Robot time the servos get after a trajectory ends before the body is held to it."""
-
-
-@dataclass(frozen=True)
-class AgentOptions:
-    """How an agent runs: control ``rate`` and ``state_rate`` in Hz, ``speed`` (robot seconds
-    per wall second, 0 = unpaced), key ``prefix``, ``groups`` it obeys, databank query timeout,
-    joint-limit clamp ``margin``."""
-
-    rate: float = 500.0
-    state_rate: float = 50.0
-    speed: float = 1.0
-    prefix: str = DEFAULT_PREFIX
-    groups: tuple[str, ...] = ()
-    query_timeout_s: float = 1.0
-    margin: float = DEFAULT_MARGIN
-
-    def __post_init__(self) -> None:
-        checks = (
-            (math.isfinite(self.rate) and self.rate > 0, f"rate must be > 0 Hz, got {self.rate}"),
-            (0 < self.state_rate <= self.rate,
-             f"state rate must be in (0, rate], got {self.state_rate}"),
-            (math.isfinite(self.speed) and self.speed >= 0,
-             f"speed must be >= 0 (0 = unpaced), got {self.speed}"),
-            (self.query_timeout_s > 0, f"query timeout must be > 0, got {self.query_timeout_s}"),
-            (self.margin >= 0, f"margin must be >= 0, got {self.margin}"),
-        )
-        for ok, message in checks:
-            if not ok:
-                raise KinesphereError("malformed", message)
 
 
 @dataclass
@@ -365,47 +335,16 @@ class Agent:
     # --- state -----------------------------------------------------------------------------------
 
     def status(self) -> tuple[str, str]:
-        """The status and detail to publish now.
-
-        Precedence: e-stop, then what the operator caused (stopped, holding, error), then
-        the databank's reachability, then motion (moving, idle, clamped).
-        """
-        status, detail = self._status, self._detail
+        """The status and detail to publish now (precedence: :func:`reported_status`)."""
         ctrl = self.controller
-        if self.safety.estopped:
-            return Status.ESTOP, detail
-        if status in (Status.STOPPED, Status.HOLDING, Status.ERROR):
-            return status, detail
-        reachable = self.resolver.reachable
-        if reachable is False:
-            return Status.DATABANK_UNREACHABLE, detail if status == Status.DATABANK_UNREACHABLE \
-                else self.resolver.last_error
-        if status == Status.DATABANK_UNREACHABLE:  # it answers again
-            status, detail = Status.MOVING, "databank reachable again"
-        if status == Status.MOVING and not ctrl.moving:
-            status, detail = (Status.CLAMPED, detail) if ctrl.joints.clamped else (
-                Status.IDLE, "at target")
-        if status in (Status.IDLE, Status.CLAMPED) and ctrl.time - self._moved_at >= SETTLE_S:
-            blocked = self._blocked()
-            if blocked:
-                return Status.ERROR, blocked
-        return status, detail
-
-    def _blocked(self) -> str:
-        """Why the body is not where the trajectory ended, or "" when it is.
-
-        The ECL checks its poses, not the joint-space path to them: an arm can catch on the
-        other one on the way and stay there. Saying "at target" then would be a lie.
-        """
-        ctrl = self.controller
-        error = np.abs(np.asarray(ctrl.q()) - ctrl.joints.target)
-        worst = int(np.argmax(error)) if error.size else 0
-        if not error.size or error[worst] <= BLOCKED_TOL:
-            return ""
-        contacts = sorted({f"{a}/{b}" for a, b in robot_contacts(ctrl.model, ctrl.data)})
-        touching = f"; self-contact {', '.join(contacts[:3])}" if contacts else ""
-        return (f"blocked: {ctrl.joint_names[worst]} is {error[worst]:.3f} from its target"
-                f"{touching}")
+        reported: tuple[str, str] = reported_status(
+            self._status, self._detail, estopped=self.safety.estopped,
+            reachable=self.resolver.reachable, last_error=self.resolver.last_error,
+            moving=ctrl.moving, clamped=bool(ctrl.joints.clamped),
+            settled=ctrl.time - self._moved_at >= SETTLE_S,
+            blocked=lambda: ctrl.blocked(BLOCKED_TOL),
+        )
+        return reported
 
     def publish(self) -> RobotState:
         ctrl = self.controller
