@@ -36,6 +36,7 @@ from kinesphere.robots.platform import load_platform
 
 from kinesphere.laban import Direction
 
+from .arcs import along_arc, arc_at, cosine, halfway
 from .ik import LimbSolver
 from .store import PoseRow
 from .vsam import Vsam, VsamEntry, load_vsam
@@ -162,7 +163,7 @@ def _measure(solver: LimbSolver, values: np.ndarray, d: np.ndarray) -> _Pose:
     values = np.array([_r(v) for v in np.clip(values, solver.lower, solver.upper)])
     offset = solver.reach(solver.full_q(values)).offset
     proj = float(offset @ d)
-    return _Pose(values, offset, proj, _cos(offset, d))
+    return _Pose(values, offset, proj, cosine(offset, d))
 
 
 @dataclass(frozen=True)
@@ -185,7 +186,7 @@ def _direction(
     neutral = solver.neutral[solver.qadr]
     far = _far(solver, neutral, d, world)
     if far.cosine < COS_FAR:  # maybe a local optimum: go round via the half-way direction
-        via = _via(solver.neutral_reach().offset, d)
+        via = halfway(solver.neutral_reach().offset, d)
         start = solver.solve(neutral, _ray(solver, solver.span, solver.body_rot @ via),
                              FAR_ITERATIONS)
         detour = _far(solver, start, d, world)
@@ -260,18 +261,6 @@ def _paths(solver: LimbSolver, poses: list[_Pose], sizes: tuple[int, ...]) -> st
     return None
 
 
-def _via(rest: np.ndarray, d: np.ndarray) -> np.ndarray:
-    """The unit direction half-way from the neutral tip direction to d; for opposite
-    directions, the way over the top (body up, or forward if the tip rests vertical)."""
-    u = rest / max(float(np.linalg.norm(rest)), 1e-9)
-    half = u + d
-    if float(np.linalg.norm(half)) > 0.2:
-        return np.asarray(half / np.linalg.norm(half))
-    up = np.array([0.0, 0.0, 1.0]) if abs(u[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
-    side = up - (up @ u) * u
-    return np.asarray(side / np.linalg.norm(side))
-
-
 def _far(solver: LimbSolver, start: np.ndarray, d: np.ndarray, world: np.ndarray) -> _Pose:
     """The farthest reach toward d from ``start``: pulled toward a point far out on the ray."""
     target = _ray(solver, FAR_TARGET * solver.span, world)
@@ -302,7 +291,7 @@ def _sizes(
     found: dict[int, _Pose] = {n - 1: far}
     for i in (range(n - 2, -1, -1) if downward else range(n - 1)):
         proj = p0 + (far.proj - p0) * (i + 1) / n
-        arc = solver.origin + solver.body_rot @ _arc_at(arc_start, far.offset, d, proj)
+        arc = solver.origin + solver.body_rot @ arc_at(arc_start, far.offset, d, proj)
         candidates = [(arc, MIN_GAP * (far.proj - p0) / n)]
         if ray:
             t = lo + (far.proj - lo) * i / (n - 1)
@@ -358,45 +347,13 @@ def _first_valid(
 def _honest_start(neutral: np.ndarray, far: np.ndarray, d: np.ndarray) -> np.ndarray:
     """Where the swing from neutral to far starts to point honestly toward d (cosine
     COS_FAR), or neutral itself if it already does: the swing family's size 0."""
-    if _cos(neutral, d) >= COS_FAR:
+    if cosine(neutral, d) >= COS_FAR:
         return neutral
     lo, hi = 0.0, 1.0
     for _ in range(30):
         mid = (lo + hi) / 2
-        if _cos(_arc(neutral, far, mid), d) >= COS_FAR:
+        if cosine(along_arc(neutral, far, mid), d) >= COS_FAR:
             hi = mid
         else:
             lo = mid
-    return _arc(neutral, far, hi)
-
-
-def _cos(v: np.ndarray, d: np.ndarray) -> float:
-    n = float(np.linalg.norm(v))
-    return float(v @ d) / n if n > 1e-9 else 0.0
-
-
-def _arc(start: np.ndarray, end: np.ndarray, g: float) -> np.ndarray:
-    """Fraction ``g`` of the way from ``start`` to ``end``: slerp of direction, lerp of length."""
-    la, lb = float(np.linalg.norm(start)), float(np.linalg.norm(end))
-    a, b = start / la, end / lb
-    angle = float(np.arccos(np.clip(a @ b, -1.0, 1.0)))
-    if angle < 1e-6:
-        return np.asarray(b * ((1 - g) * la + g * lb))
-    u = (np.sin((1 - g) * angle) * a + np.sin(g * angle) * b) / np.sin(angle)
-    return np.asarray(u * ((1 - g) * la + g * lb))
-
-
-def _arc_at(start: np.ndarray, end: np.ndarray, d: np.ndarray, proj: float) -> np.ndarray:
-    """The first point on the arc from ``start`` to ``end`` whose projection on d reaches
-    ``proj`` (a coarse scan, then bisection: deterministic)."""
-    grid = np.linspace(0.0, 1.0, 65)
-    above = [float(g) for g in grid if float(_arc(start, end, float(g)) @ d) >= proj]
-    hi = above[0] if above else 1.0
-    lo = max(hi - 1.0 / 64, 0.0)
-    for _ in range(30):
-        mid = (lo + hi) / 2
-        if float(_arc(start, end, mid) @ d) < proj:
-            lo = mid
-        else:
-            hi = mid
-    return _arc(start, end, hi)
+    return along_arc(neutral, far, hi)
