@@ -21,24 +21,24 @@ from kinesphere.robots.platform import Platform, load_platform
 from kinesphere.errors import KinesphereError
 from kinesphere.laban import Direction
 from kinesphere.protocol import (
-    COMPOUND,
     NO_ID,
     Catalogue,
     JointLimit,
     LimbEntry,
     Pose,
-    SpatialCommand,
 )
-from kinesphere.sizes import parse_size
 
 from . import transfer
 from .cells import Cell, build_cells
+from .compound import PartLike as PartLike
+from .compound import join
 from .store import (
     Tables,
-    check_joints,
+    check_record,
     default_db_path,
     limb_neutral,
     read_tables,
+    size_value,
     upsert_pose,
     write_tables,
 )
@@ -48,7 +48,6 @@ log = logging.getLogger(__name__)
 _DB_SUFFIXES = (".sqlite", ".sqlite3", ".db")
 _DIRECTION_CACHE_MAX = 512
 _PLACE_MIDDLE = Direction.PLACE_MIDDLE.slug
-PartLike = SpatialCommand | tuple[Any, ...] | list[Any]
 
 
 class Ecl:
@@ -147,7 +146,7 @@ class Ecl:
         if (type(size) is float or type(size) is int) and 0 <= size < 1e15:
             s = float(size)
         else:
-            s = _size(size)
+            s = size_value(size)
         cell = cells.get(slug)
         if slug == _PLACE_MIDDLE and lname in self._neutral:
             return Pose(platform=self._name, limb=lname, origin=oname, direction=slug, size=s,
@@ -199,36 +198,11 @@ class Ecl:
         return [h[0] * k + 0.0, h[1] * k + 0.0, 0.0]  # + 0.0: no -0.0 at size 0
 
     def compound(self, parts: Sequence[PartLike], last_wins: bool = False) -> Pose:
-        """Join several parts joint-wise; translations add.
+        """Join several parts joint-wise; translations add (see :func:`compound.join`).
 
         A joint set by two parts to different values is a ``conflict`` unless ``last_wins``.
         """
-        if not parts:
-            raise KinesphereError("malformed", "a compound pose needs at least one part")
-        joints: dict[str, float] = {}
-        owner: dict[str, int] = {}
-        translation: list[float] | None = None
-        done: list[SpatialCommand] = []
-        for i, part in enumerate(parts):
-            pose = self.query(*_unpack(part, i))
-            done.append(SpatialCommand(pose.limb, pose.origin, pose.direction, pose.size))
-            for name, value in pose.joints.items():
-                if name in joints and joints[name] != value and not last_wins:
-                    a, b = done[owner[name]], done[-1]
-                    raise KinesphereError(
-                        "conflict", f"joint {name!r} is set by part {owner[name] + 1} "
-                        f"({a.limb}, {a.origin}, {a.direction}, {a.size:g}) and by part {i + 1} "
-                        f"({b.limb}, {b.origin}, {b.direction}, {b.size:g}); "
-                        "pass last_wins to let the later part win",
-                    )
-                joints[name] = value
-                owner[name] = i
-            if pose.translation is not None:
-                base = translation or [0.0, 0.0, 0.0]
-                translation = [u + v for u, v in zip(base, pose.translation, strict=True)]
-        return Pose(platform=self.platform.name, limb=COMPOUND, origin=COMPOUND,
-                    direction=COMPOUND, size=max(p.size for p in done), joints=joints,
-                    translation=translation, k_id=NO_ID, parts=done)
+        return join(self.query, self._name, parts, last_wins)
 
     # -- names and errors --------------------------------------------------------------------
     def directions(self, limb: str, origin: str) -> list[Direction]:
@@ -344,42 +318,15 @@ class Ecl:
         Everything is validated before the one write transaction, so a bad call changes nothing.
         """
         e = self.platform.eurdf
-        if not isinstance(limb, str):
-            raise KinesphereError("unknown_limb", f"limb must be a name, got {limb!r}")
-        lname = e.limb(limb).name
-        oname = e.origin(origin).name if isinstance(origin, str) else ""
-        entry = self.vsam.entry(lname, oname)
-        if entry is None:
-            valid = ", ".join(x.origin for x in self.vsam.entries if x.limb == lname) or "none"
-            raise KinesphereError(
-                "unknown_origin", f"origin {origin!r} is not paired with {lname}; its origins: "
-                f"{valid}",
-            )
-        d = Direction.parse(direction)
-        if d not in entry.directions:
-            raise KinesphereError(
-                "direction_unavailable", f"the VSAM has no {d.slug} for ({lname}, {oname}); "
-                f"it has: {', '.join(x.slug for x in entry.directions)}",
-            )
-        if d is Direction.PLACE_MIDDLE:
-            raise KinesphereError(
-                "forbidden", "place-middle is the limb's neutral pose; change [neutral] in "
-                f"{self.platform.folder / 'platform.toml'} instead",
-            )
-        s = _size(size)
-        if not s.is_integer() or s < 1:
-            raise KinesphereError(
-                "size_out_of_range", f"a recorded size must be a positive integer, got {size!r}"
-            )
-        if not isinstance(joints, Mapping) or not joints:
-            raise KinesphereError("malformed", "record needs joints: a non-empty name -> value map")
-        given = check_joints(self.platform, lname, joints, complete=False)
+        lname, oname, d, size_int, given = check_record(
+            self.platform, self.vsam, limb, origin, direction, size, joints
+        )
         cell = self._cells.get((lname, oname), {}).get(d.slug)
-        stored = cell.row(int(s)) if cell is not None else None
+        stored = cell.row(size_int) if cell is not None else None
         base = stored if stored is not None else dict(self._neutral[lname])
-        upsert_pose(self.db_path, e.joint_names, (lname, oname, d.slug), int(s), base | given)
+        upsert_pose(self.db_path, e.joint_names, (lname, oname, d.slug), size_int, base | given)
         self.reload()
-        return self.query(lname, oname, d, int(s))
+        return self.query(lname, oname, d, size_int)
 
     def export_json(self, path: str | Path) -> Path:
         """Write the whole databank as JSON (import gives back the same bytes)."""
@@ -401,20 +348,3 @@ def _names(parts: Sequence[Any], keep: set[str]) -> dict[str, str]:
             if p.alias:
                 out[p.alias] = p.name
     return out
-
-
-def _size(value: object) -> float:
-    try:
-        return parse_size(value)
-    except OverflowError:
-        raise KinesphereError("size_out_of_range", f"size {value!r} is too large") from None
-
-
-def _unpack(part: PartLike, i: int) -> tuple[Any, Any, Any, Any]:
-    if isinstance(part, SpatialCommand):
-        return part.limb, part.origin, part.direction, part.size
-    if isinstance(part, (tuple, list)) and len(part) == 4:
-        return part[0], part[1], part[2], part[3]
-    raise KinesphereError(
-        "malformed", f"part {i + 1} must be (limb, origin, direction, size), got {part!r}"
-    )

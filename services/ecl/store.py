@@ -21,6 +21,7 @@ from kinesphere.robots.platform import Platform
 
 from kinesphere.errors import KinesphereError
 from kinesphere.laban import Direction
+from kinesphere.sizes import parse_size
 
 from .db import (
     META_KEYS,
@@ -38,8 +39,9 @@ from .vsam import Vsam
 
 __all__ = [
     "DATA_DIR", "LIMIT_TOLERANCE", "META_KEYS", "PoseRow", "Tables", "check_joints",
-    "connect", "content_digest", "default_db_path", "limb_neutral", "quote_ident",
-    "read_tables", "upsert_pose", "write_databank", "write_tables",
+    "check_record", "connect", "content_digest", "default_db_path", "limb_neutral",
+    "quote_ident", "read_tables", "size_value", "upsert_pose", "write_databank",
+    "write_tables",
 ]
 
 DATA_DIR = Path(__file__).resolve().parent / "data"
@@ -97,6 +99,63 @@ def check_joints(
     if complete and missing:
         raise KinesphereError("malformed", f"pose for {limb} lacks joints: {', '.join(missing)}")
     return {j: out[j] for j in own if j in out}
+
+
+def check_record(
+    platform: Platform,
+    vsam: Vsam,
+    limb: str,
+    origin: str,
+    direction: str | Direction,
+    size: object,
+    joints: Mapping[str, object],
+) -> tuple[str, str, Direction, int, dict[str, float]]:
+    """Validate a super-user edit before anything is written: the (limb, origin) pair and the
+    direction are in the VSAM, place-middle is refused, the size is a positive integer and
+    the joints belong to the limb (:func:`check_joints`, not necessarily all of them).
+
+    Returns the limb and origin labels, the direction, the size and the checked joints.
+    """
+    e = platform.eurdf
+    if not isinstance(limb, str):
+        raise KinesphereError("unknown_limb", f"limb must be a name, got {limb!r}")
+    lname = e.limb(limb).name
+    oname = e.origin(origin).name if isinstance(origin, str) else ""
+    entry = vsam.entry(lname, oname)
+    if entry is None:
+        valid = ", ".join(x.origin for x in vsam.entries if x.limb == lname) or "none"
+        raise KinesphereError(
+            "unknown_origin", f"origin {origin!r} is not paired with {lname}; its origins: "
+            f"{valid}",
+        )
+    d = Direction.parse(direction)
+    if d not in entry.directions:
+        raise KinesphereError(
+            "direction_unavailable", f"the VSAM has no {d.slug} for ({lname}, {oname}); "
+            f"it has: {', '.join(x.slug for x in entry.directions)}",
+        )
+    if d is Direction.PLACE_MIDDLE:
+        raise KinesphereError(
+            "forbidden", "place-middle is the limb's neutral pose; change [neutral] in "
+            f"{platform.folder / 'platform.toml'} instead",
+        )
+    s = size_value(size)
+    if not s.is_integer() or s < 1:
+        raise KinesphereError(
+            "size_out_of_range", f"a recorded size must be a positive integer, got {size!r}"
+        )
+    if not isinstance(joints, Mapping) or not joints:
+        raise KinesphereError("malformed", "record needs joints: a non-empty name -> value map")
+    given = check_joints(platform, lname, joints, complete=False)
+    return lname, oname, d, int(s), given
+
+
+def size_value(value: object) -> float:
+    """A size as a number (``far``, ``2.5``, 3); too large for a float is ``size_out_of_range``."""
+    try:
+        return parse_size(value)
+    except OverflowError:
+        raise KinesphereError("size_out_of_range", f"size {value!r} is too large") from None
 
 
 def limb_neutral(platform: Platform, limb: str) -> dict[str, float]:
