@@ -77,15 +77,13 @@ def _reachable(link: Any, keys: list[str], wait: float) -> None:
 def _signals(on_stop: Callable[[], None]) -> Iterator[None]:
     """SIGTERM (and SIGINT) end the work through ``on_stop`` so the final stop still goes out."""
 
+    from kinesphere.signals import handle_signals
+
     def handler(signum: int, frame: FrameType | None) -> None:
         on_stop()
 
-    previous = {s: signal.signal(s, handler) for s in (signal.SIGTERM, signal.SIGINT)}
-    try:
+    with handle_signals(handler, (signal.SIGTERM, signal.SIGINT)):
         yield
-    finally:
-        for s, h in previous.items():
-            signal.signal(s, h)
 
 
 # --- handlers -----------------------------------------------------------------------------

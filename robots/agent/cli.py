@@ -12,6 +12,7 @@ from types import FrameType
 from typing import Any
 
 from kinesphere.cliargs import DEFAULT_ENDPOINT, add_zenoh_arguments
+from kinesphere.signals import handle_signals
 
 log = logging.getLogger(__name__)
 
@@ -73,38 +74,36 @@ def _agent(args: argparse.Namespace) -> int:
         log.info("signal %d: shutting down", signum)
         stop.set()
 
-    previous = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
-    listen, connect = args.listen, args.connect
-    if listen is None and connect is None and args.zenoh_config is None:
-        listen, connect = [LOOPBACK_ANY_PORT], [DEFAULT_ENDPOINT]  # one machine, no set-up
-    session = open_session(args.mode, listen=listen, connect=connect,
-                           config_file=args.zenoh_config)
-    agent: Agent | None = None
-    viewer = None
-    try:
-        agent = Agent(args.platform, robot_id, session, options)
-        agent.declare()
-        on_tick = None
-        if args.viewer:
-            viewer = _viewer(agent.controller)
-        if viewer is not None:
-            every = max(1, round(args.rate / VIEWER_HZ))
-            v = viewer
-            a = agent
+    with handle_signals(on_signal, (signal.SIGINT, signal.SIGTERM)):
+        listen, connect = args.listen, args.connect
+        if listen is None and connect is None and args.zenoh_config is None:
+            listen, connect = [LOOPBACK_ANY_PORT], [DEFAULT_ENDPOINT]  # one machine, no set-up
+        session = open_session(args.mode, listen=listen, connect=connect,
+                               config_file=args.zenoh_config)
+        agent: Agent | None = None
+        viewer = None
+        try:
+            agent = Agent(args.platform, robot_id, session, options)
+            agent.declare()
+            on_tick = None
+            if args.viewer:
+                viewer = _viewer(agent.controller)
+            if viewer is not None:
+                every = max(1, round(args.rate / VIEWER_HZ))
+                v = viewer
+                a = agent
 
-            def on_tick() -> None:
-                if a.controller.steps % every == 0:
-                    if not v.is_running():
-                        stop.set()
-                    v.sync()
+                def on_tick() -> None:
+                    if a.controller.steps % every == 0:
+                        if not v.is_running():
+                            stop.set()
+                        v.sync()
 
-        agent.run(stop, on_tick)
-    finally:
-        if viewer is not None:
-            viewer.close()
-        if agent is not None:
-            agent.close()
-        close_session(session)
-        for s, handler in previous.items():
-            signal.signal(s, handler)
+            agent.run(stop, on_tick)
+        finally:
+            if viewer is not None:
+                viewer.close()
+            if agent is not None:
+                agent.close()
+            close_session(session)
     return 0

@@ -25,6 +25,7 @@ from kinesphere.services.ecl.store import DATA_DIR
 
 from kinesphere.errors import KinesphereError
 from kinesphere.keyexpr import Keys
+from kinesphere.signals import handle_signals
 from kinesphere.zconfig import DEFAULT_ENDPOINT, LOOPBACK_ANY_PORT, close_session, open_session
 
 from .service import DatabankService
@@ -116,30 +117,29 @@ def run(
         caught.append(signal.Signals(signum).name)
         stop.set()
 
-    previous = {s: signal.signal(s, on_signal) for s in (signal.SIGTERM, signal.SIGINT)}
-    started = time.monotonic()
-    try:
-        extra = list(known_platforms)
-        known = [*platform_names(), *extra] if extra else None
-        svc = DatabankService(session, ecls, keys, replica, writes_enabled, known_platforms=known)
-        with svc:
+    with handle_signals(on_signal, (signal.SIGTERM, signal.SIGINT)):
+        started = time.monotonic()
+        try:
+            extra = list(known_platforms)
+            known = [*platform_names(), *extra] if extra else None
+            svc = DatabankService(session, ecls, keys, replica, writes_enabled,
+                                  known_platforms=known)
+            with svc:
+                log.info(
+                    "databank %s serving %s under %s/ (writes %s, zenoh id %s)",
+                    replica,
+                    ", ".join(f"{n} [{e.version}]" for n, e in sorted(ecls.items())),
+                    keys.prefix,
+                    "enabled" if writes_enabled else "disabled",
+                    session.info.zid(),
+                )
+                stop.wait()
             log.info(
-                "databank %s serving %s under %s/ (writes %s, zenoh id %s)",
+                "databank %s stopped on %s after %.1f s",
                 replica,
-                ", ".join(f"{n} [{e.version}]" for n, e in sorted(ecls.items())),
-                keys.prefix,
-                "enabled" if writes_enabled else "disabled",
-                session.info.zid(),
+                caught[0] if caught else "request",
+                time.monotonic() - started,
             )
-            stop.wait()
-        log.info(
-            "databank %s stopped on %s after %.1f s",
-            replica,
-            caught[0] if caught else "request",
-            time.monotonic() - started,
-        )
-    finally:
-        close_session(session)
-        for s, handler in previous.items():
-            signal.signal(s, handler)
+        finally:
+            close_session(session)
     return 0

@@ -28,6 +28,7 @@ from typing import IO
 import zenoh
 
 from kinesphere.errors import KinesphereError
+from kinesphere.signals import handle_signals
 from kinesphere.zconfig import close_session, open_session, session_config
 
 log = logging.getLogger("kinesphere.router")
@@ -183,8 +184,7 @@ def run_router(
         log.info("router: signal %d, shutting down", signum)
         stop.set()
 
-    previous = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
-    try:
+    with handle_signals(on_signal, (signal.SIGINT, signal.SIGTERM)):
         session = open_session(config=config)
         try:
             endpoints = json.loads(config.get_json("listen/endpoints"))
@@ -200,7 +200,4 @@ def run_router(
         finally:
             close_session(session)
             log.info("router stopped")
-    finally:
-        for s, handler in previous.items():
-            signal.signal(s, handler)
     return 0

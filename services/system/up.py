@@ -27,6 +27,7 @@ from rich.live import Live
 from kinesphere.errors import KinesphereError
 from kinesphere.keyexpr import DEFAULT_PREFIX, Keys
 from kinesphere.protocol import RobotState
+from kinesphere.signals import handle_signals
 from kinesphere.zconfig import LOOPBACK_ANY_PORT, close_session, open_hub, undeclare
 
 from .procs import ChildFailed, Supervisor
@@ -145,12 +146,8 @@ def _signals_raise() -> Iterator[None]:
     def handler(signum: int, _frame: object) -> None:
         raise _Stop(f"signal {signum}")
 
-    previous = {s: signal.signal(s, handler) for s in (signal.SIGTERM, signal.SIGHUP)}
-    try:
+    with handle_signals(handler, (signal.SIGTERM, signal.SIGHUP)):
         yield
-    finally:
-        for s, h in previous.items():
-            signal.signal(s, h)
 
 
 class Demo:
