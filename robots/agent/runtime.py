@@ -241,11 +241,11 @@ class Agent:
             self._last_seq = cmd.seq  # acted on now; poses count once resolved
         if verdict is Verdict.ESTOP:
             self._halt(Status.ESTOP, f"e-stop from {cmd.sender or 'a client'}; release with "
-                       "estop=false, stop=false, deadman=true")
+                       "a command with release=true (kinesphere estop --release)")
             log.warning("agent %s: e-stop (seq %d)", self.robot_id, cmd.seq)
         elif verdict is Verdict.LATCHED:
-            self._set(Status.ESTOP, "e-stop latched; ignoring commands until released with "
-                      "estop=false, stop=false, deadman=true")
+            self._set(Status.ESTOP, "e-stop latched; ignoring commands until one with "
+                      "release=true (kinesphere estop --release)")
         elif verdict is Verdict.RELEASE:
             self._set(Status.IDLE, "e-stop released; send a command to move")
             log.warning("agent %s: e-stop released (seq %d)", self.robot_id, cmd.seq)
