@@ -165,14 +165,18 @@ class BaseController:
     def step(self) -> None:
         raise NotImplementedError
 
+    def yaw_limits(self) -> tuple[float, float]:
+        """Yaw acceleration and jerk: the linear limits scaled by yaw rate / speed."""
+        scale = self.spec.max_yaw_rate / max(self.spec.max_speed, 1e-9)
+        return self.spec.max_acceleration * scale, self.spec.max_jerk * scale
+
 
 class OmniBase(BaseController):
     """Holonomic base: Ruckig over world (x, y, yaw)."""
 
     def __init__(self, spec: BaseSpec, dt: float) -> None:
         super().__init__(spec, dt)
-        yaw_acc = spec.max_acceleration * spec.max_yaw_rate / max(spec.max_speed, 1e-9)
-        yaw_jerk = spec.max_jerk * spec.max_yaw_rate / max(spec.max_speed, 1e-9)
+        yaw_acc, yaw_jerk = self.yaw_limits()
         self._otg = _Otg(
             3, dt, [spec.max_speed, spec.max_speed, spec.max_yaw_rate],
             [spec.max_acceleration, spec.max_acceleration, yaw_acc],
@@ -230,8 +234,7 @@ class DiffBase(BaseController):
 
     def __init__(self, spec: BaseSpec, dt: float) -> None:
         super().__init__(spec, dt)
-        yaw_acc = spec.max_acceleration * spec.max_yaw_rate / max(spec.max_speed, 1e-9)
-        yaw_jerk = spec.max_jerk * spec.max_yaw_rate / max(spec.max_speed, 1e-9)
+        yaw_acc, yaw_jerk = self.yaw_limits()
         self._otg = _Otg(
             2, dt, [spec.max_speed, spec.max_yaw_rate],
             [spec.max_acceleration, yaw_acc], [spec.max_jerk, yaw_jerk],
