@@ -213,28 +213,26 @@ def parse(data: dict[str, Any], source: str = "<mapping>") -> MapFile:
     )
 
 
+def _read_toml(path: str | Path, what: str) -> dict[str, Any]:
+    """A TOML file as a dict; unreadable or invalid files raise KinesphereError naming it."""
+    try:
+        return tomllib.loads(Path(path).read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise KinesphereError("malformed", f"cannot read {what} {path}: {exc.strerror}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise KinesphereError("malformed", f"{what} {path} is not TOML: {exc}") from None
+
+
 def load(path: str | Path | None = None) -> MapFile:
     """The defaults, or ``path`` laid over them; a bad file raises KinesphereError."""
     if path is None:
         return parse({}, "default")
-    try:
-        data = tomllib.loads(Path(path).read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise KinesphereError("malformed", f"cannot read mapping {path}: {exc.strerror}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise KinesphereError("malformed", f"mapping {path} is not TOML: {exc}") from None
-    return parse(data, str(path))
+    return parse(_read_toml(path, "mapping"), str(path))
 
 
 def load_groups(path: str | Path) -> dict[str, tuple[str, ...]]:
     """Only the ``[groups]`` of a TOML file (a fleet file shared by several operators)."""
-    try:
-        data = tomllib.loads(Path(path).read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise KinesphereError("malformed", f"cannot read groups {path}: {exc.strerror}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise KinesphereError("malformed", f"groups file {path} is not TOML: {exc}") from None
-    groups = data.get("groups")
+    groups = _read_toml(path, "groups file").get("groups")
     if not isinstance(groups, dict):
         raise KinesphereError("malformed", f"{path} has no [groups] table")
     return _groups(groups)
