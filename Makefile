@@ -3,17 +3,20 @@ PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
+# The five distributions of this repository (docs/architecture.md): the core and one per role.
+PARTS  := . robots services clients deploy
+SRC    := kinesphere robots services clients deploy tests bench
 export MUJOCO_GL ?= egl
 export SDL_VIDEODRIVER ?= dummy
 export SDL_AUDIODRIVER ?= dummy
 export PYTHONDONTWRITEBYTECODE := 1
 
-.PHONY: install demo test lint typecheck bench clean
+.PHONY: install demo test lint typecheck layers bench lock clean
 
-$(STAMP): pyproject.toml setup.py
+$(STAMP): pyproject.toml robots/pyproject.toml services/pyproject.toml clients/pyproject.toml deploy/pyproject.toml constraints.txt
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[test]'
+	$(BIN)/python -m pip install --quiet -c constraints.txt -e '.[test]' $(addprefix -e ,$(filter-out .,$(PARTS)))
 	touch $(STAMP)
 
 install: $(STAMP)
@@ -21,19 +24,28 @@ install: $(STAMP)
 demo: $(STAMP)
 	$(BIN)/kinesphere up --headless
 
-test: $(STAMP)
-	$(BIN)/ruff check kinesphere services clients robots tests bench
-	$(BIN)/mypy --strict kinesphere
+test: lint typecheck layers
 	$(BIN)/python -m pytest -q
 
 lint: $(STAMP)
-	$(BIN)/ruff check kinesphere services clients robots tests bench
+	$(BIN)/ruff check $(SRC)
 
 typecheck: $(STAMP)
-	$(BIN)/mypy --strict kinesphere
+	$(BIN)/mypy kinesphere $(addsuffix /kinesphere,$(filter-out .,$(PARTS)))
+
+layers: $(STAMP)
+	$(BIN)/lint-imports
 
 bench: $(STAMP)
 	$(BIN)/python -m bench
 
+# Re-pin what CI tests with: resolve the newest allowed versions in a scratch venv, freeze them.
+lock:
+	rm -rf .venv-lock && $(PYTHON) -m venv .venv-lock
+	.venv-lock/bin/python -m pip install --quiet --upgrade pip
+	.venv-lock/bin/python -m pip install --quiet -e '.[test]' $(addprefix -e ,$(filter-out .,$(PARTS)))
+	.venv-lock/bin/python -m pip freeze --exclude-editable | grep -v '^kinesphere' > constraints.txt
+	rm -rf .venv-lock
+
 clean:
-	rm -rf $(VENV) build *.egg-info .pytest_cache .mypy_cache .ruff_cache
+	rm -rf $(VENV) build .pytest_cache .mypy_cache .ruff_cache

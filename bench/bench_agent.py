@@ -21,12 +21,12 @@ from pathlib import Path
 import mujoco
 import numpy as np
 import zenoh
-from kinesphere.robots.agent.runtime import Agent, AgentOptions
-from kinesphere.robots.mjcf import platform_model
 
 from kinesphere import zconfig
 from kinesphere.keyexpr import Keys
 from kinesphere.protocol import Command, RobotState, SpatialCommand, decode, encode
+from kinesphere.robots.agent.runtime import Agent, AgentOptions
+from kinesphere.robots.mjcf import platform_model
 
 KEYS = Keys()
 PLATFORMS = ["baxter", "nao", "youbot", "packbot", "khepera"]

@@ -20,12 +20,12 @@ from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 
 import zenoh
+
+from kinesphere.keyexpr import Keys
 from kinesphere.robots.platform import load_platform
 from kinesphere.services.ecl.ecl import Ecl
 from kinesphere.services.ecl.store import PoseRow, default_db_path, write_databank
 from kinesphere.services.ecl.vsam import load_vsam
-
-from kinesphere.keyexpr import Keys
 from kinesphere.zconfig import close_session, loopback_endpoint, session_config
 
 KEYS = Keys("kbench")
@@ -62,7 +62,6 @@ def _databank(tmp: Path) -> tuple[str, str, tuple[str, str, str, float]]:
 def serve(endpoint: str, platform: str, db: str, reply_size: int) -> None:
     """The server process: databank + floor on one session until stdin closes."""
     from kinesphere.services.databank.service import DatabankService
-
     from kinesphere.zconfig import open_session
 
     ecl = Ecl.open(platform, db)

@@ -10,11 +10,10 @@ import argparse
 import logging
 import sys
 from collections.abc import Callable, Sequence
-from importlib.metadata import entry_points
+from importlib.metadata import entry_points, version
 from pathlib import Path
 from typing import Any
 
-from kinesphere import __version__
 from kinesphere.errors import KinesphereError
 
 
@@ -54,7 +53,9 @@ def build_parser() -> argparse.ArgumentParser:
         prog="kinesphere",
         description="Steer any robot with Laban spatial commands: (limb, origin, direction, size).",
     )
-    parser.add_argument("--version", action="version", version=f"kinesphere {__version__}")
+    parser.add_argument(
+        "--version", action="version", version=f"kinesphere {version('kinesphere')}"
+    )
     parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     _register_core(sub)

@@ -16,14 +16,14 @@ import math
 import numpy as np
 import pytest
 import zenoh
-from kinesphere.robots.agent.controller import Controller
-from kinesphere.robots.agent.resolver import Resolver, parts_key
-from kinesphere.robots.mjcf import platform_model
 from test_agent_support import WAIT_S, Databank, databank, hub
 
 from kinesphere import zconfig
 from kinesphere.errors import KinesphereError
 from kinesphere.protocol import SpatialCommand
+from kinesphere.robots.agent.controller import Controller
+from kinesphere.robots.agent.resolver import Resolver, parts_key
+from kinesphere.robots.mjcf import platform_model
 
 __all__ = ["databank", "hub"]  # fixtures
 PLATFORMS = ["baxter", "nao", "youbot", "packbot", "khepera"]

@@ -9,6 +9,11 @@ import math
 
 import numpy as np
 import pytest
+
+from kinesphere import zconfig
+from kinesphere.errors import KinesphereError
+from kinesphere.eurdf import JointLimit
+from kinesphere.protocol import Command, Drive
 from kinesphere.robots.agent.base import DiffBase, OmniBase, make_base, wrap_angle
 from kinesphere.robots.agent.controller import Controller
 from kinesphere.robots.agent.runtime import SETTLE_S, Agent, AgentOptions
@@ -16,11 +21,6 @@ from kinesphere.robots.agent.safety import DRIVE_TTL_S, Safety, Verdict
 from kinesphere.robots.agent.trajectory import DEFAULT_MARGIN, JointTrajectory
 from kinesphere.robots.mjcf import platform_model
 from kinesphere.robots.platform import BaseSpec
-
-from kinesphere import zconfig
-from kinesphere.errors import KinesphereError
-from kinesphere.eurdf import JointLimit
-from kinesphere.protocol import Command, Drive
 
 DT = 0.002
 ACC, JERK = 4.0, 40.0

@@ -14,7 +14,6 @@ import pytest
 import zenoh
 from test_agent_support import (
     KEYS,
-    ROOT,
     WAIT_S,
     Databank,
     Operator,
@@ -24,6 +23,7 @@ from test_agent_support import (
 
 from kinesphere import zconfig
 from kinesphere.protocol import RecordRequest, SpatialCommand, encode
+from kinesphere.services.ecl.store import DATA_DIR
 
 
 @pytest.fixture
@@ -87,7 +87,7 @@ def test_cache_is_per_databank_version(
     """A repeated command needs no round trip; a recorded pose reaches the robot at once."""
     session, endpoint = own_hub
     db = tmp_path / "youbot.sqlite"
-    shutil.copy(ROOT / "services" / "ecl" / "data" / "youbot.sqlite", db)
+    shutil.copy(DATA_DIR / "youbot.sqlite", db)
     bank = Databank(endpoint, session, ["--db", f"youbot={db}", "--allow-writes"])
     bank.start()
     try:

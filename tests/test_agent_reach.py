@@ -10,7 +10,6 @@ from contextlib import ExitStack
 import numpy as np
 import pytest
 import zenoh
-from kinesphere.robots.agent.runtime import Agent
 from test_agent_support import (
     Databank,
     Operator,
@@ -23,6 +22,7 @@ from test_agent_support import (
 )
 
 from kinesphere.protocol import Catalogue, Pose, RobotState, SpatialCommand
+from kinesphere.robots.agent.runtime import Agent
 
 __all__ = ["databank", "hub"]  # fixtures
 PLATFORMS = ["baxter", "nao", "youbot", "packbot", "khepera"]

@@ -10,8 +10,6 @@ from contextlib import ExitStack
 
 import numpy as np
 import zenoh
-from kinesphere.robots.agent.runtime import Agent
-from kinesphere.robots.agent.safety import DRIVE_TTL_S
 from test_agent_support import (
     Databank,
     Operator,
@@ -22,6 +20,8 @@ from test_agent_support import (
 )
 
 from kinesphere.protocol import Command, RobotState, encode
+from kinesphere.robots.agent.runtime import Agent
+from kinesphere.robots.agent.safety import DRIVE_TTL_S
 
 __all__ = ["databank", "hub"]  # fixtures
 

@@ -22,8 +22,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 import zenoh
-from kinesphere.robots.agent.controller import Controller
-from kinesphere.robots.agent.runtime import Agent, AgentOptions
 
 from kinesphere import zconfig
 from kinesphere.keyexpr import Keys
@@ -38,6 +36,8 @@ from kinesphere.protocol import (
     encode,
     error_from_reply,
 )
+from kinesphere.robots.agent.controller import Controller
+from kinesphere.robots.agent.runtime import Agent, AgentOptions
 
 KEYS = Keys()
 ROOT = Path(__file__).resolve().parent.parent

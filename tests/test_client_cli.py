@@ -9,11 +9,11 @@ from pathlib import Path
 
 import pytest
 import zenoh
-from kinesphere.clients import record
-from kinesphere.clients.state import Action, ControllerState
 from test_client_support import KEYS, Inbox, hub
 
 from kinesphere.cli import main
+from kinesphere.clients import record
+from kinesphere.clients.state import Action, ControllerState
 
 __all__ = ["hub"]  # fixtures
 

@@ -23,15 +23,15 @@ from pathlib import Path
 import pygame
 import pytest
 import zenoh
+from test_client_support import Pad, Script, pygame_up
+
+from kinesphere import zconfig
 from kinesphere.clients import input as pad
 from kinesphere.clients import mapfile
 from kinesphere.clients import targets as tg
 from kinesphere.clients.link import RobotLink
 from kinesphere.clients.state import Action, ControllerState
 from kinesphere.clients.teleop import Teleop, TeleopOptions, run
-from test_client_support import Pad, Script, pygame_up
-
-from kinesphere import zconfig
 from kinesphere.keyexpr import Keys
 from kinesphere.protocol import RobotState, decode
 
@@ -47,14 +47,8 @@ PLATFORMS = {PB: "packbot", YB: "youbot"}
 
 
 def databank_args() -> list[str]:
-    """The shipped databanks, or prebuilt ones from $KINESPHERE_TEST_DBS (DIR/<platform>.sqlite)."""
-    shipped = ROOT / "services" / "ecl" / "data"
-    if all((shipped / f"{p}.sqlite").exists() for p in PLATFORMS.values()):
-        return [a for p in PLATFORMS.values() for a in ("--platform", p)]
-    dev = os.environ.get("KINESPHERE_TEST_DBS")
-    if dev and all((Path(dev) / f"{p}.sqlite").exists() for p in PLATFORMS.values()):
-        return [a for p in PLATFORMS.values() for a in ("--db", f"{p}={Path(dev) / p}.sqlite")]
-    pytest.skip("no packbot/youbot databanks in services/ecl/data (or $KINESPHERE_TEST_DBS)")
+    """The shipped databanks of the platforms under test."""
+    return [a for p in PLATFORMS.values() for a in ("--platform", p)]
 
 
 class Child:

@@ -12,12 +12,12 @@ os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
 
 import pygame  # noqa: E402
 import pytest  # noqa: E402
+
 from kinesphere.clients import hud  # noqa: E402
 from kinesphere.clients import targets as tg  # noqa: E402
 from kinesphere.clients.link import Seen  # noqa: E402
 from kinesphere.clients.mapping import Intent  # noqa: E402
 from kinesphere.clients.teleop import View  # noqa: E402
-
 from kinesphere.laban import Direction, Horizontal, Level  # noqa: E402
 from kinesphere.protocol import Drive, RobotState  # noqa: E402
 

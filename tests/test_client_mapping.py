@@ -6,6 +6,7 @@ import math
 from pathlib import Path
 
 import pytest
+
 from kinesphere.clients import mapfile
 from kinesphere.clients.mapping import (
     Intent,
@@ -15,7 +16,6 @@ from kinesphere.clients.mapping import (
     nearest_available,
 )
 from kinesphere.clients.state import Action, ControllerState
-
 from kinesphere.errors import KinesphereError
 from kinesphere.laban import Direction
 

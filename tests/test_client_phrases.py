@@ -9,10 +9,10 @@ from pathlib import Path
 
 import pytest
 import zenoh
-from kinesphere.clients import phrases
-from kinesphere.clients.link import Sequencer
 from test_client_support import KEYS, WAIT_S, Inbox, client_link, hub, sentinel
 
+from kinesphere.clients import phrases
+from kinesphere.clients.link import Sequencer
 from kinesphere.errors import KinesphereError
 from kinesphere.laban import Direction
 

@@ -9,11 +9,6 @@ from pathlib import Path
 import pygame
 import pytest
 import zenoh
-from kinesphere.clients import input as pad
-from kinesphere.clients import mapfile, record
-from kinesphere.clients import targets as tg
-from kinesphere.clients.state import NEUTRAL, Action, ControllerState
-from kinesphere.clients.teleop import Teleop, TeleopOptions, run
 from test_client_support import (
     KEYS,
     WAIT_S,
@@ -26,6 +21,11 @@ from test_client_support import (
     sentinel,
 )
 
+from kinesphere.clients import input as pad
+from kinesphere.clients import mapfile, record
+from kinesphere.clients import targets as tg
+from kinesphere.clients.state import NEUTRAL, Action, ControllerState
+from kinesphere.clients.teleop import Teleop, TeleopOptions, run
 from kinesphere.errors import KinesphereError
 
 __all__ = ["hub", "pygame_up"]  # fixtures

@@ -23,11 +23,11 @@ os.environ.setdefault("SDL_AUDIODRIVER", "dummy")
 import pygame  # noqa: E402
 import pytest  # noqa: E402
 import zenoh  # noqa: E402
+
+from kinesphere import zconfig  # noqa: E402
 from kinesphere.clients import input as pad  # noqa: E402
 from kinesphere.clients.link import RobotLink  # noqa: E402
 from kinesphere.clients.state import ControllerState  # noqa: E402
-
-from kinesphere import zconfig  # noqa: E402
 from kinesphere.keyexpr import Keys  # noqa: E402
 from kinesphere.protocol import Catalogue, Command, RobotState, decode, encode  # noqa: E402
 

@@ -11,12 +11,6 @@ import msgspec
 import pygame
 import pytest
 import zenoh
-from kinesphere.clients import input as pad
-from kinesphere.clients import mapfile
-from kinesphere.clients import targets as tg
-from kinesphere.clients.limbs import CatalogueCache, Selection, pairs_of
-from kinesphere.clients.link import RobotLink
-from kinesphere.clients.teleop import Teleop, TeleopOptions, run
 from test_client_support import (
     KEYS,
     WAIT_S,
@@ -32,6 +26,12 @@ from test_client_support import (
 )
 
 from kinesphere import zconfig
+from kinesphere.clients import input as pad
+from kinesphere.clients import mapfile
+from kinesphere.clients import targets as tg
+from kinesphere.clients.limbs import CatalogueCache, Selection, pairs_of
+from kinesphere.clients.link import RobotLink
+from kinesphere.clients.teleop import Teleop, TeleopOptions, run
 from kinesphere.laban import Direction
 from kinesphere.protocol import Catalogue, LimbEntry, SpatialCommand
 

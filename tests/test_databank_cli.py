@@ -15,8 +15,6 @@ from pathlib import Path
 
 import pytest
 import zenoh
-from kinesphere.services.databank import client
-from kinesphere.services.databank.serve import open_ecls
 from test_databank_support import (
     KEYS,
     ROOT,
@@ -33,6 +31,8 @@ from test_databank_support import (
 from kinesphere import zconfig
 from kinesphere.cli import main
 from kinesphere.errors import KinesphereError
+from kinesphere.services.databank import client
+from kinesphere.services.databank.serve import open_ecls
 
 CMD = ("toyarm", "arm", "shoulder", "left-high", "2")
 

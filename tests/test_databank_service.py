@@ -9,9 +9,6 @@ from pathlib import Path
 import msgspec
 import pytest
 import zenoh
-from kinesphere.services.databank.replies import MAX_PAYLOAD
-from kinesphere.services.databank.service import DatabankService, changed_key
-from kinesphere.services.ecl.ecl import Ecl
 from test_databank_support import (
     KEYS,
     TOY,
@@ -27,6 +24,9 @@ from test_databank_support import (
 from kinesphere import protocol as pr
 from kinesphere import zconfig
 from kinesphere.errors import KinesphereError
+from kinesphere.services.databank.replies import MAX_PAYLOAD
+from kinesphere.services.databank.service import DatabankService, changed_key
+from kinesphere.services.ecl.ecl import Ecl
 
 ARM = ("toyarm", "limb_11", "distal_11")
 

@@ -17,12 +17,12 @@ from contextlib import contextmanager
 from pathlib import Path
 
 import zenoh
-from kinesphere.robots.platform import load_platform
-from kinesphere.services.ecl.store import PoseRow, write_databank
-from kinesphere.services.ecl.vsam import load_vsam
 
 from kinesphere import protocol as pr
 from kinesphere.keyexpr import Keys
+from kinesphere.robots.platform import load_platform
+from kinesphere.services.ecl.store import PoseRow, write_databank
+from kinesphere.services.ecl.vsam import load_vsam
 from kinesphere.zconfig import loopback_config, open_session
 
 ROOT = Path(__file__).resolve().parents[1]

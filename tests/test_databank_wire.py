@@ -14,15 +14,15 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from test_databank_support import ROOT, answered
+
+from kinesphere import zconfig
+from kinesphere.keyexpr import Keys
 from kinesphere.robots.platform import load_platform
 from kinesphere.services.databank.service import DatabankService
 from kinesphere.services.ecl.ecl import Ecl
 from kinesphere.services.ecl.store import PoseRow, write_databank
 from kinesphere.services.ecl.vsam import load_vsam
-from test_databank_support import ROOT, answered
-
-from kinesphere import zconfig
-from kinesphere.keyexpr import Keys
 
 DOC = ROOT / "docs" / "protocol.md"
 NO_KINESPHERE = "import sys\nsys.modules['kinesphere'] = None  # any kinesphere import fails\n"

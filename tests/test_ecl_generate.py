@@ -10,6 +10,9 @@ from pathlib import Path
 import mujoco
 import numpy as np
 import pytest
+
+from kinesphere.cli import main
+from kinesphere.laban import Direction
 from kinesphere.robots.mjcf import PlatformModel, platform_model
 from kinesphere.robots.platform import load_platform, platform_names
 from kinesphere.services.ecl.constraints import tip_point
@@ -17,9 +20,6 @@ from kinesphere.services.ecl.ecl import Ecl
 from kinesphere.services.ecl.generate import COS_FAR, COS_SIZE, GENERATOR_VERSION, generate
 from kinesphere.services.ecl.store import default_db_path, read_tables
 from kinesphere.services.ecl.vsam import load_vsam
-
-from kinesphere.cli import main
-from kinesphere.laban import Direction
 
 TOY = Path(__file__).parent / "data" / "toyarm"
 SHIPPED = ("baxter", "nao", "youbot", "packbot", "khepera")

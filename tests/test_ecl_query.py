@@ -8,16 +8,16 @@ from pathlib import Path
 
 import msgspec
 import pytest
-from kinesphere.robots.platform import load_platform
-from kinesphere.services.ecl.ecl import Ecl
-from kinesphere.services.ecl.store import PoseRow, content_digest, write_databank
-from kinesphere.services.ecl.vsam import load_vsam
 from test_ecl_store import TOY, build, toy_rows
 
 from kinesphere.cli import main
 from kinesphere.errors import KinesphereError
 from kinesphere.laban import Direction
 from kinesphere.protocol import COMPOUND, NO_ID, Pose, SpatialCommand
+from kinesphere.robots.platform import load_platform
+from kinesphere.services.ecl.ecl import Ecl
+from kinesphere.services.ecl.store import PoseRow, content_digest, write_databank
+from kinesphere.services.ecl.vsam import load_vsam
 
 
 @pytest.fixture

@@ -6,12 +6,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from kinesphere.services.ecl import render
-from kinesphere.services.ecl.ecl import Ecl
 from PIL import Image
 
 from kinesphere.cli import main
 from kinesphere.laban import Direction
+from kinesphere.services.ecl import render
+from kinesphere.services.ecl.ecl import Ecl
 
 CELL, LABEL, TITLE = render.CELL, render.LABEL, render.TITLE
 

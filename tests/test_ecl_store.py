@@ -12,6 +12,9 @@ import sys
 from pathlib import Path
 
 import pytest
+
+from kinesphere.errors import KinesphereError
+from kinesphere.laban import Direction
 from kinesphere.robots.platform import Platform, load_platform
 from kinesphere.services.ecl.ecl import Ecl
 from kinesphere.services.ecl.store import (
@@ -23,9 +26,6 @@ from kinesphere.services.ecl.store import (
     write_databank,
 )
 from kinesphere.services.ecl.vsam import load_vsam
-
-from kinesphere.errors import KinesphereError
-from kinesphere.laban import Direction
 
 TOY = Path(__file__).resolve().parent / "data" / "toyarm"
 

@@ -8,6 +8,7 @@ import mujoco
 import numpy as np
 import pytest
 import yourdfpy
+
 from kinesphere.robots.mjcf import BASE_JOINTS, platform_model
 from kinesphere.robots.platform import load_platform, platform_names
 

@@ -14,7 +14,6 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-from kinesphere.services.system.procs import Supervisor
 from test_system_support import (
     WAIT_S,
     Observer,
@@ -27,6 +26,7 @@ from test_system_support import (
     until,
 )
 
+from kinesphere.deploy.procs import Supervisor
 from kinesphere.keyexpr import KEYS
 from kinesphere.protocol import Command, SpatialCommand, encode
 from kinesphere.zconfig import free_port

@@ -16,7 +16,6 @@ from pathlib import Path
 
 import pytest
 import zenoh
-from kinesphere.services.system.procs import Supervisor
 from test_system_support import (
     DEPLOY,
     KEYS,
@@ -33,6 +32,7 @@ from test_system_support import (
     until,
 )
 
+from kinesphere.deploy.procs import Supervisor
 from kinesphere.errors import KinesphereError
 from kinesphere.protocol import Command, Pose, RecordRequest, SpatialCommand, decode, encode
 from kinesphere.zconfig import close_session, free_port, open_session, session, session_config

@@ -14,16 +14,17 @@ from pathlib import Path
 
 import pytest
 import zenoh
-from kinesphere.services.system.procs import Supervisor
-from kinesphere.services.system.watch import Alive, StateRecorder, watch_alive
 
+from kinesphere.deploy.procs import Supervisor
+from kinesphere.deploy.watch import Alive, StateRecorder, watch_alive
 from kinesphere.keyexpr import Keys
 from kinesphere.protocol import Pose, RobotState, decode, error_from_reply
+from kinesphere.services.ecl.store import DATA_DIR
 from kinesphere.zconfig import close_session, open_session, undeclare
 
 ROOT = Path(__file__).resolve().parent.parent
 DEPLOY = ROOT / "deploy"
-SHIPPED_DBS = ROOT / "services" / "ecl" / "data"
+SHIPPED_DBS = DATA_DIR
 KEYS = Keys()
 WAIT_S = 60.0
 """Upper bound for start-up events on a loaded 2-core machine; healthy runs take seconds."""

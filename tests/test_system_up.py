@@ -15,14 +15,15 @@ import sys
 from pathlib import Path
 
 import pytest
-from kinesphere.services.system.router import DenialFilter, describe_subject
-from kinesphere.services.system.up import (
+from test_system_support import ROOT, SHIPPED_DBS, WAIT_S, until
+
+from kinesphere.deploy.router import DenialFilter, describe_subject
+from kinesphere.deploy.up import (
     default_phrases,
     parse_phrase,
     parse_robots,
+    shipped_phrases_dir,
 )
-from test_system_support import ROOT, SHIPPED_DBS, WAIT_S, until
-
 from kinesphere.errors import KinesphereError
 
 PHRASE = (
@@ -120,7 +121,7 @@ def test_robot_and_phrase_options() -> None:
     for bad in ("", "baxter:x,nao:x", "baxter:a/b", "nosuch"):
         with pytest.raises(KinesphereError):
             parse_robots(bad)
-    shipped = ROOT / "clients" / "phrases"
+    shipped = shipped_phrases_dir()
     phrases = default_phrases(parse_robots("baxter,packbot"), shipped)
     assert [(p.path.name, p.target) for p in phrases] == [
         ("left_high.toml", "all"), ("packbot_sweep.toml", "packbot")]

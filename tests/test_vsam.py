@@ -4,11 +4,11 @@ import shutil
 from pathlib import Path
 
 import pytest
-from kinesphere.robots.platform import load_platform
-from kinesphere.services.ecl.vsam import load_vsam, vsam_from_dict
 
 from kinesphere.errors import KinesphereError
 from kinesphere.laban import Direction
+from kinesphere.robots.platform import load_platform
+from kinesphere.services.ecl.vsam import load_vsam, vsam_from_dict
 
 TOY = Path(__file__).resolve().parent / "data" / "toyarm"
 STEPS = {"baxter": None, "nao": 0.1, "youbot": 0.25, "packbot": 0.5, "khepera": 0.05}

@@ -1,0 +1,177 @@
+"""The operator's sub-commands: ``gamepad``, ``send``, ``play`` and ``estop``.
+
+Only the parsers live here (registered by the ``kinesphere`` dispatcher through the
+``kinesphere.commands`` entry point); the handlers are in :mod:`kinesphere.clients.commands`.
+"""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+from kinesphere.cliargs import DEFAULT_ENDPOINT, add_zenoh_arguments
+from kinesphere.clients import commands
+
+KEYS_HELP = """keys (keyboard fallback, the HUD window needs focus):
+  arrows      right stick: the limb's horizontal direction (diagonals: two arrows)
+  1 / 2 / 3   near / mid / far reach for the arrows and Q/E
+  Q / E       low / high level (alone: Place Low / Place High)
+  W A S D     left stick: drive the base (hold shift for full speed)
+  space       deadman (hold)          B       beyond: reach past far (hold, with 3)
+  Tab / L     next limb / origin      T       next target (robot -> group -> all)
+  Escape      E-STOP every robot      Enter   release the e-stop of the target
+  F10         quit
+
+gamepad (SDL layout, see clients/mappings/default.toml):
+  right stick limb direction + reach   left stick   drive the base
+  LT / RT     low / high level         LB (hold)    deadman       RB (hold) beyond
+  d-pad       left/right: limb, up/down: origin     Y  next target
+  B           E-STOP every robot       Start        release the e-stop
+"""
+
+
+def _zenoh(p: argparse.ArgumentParser) -> None:
+    add_zenoh_arguments(
+        p,
+        default_help=f"Without --connect, --listen or --zenoh-config: connect to "
+        f"{DEFAULT_ENDPOINT},\nwhere 'kinesphere databank serve' listens.",
+    )
+
+
+def _targeting(p: argparse.ArgumentParser, ttl_default: str = "300", wait: bool = True) -> None:
+    p.add_argument(
+        "--groups",
+        metavar="FILE",
+        help="TOML file with [groups] name = [robot ids] (adds to the mapping's)",
+    )
+    p.add_argument(
+        "--ttl-ms",
+        type=int,
+        default=None,
+        metavar="MS",
+        help=f"robots hold if no newer command arrives within MS (default {ttl_default})",
+    )
+    if wait:
+        p.add_argument(
+            "--wait",
+            type=float,
+            default=5.0,
+            metavar="S",
+            help="wait up to S seconds for the target robots to be reachable (default 5)",
+        )
+
+
+def register(sub: Any) -> None:
+    fmt = argparse.RawDescriptionHelpFormatter
+    g = sub.add_parser(
+        "gamepad",
+        formatter_class=fmt,
+        help="teleoperate robots with a gamepad (or the keyboard) and a HUD",
+        description="Stream spatial commands from a gamepad: the right stick moves the "
+        "selected limb (direction from its angle, size from its deflection, level from the "
+        "triggers), the left stick drives the base, both at once. Commands go out at --rate "
+        "while the deadman is held, each with --ttl-ms so robots stop if this client dies; "
+        "letting go sends a final stop.",
+        epilog=KEYS_HELP,
+    )
+    g.add_argument(
+        "--target",
+        default="all",
+        metavar="ID|GROUP|all",
+        help="robot id, group name or 'all' (default all; cycle with the target button)",
+    )
+    g.add_argument("--headless", action="store_true", help="no HUD window (needs a gamepad)")
+    g.add_argument(
+        "--mapping", metavar="FILE", help="TOML mapping laid over clients/mappings/default.toml"
+    )
+    g.add_argument("--record", metavar="FILE", help="record the session (JSON lines) to FILE")
+    g.add_argument(
+        "--replay",
+        metavar="FILE",
+        help="replay a recording instead of reading a device; exits when it ends",
+    )
+    g.add_argument(
+        "--rate",
+        type=float,
+        default=30.0,
+        metavar="HZ",
+        help="command rate while engaged (default 30)",
+    )
+    g.add_argument(
+        "--no-deadman",
+        action="store_true",
+        help="stream whenever a stick or trigger is deflected (no deadman button)",
+    )
+    g.add_argument("--duration", type=float, metavar="S", help="quit after S seconds")
+    g.add_argument("--screenshot", metavar="PNG", help="save the HUD to PNG when quitting")
+    _targeting(g, wait=False)
+    _zenoh(g)
+    g.set_defaults(func=commands.gamepad)
+
+    s = sub.add_parser(
+        "send",
+        formatter_class=fmt,
+        help="send one command (L O D S ...) to a robot, a group or all",
+        description="Send one Command with the given spatial parts, e.g.\n"
+        "  kinesphere send baxter-1 limb_11 distal_11 left-high 3\n"
+        "  kinesphere send all right_arm right_shoulder forward-low far --drive forward 0.3 "
+        "--for 2\nLimbs and origins are labels or aliases; sizes are numbers or near/mid/far. "
+        "With --for the command is repeated at --rate for that long (a drive needs that), then "
+        "a stop follows.",
+    )
+    s.add_argument("target", help="robot id, group name or 'all'")
+    s.add_argument(
+        "parts",
+        nargs="*",
+        metavar="L O D S",
+        help="limb origin direction size, repeated for compound commands",
+    )
+    s.add_argument(
+        "--drive",
+        nargs=2,
+        metavar=("DIR", "SPEED"),
+        help="also drive the base along DIR (a middle horizontal) at SPEED 0..1",
+    )
+    s.add_argument(
+        "--for",
+        dest="hold",
+        type=float,
+        metavar="S",
+        help="repeat the command for S seconds, then stop",
+    )
+    s.add_argument(
+        "--rate", type=float, default=30.0, metavar="HZ", help="repeat rate with --for (default 30)"
+    )
+    s.add_argument("--mapping", metavar="FILE", help="mapping file whose [groups] to use")
+    _targeting(s, "0: the pose is reached whatever happens next; 300 with --for")
+    _zenoh(s)
+    s.set_defaults(func=commands.send)
+
+    p = sub.add_parser(
+        "play",
+        formatter_class=fmt,
+        help="play a movement phrase (TOML) on a robot, a group or all",
+        description="Play a phrase: steps of spatial commands (and drives) with durations, "
+        "streamed at --rate, then a stop. PHRASE is a file or a shipped phrase name: "
+        "left_high, tour_guide, packbot_sweep, packbot_retreat.",
+    )
+    p.add_argument("phrase", metavar="PHRASE", help="phrase file (TOML) or shipped name")
+    p.add_argument("--target", default="all", help="robot id, group name or 'all' (default)")
+    p.add_argument("--rate", type=float, default=30.0, metavar="HZ", help="default 30")
+    p.add_argument("--mapping", metavar="FILE", help="mapping file whose [groups] to use")
+    _targeting(p, "the phrase's ttl_ms, else 300")
+    _zenoh(p)
+    p.set_defaults(func=commands.play)
+
+    e = sub.add_parser(
+        "estop",
+        help="emergency-stop every robot (or --release the target's latch)",
+        description="Put an e-stop Command on <prefix>/robot/*/command: every robot halts "
+        "in place and latches until released. --release clears the latch of --target.",
+    )
+    e.add_argument("--release", action="store_true", help="release instead of stopping")
+    e.add_argument("--target", default="all", help="robots to release (default all)")
+    e.add_argument("--mapping", metavar="FILE", help="mapping file whose [groups] to use")
+    _targeting(e)
+    _zenoh(e)
+    e.set_defaults(func=commands.estop)

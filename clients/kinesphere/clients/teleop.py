@@ -1,0 +1,273 @@
+"""The streaming loop: controller snapshots in, Commands out at a fixed rate.
+
+While the operator is engaged (deadman held, or with ``--no-deadman`` anything deflected) every
+tick puts one Command on the target's keys with a fresh ``seq`` and ``ttl_ms``, even when it
+repeats the last one: the stream is the robot's proof that the operator is still there, and a
+robot that stops hearing it holds within ``ttl_ms``. When the operator lets go, the device
+disconnects, the target changes or the client exits, one final stop goes out.
+
+E-stop goes to every robot (``{p}/robot/*/command``) and latches here too. Robots clear their
+latch only on a command with ``release=True``; the loop also stops streaming while any targeted
+robot reports ``estop`` (pointless commands would only be ignored), and after an e-stop, a
+release or a disconnect it streams again only after the deadman was let go and pressed anew.
+
+A direction the selected limb has no poses for (per the targets' catalogues) is replaced by
+the nearest available one, and the HUD shows both, so the robot never just refuses a stick.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from typing import Protocol
+
+from kinesphere.clients import targets as tg
+from kinesphere.clients.limbs import (
+    CatalogueCache,
+    Selection,
+    aliases_of,
+    available_directions,
+    pairs_of,
+)
+from kinesphere.clients.link import RobotLink, Seen, Sequencer, new_sender
+from kinesphere.clients.mapfile import MapFile
+from kinesphere.clients.mapping import (
+    NEUTRAL_INTENT,
+    Intent,
+    MapperState,
+    map_controls,
+    nearest_available,
+)
+from kinesphere.clients.state import Action, ControllerState
+from kinesphere.laban import Direction
+from kinesphere.protocol import SpatialCommand, Status
+
+log = logging.getLogger(__name__)
+
+RELEASE_GRACE_S = 0.5
+"""After a release, ``estop`` states this young may predate it and are not a new e-stop."""
+
+
+class Source(Protocol):
+    """Anything that yields controller snapshots: pygame input or a replayed recording."""
+
+    def poll(self) -> ControllerState: ...
+
+
+@dataclass(frozen=True)
+class TeleopOptions:
+    rate_hz: float = 30.0
+    ttl_ms: int = 300
+    deadman_required: bool = True
+
+
+@dataclass(frozen=True)
+class View:
+    """Everything the HUD shows after a tick: what the robots are about to do and are doing."""
+
+    target: tg.Target
+    limb: str
+    origin: str
+    aliases: dict[str, str]
+    intent: Intent
+    engaged: bool
+    deadman_required: bool
+    estopped: bool
+    remote_estop: list[str]
+    need_fresh_deadman: bool
+    connected: bool
+    source: str
+    robots: dict[str, Seen]
+    seq: int
+    message: str
+    catalogue_errors: dict[str, str] = field(default_factory=dict)
+    available: frozenset[str] | None = None
+    """Directions the limb has poses for (None: no catalogue yet)."""
+    asked: Direction | None = None
+    """The direction the stick asked for, when the nearest available one replaced it."""
+
+
+class Teleop:
+    """One operator's session state; :meth:`tick` once per period, :meth:`shutdown` at exit."""
+
+    def __init__(
+        self,
+        link: RobotLink,
+        mapfile: MapFile,
+        target: tg.Target,
+        options: TeleopOptions | None = None,
+        sender: str | None = None,
+    ) -> None:
+        self.link = link
+        self.map = mapfile
+        self.target = target
+        self.options = options or TeleopOptions()
+        self.seq = Sequencer(sender or new_sender("gamepad"), self.options.ttl_ms)
+        self.selection = Selection()
+        self.catalogues = CatalogueCache(link)
+        self.mstate = MapperState()
+        self.intent = NEUTRAL_INTENT
+        self.streaming = False
+        self.estopped = False
+        self.need_fresh = False
+        self.released_at = float("-inf")
+        self.quit = False
+        self.message = ""
+        self._last: float | None = None
+        self._aliases: dict[str, str] = {}
+        self._available: frozenset[str] | None = None
+        self._asked: Direction | None = None
+
+    # --- decisions ----------------------------------------------------------------------
+
+    def _platforms(self) -> list[str]:
+        states = self.link.states()
+        return [s.state.platform for rid, s in sorted(states.items()) if self.target.includes(rid)]
+
+    def _remote_estop(self) -> list[str]:
+        """Targeted robots that report a latched e-stop (not one we just released)."""
+        return sorted(
+            rid
+            for rid, seen in self.link.states().items()
+            if self.target.includes(rid)
+            and seen.state.status == Status.ESTOP
+            and seen.at > self.released_at + RELEASE_GRACE_S
+        )
+
+    def _stop_stream(self) -> None:
+        if self.streaming:
+            self.link.put(self.target.keys(self.link.keys), self.seq.stop())
+            self.streaming = False
+
+    def _presses(self, cs: ControllerState) -> None:
+        if cs.was_pressed(Action.ESTOP):
+            self.link.estop_all(self.seq)
+            self.streaming = False
+            self.estopped = self.need_fresh = True
+            self.message = "E-STOP sent to all robots"
+        if cs.was_pressed(Action.RELEASE) and not cs.was_pressed(Action.ESTOP):
+            self.link.put(self.target.keys(self.link.keys), self.seq.release())
+            self.estopped, self.need_fresh = False, True
+            self.released_at = time.monotonic()
+            self.message = f"e-stop released for {self.target.label}"
+        if cs.was_pressed(Action.TARGET_NEXT):
+            self._stop_stream()
+            self.target = tg.cycle(self.target, self.link.robots(), self.map.groups)
+            self.message = f"target: {self.target.label}"
+        sel = self.selection
+        moves: tuple[tuple[str, Callable[[int], None], int], ...] = (
+            (Action.LIMB_NEXT, sel.next_limb, 1),
+            (Action.LIMB_PREV, sel.next_limb, -1),
+            (Action.ORIGIN_NEXT, sel.next_origin, 1),
+            (Action.ORIGIN_PREV, sel.next_origin, -1),
+        )
+        for action, move, step in moves:
+            if cs.was_pressed(action):
+                move(step)
+                self.message = f"limb {sel.limb} from {sel.origin}"
+        if cs.was_pressed(Action.QUIT):
+            self.quit = True
+
+    def tick(self, cs: ControllerState, now: float | None = None) -> View:
+        """Map ``cs``, handle its presses, and put this period's Command (or the final stop)."""
+        now = time.monotonic() if now is None else now
+        dt = 0.0 if self._last is None else now - self._last
+        self._last = now
+        self.intent, self.mstate = map_controls(cs, self.mstate, dt, self.map.tuning)
+        self._presses(cs)
+        cats = self.catalogues.get(self._platforms())
+        self.selection.update(pairs_of(cats))
+        self._aliases = aliases_of(cats)
+        self._available = available_directions(cats, self.selection.limb, self.selection.origin)
+        asked = self.intent.direction
+        snapped = nearest_available(asked, self._available)
+        self._asked = asked if snapped is not asked else None
+        if snapped is not asked:
+            self.intent = replace(self.intent, direction=snapped)
+        remote = self._remote_estop()
+        required = self.options.deadman_required
+        wants = self.intent.deadman if required else self.intent.moving
+        if not cs.connected:
+            self.need_fresh = True
+            if self.streaming:
+                self.message = "controller disconnected: stopped"
+        elif not wants:
+            self.need_fresh = False
+        engaged = (
+            cs.connected and wants and not self.need_fresh and not self.estopped and not remote
+        )
+        if engaged:
+            part = SpatialCommand(
+                limb=self.selection.limb,
+                origin=self.selection.origin,
+                direction=self.intent.direction.slug,
+                size=self.intent.size,
+            )
+            cmd = self.seq.command([part], self.intent.drive, deadman=True)
+            self.link.put(self.target.keys(self.link.keys), cmd)
+            self.streaming = True
+        else:
+            self._stop_stream()
+        return self.view(cs, engaged, remote)
+
+    def view(self, cs: ControllerState, engaged: bool, remote: list[str]) -> View:
+        return View(
+            target=self.target,
+            limb=self.selection.limb,
+            origin=self.selection.origin,
+            aliases=self._aliases,
+            intent=self.intent,
+            engaged=engaged,
+            deadman_required=self.options.deadman_required,
+            estopped=self.estopped,
+            remote_estop=remote,
+            need_fresh_deadman=self.need_fresh and not engaged,
+            connected=cs.connected,
+            source=cs.source,
+            robots=self.link.states(),
+            seq=self.seq.seq,
+            message=self.message,
+            catalogue_errors=self.catalogues.errors(),
+            available=self._available,
+            asked=self._asked,
+        )
+
+    def shutdown(self) -> None:
+        """Final stop if a stream is still running (exit, Ctrl-C, SIGTERM)."""
+        self._stop_stream()
+
+
+def run(
+    teleop: Teleop,
+    source: Source,
+    *,
+    draw: Callable[[View], None] | None = None,
+    record: Callable[[float, ControllerState], None] | None = None,
+    finished: Callable[[], bool] | None = None,
+) -> None:
+    """Tick at ``rate_hz`` on absolute deadlines (no drift) until quit or ``finished()``.
+
+    Falls behind gracefully: a late tick is not followed by a burst of catch-up ticks.
+    The final stop is sent however the loop ends.
+    """
+    period = 1.0 / teleop.options.rate_hz
+    start = next_t = time.monotonic()
+    try:
+        while not teleop.quit and not (finished is not None and finished()):
+            now = time.monotonic()
+            cs = source.poll()
+            if record is not None:
+                record(now - start, cs)
+            view = teleop.tick(cs, now)
+            if draw is not None:
+                draw(view)
+            next_t += period
+            delay = next_t - time.monotonic()
+            if delay > 0:
+                time.sleep(delay)
+            elif delay < -period:
+                next_t = time.monotonic()
+    finally:
+        teleop.shutdown()

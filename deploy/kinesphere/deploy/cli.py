@@ -1,0 +1,103 @@
+"""``kinesphere up``, ``status`` and ``router``: the system as operators run it.
+
+Heavy imports (Zenoh, MuJoCo, rich) happen inside the handlers so ``kinesphere --help`` stays
+quick.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+from kinesphere.cliargs import DEFAULT_ENDPOINT, add_zenoh_arguments
+from kinesphere.keyexpr import DEFAULT_PREFIX
+
+
+def register(sub: Any) -> None:
+    up = sub.add_parser(
+        "up",
+        help="start a whole local system (databank + robots), play a demo, stop it all",
+        description="Start a databank and one robot agent per robot as separate processes on "
+        "loopback (peer mode, no router), wait until each is alive, play the demo phrases, "
+        "show a live status table, write pictures of the final poses and joint trajectories to "
+        "--out, then stop every process (also on Ctrl-C). Exit 0 after the demo.",
+    )
+    up.add_argument(
+        "--robots", default="baxter,nao,youbot,packbot", metavar="LIST",
+        help="comma-separated platforms, optionally PLATFORM:ID (default "
+        "baxter,nao,youbot,packbot)",
+    )
+    up.add_argument(
+        "--phrase", action="append", default=[], metavar="FILE[@ROBOT]",
+        help="play this phrase, on every robot or on ROBOT (repeatable, in order; default: the "
+        "paper's Left-High example on all robots, then the PackBot sweep on the packbot)",
+    )
+    up.add_argument("--out", type=Path, default=Path("out"), metavar="DIR",
+                    help="where pictures, summary.json and logs/ go (default out/)")
+    up.add_argument("--headless", action="store_true",
+                    help="no viewer windows and no live redraw: print tables instead")
+    up.add_argument("--keep-running", action="store_true",
+                    help="after the demo, keep the system up until Ctrl-C")
+    up.add_argument("--start-timeout", type=float, default=120.0, metavar="S",
+                    help="seconds allowed for every process to come up (default 120)")
+    up.add_argument("--db", action="append", default=[], metavar="PLATFORM=PATH",
+                    help="serve this databank file instead of the shipped one (repeatable)")
+    up.add_argument("--prefix", default=DEFAULT_PREFIX, help="key prefix (default kinesphere)")
+    up.set_defaults(func=_up)
+
+    st = sub.add_parser(
+        "status",
+        help="list live databanks and robots and each robot's last state",
+        description="Ask the network who is alive (liveliness) and listen briefly to every "
+        "robot's state. Exit 0 when something answered, 1 when nothing did.",
+    )
+    st.add_argument("--timeout", type=float, default=2.0, metavar="S",
+                    help="seconds to wait for answers (default 2)")
+    st.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    add_zenoh_arguments(
+        st,
+        default_help=f"Without --connect or --zenoh-config: connect to {DEFAULT_ENDPOINT} "
+        "(peer mode, listening nowhere).",
+        listen=False,
+    )
+    st.set_defaults(func=_status)
+
+    rt = sub.add_parser(
+        "router",
+        help="run a Zenoh router (TLS, access control) until SIGTERM/Ctrl-C",
+        description="Run a Zenoh router from the Python package with a JSON5 config file (see "
+        "deploy/router.json5). With access control on, every denied message is logged as "
+        "'access denied: ...'.",
+    )
+    rt.add_argument("--config", type=Path, metavar="FILE", help="Zenoh JSON5 config file")
+    rt.add_argument("--listen", action="append", metavar="EP",
+                    help="listen endpoint, overrides the file's (repeatable; default "
+                    "tcp/[::]:7447)")
+    rt.add_argument("--log-denials", action=argparse.BooleanOptionalAction, default=None,
+                    help="log access-control denials (default: on when access control is)")
+    rt.set_defaults(func=_router)
+
+
+def _up(args: argparse.Namespace) -> int:
+    from kinesphere.deploy.up import Demo, UpOptions, default_phrases, parse_phrase, parse_robots
+
+    robots = parse_robots(args.robots)
+    phrases = [parse_phrase(p) for p in args.phrase] or default_phrases(robots)
+    opts = UpOptions(robots=robots, phrases=phrases, out=args.out, headless=args.headless,
+                     keep_running=args.keep_running, prefix=args.prefix,
+                     start_timeout=args.start_timeout, databanks=args.db)
+    return Demo(opts).run()
+
+
+def _status(args: argparse.Namespace) -> int:
+    from kinesphere.deploy.status import collect, print_status
+
+    info = collect(args.connect, args.zenoh_config, args.mode, args.timeout, args.prefix)
+    return print_status(info, args.json)
+
+
+def _router(args: argparse.Namespace) -> int:
+    from kinesphere.deploy.router import run_router
+
+    return run_router(args.config, args.listen, log_denials=args.log_denials)

@@ -1,0 +1,373 @@
+"""``kinesphere up``: a whole local system from one command, the demo operators see first.
+
+The supervisor's own Zenoh session is the hub on a free loopback port; the databank and one
+agent per robot start as separate processes joined to it (peer mode, multicast scouting off,
+listening on loopback only), then phrases are played by ``kinesphere play`` processes. Every
+wait has a deadline and names what did not happen; every exit path stops the children.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import shutil
+import signal
+import time
+from collections.abc import Callable, Iterator
+from contextlib import ExitStack, contextmanager
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+
+import msgspec
+import numpy as np
+from rich.console import Console
+from rich.live import Live
+
+from kinesphere.deploy.procs import ChildFailed, Supervisor
+from kinesphere.deploy.table import robot_table, state_dict, wide_console
+from kinesphere.deploy.watch import Alive, StateRecorder, is_settled, watch_alive
+from kinesphere.errors import KinesphereError
+from kinesphere.keyexpr import DEFAULT_PREFIX, Keys
+from kinesphere.protocol import RobotState
+from kinesphere.signals import handle_signals
+from kinesphere.zconfig import LOOPBACK_ANY_PORT, close_session, open_hub, undeclare
+
+log = logging.getLogger(__name__)
+
+DEFAULT_ROBOTS = ("baxter", "nao", "youbot", "packbot")
+START_TIMEOUT_S = 120.0
+PHRASE_TIMEOUT_S = 90.0
+SETTLE_TIMEOUT_S = 15.0
+
+
+@dataclass(frozen=True)
+class Robot:
+    platform: str
+    robot_id: str
+
+
+@dataclass(frozen=True)
+class Phrase:
+    path: Path
+    target: str  # a robot id, a group, or "all"
+
+
+@dataclass
+class UpOptions:
+    robots: list[Robot]
+    phrases: list[Phrase]
+    out: Path = Path("out")
+    headless: bool = False
+    keep_running: bool = False
+    prefix: str = DEFAULT_PREFIX
+    start_timeout: float = START_TIMEOUT_S
+    phrase_timeout: float = PHRASE_TIMEOUT_S
+    databanks: list[str] = field(default_factory=list)  # PLATFORM=PATH for databank --db
+    extra_agent_args: list[str] = field(default_factory=list)
+
+
+def parse_robots(text: str) -> list[Robot]:
+    """``baxter,nao`` or ``baxter:left,baxter:right``: ids default to the platform name."""
+    robots: list[Robot] = []
+    seen: dict[str, int] = {}
+    for item in (s.strip() for s in text.split(",")):
+        if not item:
+            continue
+        platform, _, rid = item.partition(":")
+        if not rid:
+            seen[platform] = seen.get(platform, 0) + 1
+            rid = platform if seen[platform] == 1 else f"{platform}-{seen[platform]}"
+        robots.append(Robot(platform, rid))
+    ids = [r.robot_id for r in robots]
+    if not robots or len(set(ids)) != len(ids):
+        raise KinesphereError("malformed", f"--robots needs distinct robots, got {text!r}")
+    from kinesphere.robots.platform import platform_names
+
+    known = platform_names()
+    for r in robots:
+        Keys().command(r.robot_id)  # a valid key segment
+        if r.platform not in known and not Path(r.platform).is_dir():
+            raise KinesphereError(
+                "unknown_platform", f"unknown platform {r.platform!r}; valid: {', '.join(known)}")
+    return robots
+
+
+def parse_phrase(spec: str) -> Phrase:
+    """``FILE`` (played on every robot) or ``FILE@ROBOT``."""
+    path, _, target = spec.rpartition("@") if "@" in spec else (spec, "", "all")
+    p = Path(path)
+    if not p.is_file():
+        raise KinesphereError("malformed", f"phrase file {p} does not exist")
+    return Phrase(p, target or "all")
+
+
+def shipped_phrases_dir() -> Path:
+    """The phrases the client distribution ships (``kinesphere up`` plays them with it)."""
+    try:
+        return Path(str(resources.files("kinesphere.clients") / "phrases"))
+    except ModuleNotFoundError:
+        raise KinesphereError(
+            "unavailable", "kinesphere up plays phrases: install kinesphere-clients too"
+        ) from None
+
+
+def default_phrases(robots: list[Robot], phrases_dir: Path | None = None) -> list[Phrase]:
+    """The paper's Left-High example on every robot, then the PackBot sweep on each packbot."""
+    phrases_dir = phrases_dir or shipped_phrases_dir()
+    out: list[Phrase] = []
+    left_high = sorted(phrases_dir.glob("*left*high*.toml"))
+    if left_high:
+        out.append(Phrase(left_high[0], "all"))
+    sweep = phrases_dir / "packbot_sweep.toml"
+    if sweep.is_file():
+        out += [Phrase(sweep, r.robot_id) for r in robots if r.platform == "packbot"]
+    if not out:
+        raise KinesphereError("malformed", f"no demo phrases found in {phrases_dir}")
+    return out
+
+
+def peak_states(recorder: StateRecorder) -> dict[str, RobotState]:
+    """Each robot at the recorded moment farthest (in joint space) from where it started.
+
+    The final pose of a phrase that returns to neutral says little; this shows the reach.
+    """
+    out: dict[str, RobotState] = {}
+    with recorder.changed:
+        for rid, t in recorder.tracks.items():
+            if not t.qs:
+                out[rid] = t.last
+                continue
+            q = np.asarray(t.qs)
+            i = int(np.argmax(np.linalg.norm(q - q[0], axis=1)))
+            out[rid] = msgspec.structs.replace(
+                t.last, q=t.qs[i], qd=[], base_pose=t.bases[i], status="peak",
+                detail=f"farthest from start, at {t.times[i]:.1f} s")
+    return out
+
+
+class _Stop(Exception):
+    """SIGTERM/SIGHUP turned into an exception so every ``finally`` runs."""
+
+
+@contextmanager
+def _signals_raise() -> Iterator[None]:
+    def handler(signum: int, _frame: object) -> None:
+        raise _Stop(f"signal {signum}")
+
+    with handle_signals(handler, (signal.SIGTERM, signal.SIGHUP)):
+        yield
+
+
+class Demo:
+    """One ``kinesphere up`` run: children, hub session, recorder, and what it writes."""
+
+    def __init__(self, opts: UpOptions, console: Console | None = None) -> None:
+        self.opts = opts
+        self.keys = Keys(opts.prefix)
+        self.console = console or wide_console()
+        self.sup = Supervisor(opts.out / "logs")
+        self.recorder = StateRecorder(self.keys)
+        self.alive: Alive | None = None
+        self.endpoint = ""
+        self.timings: dict[str, float] = {}
+        self._t0 = time.monotonic()
+        self._live: Live | None = None
+        self._stopped: list[int] | None = None
+
+    # --- phases -----------------------------------------------------------------------------
+
+    def _mark(self, what: str) -> None:
+        self.timings[what] = round(time.monotonic() - self._t0, 2)
+        self.console.log(f"{what} ({self.timings[what]:.1f} s)")
+
+    def _table(self) -> object:
+        a = self.alive
+        return robot_table(
+            self.recorder.snapshot(),
+            alive=sorted(a.robots) if a else (),
+            databanks=sorted(a.databanks) if a else (),
+        )
+
+    def _poll(self, cond: Callable[[], bool], timeout: float, what: str) -> None:
+        """Wait for ``cond`` while checking children and refreshing the table."""
+        deadline = time.monotonic() + timeout
+        while not cond():
+            self.sup.check()
+            if time.monotonic() > deadline:
+                raise KinesphereError("unavailable", f"timed out after {timeout:.0f} s: {what}")
+            self.recorder.wait_for(lambda _s: False, 0.2)
+            if self._live is not None:
+                self._live.update(self._table())  # type: ignore[arg-type]
+
+    def start(self) -> None:
+        o = self.opts
+        shutil.rmtree(self.sup.log_dir, ignore_errors=True)
+        session, self.endpoint = open_hub("peer")
+        self._session = session
+        self.recorder.start(session)
+        self.alive, self._subs = watch_alive(session, self.keys)
+        self.console.log(f"hub {self.endpoint}; logs in {self.sup.log_dir}")
+        zargs = ["--connect", self.endpoint, "--listen", LOOPBACK_ANY_PORT]
+        prefix = [] if o.prefix == DEFAULT_PREFIX else ["--prefix", o.prefix]
+        dbs = [a for spec in o.databanks for a in ("--db", spec)]
+        self.sup.spawn("databank",
+                       ["databank", "serve", "--replica", "demo", *dbs, *zargs, *prefix])
+        viewer = [] if o.headless or not os.environ.get("DISPLAY") else ["--viewer"]
+        for r in o.robots:
+            self.sup.spawn(
+                f"agent-{r.robot_id}",
+                ["agent", r.platform, "--id", r.robot_id, *zargs, *prefix, *viewer,
+                 *o.extra_agent_args],
+            )
+        self._wait_started()
+
+    def _wait_started(self) -> None:
+        ids = {r.robot_id for r in self.opts.robots}
+        alive = self.alive
+        assert alive is not None
+
+        def up() -> bool:
+            return bool(alive.databanks) and ids <= alive.robots
+
+        try:
+            self._poll(up, self.opts.start_timeout, "liveliness of the databank and robots")
+            self._poll(lambda: ids <= set(self.recorder.snapshot()), 15.0, "first robot states")
+        except KinesphereError as exc:
+            missing = [] if alive.databanks else ["databank"]
+            missing += [f"agent-{r}" for r in sorted(ids - alive.robots)]
+            tails = "\n".join(
+                f"--- {name} ({self.sup.children[name].log_path}):\n"
+                f"{self.sup.children[name].tail()}"
+                for name in missing
+            )
+            raise KinesphereError(
+                "unavailable", f"{exc.message}; not up: {', '.join(missing) or '?'}\n{tails}"
+            ) from None
+        self._mark(f"{len(ids)} robots and the databank are up")
+
+    def play(self, phrase: Phrase, index: int) -> None:
+        name = f"play-{index}-{phrase.path.stem}"
+        args = ["play", str(phrase.path), "--target", phrase.target,
+                "--connect", self.endpoint, "--listen", LOOPBACK_ANY_PORT]
+        if self.opts.prefix != DEFAULT_PREFIX:
+            args += ["--prefix", self.opts.prefix]
+        child = self.sup.spawn(name, args, expect_exit=True)
+        self.console.log(f"playing {phrase.path.name} on {phrase.target}")
+        self._poll(lambda: not child.alive(), self.opts.phrase_timeout, f"{name} to finish")
+        code = child.proc.returncode
+        if code != 0:
+            raise ChildFailed(f"{name} exited with code {code}:\n{child.tail()}")
+        self._mark(f"played {phrase.path.name} on {phrase.target}")
+
+    def settle(self) -> None:
+        ids = [r.robot_id for r in self.opts.robots]
+
+        def settled() -> bool:
+            s = self.recorder.snapshot()
+            return all(r in s and is_settled(s[r], tol=0.02) for r in ids)
+
+        try:
+            self._poll(settled, SETTLE_TIMEOUT_S, "robots to come to rest")
+            self._mark("robots at rest")
+        except KinesphereError:
+            self.console.log("[yellow]some robots still moving; pictures show them mid-motion")
+
+    def pictures(self) -> dict[str, str]:
+        from kinesphere.deploy.pictures import (  # Pillow and MuJoCo rendering
+            pose_sheets,
+            trajectory_png,
+        )
+
+        out = self.opts.out
+        states = self.recorder.snapshot()
+        final, peak = out / "final_poses.png", out / "peak_poses.png"
+        pose_sheets({final: states, peak: peak_states(self.recorder)})
+        files = {"final_poses": str(final), "peak_poses": str(peak)}
+        with self.recorder.changed:
+            # the base's x and y ride along as two more series (the sweep drives while reaching)
+            tracks = {rid: ([*t.last.joint_names, "base x", "base y"], list(t.times),
+                            [[*q, b[0], b[1]] for q, b in zip(t.qs, t.bases, strict=True)])
+                      for rid, t in self.recorder.tracks.items()}
+        for rid, (names, times, qs) in tracks.items():
+            files[f"trajectory_{rid}"] = str(
+                trajectory_png(rid, names, times, qs, out / f"trajectory_{rid}.png"))
+        summary = {
+            "endpoint": self.endpoint,
+            "timings_s": self.timings,
+            "phrases": [{"file": str(p.path), "target": p.target} for p in self.opts.phrases],
+            "robots": {rid: state_dict(st) for rid, st in sorted(states.items())},
+            "problems": self.recorder.problems(),
+            "files": files,
+        }
+        (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+        self._mark(f"wrote {len(files)} pictures and summary.json to {out}")
+        return files
+
+    def shutdown(self) -> list[int]:
+        """Stop children, then the hub; returns PIDs that survived (should be none).
+
+        A second Ctrl-C is ignored meanwhile: cleaning up takes at most the grace period.
+        """
+        if self._stopped is not None:
+            return self._stopped
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+        try:
+            codes = self.sup.stop_all()
+        finally:
+            signal.signal(signal.SIGINT, previous)
+        undeclare(*getattr(self, "_subs", []))
+        self.recorder.close()
+        close_session(getattr(self, "_session", None))
+        left = self._stopped = self.sup.leftovers()
+        bad = {n: c for n, c in codes.items() if c not in (0, None) and not n.startswith("play")}
+        if bad:
+            self.console.log(f"[yellow]exit codes on shutdown: {bad}")
+        self._mark("all processes stopped" if not left else f"[red]left behind: {left}")
+        return left
+
+    # --- the whole run ----------------------------------------------------------------------
+
+    def run(self) -> int:
+        o = self.opts
+        o.out.mkdir(parents=True, exist_ok=True)
+        left: list[int] = []
+        with ExitStack() as stack:
+            stack.enter_context(_signals_raise())
+            try:
+                self.start()
+                if not o.headless and self.console.is_terminal:
+                    self._live = stack.enter_context(
+                        Live(self._table(), console=self.console, refresh_per_second=4)  # type: ignore[arg-type]
+                    )
+                for i, phrase in enumerate(o.phrases, 1):
+                    self.play(phrase, i)
+                    if self._live is None:
+                        self.console.print(self._table())
+                self.settle()
+                if self._live is not None:
+                    self._live.stop()
+                    self._live = None
+                self.console.print(self._table())
+                if not o.keep_running:
+                    self.shutdown()  # the states are recorded: render on a quiet machine
+                self.pictures()
+                for rid, seen in self.recorder.problems().items():
+                    for status, detail in seen.items():
+                        self.console.log(f"[yellow]warning: {rid} reported {status}: {detail}")
+                if o.keep_running:
+                    self.console.log("running; Ctrl-C to stop")
+                    self._poll(lambda: False, float("inf"), "Ctrl-C")
+            except ChildFailed as exc:
+                raise KinesphereError("unavailable", str(exc)) from None
+            except _Stop as exc:
+                self.console.log(f"stopping on {exc}")
+            finally:
+                if self._live is not None:
+                    self._live.stop()
+                left = self.shutdown()
+        if left:
+            raise KinesphereError("internal", f"processes left behind: {left}")
+        self.console.log(f"done in {time.monotonic() - self._t0:.1f} s")
+        return 0

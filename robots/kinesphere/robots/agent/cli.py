@@ -1,0 +1,108 @@
+"""``kinesphere agent PLATFORM``: run one robot until SIGINT/SIGTERM, then shut down cleanly."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import signal
+import threading
+from pathlib import Path
+from types import FrameType
+from typing import Any
+
+from kinesphere.cliargs import DEFAULT_ENDPOINT, add_zenoh_arguments
+from kinesphere.signals import handle_signals
+
+log = logging.getLogger(__name__)
+
+VIEWER_HZ = 60.0
+
+
+def register(sub: Any) -> None:
+    p = sub.add_parser(
+        "agent",
+        help="run a simulated robot that follows spatial commands",
+        description="Run PLATFORM's MuJoCo body in real time: it subscribes to "
+        "{prefix}/robot/ID/command, resolves commands through the databank, moves along "
+        "jerk-limited Ruckig trajectories and publishes {prefix}/robot/ID/state.",
+    )
+    p.add_argument("platform", help="platform name (see 'kinesphere platforms') or folder")
+    p.add_argument("--id", dest="robot_id", help="robot id (default: the platform name)")
+    p.add_argument("--rate", type=float, default=500.0, help="control rate in Hz (default 500)")
+    p.add_argument("--state-rate", type=float, default=50.0,
+                   help="RobotState rate in Hz (default 50)")
+    p.add_argument("--speed", type=float, default=1.0,
+                   help="robot seconds per wall second; 0 = as fast as possible (default 1)")
+    p.add_argument("--group", action="append", default=[], metavar="NAME",
+                   help="also obey {prefix}/group/NAME/command (repeatable)")
+    p.add_argument("--viewer", action="store_true", help="open a MuJoCo viewer window")
+    add_zenoh_arguments(
+        p,
+        default_help=f"Without --listen, --connect or --zenoh-config: connect to "
+        f"{DEFAULT_ENDPOINT}, where 'kinesphere databank serve' listens, and listen on "
+        "loopback, any port.",
+    )
+    p.set_defaults(func=_agent)
+
+
+def _viewer(controller: Any) -> Any:
+    """A passive MuJoCo viewer, or None (with a warning) where no display exists."""
+    if not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+        log.warning("--viewer: no display (DISPLAY/WAYLAND_DISPLAY unset); running headless")
+        return None
+    try:
+        import mujoco.viewer
+
+        return mujoco.viewer.launch_passive(controller.model, controller.data)
+    except Exception as exc:  # GL or windowing failures must not kill the robot
+        log.warning("--viewer: cannot open a window (%s); running headless", exc)
+        return None
+
+
+def _agent(args: argparse.Namespace) -> int:
+    from kinesphere.robots.agent.runtime import Agent, AgentOptions
+    from kinesphere.zconfig import LOOPBACK_ANY_PORT, close_session, open_session
+
+    robot_id = args.robot_id or Path(args.platform).name
+    options = AgentOptions(rate=args.rate, state_rate=args.state_rate, speed=args.speed,
+                           prefix=args.prefix, groups=tuple(args.group))
+    stop = threading.Event()
+
+    def on_signal(signum: int, frame: FrameType | None) -> None:
+        log.info("signal %d: shutting down", signum)
+        stop.set()
+
+    with handle_signals(on_signal, (signal.SIGINT, signal.SIGTERM)):
+        listen, connect = args.listen, args.connect
+        if listen is None and connect is None and args.zenoh_config is None:
+            listen, connect = [LOOPBACK_ANY_PORT], [DEFAULT_ENDPOINT]  # one machine, no set-up
+        session = open_session(args.mode, listen=listen, connect=connect,
+                               config_file=args.zenoh_config)
+        agent: Agent | None = None
+        viewer = None
+        try:
+            agent = Agent(args.platform, robot_id, session, options)
+            agent.declare()
+            on_tick = None
+            if args.viewer:
+                viewer = _viewer(agent.controller)
+            if viewer is not None:
+                every = max(1, round(args.rate / VIEWER_HZ))
+                v = viewer
+                a = agent
+
+                def on_tick() -> None:
+                    if a.controller.steps % every == 0:
+                        if not v.is_running():
+                            stop.set()
+                        v.sync()
+
+            agent.run(stop, on_tick)
+        finally:
+            if viewer is not None:
+                viewer.close()
+            if agent is not None:
+                agent.close()
+            close_session(session)
+    return 0

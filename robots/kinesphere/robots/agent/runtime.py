@@ -1,0 +1,373 @@
+"""The robot agent: commands in, RobotState out, a real-time control loop in between.
+
+Threads: Zenoh callbacks only decode and append to an inbox (a deque: lock-free, never
+blocks the network); the resolver's worker does the blocking databank queries; the control
+loop alone touches the Controller, drains the inbox at the start of each step and publishes
+state every ``1/state_rate`` s of robot time. Commands whose poses are cached are applied in
+the very step that drains them.
+
+Clock: the loop's own simulated time drives the trajectories and the watchdog. ``speed`` sets
+how it is paced (``pacing.py``): 1 = real time (wall clock), k = k times faster, 0 = as fast
+as possible (tests and benchmarks).
+
+Ordering: per ``sender``, a command older than the newest one seen (lower or equal ``seq`` *and*
+no later ``sent_ns``) is dropped as stale; a restarted client (seq from 0, newer clock) is
+accepted. E-stop and stop are never dropped. See ``safety.py`` for the safety rules.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import zenoh
+
+from kinesphere.errors import KinesphereError
+from kinesphere.keyexpr import Keys
+from kinesphere.laban import Direction
+from kinesphere.protocol import Command, Payload, Pose, RobotState, Status, decode, encode
+from kinesphere.robots.agent.controller import BLOCKED_TOL as BLOCKED_TOL
+from kinesphere.robots.agent.controller import Controller
+from kinesphere.robots.agent.options import AgentOptions as AgentOptions
+from kinesphere.robots.agent.pacing import LoopStats, run_paced
+from kinesphere.robots.agent.resolver import Answer, Resolver, parts_key
+from kinesphere.robots.agent.safety import Safety, Verdict
+from kinesphere.robots.agent.status import reported_status
+from kinesphere.robots.mjcf import platform_model
+from kinesphere.zconfig import undeclare
+
+log = logging.getLogger(__name__)
+
+SETTLE_S = 0.2
+"""Robot time the servos get after a trajectory ends before the body is held to it."""
+
+
+@dataclass
+class _Received:
+    cmd: Command
+
+
+@dataclass
+class _Bad:
+    error: KinesphereError
+
+
+@dataclass
+class _Resolved:
+    ticket: int
+    answer: Answer
+
+
+class Agent:
+    """One robot: a Controller, its safety rules, its databank resolver, its Zenoh face."""
+
+    def __init__(
+        self, platform: str, robot_id: str, session: zenoh.Session,
+        options: AgentOptions | None = None,
+    ) -> None:
+        self.options = options or AgentOptions()
+        self.keys = Keys(self.options.prefix)
+        self.keys.command(robot_id)  # validates the id as a key segment
+        self.robot_id = robot_id
+        self.session = session
+        self.controller = Controller(platform_model(platform), self.options.rate,
+                                     self.options.margin)
+        self.platform = self.controller.platform.name
+        self.resolver = Resolver(session, self.platform, self.keys, self.options.query_timeout_s)
+        self.safety = Safety()
+        self.stats = LoopStats()
+        self.latencies: deque[tuple[int, int, int]] = deque(maxlen=10_000)
+        """(seq, sent_ns, first moving step ns) per pose command applied."""
+        self.last_state: RobotState | None = None
+        self._inbox: deque[_Received | _Bad | _Resolved] = deque()
+        self._ticket = 0
+        self._latest: dict[str, tuple[int, int]] = {}
+        self._last_seq = -1
+        self._pending: tuple[int, Command, float | None] | None = None
+        """(ticket, command, base yaw at receipt) of the command waiting for the databank."""
+        self._probe: tuple[int, int] | None = None
+        self._status = Status.IDLE
+        self._detail = "no command yet"
+        self._state_seq = 0
+        self._moved_at = 0.0
+        self._publish_every = max(1, round(self.options.rate / self.options.state_rate))
+        self._entities: list[Any] = []
+        self._publisher: Any = None
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+
+    # --- lifetime ------------------------------------------------------------------------------
+
+    def declare(self) -> None:
+        """Subscribe to commands, declare the state publisher and liveliness token."""
+        s = self.session
+        keys = [self.keys.command(self.robot_id)]
+        keys += [self.keys.group_command(g) for g in self.options.groups]
+        self._entities = [s.declare_subscriber(k, self._on_sample) for k in keys]
+        self._publisher = s.declare_publisher(
+            self.keys.state(self.robot_id), congestion_control=zenoh.CongestionControl.DROP
+        )
+        self._entities.append(self._publisher)
+        self._entities.append(s.liveliness().declare_token(self.keys.alive_robot(self.robot_id)))
+        self.resolver.start()
+        log.info("agent %s (%s) up: %s", self.robot_id, self.platform, keys[0])
+
+    def start(self) -> Agent:
+        """Declare and run the loop in a thread; :meth:`close` ends both."""
+        self.declare()
+        self._thread = threading.Thread(target=self.run, name=f"agent-{self.robot_id}",
+                                        daemon=True)
+        self._thread.start()
+        return self
+
+    def close(self) -> None:
+        """Stop the loop, undeclare everything (the session stays open: the caller owns it)."""
+        self._stop.set()
+        if self._thread is not None and self._thread is not threading.current_thread():
+            self._thread.join(timeout=5.0)
+        self.resolver.close()
+        undeclare(*reversed(self._entities))
+        self._entities = []
+        log.info("agent %s down after %d steps (%d slips)", self.robot_id, self.stats.steps,
+                 self.stats.slips)
+
+    def __enter__(self) -> Agent:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # --- network callbacks (Zenoh threads) -----------------------------------------------------
+
+    def _on_sample(self, sample: zenoh.Sample) -> None:
+        self.receive(sample.payload)
+
+    def receive(self, payload: Payload) -> None:
+        """Queue an encoded Command for the next control step (any thread; never blocks)."""
+        try:
+            self._inbox.append(_Received(decode(payload, Command)))
+        except KinesphereError as exc:
+            self._inbox.append(_Bad(exc))
+
+    def _on_resolved(self, ticket: int, answer: Answer) -> None:
+        self._inbox.append(_Resolved(ticket, answer))
+
+    # --- the loop ------------------------------------------------------------------------------
+
+    def run(self, stop: threading.Event | None = None, on_tick: Callable[[], None] | None = None
+            ) -> None:
+        """Step paced by ``options.speed`` until :meth:`close` (or ``stop`` is set)."""
+        period = self.controller.dt / self.options.speed if self.options.speed > 0 else 0.0
+
+        def step() -> None:
+            self.tick()
+            if on_tick is not None:
+                on_tick()
+
+        def stopped() -> bool:
+            return self._stop.is_set() or (stop is not None and stop.is_set())
+
+        def failed(exc: Exception) -> None:
+            self._set(Status.ERROR, f"internal: control step failed: {exc!r}")
+
+        run_paced(step, period, stopped, self.stats, f"agent {self.robot_id}", failed)
+
+    def tick(self) -> None:
+        """One control cycle: commands, watchdog, physics, and state when due."""
+        inbox = self._inbox
+        while inbox:
+            self._handle(inbox.popleft())
+        ctrl = self.controller
+        if self.safety.expired(ctrl.time) and ctrl.moving:
+            self._halt(Status.HOLDING, "no new command within ttl_ms: holding")
+        ctrl.step()
+        self.stats.steps += 1
+        if ctrl.moving:
+            self._moved_at = ctrl.time
+        if self._probe is not None:
+            seq, sent_ns = self._probe
+            self._probe = None
+            self.latencies.append((seq, sent_ns, time.time_ns()))
+        if ctrl.steps % self._publish_every == 0:
+            self.publish()
+
+    # --- commands (control thread) ------------------------------------------------------------
+
+    def _handle(self, item: _Received | _Bad | _Resolved) -> None:
+        """Act on one inbox item; whatever goes wrong is reported, never raised into the loop."""
+        what = "command" if isinstance(item, _Bad) else f"command {self._seq_of(item)}"
+        try:
+            if isinstance(item, _Resolved):
+                self._apply(item.ticket, item.answer)
+            elif isinstance(item, _Bad):
+                raise item.error
+            else:
+                self._command(item.cmd)
+        except KinesphereError as exc:
+            self._last_seq = max(self._last_seq, self._seq_of(item))
+            self._error(exc, what)
+        except Exception as exc:  # a bug must not take the robot's control loop down
+            log.exception("agent %s: %s failed", self.robot_id, what)
+            self._last_seq = max(self._last_seq, self._seq_of(item))
+            self._error(KinesphereError("internal", repr(exc)), what)
+
+    def _seq_of(self, item: _Received | _Bad | _Resolved) -> int:
+        if isinstance(item, _Received):
+            return item.cmd.seq
+        if isinstance(item, _Resolved) and self._pending is not None:
+            return self._pending[1].seq
+        return self._last_seq
+
+    def _stale(self, cmd: Command) -> bool:
+        last = self._latest.get(cmd.sender)
+        if last is not None and cmd.seq <= last[0] and cmd.sent_ns <= last[1]:
+            return not (cmd.estop or cmd.stop)
+        self._latest[cmd.sender] = (cmd.seq, cmd.sent_ns)
+        return False
+
+    def _command(self, cmd: Command) -> None:
+        if self._stale(cmd):
+            log.debug("stale command %s from %r dropped", cmd.seq, cmd.sender)
+            return
+        ctrl = self.controller
+        verdict = self.safety.on_command(cmd, ctrl.time)
+        if verdict is not Verdict.MOVE or not cmd.parts:
+            self._last_seq = cmd.seq  # acted on now; poses count once resolved
+        if verdict is Verdict.ESTOP:
+            self._halt(Status.ESTOP, f"e-stop from {cmd.sender or 'a client'}; release with "
+                       "a command with release=true (kinesphere estop --release)")
+            log.warning("agent %s: e-stop (seq %d)", self.robot_id, cmd.seq)
+        elif verdict is Verdict.LATCHED:
+            self._set(Status.ESTOP, "e-stop latched; ignoring commands until one with "
+                      "release=true (kinesphere estop --release)")
+        elif verdict is Verdict.RELEASE:
+            self._set(Status.IDLE, "e-stop released; send a command to move")
+            log.warning("agent %s: e-stop released (seq %d)", self.robot_id, cmd.seq)
+        elif verdict is Verdict.STOP:
+            self._halt(Status.STOPPED, "stop command")
+        elif verdict is Verdict.DEADMAN:
+            self._halt(Status.HOLDING, "deadman released: holding")
+        else:
+            self._move(cmd)
+
+    def _move(self, cmd: Command) -> None:
+        ctrl = self.controller
+        base = ctrl.base
+        if cmd.drive is not None:
+            d = Direction.parse(cmd.drive.direction)
+            if not d.is_translation:
+                raise KinesphereError(
+                    "malformed", f"drive direction {d.slug!r} is not a middle horizontal; valid: "
+                    + ", ".join(t.slug for t in Direction.translations()))
+            if base is None:
+                raise KinesphereError("cannot_translate", f"{self.platform} has a fixed base")
+            base.drive(d.vector[:2], cmd.drive.speed)
+            self._set(Status.MOVING, f"driving {d.slug} at {cmd.drive.speed:.2f}")
+        elif base is not None and base.driving:
+            base.stop()
+        if not cmd.parts:
+            return
+        key = parts_key(cmd.parts)
+        self._ticket += 1
+        hit = self.resolver.cached(key)
+        yaw = ctrl.commanded_base_yaw()
+        if hit is not None:
+            self._last_seq = cmd.seq
+            self._apply_pose(hit, yaw, cmd)
+        else:
+            self._pending = (self._ticket, cmd, yaw)
+            self.resolver.submit(self._ticket, key, self._on_resolved)
+
+    def _apply(self, ticket: int, answer: Answer) -> None:
+        if ticket != self._ticket or self._pending is None or self._pending[0] != ticket:
+            return  # overtaken by a newer command, a stop or an e-stop
+        _, cmd, yaw = self._pending
+        self._last_seq = cmd.seq
+        if isinstance(answer, KinesphereError):
+            self._error(answer, f"command {cmd.seq}")
+            return
+        self._apply_pose(answer, yaw, cmd)
+
+    def _apply_pose(self, pose: Pose, yaw: float | None, cmd: Command) -> None:
+        ctrl = self.controller
+        if pose.platform != self.platform:
+            raise KinesphereError("internal", f"databank answered for {pose.platform!r}")
+        try:
+            clamps = ctrl.joints.retarget(pose.joints)
+        except (KeyError, ValueError) as exc:
+            self._error(KinesphereError(
+                "internal", f"databank pose has joints {self.platform} cannot take: {exc}"),
+                f"command {cmd.seq}")
+            return
+        if pose.translation is not None and ctrl.base is not None and not ctrl.base.driving:
+            ctrl.base.translate(pose.translation, yaw)
+        beyond = [c for c in clamps if c.beyond]
+        if beyond:
+            detail = "clamped " + ", ".join(f"{c.joint} {c.requested:+.4f}->{c.target:+.4f}"
+                                             for c in beyond)
+            log.info("agent %s: %s", self.robot_id, detail)
+        else:
+            detail = f"to {pose.limb}/{pose.origin}/{pose.direction}/{pose.size:g}"
+        self._set(Status.MOVING, detail)
+        self._probe = (cmd.seq, cmd.sent_ns)
+
+    def _halt(self, status: str, detail: str) -> None:
+        self._ticket += 1  # pending resolutions no longer apply
+        self.controller.halt()
+        self._set(status, detail)
+
+    def _set(self, status: str, detail: str) -> None:
+        self._status, self._detail = status, detail
+
+    def _error(self, exc: KinesphereError, what: str) -> None:
+        log.warning("agent %s: %s rejected: %s", self.robot_id, what, exc)
+        if exc.code == "unavailable":
+            self._set(Status.DATABANK_UNREACHABLE, f"{what}: {exc.message}; holding last pose")
+        else:
+            self._set(Status.ERROR, f"{what}: {exc.code}: {exc.message}")
+
+    # --- state -----------------------------------------------------------------------------------
+
+    def status(self) -> tuple[str, str]:
+        """The status and detail to publish now (precedence: :func:`reported_status`)."""
+        ctrl = self.controller
+        reported: tuple[str, str] = reported_status(
+            self._status, self._detail, estopped=self.safety.estopped,
+            reachable=self.resolver.reachable, last_error=self.resolver.last_error,
+            moving=ctrl.moving, clamped=bool(ctrl.joints.clamped),
+            settled=ctrl.time - self._moved_at >= SETTLE_S,
+            blocked=lambda: ctrl.blocked(BLOCKED_TOL),
+        )
+        return reported
+
+    def publish(self) -> RobotState:
+        ctrl = self.controller
+        status, detail = self.status()
+        self._state_seq += 1
+        state = RobotState(
+            robot_id=self.robot_id, platform=self.platform, seq=self._state_seq,
+            stamp_ns=time.time_ns(), joint_names=list(ctrl.joint_names), q=ctrl.q(),
+            qd=ctrl.qd(), base_pose=ctrl.base_pose(), status=status,
+            last_command_seq=self._last_seq, detail=detail,
+            clamped=sorted(ctrl.joints.clamped),
+        )
+        self.last_state = state
+        if self._publisher is not None:
+            try:
+                self._publisher.put(encode(state))
+            except zenoh.ZError as exc:  # session closing or congested: the loop goes on
+                log.debug("state not published: %s", exc)
+        return state
+
+    def cost_percentiles(self) -> tuple[float, float]:
+        """Median and p99 step cost in seconds over the recent steps."""
+        costs = np.fromiter(self.stats.costs_s, dtype=float)
+        if costs.size == 0:
+            return 0.0, 0.0
+        return float(np.median(costs)), float(np.percentile(costs, 99))

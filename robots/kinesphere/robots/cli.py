@@ -1,0 +1,129 @@
+"""Sub-commands about robot bodies: ``platforms`` and ``describe``."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:  # imported lazily: yourdfpy/trimesh cost ~1 s at every CLI start
+    from kinesphere.eurdf import Eurdf
+
+
+def register(sub: Any) -> None:
+    p = sub.add_parser("platforms", help="list the shipped platforms")
+    p.add_argument("--json", action="store_true", help="machine-readable output")
+    p.set_defaults(func=_platforms)
+    d = sub.add_parser(
+        "describe",
+        help="print a platform's labels C, J, L and configuration space P",
+        description="Print C (core), J (joint locations), L (limbs, with the links each covers), "
+        "the DOF count and P (joint limits). PLATFORM is a shipped name or an .eurdf file.",
+    )
+    d.add_argument(
+        "platform", help="platform name (see 'kinesphere platforms'), 'all', or an eURDF path"
+    )
+    d.add_argument("--json", action="store_true", help="machine-readable output")
+    d.set_defaults(func=_describe)
+
+
+def _platforms(args: argparse.Namespace) -> int:
+    from kinesphere.robots.platform import load_platform, platform_names
+
+
+    rows = []
+    for name in platform_names():
+        p = load_platform(name)
+        rows.append(
+            {
+                "name": name,
+                "title": p.title,
+                "dof": len(p.joint_names),
+                "base": p.base.kind,
+                "limbs": len(p.eurdf.limbs),
+            }
+        )
+    if args.json:
+        print(json.dumps(rows, indent=2))
+    else:
+        for r in rows:
+            print(f"{r['name']:<9} {r['dof']:>3} DOF  base={r['base']:<6} {r['title']}")
+    return 0
+
+
+def describe_dict(e: Eurdf, base: str | None = None) -> dict[str, Any]:
+    """The (C, J, L, P) of an eURDF as plain data (also the --json output)."""
+
+    def num(x: float) -> float | None:
+        return x if math.isfinite(x) else None
+
+    return {
+        "name": e.name,
+        "base": base,
+        "dof": len(e.limits),
+        "C": [{"label": p.name, "alias": p.alias, "links": list(p.links)} for p in e.core],
+        "J": [{"label": p.name, "alias": p.alias, "joints": list(p.joints)} for p in e.distals],
+        "L": [
+            {
+                "label": p.name,
+                "alias": p.alias,
+                "distal": p.distal,
+                "links": list(p.links),
+                "joints": list(e.limb_joints(p.name)),
+                "tip": e.tip_link(p.name),
+            }
+            for p in e.limbs
+        ],
+        "P": [
+            {
+                "joint": lim.name,
+                "type": lim.kind,
+                "lower": num(lim.lower),
+                "upper": num(lim.upper),
+                "velocity": num(lim.velocity),
+            }
+            for lim in e.P
+        ],
+    }
+
+
+def _describe(args: argparse.Namespace) -> int:
+    from kinesphere.eurdf import load_eurdf
+    from kinesphere.robots.platform import load_platform, platform_names
+
+    if args.platform == "all":
+        for name in platform_names():
+            args.platform = name
+            _describe(args)
+            print()
+        return 0
+    if args.platform.endswith((".eurdf", ".urdf", ".xml")) or Path(args.platform).is_file():
+        eurdf, base = load_eurdf(args.platform), None
+    else:
+        platform = load_platform(args.platform)
+        eurdf, base = platform.eurdf, platform.base.kind
+    info = describe_dict(eurdf, base)
+    if args.json:
+        print(json.dumps(info, indent=2))
+        return 0
+    print(f"{info['name']}: {info['dof']} DOF" + (f", base {base}" if base else ""))
+    print("C = {" + ", ".join(c["label"] for c in info["C"]) + "}")
+    print("J = {" + ", ".join(j["label"] for j in info["J"]) + "}")
+    print("L = {" + ", ".join(lb["label"] for lb in info["L"]) + "}")
+    for c in info["C"]:
+        print(f"  {c['label']:<10} {c['alias'] or '':<16} links: {', '.join(c['links'])}")
+    for j in info["J"]:
+        print(f"  {j['label']:<10} {j['alias'] or '':<16} joints: {', '.join(j['joints'])}")
+    for lb in info["L"]:
+        print(f"  {lb['label']:<10} {lb['alias'] or '':<16} from {lb['distal']}, tip {lb['tip']}")
+        print(f"  {'':<27} joints: {', '.join(lb['joints'])}")
+        print(f"  {'':<27} links:  {', '.join(lb['links'])}")
+    print(f"P ({info['dof']} joints):")
+    for p in info["P"]:
+        lo = "-inf" if p["lower"] is None else f"{p['lower']:+.4f}"
+        hi = "+inf" if p["upper"] is None else f"{p['upper']:+.4f}"
+        vel = "inf" if p["velocity"] is None else f"{p['velocity']:.3f}"
+        print(f"  {p['joint']:<18} {p['type']:<10} [{lo}, {hi}]  vmax {vel}")
+    return 0

@@ -1,0 +1,183 @@
+"""``kinesphere databank serve`` and ``kinesphere query``: the databank from a shell.
+
+Imports of Zenoh and the ECL happen inside the handlers, so ``kinesphere --help`` stays quick.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from typing import Any
+
+from kinesphere.cliargs import DEFAULT_ENDPOINT, add_zenoh_arguments
+from kinesphere.errors import KinesphereError
+
+
+def register(sub: Any) -> None:
+    db = sub.add_parser(
+        "databank",
+        help="serve ECL databanks over Zenoh (pose queries for agents and clients)",
+        description="The databank service: answers pose, compound, catalogue and record "
+        "queries under <prefix>/ecl/<platform>/ (see docs/protocol.md).",
+    )
+    dsub = db.add_subparsers(dest="databank_command", metavar="COMMAND", required=True)
+    s = dsub.add_parser(
+        "serve",
+        help="serve databanks until SIGTERM or Ctrl-C",
+        description="Serve every shipped databank (embedded SQLite, no set-up), or those "
+        "named. Several replicas may serve the same platforms: each query gets one answer, and "
+        "when a replica stops the others answer. Without --listen/--connect/--zenoh-config it "
+        f"listens on {DEFAULT_ENDPOINT}, or connects there if that port is taken. Logs one line "
+        "on start and one on stop; exits 0 on SIGTERM/SIGINT.",
+    )
+    s.add_argument(
+        "--platform", action="append", default=[], metavar="NAME",
+        help="serve this platform's shipped databank (a name or platform folder; repeatable)",
+    )
+    s.add_argument(
+        "--db", action="append", default=[], metavar="PATH",
+        help="serve this databank file; its meta names the platform. PLATFORM=PATH pairs it "
+        "with a platform name or folder (repeatable)",
+    )
+    s.add_argument(
+        "--replica", metavar="ID",
+        help="replica name in the liveliness token <prefix>/alive/databank/ID (default "
+        "<host>-<pid>)",
+    )
+    s.add_argument(
+        "--allow-writes", action="store_true",
+        help="accept record queries and puts (super-user pose edits); off by default. Restrict "
+        "who may send them with Zenoh access control on <prefix>/ecl/*/record",
+    )
+    s.add_argument(
+        "--known-platform", action="append", default=[], metavar="NAME",
+        help="a platform other replicas serve: never answer unknown_platform for it "
+        "(shipped platforms are always known)",
+    )
+    add_zenoh_arguments(
+        s,
+        default_help=f"Without --listen, --connect or --zenoh-config: listen on "
+        f"{DEFAULT_ENDPOINT}, or connect there if that port is taken.",
+    )
+    s.set_defaults(func=_serve)
+
+    q = sub.add_parser(
+        "query",
+        help="ask the databank for a pose (or a platform's catalogue)",
+        description="Print the joint targets f_SB(L, O, D, S) of PLATFORM, plus the base "
+        "translation when S is beyond the largest stored size. L and O are labels or aliases "
+        "(limb_11, right_arm), D a Laban direction (left-high), S a size (1, 2.5, far). "
+        f"Connects to {DEFAULT_ENDPOINT} unless told otherwise. Exit 2 with the error code when "
+        "the databank refuses or nobody answers.",
+    )
+    q.add_argument("platform", help="platform name, e.g. baxter")
+    q.add_argument("params", nargs="*", metavar="L O D S", help="limb origin direction size")
+    q.add_argument("--catalogue", action="store_true",
+                   help="print what the platform answers instead of a pose")
+    q.add_argument("--json", action="store_true", help="print the reply message as JSON")
+    q.add_argument("--timeout", type=float, default=2.0, metavar="S",
+                   help="seconds to wait for an answer (default 2)")
+    add_zenoh_arguments(
+        q,
+        default_help=f"Without --connect or --zenoh-config: connect to {DEFAULT_ENDPOINT} "
+        "as a Zenoh client.",
+        default_mode="client",
+    )
+    q.set_defaults(func=_query)
+
+
+def _session_args(args: argparse.Namespace) -> dict[str, Any]:
+    return {
+        "mode": args.mode,
+        "listen": args.listen,
+        "connect": args.connect,
+        "config_file": args.zenoh_config,
+    }
+
+
+def _serve(args: argparse.Namespace) -> int:
+    from kinesphere.keyexpr import Keys
+    from kinesphere.services.databank.serve import (
+        default_replica_id,
+        open_default_session,
+        open_ecls,
+        run,
+    )
+    from kinesphere.zconfig import open_session
+
+    keys = Keys(args.prefix)
+    ecls = open_ecls(args.platform, args.db)
+    if args.listen is None and args.connect is None and args.zenoh_config is None:
+        session = open_default_session(args.mode)
+    else:
+        session = open_session(**_session_args(args))
+    replica = args.replica or default_replica_id()
+    return run(session, ecls, keys, replica, args.allow_writes, args.known_platform)
+
+
+def _query(args: argparse.Namespace) -> int:
+    if not args.catalogue and len(args.params) != 4:
+        raise KinesphereError(
+            "malformed",
+            f"query needs LIMB ORIGIN DIRECTION SIZE (got {len(args.params)} values), "
+            "or --catalogue",
+        )
+    if args.catalogue and args.params:
+        raise KinesphereError("malformed", "--catalogue takes no LIMB ORIGIN DIRECTION SIZE")
+    from kinesphere.keyexpr import Keys
+    from kinesphere.services.databank import client
+    from kinesphere.zconfig import session
+
+    zargs = _session_args(args)
+    if args.connect is None and args.zenoh_config is None:
+        zargs["connect"] = [DEFAULT_ENDPOINT]
+    if zargs["mode"] is None and args.zenoh_config is None:
+        zargs["mode"] = "client"
+    if zargs["mode"] == "client":
+        zargs["listen"] = None
+    keys = Keys(args.prefix)
+    with session(**zargs) as s:
+        if args.catalogue:
+            msg: Any = client.query_catalogue(s, args.platform, keys=keys, timeout=args.timeout)
+        else:
+            limb, origin, direction, size = args.params
+            msg = client.query_pose(
+                s, args.platform, limb, origin, direction, size, keys=keys, timeout=args.timeout
+            )
+    if args.json:
+        print(json.dumps(client.to_builtins(msg), indent=2))
+    elif args.catalogue:
+        _print_catalogue(msg)
+    else:
+        _print_pose(msg)
+    return 0
+
+
+def _print_pose(pose: Any) -> None:
+    where = f"k_id {pose.k_id}" + (f", p_id {pose.p_id}" if pose.p_id is not None else "")
+    print(
+        f"{pose.platform} {pose.limb} from {pose.origin} {pose.direction} size {pose.size:g} "
+        f"({where})"
+    )
+    width = max((len(n) for n in pose.joints), default=0)
+    for name, value in pose.joints.items():
+        print(f"  {name:<{width}}  {value: .6f}")
+    if not pose.joints:
+        print("  (no joints move)")
+    if pose.translation is not None:
+        x, y, z = pose.translation
+        print(f"  translate base  x {x:+.4f}  y {y:+.4f}  z {z:+.4f} m (body frame)")
+    sys.stdout.flush()
+
+
+def _print_catalogue(cat: Any) -> None:
+    print(f"{cat.platform} (ECL {cat.version}); sizes {', '.join(map(str, cat.sizes))}")
+    aliases = {v: k for k, v in cat.aliases.items()}
+    for e in cat.limbs:
+        names = [f"{n} ({aliases[n]})" if n in aliases else n for n in (e.limb, e.origin)]
+        print(f"  {names[0]} from {names[1]}: {', '.join(e.directions)}")
+    if cat.can_translate:
+        print(f"  core {', '.join(cat.core)} translates {cat.translation_step:g} m per size "
+              f"unit: {', '.join(cat.directions_for_core)}")
+    print(f"  joints: {', '.join(j.name for j in cat.joints)}")

@@ -1,0 +1,167 @@
+"""Super-user writes (``record``) and keeping replicas in step after them.
+
+A record is validated, written by a fresh copy of the ECL (``Ecl.record`` writes SQL and
+reloads), and the copy is swapped in whole, so concurrent pose lookups never see a half-built
+ECL and need no lock. Then ``{p}/ecl/{platform}/changed`` is put with the recorded Pose as
+payload and the replica id as attachment: agents drop their cached poses of that platform.
+
+Replicas receive each other's ``changed`` too. A replica that sees a peer's record does
+nothing if it already serves that pose (the record was sent to every replica), reloads its
+databank when the file on disk changed (replicas sharing one file), else re-applies the same
+record when its own writes are enabled (so replicas with their own files converge), else it
+logs that it now serves older poses. Re-applied records are not announced again.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable
+from typing import TYPE_CHECKING
+
+import zenoh
+
+from kinesphere.errors import KinesphereError
+from kinesphere.protocol import Pose, RecordRequest, decode, encode
+from kinesphere.services.databank.replies import (
+    DEFERRED,
+    MAX_PAYLOAD,
+    Answer,
+    Deferred,
+    error,
+    ok,
+    request_bytes,
+    send,
+)
+from kinesphere.services.ecl.ecl import Ecl
+
+if TYPE_CHECKING:
+    from kinesphere.services.databank.service import DatabankService, Served
+
+log = logging.getLogger(__name__)
+_WARN_EVERY = 10.0
+_last_warning: dict[str, float] = {}
+
+
+def forbidden(st: Served) -> KinesphereError:
+    return KinesphereError(
+        "forbidden",
+        f"recording poses is disabled on this databank for {st.name}; "
+        "start it with 'kinesphere databank serve --allow-writes'",
+    )
+
+
+def on_query(svc: DatabankService, st: Served, query: zenoh.Query) -> Answer | Deferred:
+    """A record query: refused at once when writes are off, else queued for the worker,
+    which answers and drops it (:data:`DEFERRED` tells the caller to keep it)."""
+    if not svc.writes_enabled:
+        return error("forbidden", forbidden(st).message)
+    svc.submit(lambda: _answer(svc, st, query))
+    return DEFERRED
+
+
+def _answer(svc: DatabankService, st: Served, query: zenoh.Query) -> None:
+    with query:
+        try:
+            answer: Answer = ok(record(svc, st, request_bytes(query, "RecordRequest")))
+        except KinesphereError as exc:
+            answer = error(exc.code, exc.message)
+        except Exception as exc:
+            log.exception("record on %s failed", st.name)
+            answer = error("internal", f"{type(exc).__name__}: {exc}")
+        send(query, st.record_key, answer)
+
+
+def put_handler(svc: DatabankService, st: Served) -> Callable[[zenoh.Sample], None]:
+    """Record puts: no one to answer, so failures are logged (refusals at most every 10 s)."""
+
+    def on_put(sample: zenoh.Sample) -> None:
+        if not svc.writes_enabled:
+            _warn(st.record_key, str(forbidden(st)))
+            return
+        payload = sample.payload.to_bytes()
+        svc.submit(lambda: _put(svc, st, payload))
+
+    return on_put
+
+
+def _put(svc: DatabankService, st: Served, payload: bytes) -> None:
+    try:
+        if len(payload) > MAX_PAYLOAD:
+            raise KinesphereError("malformed", f"record payload of {len(payload)} bytes")
+        record(svc, st, payload)
+    except KinesphereError as exc:
+        log.warning("record put on %s refused: %s", st.name, exc)
+
+
+def record(svc: DatabankService, st: Served, payload: bytes) -> Pose:
+    """Store a RecordRequest, serve the result at once, announce it; worker thread only."""
+    req = decode(payload, RecordRequest)
+    pose = _write(svc, st, req.limb, req.origin, req.direction, req.size, req.joints)
+    log.info(
+        "recorded %s %s/%s/%s/%d on replica %s (ECL %s)",
+        st.name, pose.limb, pose.origin, pose.direction, req.size, svc.replica_id,
+        st.ecl.version,
+    )
+    svc.session.put(st.changed_key, encode(pose), attachment=svc.replica_id.encode())
+    return pose
+
+
+def _write(
+    svc: DatabankService,
+    st: Served,
+    limb: str,
+    origin: str,
+    direction: str,
+    size: int,
+    joints: dict[str, float],
+) -> Pose:
+    fresh = Ecl.open(st.ecl.platform, st.ecl.db_path)
+    pose: Pose = fresh.record(limb, origin, direction, size, joints)
+    svc.swap(st, fresh)
+    return pose
+
+
+def peer_handler(svc: DatabankService, st: Served) -> Callable[[zenoh.Sample], None]:
+    """``changed`` from another replica: catch up on the worker thread."""
+    me = svc.replica_id.encode()
+
+    def on_changed(sample: zenoh.Sample) -> None:
+        att = sample.attachment
+        origin = att.to_bytes() if att is not None else b""
+        if origin == me:
+            return
+        payload = sample.payload.to_bytes()
+        svc.submit(lambda: _catch_up(svc, st, payload, origin.decode("utf-8", "replace")))
+
+    return on_changed
+
+
+def _catch_up(svc: DatabankService, st: Served, payload: bytes, peer: str) -> None:
+    try:
+        pose = decode(payload, Pose)
+        if pose.p_id is None or pose.is_compound:
+            raise KinesphereError("malformed", "changed carries no stored pose")
+        if st.ecl.query(pose.limb, pose.origin, pose.direction, pose.p_id) == pose:
+            return  # this replica recorded it too (a record sent to every replica)
+        on_disk = Ecl.open(st.ecl.platform, st.ecl.db_path)
+        if on_disk.version != st.ecl.version:
+            svc.swap(st, on_disk)
+            log.info("reloaded %s after replica %s recorded (ECL %s)", st.name, peer,
+                     on_disk.version)
+        elif svc.writes_enabled:
+            _write(svc, st, pose.limb, pose.origin, pose.direction, pose.p_id, pose.joints)
+            log.info("applied %s's record of %s %s/%s/%s/%d", peer, st.name, pose.limb,
+                     pose.origin, pose.direction, pose.p_id)
+        else:
+            log.warning("replica %s recorded a %s pose this read-only replica does not have; "
+                        "it serves older poses until restarted", peer, st.name)
+    except KinesphereError as exc:
+        log.warning("cannot follow %s's record on %s: %s", peer, st.name, exc)
+
+
+def _warn(key: str, message: str) -> None:
+    now = time.monotonic()
+    if now - _last_warning.get(key, -_WARN_EVERY) >= _WARN_EVERY:
+        _last_warning[key] = now
+        log.warning("%s", message)

@@ -1,0 +1,306 @@
+"""The databank service: the ECL's network face, answering pose queries over Zenoh.
+
+Every query under ``{p}/ecl/`` goes to *one* Python callback: Zenoh hands a query to every
+matching queryable of a session, and a second callback per query (a catch-all next to the
+pose queryable) measurably slows the hot path. So the service declares, complete:
+
+- ``{p}/ecl/*/**`` when it serves every *known* platform (the shipped ones, plus any the
+  operator names): each concrete platform is then either served here or unknown, and
+  unknown ones get ``unknown_platform``. This is the default ``serve`` set-up.
+- otherwise ``{p}/ecl/{platform}/**`` per served platform, plus a non-complete catch-all on
+  ``{p}/ecl/*/**`` that answers ``unknown_platform`` only for platforms outside the known
+  set and stays silent for known ones (another replica may serve them).
+
+*Complete* is what makes replicas work: with the default query target (BEST_MATCHING) Zenoh
+routes a query to one complete queryable that covers its key, so a querier gets one answer
+(good or bad) however many replicas run, and when a replica dies its declarations vanish
+with its link and the next query goes to another. Replicas must agree on the known set.
+
+Hot path: one dict hit on the key text, then ``query.reply`` with a pre-encoded payload.
+Records (SQL) run on a worker thread (``records.py``).
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass
+from typing import Any, Final
+
+import zenoh
+
+from kinesphere.errors import KinesphereError, choices
+from kinesphere.keyexpr import KEYS, Keys, check_segment
+from kinesphere.protocol import CompoundRequest, check_spatial, decode
+from kinesphere.robots.platform import platform_names
+from kinesphere.services.databank import records
+from kinesphere.services.databank.replies import (
+    DEFERRED,
+    Answer,
+    Deferred,
+    ReplyCache,
+    error,
+    ok,
+    request_bytes,
+    send,
+)
+from kinesphere.services.databank.worker import Worker
+from kinesphere.services.ecl.ecl import Ecl
+from kinesphere.sizes import parse_size
+
+log = logging.getLogger(__name__)
+COMPOUND_CACHE: Final = 4096
+
+
+Routed = Answer | Deferred | None  # None: answered already (wildcards) or silent
+
+
+def changed_key(keys: Keys, platform: str) -> str:
+    """``{p}/ecl/{platform}/changed``: a put after every successful record (``keys.changed``);
+    ``platform`` may be ``*`` to watch every platform."""
+    return keys.changed(platform)
+
+
+@dataclass(eq=False)
+class Served:
+    """One served platform: its ECL (replaced whole on change) and its key texts."""
+
+    name: str
+    ecl: Ecl
+    catalogue_key: str
+    compound_key: str
+    record_key: str
+    changed_key: str
+
+
+class DatabankService:
+    """Serve ``ecls`` (platform name -> Ecl) on ``session`` between :meth:`start` and :meth:`close`.
+
+    The caller owns the session and closes it after this service. ``writes_enabled`` lets
+    ``record`` queries and puts change the databanks; who may send them is for the Zenoh
+    deployment's access control (``{p}/ecl/*/record``). ``known_platforms`` replaces the
+    shipped platform names as the set this replica must not call unknown.
+    """
+
+    def __init__(
+        self,
+        session: zenoh.Session,
+        ecls: Mapping[str, Ecl],
+        keys: Keys = KEYS,
+        replica_id: str = "databank",
+        writes_enabled: bool = False,
+        *,
+        known_platforms: Iterable[str] | None = None,
+    ) -> None:
+        if not ecls:
+            raise KinesphereError("malformed", "a databank service needs at least one platform")
+        self.session = session
+        self.keys = keys
+        self.replica_id = check_segment(replica_id, "replica")
+        self.writes_enabled = writes_enabled
+        self.served: dict[str, Served] = {}
+        for name, ecl in ecls.items():
+            check_segment(name, "platform")
+            if ecl.platform.name != name:
+                raise KinesphereError(
+                    "malformed", f"databank for {ecl.platform.name!r} offered as {name!r}"
+                )
+            self.served[name] = Served(
+                name, ecl, keys.catalogue(name), keys.compound(name), keys.record(name),
+                keys.changed(name),
+            )
+        known = platform_names() if known_platforms is None else known_platforms
+        self.known = frozenset(known) | set(self.served)
+        self.serves_all_known = self.known == set(self.served)
+        self.answers = ReplyCache()
+        self.compounds = ReplyCache(COMPOUND_CACHE)
+        self._unknowns = ReplyCache(COMPOUND_CACHE)
+        self._head = f"{keys.prefix}/ecl/"
+        self._entities: list[Any] = []
+        self._worker = Worker(f"databank-{self.replica_id}-records")
+        self._started = False
+        self._lock = threading.Lock()
+
+    # -- lifecycle ---------------------------------------------------------------------------
+    def start(self) -> DatabankService:
+        """Declare everything; returns self. Declarations reach peers asynchronously."""
+        with self._lock:
+            if self._started:
+                return self
+            self._started = True
+            self._worker.start()
+            s, add = self.session, self._entities.append
+            try:
+                if self.serves_all_known:
+                    add(s.declare_queryable(f"{self._head}*/**", self._handler(self.served),
+                                            complete=True))
+                else:
+                    for st in self.served.values():
+                        add(s.declare_queryable(f"{self._head}{st.name}/**",
+                                                self._handler({st.name: st}), complete=True))
+                    add(s.declare_queryable(f"{self._head}*/**", self._on_other))
+                for st in self.served.values():
+                    add(s.declare_subscriber(st.record_key, records.put_handler(self, st)))
+                    add(s.declare_subscriber(st.changed_key, records.peer_handler(self, st)))
+                add(s.liveliness().declare_token(self.keys.alive_databank(self.replica_id)))
+            except BaseException:
+                self._undeclare()
+                raise
+        return self
+
+    def close(self) -> None:
+        """Undeclare everything (the liveliness token first, so clients fail over early),
+        finish queued records, and let go of the databanks."""
+        with self._lock:
+            if not self._started:
+                return
+            self._started = False
+            self._undeclare()
+            self._worker.stop()
+            for st in self.served.values():
+                closer = getattr(st.ecl, "close", None)
+                if callable(closer):
+                    closer()
+
+    def _undeclare(self) -> None:
+        for entity in reversed(self._entities):
+            try:
+                entity.undeclare()
+            except zenoh.ZError as exc:  # the session may already be closed
+                log.debug("undeclare failed: %s", exc)
+        self._entities.clear()
+
+    def __enter__(self) -> DatabankService:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def ecl(self, platform: str) -> Ecl:
+        """The ECL serving ``platform`` right now (replaced after each record)."""
+        return self.served[platform].ecl
+
+    def swap(self, st: Served, ecl: Ecl) -> None:
+        """Serve ``ecl`` for ``st`` from now on; answers computed before are dropped."""
+        st.ecl = ecl
+        self.answers.invalidate()
+        self.compounds.invalidate()
+
+    def submit(self, job: Callable[[], None]) -> None:
+        """Run ``job`` on the worker thread (records: SQL stays off Zenoh's threads)."""
+        self._worker.submit(job)
+
+    # -- the hot path ------------------------------------------------------------------------
+    def _handler(self, scope: Mapping[str, Served]) -> Callable[[zenoh.Query], None]:
+        get = self.answers.get
+        route = self._route
+
+        def on_query(query: zenoh.Query) -> None:
+            keep = False
+            try:
+                ke = query.key_expr
+                key = str(ke)
+                answer = get(key)
+                if answer is None:
+                    routed = route(scope, query, key)
+                    if not isinstance(routed, Answer):
+                        keep = routed is DEFERRED
+                        return
+                    answer = routed
+                if answer.ok:
+                    query.reply(ke, answer.payload)
+                else:
+                    query.reply_err(answer.payload)
+            except Exception:
+                log.exception("query %s failed", query.key_expr)
+            finally:
+                if not keep:
+                    query.drop()  # type: ignore[no-untyped-call]
+
+        return on_query
+
+    def _route(self, scope: Mapping[str, Served], query: zenoh.Query, key: str) -> Routed:
+        """Answer a key the cache does not hold (and cache what may be cached)."""
+        generation = self.answers.generation  # read before any ECL: see ReplyCache
+        if "*" in key or "$" in key:
+            self._wildcard(scope, query, key)
+            return None
+        platform, _, rest = key[len(self._head) :].partition("/")
+        st = scope.get(platform)
+        if st is None:  # only when this replica serves every known platform
+            return self.answers.put(key, self._unknown(platform), generation)
+        try:
+            if rest.startswith("pose/"):
+                pk = self.keys.parse_pose_key(key)
+                pose = st.ecl.query(pk.limb, pk.origin, pk.direction, parse_size(pk.size))
+                answer = ok(pose)
+            elif rest == "catalogue":
+                answer = ok(st.ecl.catalogue())
+            elif rest == "compound":
+                return self._compound(st, query, key)
+            elif rest == "record":
+                return records.on_query(self, st, query)
+            else:
+                answer = self._bad_key(key, platform)
+        except KinesphereError as exc:
+            answer = error(exc.code, exc.message)
+        except Exception as exc:  # a bug: say so, and do not cache it
+            log.exception("query %s failed", key)
+            return error("internal", f"{type(exc).__name__}: {exc}")
+        return self.answers.put(key, answer, generation)
+
+    def _compound(self, st: Served, query: zenoh.Query, key: str) -> Answer:
+        generation = self.compounds.generation
+        try:
+            raw = request_bytes(query, "CompoundRequest")
+            hit = self.compounds.get((key, raw))
+            if hit is not None:
+                return hit
+            req = decode(raw, CompoundRequest)
+            for part in req.parts:
+                check_spatial(part)
+            answer = ok(st.ecl.compound(req.parts, last_wins=req.last_wins))
+        except KinesphereError as exc:
+            return error(exc.code, exc.message)
+        return self.compounds.put((key, raw), answer, generation)
+
+    def _wildcard(self, scope: Mapping[str, Served], query: zenoh.Query, key: str) -> None:
+        """A wildcard key (discovery: ``{p}/ecl/*/catalogue``) gets each matching catalogue."""
+        asked = zenoh.KeyExpr(key)
+        for st in scope.values():
+            if asked.intersects(st.catalogue_key):
+                send(query, st.catalogue_key, ok(st.ecl.catalogue()))
+
+    def _bad_key(self, key: str, platform: str) -> Answer:
+        return error(
+            "malformed",
+            f"{key} is not a databank key; under {self._head}{platform}/ query "
+            "pose/<limb>/<origin>/<direction>/<size>, compound, catalogue or record",
+        )
+
+    def _unknown(self, platform: str) -> Answer:
+        return error(
+            "unknown_platform", f"no platform {platform!r}; known platforms: {choices(self.known)}"
+        )
+
+    # -- the catch-all, when this replica serves only some known platforms --------------------
+    def _on_other(self, query: zenoh.Query) -> None:
+        try:
+            answer = self.other_answer(str(query.key_expr))
+            if answer is not None:
+                query.reply_err(answer.payload)
+        except Exception:
+            log.exception("query %s failed", query.key_expr)
+        finally:
+            query.drop()  # type: ignore[no-untyped-call]
+
+    def other_answer(self, key: str) -> Answer | None:
+        """``unknown_platform`` for a concrete platform outside the known set, else None."""
+        if "*" in key or "$" in key:
+            return None
+        platform = key[len(self._head) :].partition("/")[0]
+        if platform in self.known:
+            return None  # served here (its own queryable answers) or maybe by another replica
+        hit = self._unknowns.get(platform)
+        return hit or self._unknowns.put(platform, self._unknown(platform), 0)

@@ -1,0 +1,262 @@
+"""``kinesphere ecl ...``: look up, inspect and edit a platform's ECL databank.
+
+These are the super-user's tools from the paper (store a pose for a cell, review rows, move a
+databank to and from JSON) plus a local f_SB lookup. The generator's commands (build, report,
+render) come from ``build_cli`` when that module is installed.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+import msgspec
+from rich.console import Console
+from rich.table import Table
+
+from kinesphere.endpoints import DEFAULT_ENDPOINT
+from kinesphere.errors import KinesphereError
+from kinesphere.protocol import Pose
+
+_DB_HELP = "databank file to use instead of the shipped databank of the platform"
+_PLATFORM_HELP = "platform name (see 'kinesphere platforms') or a platform folder"
+
+
+def register(sub: Any) -> None:
+    """Add the ``ecl`` command and its sub-commands to the top-level parser."""
+    ecl = sub.add_parser(
+        "ecl",
+        help="the Embodied Configuration Library: look up, show, record, export, import poses",
+        description="Each platform's ECL maps a spatial command (limb, origin, direction, size) "
+        "to a pose. These commands read and edit its SQLite databank directly (no robot or "
+        "Zenoh needed). Limbs and origins accept labels or aliases (limb_11 or right_arm), "
+        "directions any Laban spelling ('Left-High', 'left high').",
+    )
+    ecl_sub = ecl.add_subparsers(dest="ecl_command", metavar="SUBCOMMAND")
+    ecl.set_defaults(func=lambda args: _usage(ecl))
+
+    g = ecl_sub.add_parser(
+        "get",
+        help="f_SB: print the pose for LIMB ORIGIN DIRECTION SIZE",
+        description="Evaluate f_SB locally: integer sizes give the stored row, fractions "
+        "interpolate in joint space, sizes past the largest stored one add a base translation "
+        "(mobile platforms only), place-middle gives the limb's neutral pose. Use 'c_1 c_1 "
+        "DIRECTION SIZE' for a pure base translation on mobile platforms.",
+    )
+    _platform_args(g)
+    g.add_argument("limb", help="limb label or alias, e.g. limb_11 or right_arm")
+    g.add_argument("origin", help="origin (joint location) label or alias, e.g. distal_11")
+    g.add_argument("direction", help="Laban direction, e.g. left-high or 'Place Low'")
+    g.add_argument("size", help="size: 1 near, 2 mid, 3 far, fractions, or near/mid/far")
+    g.add_argument("--json", action="store_true", help="print the protocol Pose as JSON")
+    g.set_defaults(func=_get)
+
+    r = ecl_sub.add_parser(
+        "record",
+        help="store a pose given as joint values for one (limb, origin, direction, size)",
+        description="Store joint values as the pose of one cell, in one transaction; the "
+        "cell's quality figures become unknown. Joints must belong to the limb and lie within "
+        "their limits. Limb joints you leave out keep the cell's stored value (or neutral for "
+        "a new cell). Sizes are positive integers; place-middle is the neutral pose and is "
+        "changed in platform.toml instead.",
+    )
+    _platform_args(r)
+    r.add_argument("--limb", required=True, help="limb label or alias")
+    r.add_argument("--origin", required=True, help="origin label or alias paired with the limb")
+    r.add_argument("--direction", required=True, help="Laban direction")
+    r.add_argument("--size", required=True, help="integer size (1 near, 2 mid, 3 far, ...)")
+    source = r.add_mutually_exclusive_group(required=True)
+    source.add_argument(
+        "--joints", nargs="+", metavar="NAME=VALUE",
+        help="joint values in rad (m for prismatic joints), e.g. right_s0=-0.4 right_e1=1.2",
+    )
+    source.add_argument(
+        "--from-robot", metavar="ID",
+        help="capture the limb's joints from the running agent ID (its next RobotState)",
+    )
+    r.add_argument(
+        "--connect", action="append", metavar="EP",
+        help=f"with --from-robot: Zenoh endpoint to join (default {DEFAULT_ENDPOINT})",
+    )
+    r.add_argument("--zenoh-config", metavar="FILE", help="with --from-robot: Zenoh config file")
+    r.add_argument("--prefix", default="kinesphere", help="key prefix (default kinesphere)")
+    r.add_argument(
+        "--timeout", type=float, default=5.0, help="with --from-robot: seconds to wait (default 5)"
+    )
+    r.add_argument("--json", action="store_true", help="print the stored Pose as JSON")
+    r.set_defaults(func=_record)
+
+    s = ecl_sub.add_parser(
+        "show",
+        help="print stored rows as a table, optionally filtered",
+        description="Print the databank's rows (k_id, size, joint values and the generator's "
+        "quality figures: cosine to the direction, reach fraction, joint-limit margin).",
+    )
+    _platform_args(s)
+    s.add_argument("--limb", help="only this limb")
+    s.add_argument("--origin", help="only this origin")
+    s.add_argument("--direction", help="only this direction")
+    s.set_defaults(func=_show)
+
+    x = ecl_sub.add_parser(
+        "export",
+        help="write the whole databank to a JSON file",
+        description="Export every table (meta, vsam, pose, quality) as JSON for review or "
+        "editing; 'ecl import' of the file restores the same content (round trip identical).",
+    )
+    _platform_args(x)
+    x.add_argument("-o", "--output", type=Path, required=True, help="JSON file to write")
+    x.set_defaults(func=_export)
+
+    i = ecl_sub.add_parser(
+        "import",
+        help="replace the databank with the content of a JSON export",
+        description="Validate an export against the platform (labels, VSAM pairs, joint "
+        "limits, NULLs outside each limb) and replace the databank with it atomically; a "
+        "rejected file changes nothing.",
+    )
+    _platform_args(i)
+    i.add_argument("file", type=Path, help="JSON file written by 'kinesphere ecl export'")
+    i.set_defaults(func=_import)
+
+    try:
+        from kinesphere.services.ecl.build_cli import register_build
+    except ModuleNotFoundError as exc:
+        if exc.name != "kinesphere.services.ecl.build_cli":
+            raise
+    else:
+        register_build(ecl_sub, sub)
+
+
+def _platform_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("platform", help=_PLATFORM_HELP)
+    p.add_argument("--db", type=Path, metavar="PATH", help=_DB_HELP)
+
+
+def _usage(parser: argparse.ArgumentParser) -> int:
+    parser.print_help()
+    return 2
+
+
+def _console() -> Console:
+    """A terminal keeps its width; piped output is never truncated."""
+    console = Console()
+    return console if console.is_terminal else Console(width=10_000)
+
+
+def _open(args: argparse.Namespace) -> Any:
+    from kinesphere.services.ecl.ecl import Ecl
+
+    return Ecl.open(args.platform, db=args.db)
+
+
+def parse_joints(tokens: list[str]) -> dict[str, float]:
+    """``["a=1", "b=-0.5"]`` -> ``{"a": 1.0, "b": -0.5}``; bad tokens are named."""
+    out: dict[str, float] = {}
+    for tok in tokens:
+        raw, sep, value = tok.partition("=")
+        name = raw.strip()
+        if not sep or not name:
+            raise KinesphereError("malformed", f"joint {tok!r} must be written NAME=VALUE")
+        if name in out:
+            raise KinesphereError("malformed", f"joint {name!r} is given twice")
+        try:
+            out[name] = float(value)
+        except ValueError:
+            raise KinesphereError(
+                "malformed", f"joint {tok!r}: {value!r} is not a number"
+            ) from None
+    return out
+
+
+def _get(args: argparse.Namespace) -> int:
+    pose = _open(args).query(args.limb, args.origin, args.direction, args.size)
+    _print_pose(pose, args.json)
+    return 0
+
+
+def _record(args: argparse.Namespace) -> int:
+    ecl = _open(args)
+    if args.from_robot:
+        from kinesphere.keyexpr import Keys
+        from kinesphere.services.ecl.capture import capture_state, limb_joints_of
+
+        state = capture_state(args.from_robot, Keys(args.prefix), connect=args.connect,
+                              zenoh_config=args.zenoh_config, timeout=args.timeout)
+        if state.platform != ecl.platform.name:
+            raise KinesphereError(
+                "unknown_platform",
+                f"robot {args.from_robot!r} is a {state.platform}, not a {ecl.platform.name}",
+            )
+        eurdf = ecl.platform.eurdf
+        joints = limb_joints_of(state, eurdf.limb_joints(eurdf.limb(args.limb).name))
+    else:
+        joints = parse_joints(args.joints)
+    pose = ecl.record(args.limb, args.origin, args.direction, args.size, joints)
+    _print_pose(pose, args.json)
+    if not args.json:
+        Console(stderr=True).print(f"stored in {ecl.db_path} (version {ecl.version})")
+    return 0
+
+
+def _print_pose(pose: Pose, as_json: bool) -> None:
+    if as_json:
+        print(msgspec.json.encode(pose).decode())
+        return
+    where = f"k_id {pose.k_id}" + (f", p_id {pose.p_id}" if pose.p_id is not None else "")
+    console = _console()
+    console.print(f"{pose.platform}: ({pose.limb}, {pose.origin}, {pose.direction}, "
+                  f"{pose.size:g})  [{where}]", highlight=False, markup=False)
+    table = Table()
+    table.add_column("joint")
+    table.add_column("value", justify="right")
+    for name, value in pose.joints.items():
+        table.add_row(name, f"{value:.4f}")
+    if pose.translation is not None:
+        table.add_row("base translation (m)", ", ".join(f"{v:.3f}" for v in pose.translation))
+    console.print(table)
+
+
+def _show(args: argparse.Namespace) -> int:
+    ecl = _open(args)
+    rows = ecl.rows(args.limb, args.origin, args.direction)
+    names = {tuple(r["joints"]) for r in rows}
+    per_joint = len(names) == 1
+    table = Table(title=f"{ecl.platform.name} ECL ({len(rows)} rows, version {ecl.version})")
+    for col in ("k_id", "limb", "origin", "direction", "size"):
+        table.add_column(col, justify="right" if col in ("k_id", "size") else "left")
+    joint_cols = list(next(iter(names))) if per_joint else ["joints"]
+    for col in joint_cols:
+        table.add_column(col, justify="right")
+    for col in ("cosine", "reach", "margin"):
+        table.add_column(col, justify="right")
+    for r in rows:
+        if per_joint:
+            values = [f"{r['joints'][j]:.3f}" for j in joint_cols]
+        else:
+            values = [" ".join(f"{j}={v:.3f}" for j, v in r["joints"].items()) or "-"]
+        quality = ["-" if r[q] is None else f"{r[q]:.3f}" for q in ("cosine", "reach", "margin")]
+        table.add_row(str(r["k_id"]), r["limb"], r["origin"], r["direction"], str(r["size"]),
+                      *values, *quality)
+    _console().print(table)
+    return 0
+
+
+def _export(args: argparse.Namespace) -> int:
+    ecl = _open(args)
+    out = ecl.export_json(args.output)
+    Console(stderr=True).print(f"wrote {out} ({len(ecl.rows())} rows, version {ecl.version})")
+    return 0
+
+
+def _import(args: argparse.Namespace) -> int:
+    from kinesphere.robots.platform import load_platform
+    from kinesphere.services.ecl.ecl import Ecl
+    from kinesphere.services.ecl.store import default_db_path
+
+    plat = load_platform(args.platform)
+    db = args.db if args.db is not None else default_db_path(plat.name)
+    ecl = Ecl.from_json(plat, args.file, db)
+    Console(stderr=True).print(f"imported {args.file} into {ecl.db_path} (version {ecl.version})")
+    return 0

@@ -1,0 +1,348 @@
+"""f_SB: the in-memory ECL that turns ``(limb, origin, direction, size)`` into a pose.
+
+The databank is read once into per-cell arrays, so a lookup is a few dict hits and, for a
+fractional size, one linear blend: no SQL on the hot path. SQL is touched only when the ECL is
+opened and when a super-user records or imports poses, after which memory is rebuilt from disk
+so the two never disagree.
+"""
+
+from __future__ import annotations
+
+import bisect
+import json
+import logging
+import math
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+from kinesphere.errors import KinesphereError
+from kinesphere.laban import Direction
+from kinesphere.protocol import (
+    NO_ID,
+    Catalogue,
+    JointLimit,
+    LimbEntry,
+    Pose,
+)
+from kinesphere.robots.platform import Platform, load_platform
+from kinesphere.services.ecl import transfer
+from kinesphere.services.ecl.cells import Cell, build_cells
+from kinesphere.services.ecl.compound import PartLike as PartLike
+from kinesphere.services.ecl.compound import join
+from kinesphere.services.ecl.store import (
+    Tables,
+    check_record,
+    default_db_path,
+    limb_neutral,
+    read_tables,
+    size_value,
+    upsert_pose,
+    write_tables,
+)
+from kinesphere.services.ecl.vsam import Vsam, vsam_from_dict
+
+log = logging.getLogger(__name__)
+_DB_SUFFIXES = (".sqlite", ".sqlite3", ".db")
+_DIRECTION_CACHE_MAX = 512
+_PLACE_MIDDLE = Direction.PLACE_MIDDLE.slug
+
+
+class Ecl:
+    """A platform's Embodied Configuration Library, served from memory."""
+
+    def __init__(self, platform: Platform, db_path: Path, tables: Tables) -> None:
+        self.platform = platform
+        self.db_path = db_path
+        self._name = platform.name
+        self._slugs: dict[object, str] = {d.slug: d.slug for d in Direction}
+        self._slugs.update({d: d.slug for d in Direction})
+        self._index(tables)
+
+    # -- loading -----------------------------------------------------------------------------
+    @classmethod
+    def open(cls, platform: str | Path | Platform, db: str | Path | None = None) -> Ecl:
+        """Open by platform (name, folder or Platform) with its shipped or given databank,
+        or by a databank path alone (its ``meta.platform`` names the platform)."""
+        if isinstance(platform, Platform):
+            plat = platform
+        else:
+            p = Path(platform)
+            if db is None and p.is_file() and p.suffix in _DB_SUFFIXES:
+                tables = read_tables(p)
+                return cls(load_platform(tables.meta["platform"]), p.resolve(), tables)
+            plat = load_platform(str(platform))
+        path = Path(db) if db is not None else default_db_path(plat.name)
+        return cls(plat, path.resolve(), read_tables(path))
+
+    @classmethod
+    def from_json(
+        cls, platform: str | Path | Platform, json_path: str | Path, db: str | Path
+    ) -> Ecl:
+        """Create (or replace) the databank ``db`` from an export and open it."""
+        plat = platform if isinstance(platform, Platform) else load_platform(str(platform))
+        tables = transfer.tables_from_json(plat, transfer.read_json(json_path))
+        write_tables(db, tables)
+        return cls(plat, Path(db).resolve(), read_tables(db))
+
+    def reload(self) -> bool:
+        """Re-read the databank (after a rebuild or another process's record); True if changed."""
+        old = self.version
+        self._index(read_tables(self.db_path))
+        return self.version != old
+
+    def _index(self, t: Tables) -> None:
+        plat, e = self.platform, self.platform.eurdf
+        if t.meta["platform"] != plat.name:
+            raise KinesphereError(
+                "malformed", f"{self.db_path} is a databank for {t.meta['platform']!r}, "
+                f"not {plat.name!r}",
+            )
+        if t.joints != e.joint_names:
+            raise KinesphereError(
+                "incompatible_version", f"{self.db_path} was built for other joints than "
+                f"{plat.name}'s eURDF; rebuild it with 'kinesphere ecl build {plat.name}'",
+            )
+        if t.meta["eurdf_sha256"] != e.sha256:
+            log.warning("%s was built from another version of %s.eurdf", self.db_path, plat.name)
+        vsam = vsam_from_dict(json.loads(t.meta["vsam"]), plat, f"{self.db_path} meta")
+        cells = build_cells(plat, t, self.db_path)
+        limb_origins: dict[str, list[str]] = {}
+        for limb, origin in cells:
+            limb_origins.setdefault(limb, []).append(origin)
+        served = set(limb_origins)
+        # everything is built before anything is swapped, so a failed reload changes nothing
+        self.vsam: Vsam = vsam
+        self._tables = t
+        self.version: str = t.digest()[:16]
+        self._cells = cells
+        self._limb_origins = limb_origins
+        self._limbs = _names(e.limbs, served) | _names(e.core, served)
+        self._origins = _names(e.distals, set(e.J)) | _names(e.core, set(e.C))
+        self._neutral = {li: limb_neutral(plat, li) for li in e.L}
+        self._quality = {(p, k): (c, r, m) for p, k, c, r, m in t.quality}
+        self._catalogue: Catalogue | None = None
+
+    # -- f_SB --------------------------------------------------------------------------------
+    def query(self, limb: str, origin: str, direction: str | Direction, size: object) -> Pose:
+        """f_SB(l, o, d, s): the pose for a spatial command (see docs/architecture.md)."""
+        try:
+            lname = self._limbs[limb]
+        except (KeyError, TypeError):
+            lname = self._bad_limb(limb)
+        try:
+            oname = self._origins[origin]
+        except (KeyError, TypeError):
+            oname = self._bad_origin(origin, lname)
+        cells = self._cells.get((lname, oname))
+        if cells is None:
+            raise self._unpaired(lname, origin)
+        try:
+            slug = self._slugs[direction]
+        except (KeyError, TypeError):
+            slug = self._direction(direction)
+        if (type(size) is float or type(size) is int) and 0 <= size < 1e15:
+            s = float(size)
+        else:
+            s = size_value(size)
+        cell = cells.get(slug)
+        if slug == _PLACE_MIDDLE and lname in self._neutral:
+            return Pose(platform=self._name, limb=lname, origin=oname, direction=slug, size=s,
+                        joints=dict(self._neutral[lname]),
+                        k_id=cell.k_id if cell is not None else NO_ID)
+        if cell is None:
+            raise KinesphereError(
+                "direction_unavailable", f"({lname}, {oname}) has no direction {slug}; it has: "
+                f"{', '.join(d.slug for d in self.directions(lname, oname))}",
+            )
+        translation: list[float] | None = None
+        p_id: int | None = None
+        knots = cell.knots
+        i = bisect.bisect_right(knots, s) - 1
+        if not cell.joints:  # core cell: the base translates s steps, no joints move
+            joints: dict[str, float] = {}
+            translation = self._translate(cell, s)
+            if s == knots[i] and i:
+                p_id = cell.sizes[i - 1]
+        elif s == knots[i]:
+            joints = dict(cell.stored[i])
+            p_id = cell.sizes[i - 1] if i else None
+        elif i < len(knots) - 1:
+            a, b = cell.values[i], cell.values[i + 1]
+            t = (s - knots[i]) / (knots[i + 1] - knots[i])
+            joints = {n: x + t * (y - x) for n, x, y in zip(cell.joints, a, b, strict=True)}
+        else:
+            joints = dict(cell.stored[-1])
+            translation = self._translate(cell, s - knots[-1])
+        return Pose(platform=self._name, limb=lname, origin=oname, direction=slug, size=s,
+                    joints=joints, translation=translation, k_id=cell.k_id, p_id=p_id)
+
+    def _translate(self, cell: Cell, units: float) -> list[float]:
+        """``units`` translation steps along the cell's unit horizontal, body frame."""
+        h, step = cell.horizontal, self.vsam.translation_step
+        if step is None or not self.platform.base.mobile:
+            raise KinesphereError(
+                "cannot_translate", f"{self._name} has a fixed base: sizes above the largest "
+                f"stored size ({cell.sizes[-1]}) would need the base to move",
+            )
+        if h is None:
+            raise KinesphereError(
+                "cannot_translate", f"{cell.slug} is purely vertical; the base cannot translate "
+                f"along it, so sizes above {cell.sizes[-1]} are not available",
+            )
+        k = units * step
+        if not math.isfinite(k):
+            raise KinesphereError("size_out_of_range", f"size too large: {units} steps")
+        return [h[0] * k + 0.0, h[1] * k + 0.0, 0.0]  # + 0.0: no -0.0 at size 0
+
+    def compound(self, parts: Sequence[PartLike], last_wins: bool = False) -> Pose:
+        """Join several parts joint-wise; translations add (see :func:`compound.join`).
+
+        A joint set by two parts to different values is a ``conflict`` unless ``last_wins``.
+        """
+        return join(self.query, self._name, parts, last_wins)
+
+    # -- names and errors --------------------------------------------------------------------
+    def directions(self, limb: str, origin: str) -> list[Direction]:
+        """Directions a pair answers (place-middle always, for limbs), in Laban order."""
+        have = self._cells.get((limb, origin), {})
+        core = limb in self.platform.eurdf.C
+        return [d for d in Direction
+                if d.slug in have or (d is Direction.PLACE_MIDDLE and not core)]
+
+    def _direction(self, text: object) -> str:
+        slug = Direction.parse(text).slug  # type: ignore[arg-type]
+        if isinstance(text, str) and len(self._slugs) < _DIRECTION_CACHE_MAX:
+            self._slugs[text] = slug
+        return slug
+
+    def _valid_limbs(self) -> str:
+        e = self.platform.eurdf
+        out = [f"{p.name} ({p.alias})" if p.alias else p.name
+               for p in e.limbs if p.name in self._limb_origins]
+        if self.vsam.can_translate:
+            out += [f"{p.name} (core)" for p in e.core if p.name in self._limb_origins]
+        return ", ".join(out) or "none"
+
+    def _bad_limb(self, limb: object) -> str:
+        e = self.platform.eurdf
+        if isinstance(limb, str) and limb.strip() in self._limbs:
+            return self._limbs[limb.strip()]
+        name = limb.strip() if isinstance(limb, str) else None
+        if name is not None and e.aliases.get(name, name) in e.C:
+            raise KinesphereError(
+                "cannot_translate", f"{self.platform.name} has a fixed base; the core "
+                f"{limb!r} cannot be moved. Limbs: {self._valid_limbs()}",
+            )
+        what = repr(limb) if isinstance(limb, str) else f"of type {type(limb).__name__}"
+        raise KinesphereError(
+            "unknown_limb", f"{self.platform.name} has no limb {what} in its ECL; "
+            f"valid: {self._valid_limbs()}",
+        )
+
+    def _bad_origin(self, origin: object, limb: str) -> str:
+        if isinstance(origin, str) and origin.strip() in self._origins:
+            return self._origins[origin.strip()]
+        raise self._unpaired(limb, origin)
+
+    def _unpaired(self, limb: str, origin: object) -> KinesphereError:
+        valid = ", ".join(self._limb_origins.get(limb, [])) or "none"
+        what = repr(origin) if isinstance(origin, str) else f"of type {type(origin).__name__}"
+        return KinesphereError(
+            "unknown_origin", f"origin {what} is not paired with {limb}; its origins: {valid}"
+        )
+
+    # -- catalogue, rows ---------------------------------------------------------------------
+    def catalogue(self) -> Catalogue:
+        """What this ECL answers, for clients to offer only valid commands."""
+        if self._catalogue is not None:
+            return self._catalogue
+        e = self.platform.eurdf
+        limbs, core_dirs = [], []
+        for (limb, origin), cells in self._cells.items():
+            if limb in e.C:
+                core_dirs = [d.slug for d in self.directions(limb, origin)]
+                continue
+            sizes = sorted({s for c in cells.values() for s in c.sizes})
+            limbs.append(LimbEntry(limb, origin, [d.slug for d in self.directions(limb, origin)],
+                                   sizes))
+        step = self.vsam.translation_step
+        self._catalogue = Catalogue(
+            platform=self.platform.name,
+            core=list(e.C),
+            limbs=limbs,
+            joints=[JointLimit(j.name, j.lower, j.upper, j.velocity) for j in e.P],
+            translation_step=step,
+            can_translate=bool(core_dirs) and step is not None,
+            directions_for_core=core_dirs,
+            sizes=sorted({s for cs in self._cells.values() for c in cs.values() for s in c.sizes}),
+            aliases=dict(e.aliases),
+            version=self.version,
+        )
+        return self._catalogue
+
+    def cells(self) -> list[Cell]:
+        """Every stored cell, in k_id order."""
+        return sorted((c for cs in self._cells.values() for c in cs.values()),
+                      key=lambda c: c.k_id)
+
+    def rows(self, limb: str | None = None, origin: str | None = None,
+             direction: str | Direction | None = None) -> list[dict[str, Any]]:
+        """Stored rows as plain dicts, optionally filtered (aliases and spellings accepted)."""
+        lname = None if limb is None else self._limbs.get(limb) or self._bad_limb(limb)
+        oname = None if origin is None else self._origins.get(origin) or self._bad_origin(
+            origin, lname or "any limb")
+        d = None if direction is None else Direction.parse(direction)
+        out = []
+        for c in self.cells():
+            if (lname or c.limb, oname or c.origin, d or c.direction) != (
+                c.limb, c.origin, c.direction
+            ):
+                continue
+            for i, s in enumerate(c.sizes):
+                cos, reach, margin = self._quality.get((s, c.k_id), (None, None, None))
+                out.append({"k_id": c.k_id, "p_id": s, "limb": c.limb, "origin": c.origin,
+                            "direction": c.direction.slug, "size": s,
+                            "joints": dict(c.stored[i + 1]), "cosine": cos, "reach": reach,
+                            "margin": margin})
+        return out
+
+    # -- super-user writes -------------------------------------------------------------------
+    def record(self, limb: str, origin: str, direction: str | Direction, size: object,
+               joints: Mapping[str, object]) -> Pose:
+        """Store a pose for ``(limb, origin, direction, size)`` and serve it at once.
+
+        Limb joints left out keep the stored value of that cell, or neutral for a new cell.
+        Everything is validated before the one write transaction, so a bad call changes nothing.
+        """
+        e = self.platform.eurdf
+        lname, oname, d, size_int, given = check_record(
+            self.platform, self.vsam, limb, origin, direction, size, joints
+        )
+        cell = self._cells.get((lname, oname), {}).get(d.slug)
+        stored = cell.row(size_int) if cell is not None else None
+        base = stored if stored is not None else dict(self._neutral[lname])
+        upsert_pose(self.db_path, e.joint_names, (lname, oname, d.slug), size_int, base | given)
+        self.reload()
+        return self.query(lname, oname, d, size_int)
+
+    def export_json(self, path: str | Path) -> Path:
+        """Write the whole databank as JSON (import gives back the same bytes)."""
+        return transfer.write_json(path, self._tables)
+
+    def import_json(self, path: str | Path) -> None:
+        """Replace this databank atomically with an export (validated first) and reload."""
+        write_tables(self.db_path, transfer.tables_from_json(self.platform,
+                                                             transfer.read_json(path)))
+        self.reload()
+
+
+def _names(parts: Sequence[Any], keep: set[str]) -> dict[str, str]:
+    """Label and alias -> label, for the labels in ``keep``."""
+    out: dict[str, str] = {}
+    for p in parts:
+        if p.name in keep:
+            out[p.name] = p.name
+            if p.alias:
+                out[p.alias] = p.name
+    return out

@@ -1,0 +1,271 @@
+"""Differential IK for one limb of a platform's MuJoCo model, with mink.
+
+Why a class per limb: Algorithm 1 needs the same constrained solve hundreds of times per
+platform (one per direction and size), so the mink problem for a (limb, origin) pair is set
+up once and reused: a point task on the limb's distal end, a light posture task toward neutral
+(natural postures, and a unique answer for redundant arms), joint limits, a per-iteration joint
+step limit, distance limits against the rest of the robot and the floor, and every other DOF
+frozen exactly (mink's DofFreezingTask as an equality constraint). A step that would still
+touch anything is halved or refused, so every returned pose is clean. Deterministic: no
+randomness, no wall clock, only iteration caps and convergence tests.
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass
+
+import mink
+import mujoco
+import numpy as np
+
+from kinesphere.robots.mjcf import PlatformModel
+from kinesphere.services.ecl.constraints import (
+    GAIN,
+    FloorLimit,
+    PairDistanceLimit,
+    PointTask,
+    tip_point,
+)
+
+SOLVER = "daqp"
+DAMPING = 1e-2  # Levenberg-Marquardt damping: keeps stretched (singular) arms calm
+JOINT_STEP = 0.08  # rad per iteration, so no link moves farther than the detection distance
+LIMIT_MARGIN = 0.01  # rad kept from every joint limit during the solve
+FLOOR_TOLERANCE = 1e-3  # metres a limb geom may dip below z = 0 (rounding)
+POSTURE = 0.02  # posture weight per radian, against 1 per metre of tip error
+CONVERGED = 1e-3  # rad: a joint step this small everywhere counts as converged ...
+SETTLED = 2e-4  # spans: ... and so does a tip that moved less (null-space creep only)
+PATH_CLEARANCE = 0.0  # m kept along straight joint-space paths (0: they must not touch)
+PATH_STEP = 0.05  # rad between the samples of such a path
+DITHER = 0.1  # a step this close to minus the previous one means a period-2 bounce
+RETRIES = (0.5, 0.25)  # fractions of a step tried when the full step would touch something
+
+
+@dataclass(frozen=True)
+class Reach:
+    """Where a pose puts the limb's distal end."""
+
+    tip: np.ndarray  # world
+    offset: np.ndarray  # tip - origin, body frame
+
+
+def chain_span(
+    model: mujoco.MjModel, data: mujoco.MjData, origin: np.ndarray, tip: np.ndarray,
+    tip_body: int, bodies: frozenset[int],
+) -> float:
+    """An upper bound on how far a limb's distal end can get from its origin: the length of
+    the joint-anchor path from the origin to the tip (a fully stretched chain)."""
+    body, anchors = tip_body, []
+    while body > 0 and body in bodies:
+        for j in range(model.body_jntadr[body], model.body_jntadr[body] + model.body_jntnum[body]):
+            anchors.append(data.xanchor[j].copy())
+        body = int(model.body_parentid[body])
+    total, prev = 0.0, origin
+    for p in [*reversed(anchors), tip]:
+        total += float(np.linalg.norm(p - prev))
+        prev = p
+    return total
+
+
+class LimbSolver:
+    """One (limb, origin) pair of a platform, ready for repeated IK solves."""
+
+    def __init__(self, pm: PlatformModel, limb: str, origin: str) -> None:
+        model, eurdf = pm.model, pm.platform.eurdf
+        self.pm = pm
+        self.model = model
+        self.joints = eurdf.limb_joints(limb)
+        self.qadr = np.array([pm.qpos_index[j] for j in self.joints], dtype=int)
+        self.lower = np.array([eurdf.limits[j].lower for j in self.joints])
+        self.upper = np.array([eurdf.limits[j].upper for j in self.joints])
+        dofs = [pm.dof_index[j] for j in self.joints]
+        self._dof_adr = np.array(dofs, dtype=int)
+        self.neutral = pm.neutral_qpos()
+        self.config = mink.Configuration(model, self.neutral.copy())
+        data = self.config.data
+        tip_body = model.body(eurdf.tip_link(limb)).id
+        self.tip_task = PointTask(model, tip_body, tip_point(model, tip_body))
+        self.body_rot = data.xmat[model.body(eurdf.root_link).id].reshape(3, 3).copy()
+        self.origin = data.xanchor[model.joint(eurdf.origin_joint(origin)).id].copy()
+        self.bodies = frozenset(model.body(name).id for name in eurdf.limb(limb).links)
+        self._neutral_reach = self.reach(self.neutral)
+        self.span = self._span()
+        scale = max(self.span, 1e-3)  # a tip on its origin cannot point; generate drops it
+        self.tip_task = PointTask(model, tip_body, self.tip_task.point, scale=scale)
+        self._posture_mask = np.zeros(model.nv)
+        self._posture_mask[dofs] = 1.0
+        self.posture = mink.PostureTask(model, cost=self._posture_mask * POSTURE, gain=GAIN)
+        self.posture.set_target(self.neutral)
+        self._floor = model.geom("floor").id
+        self._fromto = np.zeros(6)
+        self._limb_geoms = np.array(
+            [g for g in range(model.ngeom)
+             if model.geom_contype[g] and model.geom_bodyid[g] in self.bodies],
+            dtype=int,
+        )
+        self.limits: list[mink.Limit] = [
+            mink.ConfigurationLimit(model, gain=0.9, min_distance_from_limits=LIMIT_MARGIN),
+            mink.VelocityLimit(model, {j: JOINT_STEP for j in self.joints}),
+            FloorLimit(model, [int(g) for g in self._limb_geoms]),
+        ]
+        pairs = self._distance_pairs()
+        if pairs:
+            self.limits.append(PairDistanceLimit(model, data, pairs))
+        frozen = [i for i in range(model.nv) if i not in dofs]
+        self.constraints = [mink.DofFreezingTask(model, frozen)] if frozen else []
+        self.iterations = 0
+        self._path_checker()
+
+    def _distance_pairs(self) -> list[tuple[int, int]]:
+        """Geom pairs (limb vs robot) that MuJoCo would collide in the compiled model."""
+        m = self.model
+        excluded = {frozenset(p) for p in self.pm.excluded_pairs}
+        colliding = [g for g in range(m.ngeom) if m.geom_contype[g] and g != self._floor]
+        weld, parent = m.body_weldid, m.body_parentid
+        pairs: list[tuple[int, int]] = []
+        for a in self._limb_geoms:
+            for b in colliding:
+                ba, bb = int(m.geom_bodyid[a]), int(m.geom_bodyid[b])
+                if bb in self.bodies and b <= a:
+                    continue  # limb-limb pairs once
+                wa, wb = weld[ba], weld[bb]
+                if wa == wb or weld[parent[wa]] == wb or weld[parent[wb]] == wa:
+                    continue  # same rigid body or parent/child: MuJoCo never collides them
+                if frozenset((m.body(ba).name, m.body(bb).name)) in excluded:
+                    continue
+                pairs.append((int(a), b))
+        return pairs
+
+    # --- queries ---------------------------------------------------------------------------
+    def full_q(self, values: np.ndarray) -> np.ndarray:
+        """Neutral everywhere except the limb's joints."""
+        q: np.ndarray = self.neutral.copy()
+        q[self.qadr] = values
+        return q
+
+    def reach(self, q: np.ndarray) -> Reach:
+        self.config.update(q)
+        tip = self.tip_task.position(self.config)
+        return Reach(tip=tip, offset=self.body_rot.T @ (tip - self.origin))
+
+    def neutral_reach(self) -> Reach:
+        return self._neutral_reach
+
+    def _span(self) -> float:
+        self.config.update(self.neutral)
+        return chain_span(self.model, self.config.data, self.origin,
+                          self._neutral_reach.tip, self.tip_task.body, self.bodies)
+
+    def collides(self, q: np.ndarray) -> str | None:
+        """Why a pose is not allowed (a robot self-contact or a geom under the floor), or None."""
+        m, data = self.model, self.config.data
+        self.config.update(q)
+        mujoco.mj_collision(m, data)
+        for c in data.contact[: data.ncon]:
+            b1, b2 = int(m.geom_bodyid[c.geom1]), int(m.geom_bodyid[c.geom2])
+            if b1 in self.bodies or b2 in self.bodies:
+                return f"contact {m.body(b1).name}/{m.body(b2).name}"
+        geoms = self._limb_geoms
+        for g in geoms[data.geom_xpos[geoms, 2] < m.geom_rbound[geoms] + FLOOR_TOLERANCE]:
+            dist = mujoco.mj_geomDistance(m, data, self._floor, int(g), 0.05, self._fromto)
+            if dist < -FLOOR_TOLERANCE:
+                return f"{m.body(m.geom_bodyid[g]).name} below the floor"
+        return None
+
+    def path_touches(self, a: np.ndarray, b: np.ndarray) -> str | None:
+        """Why the straight joint-space path between two limb poses is unsafe, or None.
+
+        f_SB interpolates between stored sizes and robots move roughly straight in joint
+        space, so the path must keep PATH_CLEARANCE from other links (pairs already that
+        close at neutral only must not touch) and stay above the floor; sampled every
+        PATH_STEP radians of the largest joint motion.
+        """
+        steps = max(2, int(np.ceil(float(np.max(np.abs(b - a))) / PATH_STEP)) + 1)
+        m, data = self._path_model, self._path_data
+        for t in np.linspace(0.0, 1.0, steps):
+            q = self.full_q(a + t * (b - a))
+            data.qpos[:] = q
+            mujoco.mj_kinematics(m, data)
+            mujoco.mj_collision(m, data)
+            for c in data.contact[: data.ncon]:
+                b1, b2 = int(m.geom_bodyid[c.geom1]), int(m.geom_bodyid[c.geom2])
+                close = frozenset((int(c.geom1), int(c.geom2))) in self._close_at_neutral
+                if (b1 in self.bodies or b2 in self.bodies) and (c.dist < 0 or not close):
+                    return f"{m.body(b1).name}/{m.body(b2).name} touch {t:.0%} of the way"
+            hit = self.collides(q)
+            if hit is not None:
+                return f"{hit} at {t:.0%} of the way"
+        return None
+
+    def _path_checker(self) -> None:
+        """A private model copy whose geoms report contacts PATH_CLEARANCE early."""
+        m = copy.deepcopy(self.model)
+        m.geom_margin[:] = PATH_CLEARANCE
+        self._path_model, self._path_data = m, mujoco.MjData(m)
+        self._path_data.qpos[:] = self.neutral
+        mujoco.mj_kinematics(m, self._path_data)
+        mujoco.mj_collision(m, self._path_data)
+        self._close_at_neutral = frozenset(
+            frozenset((int(c.geom1), int(c.geom2)))
+            for c in self._path_data.contact[: self._path_data.ncon]
+        )
+
+    def margin(self, values: np.ndarray) -> float:
+        """Radians (or metres) to the nearest joint limit; pi when every joint is unlimited."""
+        lo, hi = values - self.lower, self.upper - values
+        finite = np.isfinite(lo) & np.isfinite(hi)
+        if not finite.any():
+            return float(np.pi)
+        return float(np.min(np.minimum(lo[finite], hi[finite])))
+
+    # --- solving ---------------------------------------------------------------------------
+    def solve(
+        self, start: np.ndarray, target: np.ndarray, iterations: int, posture: float = POSTURE
+    ) -> np.ndarray:
+        """Move the distal end toward ``target`` (world) from ``start``; returns limb values."""
+        self.tip_task.target = np.asarray(target, dtype=float)
+        self.posture.set_cost(self._posture_mask * posture)
+        q = self.full_q(start)
+        self.config.update(q)
+        last_tip = self.tip_task.position(self.config)
+        scale = max(self.span, 1e-3)
+        self.iterations = 0
+        previous = np.zeros(len(self.joints))
+        for _ in range(iterations):
+            try:
+                v = mink.solve_ik(
+                    self.config, [self.tip_task, self.posture], dt=1.0, solver=SOLVER,
+                    damping=DAMPING, limits=self.limits, constraints=self.constraints,
+                )
+            except mink.NoSolutionFound:
+                break
+            step = v[self._dof_adr]
+            if float(np.linalg.norm(step + previous)) < DITHER * float(np.linalg.norm(step)):
+                step = step / 2  # bouncing across the optimum (a saturated, singular stretch):
+                nxt = self._clean_step(q, step)  # settle half-way between the two and stop
+                q = q if nxt is None else nxt
+                break
+            previous = step
+            nxt = self._clean_step(q, step)
+            if nxt is None:
+                break  # every fraction of the step touches something: keep the last clean pose
+            q = nxt
+            self.iterations += 1
+            tip = self.tip_task.position(self.config)
+            moved = float(np.linalg.norm(tip - last_tip)) / scale
+            last_tip = tip
+            if float(np.max(np.abs(v))) < CONVERGED or moved < SETTLED:
+                break
+        self.config.update(q)
+        return np.asarray(q[self.qadr].copy())
+
+    def _clean_step(self, q: np.ndarray, dq: np.ndarray) -> np.ndarray | None:
+        """``q`` advanced by ``dq`` (limb joints, hinge/slide only), or by a fraction of it,
+        clamped to the limits and free of contacts; None if no fraction is clean."""
+        for fraction in (1.0, *RETRIES):
+            values = np.clip(q[self.qadr] + fraction * dq, self.lower, self.upper)
+            nxt = self.full_q(values)
+            if self.collides(nxt) is None:
+                return nxt  # collides() left the configuration at nxt
+        return None
