@@ -23,6 +23,10 @@ ERROR_CODES: frozenset[str] = frozenset(
         "incompatible_version",
         "unavailable",
         "invalid_eurdf",
+        "lease_held",
+        "estopped",
+        "stale",
+        "expired",
         "internal",
     }
 )

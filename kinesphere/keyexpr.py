@@ -95,6 +95,10 @@ class Keys:
         """Catalogue query: ``{p}/ecl/{platform}/catalogue``; ``*`` lists every platform."""
         return f"{self._ecl(platform)}/catalogue"
 
+    def body(self, platform: str) -> str:
+        """Body model query (answer a BodyModel): ``{p}/ecl/{platform}/body``."""
+        return f"{self._ecl(platform)}/body"
+
     def record(self, platform: str) -> str:
         """Super-user write, payload a RecordRequest: ``{p}/ecl/{platform}/record``."""
         return f"{self._ecl(platform)}/record"
@@ -124,6 +128,10 @@ class Keys:
     def state(self, robot_id: str) -> str:
         """Where a robot puts RobotState: ``{p}/robot/{id}/state``; ``*`` to watch all."""
         return f"{self._robot(robot_id)}/state"
+
+    def ack(self, robot_id: str) -> str:
+        """Where a robot puts an Ack for every command it receives: ``{p}/robot/{id}/ack``."""
+        return f"{self._robot(robot_id)}/ack"
 
     def alive_robot(self, robot_id: str) -> str:
         """Liveliness token of a robot agent: ``{p}/alive/robot/{id}``; ``*`` for all."""
@@ -166,7 +174,7 @@ class Keys:
         n = self.prefix.count("/") + 1
         if "/".join(parts[:n]) == self.prefix:
             rest = parts[n:]
-            if len(rest) == 3 and rest[0] == "robot" and rest[2] in ("command", "state"):
+            if len(rest) == 3 and rest[0] == "robot" and rest[2] in ("command", "state", "ack"):
                 return check_segment(rest[1], "robot id")
             if len(rest) == 3 and rest[:2] == ["alive", "robot"]:
                 return check_segment(rest[2], "robot id")

@@ -10,6 +10,7 @@ have their own code (size out of range, unknown names) are left to the receiver.
 
 from __future__ import annotations
 
+from enum import StrEnum
 from typing import Annotated, Any, Final, SupportsBytes, TypeVar, get_args
 
 import msgspec
@@ -23,25 +24,79 @@ COMPOUND: Final = "compound"
 NO_ID: Final = -1
 """``Pose.k_id`` when no single VSAM row applies (compound poses)."""
 
+# Bounds on everything that comes off the wire: a peer cannot make a receiver hold or loop over
+# more than these (docs/protocol.md, "Bounds").
+MAX_NAME: Final = 64
+"""Characters in any name: platform, limb, origin, direction, robot id, group, sender, session."""
+MAX_PARTS: Final = 16
+"""Spatial commands in one Command or CompoundRequest."""
+MAX_JOINTS: Final = 256
+"""Entries in a joint map (``Pose.joints``, ``RecordRequest.joints``)."""
+MAX_TTL_MS: Final = 60_000
+"""Largest command watchdog; a robot never moves on one message for longer than a minute."""
+MAX_INT: Final = 2**63 - 1
+
 Vec3 = Annotated[list[float], msgspec.Meta(min_length=3, max_length=3)]
 Fraction = Annotated[float, msgspec.Meta(ge=0.0, le=1.0)]
-NonNegInt = Annotated[int, msgspec.Meta(ge=0)]
+SignedFraction = Annotated[float, msgspec.Meta(ge=-1.0, le=1.0)]
+NonNegInt = Annotated[int, msgspec.Meta(ge=0, le=MAX_INT)]
+Name = Annotated[str, msgspec.Meta(max_length=MAX_NAME)]
+Text = Annotated[str, msgspec.Meta(max_length=1024)]
+JointMap = Annotated[dict[Name, float], msgspec.Meta(max_length=MAX_JOINTS)]
 
 
-class Status:
+class Status(StrEnum):
     """Values of ``RobotState.status``; a plain ``str`` on the wire so new ones stay readable."""
 
-    IDLE: Final = "idle"
-    MOVING: Final = "moving"
-    HOLDING: Final = "holding"
-    STOPPED: Final = "stopped"
-    ESTOP: Final = "estop"
-    CLAMPED: Final = "clamped"
-    DATABANK_UNREACHABLE: Final = "databank_unreachable"
-    ERROR: Final = "error"
+    IDLE = "idle"
+    MOVING = "moving"
+    HOLDING = "holding"
+    STOPPED = "stopped"
+    ESTOP = "estop"
+    CLAMPED = "clamped"
+    DATABANK_UNREACHABLE = "databank_unreachable"
+    ERROR = "error"
 
 
-STATUSES: Final = frozenset(v for k, v in vars(Status).items() if k.isupper())
+STATUSES: Final = frozenset(Status)
+
+
+class AckStage(StrEnum):
+    """``Ack.stage``: what became of one command at one robot (docs/protocol.md, "Acks").
+
+    A moving command goes ``accepted`` -> ``moving`` -> one of ``reached``, ``clamped``,
+    ``blocked`` (or ``superseded`` by a newer command, ``holding`` on deadman/TTL). Commands
+    that move nothing are answered once: ``estopped``, ``released``, ``stopped``, ``holding``,
+    ``leased`` (a lease-only command). ``rejected`` carries an error ``code``.
+    """
+
+    ACCEPTED = "accepted"
+    MOVING = "moving"
+    REACHED = "reached"
+    CLAMPED = "clamped"
+    BLOCKED = "blocked"
+    SUPERSEDED = "superseded"
+    HOLDING = "holding"
+    STOPPED = "stopped"
+    ESTOPPED = "estopped"
+    RELEASED = "released"
+    LEASED = "leased"
+    REJECTED = "rejected"
+
+
+class LeaseAction(StrEnum):
+    """``Command.lease``: how a command treats the robot's control lease.
+
+    ``""`` (none): a motion command from the holder keeps the lease alive; from anyone when the
+    lease is free it acquires it; from anyone else it is refused with ``lease_held``.
+    ``acquire`` asks for the lease without moving; ``take`` takes it over from another holder
+    (logged, and the previous holder is told); ``release`` gives it back. E-stop ignores leases.
+    """
+
+    NONE = ""
+    ACQUIRE = "acquire"
+    TAKE = "take"
+    RELEASE = "release"
 
 
 # Parts nested inside messages: no version, no tag.
@@ -52,10 +107,25 @@ class SpatialCommand(msgspec.Struct, forbid_unknown_fields=False):
     size translates the base). The ECL checks names and size, so decoding accepts any value.
     """
 
-    limb: str
-    origin: str
-    direction: str
+    limb: Name
+    origin: Name
+    direction: Name
     size: float
+    exact: bool = False
+    """Only this direction: no substitution by the nearest one the limb has."""
+
+
+class Substitution(msgspec.Struct, forbid_unknown_fields=False):
+    """A part served with another direction than the one asked for (the nearest honest one).
+
+    ``angle`` is the angle in degrees between the requested and the served direction vectors.
+    """
+
+    limb: Name
+    origin: Name
+    requested: Name
+    served: Name
+    angle: float
 
 
 class JointLimit(msgspec.Struct, forbid_unknown_fields=False):
@@ -77,10 +147,25 @@ class LimbEntry(msgspec.Struct, forbid_unknown_fields=False):
 
 
 class Drive(msgspec.Struct, forbid_unknown_fields=False):
-    """Drive the base along a middle horizontal ``direction`` at ``speed`` x its maximum."""
+    """Base motion, in one of two forms.
 
-    direction: str
-    speed: Fraction
+    Version 1: along a middle horizontal ``direction`` at ``speed`` x the base's maximum.
+    Continuous: ``forward`` and ``left`` (body-frame velocity) and ``yaw`` (turn rate,
+    positive = counter-clockwise, to the left), each a fraction -1..1 of the platform's limits;
+    used when any of them is non-zero. ``diff``/``skid`` bases follow forward and yaw only.
+    Senders fill both forms (the horizontal nearest their heading) so version-1 robots still
+    drive.
+    """
+
+    direction: Name = ""
+    speed: Fraction = 0.0
+    forward: SignedFraction = 0.0
+    left: SignedFraction = 0.0
+    yaw: SignedFraction = 0.0
+
+    @property
+    def is_continuous(self) -> bool:
+        return bool(self.forward or self.left or self.yaw)
 
 
 class Message(msgspec.Struct, kw_only=True, tag_field="type", forbid_unknown_fields=False):
@@ -100,16 +185,18 @@ class Pose(Message, tag="pose", kw_only=True):
     :data:`NO_ID` and its inputs in ``parts``.
     """
 
-    platform: str
-    limb: str
-    origin: str
-    direction: str
+    platform: Name
+    limb: Name
+    origin: Name
+    direction: Name
     size: float
-    joints: dict[str, float]
+    joints: JointMap
     translation: Vec3 | None = None
     k_id: int
     p_id: int | None = None
-    parts: list[SpatialCommand] = []
+    parts: Annotated[list[SpatialCommand], msgspec.Meta(max_length=MAX_PARTS)] = []
+    substitutions: list[Substitution] = []
+    """Parts served with the nearest direction the limb has; ``direction`` is the served one."""
 
     @property
     def is_compound(self) -> bool:
@@ -123,7 +210,9 @@ class Catalogue(Message, tag="catalogue", kw_only=True):
     ``joints`` the actuated joints in eURDF order. ``translation_step`` is metres per size unit
     beyond the largest size, ``directions_for_core`` the directions the base can translate in,
     ``sizes`` every stored size, ``aliases`` maps aliases (``right_arm``) to label names, and
-    ``version`` identifies the ECL contents (changes when poses are recorded).
+    ``version`` identifies the ECL contents (changes when poses are recorded). ``max_size`` is
+    the largest size the ECL answers (``size_out_of_range`` past it; None from older
+    databanks), ``base_kind`` the base (``fixed``, ``omni``, ``diff``, ``skid``; "" if unknown).
     """
 
     platform: str
@@ -136,6 +225,8 @@ class Catalogue(Message, tag="catalogue", kw_only=True):
     sizes: list[int]
     aliases: dict[str, str] = {}
     version: str
+    max_size: float | None = None
+    base_kind: str = ""
 
     def __post_init__(self) -> None:
         if self.can_translate and not (self.translation_step and self.translation_step > 0):
@@ -143,26 +234,31 @@ class Catalogue(Message, tag="catalogue", kw_only=True):
 
 
 class Command(Message, tag="command", kw_only=True):
-    """Operator input for one robot (or all, via a wildcard key).
+    r"""Operator input for one robot (or a group, or all, via their keys).
 
-    ``seq`` grows per ``sender``; ``sent_ns`` is the sender's ``time.time_ns()`` (latency
-    only). ``deadman`` false means the operator let go: the robot holds. The robot holds when
-    no newer command arrives within ``ttl_ms`` of receiving this one. ``estop`` latches an
-    emergency stop; ``stop`` halts motion in a controlled way. Only a command with
+    ``seq`` grows per ``(sender, session)``; ``session`` is a fresh id per client process, so a
+    restarted client starts a new order. ``sent_ns`` is the sender's ``time.time_ns()``.
+    ``deadman`` false means the operator let go: the robot holds. The robot holds when no newer
+    command arrives within ``ttl_ms`` of receiving this one, and drops a command whose
+    ``ttl_ms`` ran out before it could act on it. ``estop`` latches an emergency stop (from
+    anyone, lease or not); ``stop`` halts motion in a controlled way. Only a command with
     ``release`` clears a latched e-stop (and moves nothing): a client that keeps streaming
-    ordinary commands can never release an e-stop it did not mean to.
+    ordinary commands can never release an e-stop it did not mean to. ``lease`` is a
+    :class:`LeaseAction`. Every robot that receives a command answers with :class:`Ack`\ s.
     """
 
     seq: NonNegInt
-    sent_ns: int
-    parts: list[SpatialCommand] = []
+    sent_ns: NonNegInt
+    parts: Annotated[list[SpatialCommand], msgspec.Meta(max_length=MAX_PARTS)] = []
     drive: Drive | None = None
     deadman: bool
-    ttl_ms: NonNegInt
+    ttl_ms: Annotated[int, msgspec.Meta(ge=0, le=MAX_TTL_MS)]
     estop: bool = False
     stop: bool = False
     release: bool = False
-    sender: str = ""
+    sender: Name = ""
+    session: Name = ""
+    lease: LeaseAction = LeaseAction.NONE
 
 
 class RobotState(Message, tag="robot_state", kw_only=True):
@@ -172,6 +268,10 @@ class RobotState(Message, tag="robot_state", kw_only=True):
     unknown. ``base_pose`` is ``[x m, y m, yaw rad]`` in the odometry frame. ``stamp_ns`` is the
     robot's ``time.time_ns()``; ``last_command_seq`` is -1 before the first command.
     ``clamped`` names joints held at a limit; ``detail`` explains the status to people.
+    ``groups`` are the groups the robot obeys, ``lease_holder`` the sender holding its control
+    lease ("" when free), ``estop_by`` who latched its e-stop, ``substitutions`` the parts of
+    the current target served with another direction, ``dropped`` how many commands it dropped
+    as stale or expired since it started.
     """
 
     robot_id: str
@@ -186,6 +286,11 @@ class RobotState(Message, tag="robot_state", kw_only=True):
     last_command_seq: int
     detail: str = ""
     clamped: list[str] = []
+    groups: list[str] = []
+    lease_holder: str = ""
+    estop_by: str = ""
+    substitutions: list[Substitution] = []
+    dropped: int = 0
 
     def __post_init__(self) -> None:
         n = len(self.joint_names)
@@ -215,22 +320,59 @@ class Error(Message, tag="error", kw_only=True):
 class RecordRequest(Message, tag="record_request", kw_only=True):
     """A super-user write: store ``joints`` as the pose for ``(limb, origin, direction, size)``."""
 
-    limb: str
-    origin: str
-    direction: str
-    size: int
-    joints: dict[str, float]
+    limb: Name
+    origin: Name
+    direction: Name
+    size: Annotated[int, msgspec.Meta(ge=1, le=1000)]
+    joints: JointMap
 
 
 class CompoundRequest(Message, tag="compound_request", kw_only=True):
     """Join the poses of several parts; a joint set by two parts is a ``conflict`` unless
     ``last_wins``, when the later part wins."""
 
-    parts: list[SpatialCommand]
+    parts: Annotated[list[SpatialCommand], msgspec.Meta(max_length=MAX_PARTS)]
     last_wins: bool = False
 
 
-AnyMessage = Pose | Catalogue | Command | RobotState | Error | RecordRequest | CompoundRequest
+class Ack(Message, tag="ack", kw_only=True):
+    """A robot's answer to one command, put on ``{p}/robot/{id}/ack``.
+
+    ``(sender, session, seq)`` name the command; ``stage`` is an :class:`AckStage`; ``code``
+    an error code when ``rejected`` (``lease_held``, ``estopped``, ``stale``, ``expired``,
+    ``direction_unavailable``...). ``lease_holder`` is who holds the robot's lease now.
+    """
+
+    robot_id: Name
+    sender: Name
+    session: Name = ""
+    seq: int
+    stage: AckStage
+    code: str = ""
+    detail: Text = ""
+    stamp_ns: int
+    substitutions: list[Substitution] = []
+    lease_holder: str = ""
+
+
+class BodyModel(Message, tag="body_model", kw_only=True):
+    """A platform's body, enough for a client to draw it without local platform files.
+
+    ``eurdf`` is the eURDF text (primitive shapes only, so it is small); ``neutral`` the
+    Place-Middle pose; ``base_kind`` as in :class:`Catalogue`; ``version`` a hash of the text.
+    """
+
+    platform: Name
+    eurdf: str
+    base_kind: str
+    neutral: dict[str, float]
+    version: str
+
+
+AnyMessage = (
+    Pose | Catalogue | Command | RobotState | Error | RecordRequest | CompoundRequest | Ack
+    | BodyModel
+)
 MESSAGE_TYPES: Final[tuple[type[Message], ...]] = get_args(AnyMessage)
 
 T = TypeVar("T")
@@ -240,7 +382,8 @@ Payload = bytes | bytearray | memoryview | SupportsBytes
 ENCODER: Final = msgspec.msgpack.Encoder()
 _DECODERS: dict[Any, msgspec.msgpack.Decoder[Any]] = {
     t: msgspec.msgpack.Decoder(t)
-    for t in (*MESSAGE_TYPES, AnyMessage, SpatialCommand, JointLimit, LimbEntry, Drive)
+    for t in (*MESSAGE_TYPES, AnyMessage, SpatialCommand, JointLimit, LimbEntry, Drive,
+              Substitution)
 }
 
 

@@ -78,6 +78,37 @@ SAMPLES: list[pr.Message] = [
         limb="limb_11", origin="distal_11", direction="forward-high", size=2, joints={"a": 1.25}
     ),
     pr.CompoundRequest(parts=[SPATIAL, SPATIAL], last_wins=True),
+    pr.Ack(
+        robot_id="r1",
+        sender="pad-1",
+        session="5f0c",
+        seq=42,
+        stage=pr.AckStage.REJECTED,
+        code="lease_held",
+        detail="lease held by pad-2",
+        stamp_ns=124,
+        substitutions=[pr.Substitution("limb_11", "distal_11", "left-low", "left-forward-low",
+                                       45.0)],
+        lease_holder="pad-2",
+    ),
+    pr.BodyModel(
+        platform="youbot",
+        eurdf="<robot name='youbot'/>",
+        base_kind="omni",
+        neutral={"arm_joint_1": 0.0},
+        version="sha1:def",
+    ),
+    pr.Command(
+        seq=43,
+        sent_ns=1_700_000_000_000_000_001,
+        parts=[pr.SpatialCommand("arm", "shoulder", "left-low", 2.0, exact=True)],
+        drive=pr.Drive("forward-middle", 0.5, forward=0.5, left=-0.25, yaw=0.3),
+        deadman=True,
+        ttl_ms=300,
+        sender="pad-1",
+        session="5f0c",
+        lease=pr.LeaseAction.TAKE,
+    ),
 ]
 
 
@@ -294,3 +325,55 @@ def test_error_from_reply() -> None:
     assert (timeout.code, timeout.message) == ("unavailable", "Timeout")
     newer = pr.error_from_reply(raw({"v": 9, "code": "x", "message": "y"}))
     assert newer.code == "incompatible_version"
+
+
+# --- bounds and compatibility of the fields added after the first release -----------------------
+
+
+def test_version_1_peers_still_decode() -> None:
+    """Messages as a version-1 peer sends them (no session, lease, drive vector) still decode."""
+    cmd = pr.decode(raw({"type": "command", "v": 1, "seq": 1, "sent_ns": 5, "deadman": True,
+                         "ttl_ms": 300, "drive": {"direction": "forward-middle", "speed": 0.5}}),
+                    pr.Command)
+    assert cmd.session == "" and cmd.lease is pr.LeaseAction.NONE
+    assert cmd.drive is not None and not cmd.drive.is_continuous
+    pose = pr.decode(raw({"type": "pose", "platform": "nao", "limb": "l", "origin": "o",
+                          "direction": "d", "size": 1.0, "joints": {}, "k_id": 3}), pr.Pose)
+    assert pose.substitutions == []
+
+
+@pytest.mark.parametrize(
+    ("fields", "what"),
+    [
+        ({"sender": "x" * (pr.MAX_NAME + 1)}, "sender"),
+        ({"session": "s" * (pr.MAX_NAME + 1)}, "session"),
+        ({"seq": -1}, "seq"),
+        ({"ttl_ms": pr.MAX_TTL_MS + 1}, "ttl_ms"),
+        ({"lease": "steal"}, "lease"),
+        ({"drive": {"forward": 1.5}}, "forward"),
+        ({"parts": [{"limb": "a", "origin": "b", "direction": "c", "size": 1}] * 17}, "parts"),
+        ({"parts": [{"limb": "a" * 65, "origin": "b", "direction": "c", "size": 1}]}, "limb"),
+    ],
+)
+def test_command_fields_are_bounded(fields: dict[str, Any], what: str) -> None:
+    msg = {"type": "command", "seq": 1, "sent_ns": 5, "deadman": True, "ttl_ms": 300, **fields}
+    assert what in malformed(raw(msg), pr.Command)
+
+
+def test_joint_maps_are_bounded() -> None:
+    joints = {f"j{i}": 0.0 for i in range(pr.MAX_JOINTS + 1)}
+    msg = {"type": "record_request", "limb": "l", "origin": "o", "direction": "d", "size": 1,
+           "joints": joints}
+    assert "joints" in malformed(raw(msg), pr.RecordRequest)
+
+
+def test_drive_continuous_form() -> None:
+    assert pr.Drive(yaw=0.2).is_continuous
+    assert not pr.Drive("left-middle", 1.0).is_continuous
+
+
+def test_statuses_and_stages_are_plain_strings_on_the_wire() -> None:
+    assert pr.STATUSES == {"idle", "moving", "holding", "stopped", "estop", "clamped",
+                           "databank_unreachable", "error"}
+    m = as_map(next(m for m in SAMPLES if isinstance(m, pr.Ack)))
+    assert m["stage"] == "rejected" and type(m["stage"]) is str

@@ -53,7 +53,7 @@ LIT = (250, 200, 60)
 GOOD = (70, 190, 110)
 WARN = (235, 160, 50)
 BAD = (225, 70, 60)
-STATUS_COLOURS = {
+STATUS_COLOURS: dict[str, tuple[int, int, int]] = {
     Status.MOVING: GOOD,
     Status.HOLDING: (110, 160, 230),
     Status.IDLE: DIM,

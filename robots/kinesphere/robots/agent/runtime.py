@@ -92,7 +92,7 @@ class Agent:
         self._pending: tuple[int, Command, float | None] | None = None
         """(ticket, command, base yaw at receipt) of the command waiting for the databank."""
         self._probe: tuple[int, int] | None = None
-        self._status = Status.IDLE
+        self._status: str = Status.IDLE
         self._detail = "no command yet"
         self._state_seq = 0
         self._moved_at = 0.0
