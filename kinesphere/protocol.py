@@ -323,7 +323,7 @@ class RecordRequest(Message, tag="record_request", kw_only=True):
     limb: Name
     origin: Name
     direction: Name
-    size: Annotated[int, msgspec.Meta(ge=1, le=1000)]
+    size: Annotated[int, msgspec.Meta(ge=-MAX_INT, le=MAX_INT)]  # the ECL checks it is a VSAM size
     joints: JointMap
 
 
