@@ -35,11 +35,17 @@ MAX_JOINTS: Final = 256
 MAX_TTL_MS: Final = 60_000
 """Largest command watchdog; a robot never moves on one message for longer than a minute."""
 MAX_INT: Final = 2**63 - 1
+"""Every integer on the wire fits SQLite's and C's int64."""
+MAX_PAYLOAD: Final = 64 * 1024
+"""Bytes in one message; a larger payload is ``malformed`` before anything decodes it."""
+MAX_LARGE_PAYLOAD: Final = 1024 * 1024
+"""Bytes in a :class:`Catalogue` or :class:`BodyModel` (a body's eURDF text may be tens of KiB)."""
 
 Vec3 = Annotated[list[float], msgspec.Meta(min_length=3, max_length=3)]
 Fraction = Annotated[float, msgspec.Meta(ge=0.0, le=1.0)]
 SignedFraction = Annotated[float, msgspec.Meta(ge=-1.0, le=1.0)]
 NonNegInt = Annotated[int, msgspec.Meta(ge=0, le=MAX_INT)]
+Int = Annotated[int, msgspec.Meta(ge=-MAX_INT, le=MAX_INT)]
 Name = Annotated[str, msgspec.Meta(max_length=MAX_NAME)]
 Text = Annotated[str, msgspec.Meta(max_length=1024)]
 JointMap = Annotated[dict[Name, float], msgspec.Meta(max_length=MAX_JOINTS)]
@@ -143,7 +149,7 @@ class LimbEntry(msgspec.Struct, forbid_unknown_fields=False):
     limb: str
     origin: str
     directions: list[str]
-    sizes: list[int]
+    sizes: list[Int]
 
 
 class Drive(msgspec.Struct, forbid_unknown_fields=False):
@@ -192,8 +198,8 @@ class Pose(Message, tag="pose", kw_only=True):
     size: float
     joints: JointMap
     translation: Vec3 | None = None
-    k_id: int
-    p_id: int | None = None
+    k_id: Int
+    p_id: Int | None = None
     parts: Annotated[list[SpatialCommand], msgspec.Meta(max_length=MAX_PARTS)] = []
     substitutions: list[Substitution] = []
     """Parts served with the nearest direction the limb has; ``direction`` is the served one."""
@@ -222,7 +228,7 @@ class Catalogue(Message, tag="catalogue", kw_only=True):
     translation_step: float | None = None
     can_translate: bool = False
     directions_for_core: list[str] = []
-    sizes: list[int]
+    sizes: list[Int]
     aliases: dict[str, str] = {}
     version: str
     max_size: float | None = None
@@ -276,21 +282,21 @@ class RobotState(Message, tag="robot_state", kw_only=True):
 
     robot_id: str
     platform: str
-    seq: int
-    stamp_ns: int
+    seq: Int
+    stamp_ns: Int
     joint_names: list[str]
     q: list[float]
     qd: list[float]
     base_pose: Vec3
     status: str
-    last_command_seq: int
+    last_command_seq: Int
     detail: str = ""
     clamped: list[str] = []
     groups: list[str] = []
     lease_holder: str = ""
     estop_by: str = ""
     substitutions: list[Substitution] = []
-    dropped: int = 0
+    dropped: NonNegInt = 0
 
     def __post_init__(self) -> None:
         n = len(self.joint_names)
@@ -323,7 +329,7 @@ class RecordRequest(Message, tag="record_request", kw_only=True):
     limb: Name
     origin: Name
     direction: Name
-    size: Annotated[int, msgspec.Meta(ge=-MAX_INT, le=MAX_INT)]  # the ECL checks it is a VSAM size
+    size: Int  # the ECL checks it is a VSAM size
     joints: JointMap
 
 
@@ -346,11 +352,11 @@ class Ack(Message, tag="ack", kw_only=True):
     robot_id: Name
     sender: Name
     session: Name = ""
-    seq: int
+    seq: Int
     stage: AckStage
     code: str = ""
     detail: Text = ""
-    stamp_ns: int
+    stamp_ns: Int
     substitutions: list[Substitution] = []
     lease_holder: str = ""
 
@@ -395,6 +401,7 @@ class _Envelope(msgspec.Struct):
 
 
 _ENVELOPE: Final = msgspec.msgpack.Decoder(_Envelope)
+_LARGE: Final = frozenset({Catalogue, BodyModel, AnyMessage})
 
 
 def encode(msg: msgspec.Struct) -> bytes:
@@ -421,9 +428,15 @@ def _name(type_: Any) -> str:
 
 
 def _version_error(type_: Any, v: object) -> KinesphereError:
+    if type(v) is not int:  # "1" or 1.0 is a mistyped field, not another protocol version
+        return KinesphereError(
+            "malformed",
+            f"{_name(type_)} has v = {v!r} ({type(v).__name__}); v must be the integer "
+            f"{PROTOCOL_VERSION}",
+        )
     return KinesphereError(
         "incompatible_version",
-        f"{_name(type_)} has protocol version {v!r}, this peer speaks {PROTOCOL_VERSION}",
+        f"{_name(type_)} has protocol version {v}, this peer speaks {PROTOCOL_VERSION}",
     )
 
 
@@ -431,27 +444,47 @@ def _explain(buf: bytes | bytearray | memoryview, type_: Any, exc: Exception) ->
     """Turn a msgspec failure into the error a peer can act on."""
     try:
         env = _ENVELOPE.decode(buf)
-    except (msgspec.ValidationError, msgspec.DecodeError):
+    except (msgspec.ValidationError, msgspec.DecodeError, RecursionError):
         env = None
     if env is not None and env.v != PROTOCOL_VERSION:
         return _version_error(type_, env.v)
     tag = getattr(getattr(type_, "__struct_config__", None), "tag", None)
     if env is not None and tag is not None and env.type is not None and env.type != tag:
-        return KinesphereError("malformed", f"expected a {tag!r} message, got {env.type!r}")
+        return KinesphereError("malformed", f"expected a {tag!r} message, got {env.type!r:.80}")
     if isinstance(exc, msgspec.ValidationError):  # a subclass of DecodeError: test it first
         return KinesphereError("malformed", f"bad {_name(type_)}: {exc}")
     return KinesphereError("malformed", f"bad {_name(type_)}, not MessagePack: {exc}")
 
 
+def max_payload(type_: Any) -> int:
+    """Largest payload :func:`decode` reads as ``type_`` (:data:`MAX_PAYLOAD`, or
+    :data:`MAX_LARGE_PAYLOAD` for catalogues, body models and any-message taps)."""
+    return MAX_LARGE_PAYLOAD if type_ in _LARGE else MAX_PAYLOAD
+
+
 def decode(data: Payload, type_: type[T]) -> T:
-    """Decode ``data`` as ``type_``; raises KinesphereError (malformed, incompatible_version)."""
+    """Decode ``data`` as ``type_``; raises only KinesphereError (malformed, incompatible_version).
+
+    Bounded: a payload over :func:`max_payload` bytes is refused unread, and nesting deeper
+    than the decoder's recursion limit (msgspec stops at Python's, about a thousand levels;
+    kinesphere messages nest four) is ``malformed`` instead of a RecursionError.
+    """
     buf = _buffer(data)
-    if len(buf) == 0:
+    n, limit = len(buf), max_payload(type_)
+    if n == 0:
         raise KinesphereError("malformed", f"{_name(type_)} expected, got an empty payload")
+    if n > limit:
+        raise KinesphereError(
+            "malformed", f"{_name(type_)} payload of {n} bytes exceeds {limit} bytes"
+        )
     try:
         msg = decoder(type_).decode(buf)
     except (msgspec.ValidationError, msgspec.DecodeError) as exc:
         raise _explain(buf, type_, exc) from None
+    except RecursionError:
+        raise KinesphereError(
+            "malformed", f"bad {_name(type_)}: MessagePack nested too deeply"
+        ) from None
     v = getattr(msg, "v", PROTOCOL_VERSION)
     if v != PROTOCOL_VERSION:
         raise _version_error(type_, v)

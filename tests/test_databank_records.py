@@ -24,7 +24,6 @@ from test_databank_support import (
 
 from kinesphere import protocol as pr
 from kinesphere import zconfig
-from kinesphere.services.databank.replies import MAX_PAYLOAD
 from kinesphere.services.databank.service import DatabankService, changed_key
 from kinesphere.services.ecl.ecl import Ecl
 
@@ -117,9 +116,11 @@ def test_record_serves_new_values_at_once_and_announces_them(net: Net, tmp_path:
     ("payload", "code"),
     [
         (b"\xc1junk", "malformed"),
-        (b"\x00" * (MAX_PAYLOAD + 1), "malformed"),
+        (b"\x00" * (pr.MAX_PAYLOAD + 1), "malformed"),
         (b"", "malformed"),
         (record_request(size=0), "size_out_of_range"),
+        (record_request(size=2**64 - 1), "malformed"),
+        (b"\x81\xa1x" + b"\x91" * 60_000 + b"\xc0", "malformed"),
         (record_request(yaw=99.0), "malformed"),
         (record_request(tail_joint=0.1), "malformed"),
         (pr.encode(pr.RecordRequest(limb="leg", origin="shoulder", direction="left-high",
@@ -127,8 +128,8 @@ def test_record_serves_new_values_at_once_and_announces_them(net: Net, tmp_path:
         (pr.encode(pr.RecordRequest(limb="arm", origin="shoulder", direction="place-middle",
                                     size=1, joints={"yaw": 0.1})), "forbidden"),
     ],
-    ids=["garbage", "oversized", "empty", "size-0", "out-of-limits", "foreign-joint",
-         "unknown-limb", "place-middle"],
+    ids=["garbage", "oversized", "empty", "size-0", "size-uint64", "deep", "out-of-limits",
+         "foreign-joint", "unknown-limb", "place-middle"],
 )
 def test_bad_records(net: Net, tmp_path: Path, payload: bytes, code: str) -> None:
     db = build_toy(tmp_path / "toy.sqlite")

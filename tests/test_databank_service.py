@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import math
 from collections.abc import Iterator
 from pathlib import Path
@@ -24,7 +25,7 @@ from test_databank_support import (
 from kinesphere import protocol as pr
 from kinesphere import zconfig
 from kinesphere.errors import KinesphereError
-from kinesphere.services.databank.replies import MAX_PAYLOAD
+from kinesphere.ratelog import RateLog
 from kinesphere.services.databank.service import DatabankService, changed_key
 from kinesphere.services.ecl.ecl import Ecl
 
@@ -148,7 +149,7 @@ def _msg(**fields: object) -> bytes:
 PART = {"limb": "limb_11", "origin": "distal_11", "direction": "left-high", "size": 1}
 BAD_COMPOUNDS = [
     (b"\xc1\xc1garbage", "malformed"),
-    (b"\x00" * (MAX_PAYLOAD + 1), "malformed"),
+    (b"\x00" * (pr.MAX_PAYLOAD + 1), "malformed"),
     (b"[1, 2, 3]", "malformed"),
     (msgspec.msgpack.encode([1, 2, 3]), "malformed"),
     (_msg(parts="limb_11"), "malformed"),
@@ -161,6 +162,8 @@ BAD_COMPOUNDS = [
     (_msg(parts=[PART, {**PART, "direction": "right-low"}]), "conflict"),
     (_msg(type="pose", parts=[PART]), "malformed"),
     (_msg(v=2, parts=[PART]), "incompatible_version"),
+    (b"\x82\xa5parts\x90\xa1x" + b"\x91" * 60_000 + b"\xc0", "malformed"),
+    (_msg(v="1", parts=[PART]), "malformed"),
 ]
 
 
@@ -168,7 +171,7 @@ BAD_COMPOUNDS = [
     ("payload", "code"), BAD_COMPOUNDS,
     ids=["garbage", "oversized", "json", "array", "parts-str", "size-str", "size-nan",
          "size-negative", "empty-limb", "no-parts", "unknown-limb", "conflict", "wrong-type",
-         "version-2"],
+         "version-2", "deep", "version-str"],
 )
 def test_bad_compound_payloads(
     net: tuple[DatabankService, zenoh.Session], payload: bytes, code: str
@@ -219,3 +222,19 @@ def test_construction_checks(db: Path) -> None:
                 DatabankService(hub, ecls, KEYS)
             assert info.value.code == "malformed"
     assert changed_key(KEYS, "toyarm") == f"{KEYS.prefix}/ecl/toyarm/changed"
+
+
+def test_malformed_requests_log_one_line_without_traceback(
+    net: tuple[DatabankService, zenoh.Session], caplog: pytest.LogCaptureFixture
+) -> None:
+    """Before: deep nesting was ``internal`` with a full traceback logged per request."""
+    svc, c = net
+    svc.refused = RateLog(logging.getLogger("kinesphere.services.databank.service"))
+    caplog.set_level(logging.DEBUG, logger="kinesphere")
+    deep = b"\x82\xa5parts\x90\xa1x" + b"\x91" * 60_000 + b"\xc0"
+    for _ in range(20):
+        assert error_code(raw_get(c, KEYS.compound("toyarm"), deep)) == "malformed"
+    lines = [r for r in caplog.records if r.levelno >= logging.WARNING]
+    assert len(lines) == 1, [r.getMessage() for r in lines]
+    assert lines[0].exc_info is None and "nested too deeply" in lines[0].getMessage()
+    assert svc.refused.held == 19

@@ -15,7 +15,6 @@ logs that it now serves older poses. Re-applied records are not announced again.
 from __future__ import annotations
 
 import logging
-import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
@@ -25,7 +24,6 @@ from kinesphere.errors import KinesphereError
 from kinesphere.protocol import Pose, RecordRequest, decode, encode
 from kinesphere.services.databank.replies import (
     DEFERRED,
-    MAX_PAYLOAD,
     Answer,
     Deferred,
     error,
@@ -39,8 +37,6 @@ if TYPE_CHECKING:
     from kinesphere.services.databank.service import DatabankService, Served
 
 log = logging.getLogger(__name__)
-_WARN_EVERY = 10.0
-_last_warning: dict[str, float] = {}
 
 
 def forbidden(st: Served) -> KinesphereError:
@@ -65,6 +61,8 @@ def _answer(svc: DatabankService, st: Served, query: zenoh.Query) -> None:
         try:
             answer: Answer = ok(record(svc, st, request_bytes(query, "RecordRequest")))
         except KinesphereError as exc:
+            if exc.code == "malformed":
+                svc.refused((st.name, "record"), "%s record refused: %s", st.name, exc)
             answer = error(exc.code, exc.message)
         except Exception as exc:
             log.exception("record on %s failed", st.name)
@@ -77,7 +75,7 @@ def put_handler(svc: DatabankService, st: Served) -> Callable[[zenoh.Sample], No
 
     def on_put(sample: zenoh.Sample) -> None:
         if not svc.writes_enabled:
-            _warn(st.record_key, str(forbidden(st)))
+            svc.refused((st.name, "put"), "%s", forbidden(st))
             return
         payload = sample.payload.to_bytes()
         svc.submit(lambda: _put(svc, st, payload))
@@ -87,11 +85,9 @@ def put_handler(svc: DatabankService, st: Served) -> Callable[[zenoh.Sample], No
 
 def _put(svc: DatabankService, st: Served, payload: bytes) -> None:
     try:
-        if len(payload) > MAX_PAYLOAD:
-            raise KinesphereError("malformed", f"record payload of {len(payload)} bytes")
-        record(svc, st, payload)
+        record(svc, st, payload)  # decode refuses payloads over MAX_PAYLOAD
     except KinesphereError as exc:
-        log.warning("record put on %s refused: %s", st.name, exc)
+        svc.refused((st.name, "put", exc.code), "record put on %s refused: %s", st.name, exc)
 
 
 def record(svc: DatabankService, st: Served, payload: bytes) -> Pose:
@@ -157,11 +153,5 @@ def _catch_up(svc: DatabankService, st: Served, payload: bytes, peer: str) -> No
             log.warning("replica %s recorded a %s pose this read-only replica does not have; "
                         "it serves older poses until restarted", peer, st.name)
     except KinesphereError as exc:
-        log.warning("cannot follow %s's record on %s: %s", peer, st.name, exc)
-
-
-def _warn(key: str, message: str) -> None:
-    now = time.monotonic()
-    if now - _last_warning.get(key, -_WARN_EVERY) >= _WARN_EVERY:
-        _last_warning[key] = now
-        log.warning("%s", message)
+        svc.refused((st.name, "changed", peer), "cannot follow %s's record on %s: %s", peer,
+                    st.name, exc)

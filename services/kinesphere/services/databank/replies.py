@@ -16,10 +16,8 @@ import msgspec
 import zenoh
 
 from kinesphere.errors import KinesphereError
-from kinesphere.protocol import Error, encode
+from kinesphere.protocol import MAX_PAYLOAD, Error, encode
 
-MAX_PAYLOAD: Final = 64 * 1024
-"""Largest request payload (compound, record) accepted; larger ones get ``malformed``."""
 MAX_ENTRIES: Final = 65_536
 
 

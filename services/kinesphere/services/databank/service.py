@@ -33,6 +33,7 @@ import zenoh
 from kinesphere.errors import KinesphereError, choices
 from kinesphere.keyexpr import KEYS, Keys, check_segment
 from kinesphere.protocol import CompoundRequest, check_spatial, decode
+from kinesphere.ratelog import RateLog
 from kinesphere.robots.platform import platform_names
 from kinesphere.services.databank import records
 from kinesphere.services.databank.replies import (
@@ -116,6 +117,8 @@ class DatabankService:
         self.answers = ReplyCache()
         self.compounds = ReplyCache(COMPOUND_CACHE)
         self._unknowns = ReplyCache(COMPOUND_CACHE)
+        self.refused = RateLog(log)
+        """One warning line per malformed-request kind and platform every 10 s."""
         self._head = f"{keys.prefix}/ecl/"
         self._entities: list[Any] = []
         self._worker = Worker(f"databank-{self.replica_id}-records")
@@ -262,6 +265,8 @@ class DatabankService:
                 check_spatial(part)
             answer = ok(st.ecl.compound(req.parts, last_wins=req.last_wins))
         except KinesphereError as exc:
+            if exc.code == "malformed":
+                self.refused((st.name, "compound"), "%s compound refused: %s", st.name, exc)
             return error(exc.code, exc.message)
         return self.compounds.put((key, raw), answer, generation)
 
