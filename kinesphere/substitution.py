@@ -13,16 +13,23 @@ what the robot acknowledges agree:
    :class:`Direction` order, so the choice never depends on set or dictionary order.
 
 ``place-middle`` is the neutral pose, not a pull: it is served only by itself.
+
+:data:`MAX_ANGLE_DEG` bounds how far a replacement may be from the request: past it the served
+direction has hardly any component along the one asked for (place-low served by a high pull,
+a sideways push by forward), which is a different movement, not a substitute.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Iterable
-from typing import NamedTuple
+from typing import Final, NamedTuple
 
 from kinesphere.laban import Direction
 
+MAX_ANGLE_DEG: Final = 75.0
+"""Largest angle between a request and its replacement (cos 75 deg = 0.26); adjacent
+diagonals (70.5 deg) still qualify, orthogonal and opposite directions never do."""
 _ORDER = {d: i for i, d in enumerate(Direction)}
 
 

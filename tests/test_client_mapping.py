@@ -13,7 +13,6 @@ from kinesphere.clients.mapping import (
     MapperState,
     Tuning,
     map_controls,
-    nearest_available,
 )
 from kinesphere.clients.state import Action, ControllerState
 from kinesphere.errors import KinesphereError
@@ -161,17 +160,6 @@ def test_both_sticks_at_once() -> None:
     assert i.direction is Direction.LEFT_LOW and i.size == 3.0
     assert i.drive is not None and i.drive.direction == "forward-middle"
     assert i.deadman and i.moving
-
-
-def test_a_missing_direction_becomes_the_nearest_available_one() -> None:
-    packbot_arm = frozenset({"left-forward-low", "right-forward-low", "left-middle", "back-high"})
-    assert nearest_available(Direction.LEFT_LOW, packbot_arm) is Direction.LEFT_FORWARD_LOW
-    assert nearest_available(Direction.RIGHT_LOW, packbot_arm) is Direction.RIGHT_FORWARD_LOW
-    assert nearest_available(Direction.LEFT_MIDDLE, packbot_arm) is Direction.LEFT_MIDDLE
-    assert nearest_available(Direction.PLACE_MIDDLE, packbot_arm) is Direction.PLACE_MIDDLE
-    assert nearest_available(Direction.LEFT_LOW, None) is Direction.LEFT_LOW, "no catalogue yet"
-    only_up = frozenset({"place-high"})
-    assert nearest_available(Direction.PLACE_LOW, only_up) is Direction.PLACE_LOW, "opposite"
 
 
 def test_disconnected_is_neutral() -> None:

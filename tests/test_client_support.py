@@ -204,6 +204,25 @@ class FakeRobot:
 
 
 @contextmanager
+def databank(session: zenoh.Session, *platforms: str) -> Iterator[None]:
+    """The real databank service with the shipped databanks of ``platforms``, on ``session``."""
+    from kinesphere.services.databank.service import DatabankService
+    from kinesphere.services.ecl.ecl import Ecl
+
+    with DatabankService(session, {p: Ecl.open(p) for p in platforms}, KEYS, "clients"):
+        yield
+
+
+def await_catalogue(link: RobotLink, platform: str) -> None:
+    """Until a catalogue query for ``platform`` from ``link``'s session would reach a server."""
+    querier = link.session.declare_querier(KEYS.catalogue(platform))
+    try:
+        assert zconfig.wait_matching(querier, WAIT_S), f"no catalogue server for {platform}"
+    finally:
+        zconfig.undeclare(querier)
+
+
+@contextmanager
 def fake_catalogue(session: zenoh.Session, cat: Catalogue) -> Iterator[None]:
     """A catalogue queryable for ``cat.platform`` (the databank's catalogue key only)."""
     payload = encode(cat)

@@ -18,7 +18,9 @@ from test_client_support import (
     Inbox,
     Pad,
     Script,
+    await_catalogue,
     client_link,
+    databank,
     fake_catalogue,
     hub,
     pygame_up,
@@ -312,9 +314,7 @@ def test_shoulder_cycling_follows_the_robots_catalogue(
     FakeRobot(session, "r1", "fakebot").state()
     assert link.wait_for(lambda lk: "r1" in lk.states(), WAIT_S)
     with fake_catalogue(session, FAKEBOT):
-        querier = link.session.declare_querier(KEYS.catalogue("fakebot"))
-        assert zconfig.wait_matching(querier, WAIT_S)
-        zconfig.undeclare(querier)
+        await_catalogue(link, "fakebot")
         op = teleop(link, tg.robot("r1"))
         op.tick(inp.poll())
         assert op.catalogues.arrived.wait(WAIT_S)
@@ -352,28 +352,34 @@ def test_groups_of_different_platforms_offer_the_shared_pairs_first() -> None:
     assert (sel.limb, sel.origin) == ("limb_12", "distal_12"), "a still valid choice is kept"
 
 
-def test_a_direction_the_limb_lacks_becomes_the_nearest_it_has(
+def test_a_direction_the_limb_lacks_is_served_in_front(
     hub: tuple[zenoh.Session, str], link: RobotLink, inboxes: dict[str, Inbox],
     inp: pad.PygameInput,
 ) -> None:  # fmt: skip
+    """The PackBot arm (real databank) has no left-low: low + stick left sends left-forward-low."""
     session, _ = hub
-    FakeRobot(session, "r2", "fakebot").state()
+    FakeRobot(session, "r2", "packbot").state()
     assert link.wait_for(lambda lk: "r2" in lk.states(), WAIT_S)
-    with fake_catalogue(session, FAKEBOT):
-        querier = link.session.declare_querier(KEYS.catalogue("fakebot"))
-        assert zconfig.wait_matching(querier, WAIT_S)
-        zconfig.undeclare(querier)
+    with databank(session, "packbot"):
+        await_catalogue(link, "packbot")
         op = teleop(link, tg.robot("r2"))
         op.tick(inp.poll())
         assert op.catalogues.arrived.wait(WAIT_S)
         p = Pad()
         p.deadman()
-        p.right(-1.0, 0.0)  # left-middle: limb_11 only has left-high
-        view = op.tick(inp.poll())
-    assert view.asked is Direction.LEFT_MIDDLE and view.intent.direction is Direction.LEFT_HIGH
-    assert view.available == {"left-high", "place-middle"}
+        p.axis(pygame.CONTROLLER_AXIS_TRIGGERLEFT, 1.0)
+        p.right(-1.0, 0.0)
+        left = op.tick(inp.poll())
+        p.right(1.0, 0.0)
+        right = op.tick(inp.poll())
+    assert (left.limb, left.origin) == ("limb_11", "distal_11")
+    assert left.asked is Direction.LEFT_LOW and left.intent.direction is Direction.LEFT_FORWARD_LOW
+    assert right.asked is Direction.RIGHT_LOW
+    assert right.intent.direction is Direction.RIGHT_FORWARD_LOW
+    assert left.available is not None and Direction.LEFT_LOW not in left.available
     settle(link, inboxes)
-    assert inboxes["r2"].commands()[-1].parts[0].direction == "left-high"
+    assert [c.parts[0].direction for c in inboxes["r2"].commands()[-2:]] == [
+        "left-forward-low", "right-forward-low"]  # fmt: skip
 
 
 def test_a_recorded_pose_makes_the_client_fetch_catalogues_again(
@@ -381,9 +387,7 @@ def test_a_recorded_pose_makes_the_client_fetch_catalogues_again(
 ) -> None:
     session, _ = hub
     with fake_catalogue(session, FAKEBOT):
-        querier = link.session.declare_querier(KEYS.catalogue("fakebot"))
-        assert zconfig.wait_matching(querier, WAIT_S)
-        zconfig.undeclare(querier)
+        await_catalogue(link, "fakebot")
         cache = CatalogueCache(link)
         cache.get(["fakebot"])
         assert cache.arrived.wait(WAIT_S) and cache.get(["fakebot"]) == [FAKEBOT]

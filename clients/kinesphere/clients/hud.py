@@ -178,7 +178,7 @@ def _chart(
                 pygame.draw.rect(surf, LIT if view.engaged else DIM, cell, border_radius=4)
             if view.asked is d:  # the stick's own choice, replaced by the nearest available
                 pygame.draw.rect(surf, LIT, cell, 2, border_radius=4)
-            missing = view.available is not None and d.slug not in view.available
+            missing = view.available is not None and d not in view.available
             ink = BG if lit else UNAVAILABLE if missing and d is not Direction.PLACE_MIDDLE else INK
             draw_symbol(surf, d, cell.inflate(-18, -16), ink)
     size = view.intent.size

@@ -15,12 +15,14 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 
 from kinesphere.clients.link import RobotLink
 from kinesphere.errors import KinesphereError
+from kinesphere.laban import Direction
 from kinesphere.protocol import Catalogue
+from kinesphere.substitution import MAX_ANGLE_DEG, nearest_direction
 
 log = logging.getLogger(__name__)
 
@@ -44,13 +46,14 @@ def pairs_of(catalogues: Sequence[Catalogue]) -> list[tuple[str, str]]:
 
 def available_directions(
     catalogues: Sequence[Catalogue], limb: str, origin: str
-) -> frozenset[str] | None:
+) -> frozenset[Direction] | None:
     """Directions with poses for (limb, origin) on every platform that has the pair.
 
-    None when no catalogue knows the pair (nothing to go by: send what was asked).
+    None when no catalogue knows the pair (nothing to go by: send what was asked). Names a
+    catalogue spells in a way this client does not know are skipped.
     """
     sets = [
-        frozenset(e.directions)
+        frozenset(_directions(e.directions))
         for c in catalogues
         for e in c.limbs
         if (e.limb, e.origin) == (limb, origin)
@@ -58,6 +61,28 @@ def available_directions(
     if not sets:
         return None
     return frozenset.intersection(*sets)
+
+
+def _directions(slugs: Iterable[str]) -> Iterator[Direction]:
+    for slug in slugs:
+        try:
+            yield Direction.parse(slug)
+        except KinesphereError:
+            log.debug("catalogue direction %r unknown to this client: skipped", slug)
+
+
+def served(asked: Direction, available: frozenset[Direction] | None) -> Direction:
+    """What to send for ``asked``: itself, or its replacement by the core substitution rule.
+
+    The rule (:mod:`kinesphere.substitution`) is the one the ECL uses too: nearest by angle,
+    never a front request served from behind, at most ``MAX_ANGLE_DEG`` away. With no
+    catalogue yet, or nothing admissible, ``asked`` goes out unchanged and the robot answers
+    for it (``direction_unavailable``).
+    """
+    if available is None:
+        return asked
+    choice = nearest_direction(asked, available, MAX_ANGLE_DEG)
+    return asked if choice is None else choice.direction
 
 
 def aliases_of(catalogues: Sequence[Catalogue]) -> dict[str, str]:

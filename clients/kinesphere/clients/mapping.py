@@ -154,26 +154,6 @@ def direction_of(h: Horizontal, lvl: Level) -> Direction:
     return Direction((h.value, lvl.value))
 
 
-def nearest_available(d: Direction, available: frozenset[str] | None) -> Direction:
-    """``d`` if the limb has poses for it, else the available direction closest in angle.
-
-    A VSAM may lack some pulls for a limb (a PackBot arm has no pure Left-Low); the nearest
-    one (Left-Forward-Low) is what an operator pushing left and low wants, rather than an
-    error and no motion. ``None`` means unknown (no catalogue yet): ``d`` unchanged.
-    """
-    if not available or d.slug in available or d is Direction.PLACE_MIDDLE:
-        return d
-    v = d.vector
-    best: Direction = d
-    score = 0.0
-    for slug in sorted(available):
-        c = Direction.parse(slug)
-        cos = sum(a * b for a, b in zip(v, c.vector, strict=True))
-        if cos > score + 1e-9:
-            best, score = c, cos
-    return best
-
-
 def beyond_extra(extra: float, held: bool, at_rim: bool, dt: float, tuning: Tuning) -> float:
     """Size past far: grows at ``beyond_rate`` while held at the rim, else back to 0."""
     if not (held and at_rim):

@@ -12,7 +12,8 @@ robot reports ``estop`` (pointless commands would only be ignored), and after an
 release or a disconnect it streams again only after the deadman was let go and pressed anew.
 
 A direction the selected limb has no poses for (per the targets' catalogues) is replaced by
-the nearest available one, and the HUD shows both, so the robot never just refuses a stick.
+the one :mod:`kinesphere.substitution` chooses (nearest by angle, a front request never served
+from behind), and the HUD shows both, so the robot never just refuses a stick.
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ from kinesphere.clients.limbs import (
     aliases_of,
     available_directions,
     pairs_of,
+    served,
 )
 from kinesphere.clients.link import RobotLink, Seen, Sequencer, new_sender
 from kinesphere.clients.mapfile import MapFile
@@ -38,7 +40,6 @@ from kinesphere.clients.mapping import (
     Intent,
     MapperState,
     map_controls,
-    nearest_available,
 )
 from kinesphere.clients.state import Action, ControllerState
 from kinesphere.laban import Direction
@@ -83,7 +84,7 @@ class View:
     seq: int
     message: str
     catalogue_errors: dict[str, str] = field(default_factory=dict)
-    available: frozenset[str] | None = None
+    available: frozenset[Direction] | None = None
     """Directions the limb has poses for (None: no catalogue yet)."""
     asked: Direction | None = None
     """The direction the stick asked for, when the nearest available one replaced it."""
@@ -117,7 +118,7 @@ class Teleop:
         self.message = ""
         self._last: float | None = None
         self._aliases: dict[str, str] = {}
-        self._available: frozenset[str] | None = None
+        self._available: frozenset[Direction] | None = None
         self._asked: Direction | None = None
 
     # --- decisions ----------------------------------------------------------------------
@@ -182,7 +183,7 @@ class Teleop:
         self._aliases = aliases_of(cats)
         self._available = available_directions(cats, self.selection.limb, self.selection.origin)
         asked = self.intent.direction
-        snapped = nearest_available(asked, self._available)
+        snapped = served(asked, self._available)
         self._asked = asked if snapped is not asked else None
         if snapped is not asked:
             self.intent = replace(self.intent, direction=snapped)

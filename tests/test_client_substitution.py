@@ -1,0 +1,109 @@
+"""The gamepad's substitution against the shipped catalogues of every platform.
+
+Each platform's catalogue is read from its real databank (the same ``Catalogue`` the databank
+serves), and the stick goes through the real mapping: 8 headings x 3 levels on every limb the
+right stick can select. What the operator pushes towards the front (back) stays in front
+(behind) whenever the limb has anything there, and a lateral push is never served from behind.
+"""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from kinesphere.clients.limbs import available_directions, pairs_of, served
+from kinesphere.clients.mapping import RING, MapperState, Tuning, map_controls
+from kinesphere.clients.state import ControllerState
+from kinesphere.laban import Direction, Level
+from kinesphere.protocol import Catalogue
+from kinesphere.robots.platform import platform_names
+from kinesphere.services.ecl.ecl import Ecl
+from kinesphere.substitution import MAX_ANGLE_DEG, angle_between, forward_sign
+
+CATALOGUES = {p: Ecl.open(p).catalogue() for p in platform_names()}
+TRIGGERS = {Level.LOW: {"lt": 1.0}, Level.MIDDLE: {}, Level.HIGH: {"rt": 1.0}}
+
+
+def limbs() -> list[tuple[str, Catalogue, str, str]]:
+    return [
+        (f"{p}/{limb}/{origin}", cat, limb, origin)
+        for p, cat in CATALOGUES.items()
+        for limb, origin in pairs_of([cat])
+        if any((e.limb, e.origin) == (limb, origin) for e in cat.limbs)
+    ]
+
+
+LIMBS = limbs()
+
+
+def pushed(heading_deg: float, level: Level) -> Direction:
+    """What the mapping makes of the right stick at the rim towards ``heading_deg`` (0 =
+    forward, 90 = left) with the trigger of ``level``."""
+    a = math.radians(heading_deg)
+    cs = ControllerState(rx=-math.sin(a), ry=-math.cos(a), **TRIGGERS[level])  # type: ignore[arg-type]
+    return map_controls(cs, MapperState(), 0.0, Tuning())[0].direction
+
+
+def test_every_articulated_platform_is_covered() -> None:
+    assert {c.platform for _, c, _, _ in LIMBS} == {"baxter", "nao", "packbot", "youbot"}
+    every = {(c.platform, e.limb, e.origin) for c in CATALOGUES.values() for e in c.limbs
+             if e.limb not in c.core}  # fmt: skip
+    assert {(c.platform, limb, origin) for _, c, limb, origin in LIMBS} == every
+
+
+@pytest.mark.parametrize(("name", "cat", "limb", "origin"), LIMBS, ids=[n for n, *_ in LIMBS])
+def test_stick_headings_keep_their_side_on_every_shipped_limb(
+    name: str, cat: Catalogue, limb: str, origin: str
+) -> None:
+    available = available_directions([cat], limb, origin)
+    assert available, name
+    signs = {forward_sign(d) for d in available if d is not Direction.PLACE_MIDDLE}
+    for k, horizontal in enumerate(RING):
+        for level in Level:
+            asked = pushed(k * 45.0, level)
+            assert asked == Direction((horizontal.value, level.value)), "the mapping itself"
+            got = served(asked, available)
+            where = (name, asked.slug, got.slug)
+            if asked in available:
+                assert got is asked, where
+                continue
+            sign = forward_sign(asked)
+            if sign != 0 and sign in signs:
+                assert forward_sign(got) == sign, where
+            if sign == 0 and signs & {0, 1}:
+                assert forward_sign(got) >= 0, where
+            assert got is asked or got in available, where
+            assert angle_between(asked, got) <= MAX_ANGLE_DEG, where
+
+
+def test_the_packbot_sweep_is_served_in_front() -> None:
+    """The headline gesture: low + stick left/right on the PackBot arm (it has no left-low)."""
+    arm = available_directions([CATALOGUES["packbot"]], "limb_11", "distal_11")
+    assert arm is not None and Direction.LEFT_LOW not in arm
+    assert served(pushed(90, Level.LOW), arm) is Direction.LEFT_FORWARD_LOW
+    assert served(pushed(-90, Level.LOW), arm) is Direction.RIGHT_FORWARD_LOW
+
+
+def test_without_a_catalogue_the_stick_goes_out_as_asked() -> None:
+    assert served(Direction.LEFT_LOW, None) is Direction.LEFT_LOW
+    assert served(Direction.PLACE_MIDDLE, frozenset({Direction.PLACE_HIGH})) is (
+        Direction.PLACE_MIDDLE
+    ), "neutral is never replaced"
+    up = frozenset({Direction.PLACE_HIGH, Direction.FORWARD_HIGH})
+    assert served(Direction.PLACE_LOW, up) is Direction.PLACE_LOW, "nothing honest: as asked"
+    assert served(Direction.LEFT_MIDDLE, frozenset({Direction.FORWARD_MIDDLE})) is (
+        Direction.LEFT_MIDDLE
+    ), "a right angle is another movement, not a substitute"
+
+
+def test_a_group_is_served_what_every_member_has() -> None:
+    """Mixed platforms: the group moves together, on a direction all of them store."""
+    cats = [CATALOGUES["packbot"], CATALOGUES["youbot"]]
+    both = available_directions(cats, "limb_11", "distal_11")
+    assert both is not None
+    for cat in cats:
+        own = available_directions([cat], "limb_11", "distal_11")
+        assert own is not None and both <= own
+    got = served(Direction.LEFT_LOW, both)
+    assert got in both and forward_sign(got) >= 0
