@@ -193,7 +193,7 @@ def load_eurdf(source: str | Path) -> Eurdf:
     check_urdf_elements(root)
     try:
         urdf = yourdfpy.URDF.load(
-            io.StringIO(text),
+            io.BytesIO(text.encode("utf-8")),  # bytes: lxml refuses str with an encoding decl
             load_meshes=False,
             build_scene_graph=False,
             build_collision_scene_graph=False,

@@ -147,12 +147,17 @@ def _check_limb(
         raise invalid(f"<body_part name={limb.name!r}> refers to missing {limb.distal!r}")
     distal = distals[limb.distal]
     root = joint_map[distal.joints[0]].child
-    subtree: list[str] = []
-    stack = [root]
-    while stack:
-        cur = stack.pop()
-        subtree.append(cur)
-        stack.extend(c for _, c in children.get(cur, []))
+    first = _subtree(root, children)
+    # A location's further joints run in series below its first joint (a shoulder's pitch,
+    # roll and yaw) or in parallel beside it (the fingers leaving a palm): the limb is
+    # everything below any of them.
+    subtree = list(first)
+    for jn in distal.joints[1:]:
+        child = joint_map[jn].child
+        if child not in first:
+            if joint_map[jn].parent in first:
+                raise invalid(f"{distal.name}: joint {jn!r} is below {limb.name}'s root")
+            subtree += [ln for ln in _subtree(child, children) if ln not in subtree]
     missing = sorted(set(subtree) - set(limb.links))
     extra = sorted(set(limb.links) - set(subtree))
     if missing or extra:
@@ -161,11 +166,18 @@ def _check_limb(
             f"<body_part name={limb.name!r}> must list exactly the subtree below joint "
             f"{distal.joints[0]!r} (root link {root!r}); it {what}"
         )
-    for jn in distal.joints[1:]:
-        if joint_map[jn].child not in set(subtree):
-            raise invalid(f"{distal.name}: joint {jn!r} is not inside {limb.name}")
     if not any(joint_map[j].child in set(subtree) for j in limits):
         raise invalid(f"<body_part name={limb.name!r}> contains no actuated joint")
+
+
+def _subtree(link: str, children: dict[str, list[tuple[str, str]]]) -> list[str]:
+    out: list[str] = []
+    stack = [link]
+    while stack:
+        cur = stack.pop()
+        out.append(cur)
+        stack.extend(c for _, c in children.get(cur, []))
+    return out
 
 
 def _check_hierarchy(limbs: dict[str, BodyPart]) -> None:

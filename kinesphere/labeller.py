@@ -1,125 +1,379 @@
 """Propose eURDF labels for a plain URDF, so a user can bring a new robot.
 
-The proposal follows the paper's scheme: the root and everything welded to it is the core
-``c_1``; every actuated joint leaving the core starts a chain ``i``; walking down a chain, each
-new joint location (joints closer together than ``merge_distance`` form one location) opens
-a deeper limb ``limb_ij`` rooted at ``distal_ij``. A chain's last location with nothing
-actuated below it is the end effector and gets no label of its own. Chains are ordered like
-the paper's humanoids: lateral chains first, higher before lower, right (y < 0) before left,
-central chains (a head) last. The super-user edits the result as they see fit.
+The proposal follows the paper's scheme (its Fig. 3):
+
+* **core** ``C``: the root and everything welded to it is ``c_1``. An actuated joint on the way
+  from the root to a link where two or more limbs branch off (a torso lift, a waist, a spine)
+  is a *core joint*: its location is ``distal_k`` and the links beyond it are ``c_{k+1}``.
+  Drive wheels, casters and rotors hanging off the core stay in the core's links.
+* **chains**: every other actuated joint leaving the core starts a chain ``i`` (an arm, a leg,
+  a head). Walking down a chain, each new joint location (joints closer together than
+  ``merge_distance`` form one location) opens a deeper limb ``limb_ij`` rooted at
+  ``distal_ij``. A chain's last location with nothing actuated below it is the end effector
+  and gets no label of its own.
+* **hands**: a chain stops where it branches into fingers or reaches a gripper joint; the
+  fingers are one limb of their own, rooted at a location that lists every finger joint
+  leaving the palm.
+
+Chains are numbered like the paper's humanoids: lateral chains first, higher before lower,
+front before back, right (y < 0) before left, central chains (a head) last. Aliases come from
+the URDF's own names (:mod:`kinesphere.labeller_names`). It proposes; the super-user edits the
+result as they see fit and ``kinesphere describe FILE`` checks it.
 """
 
 from __future__ import annotations
 
 import io
 import xml.etree.ElementTree as ET
-from collections.abc import Callable
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import yourdfpy
 
 from kinesphere.errors import KinesphereError
+from kinesphere.eurdf import ACTUATED_TYPES
+from kinesphere.labeller_names import (
+    Namer,
+    has_word,
+    is_core_name,
+    is_drive_name,
+    is_finger_name,
+    is_limb_name,
+)
+
+HAND_FRACTION = 0.15  # a branch shorter than this share of the robot is a hand's, not a limb
+MAX_INDEX = 9  # limb_<i><j> and distal_<k> use one digit per index
+
+
+def read_urdf(source: str | Path) -> tuple[ET.Element, yourdfpy.URDF]:
+    """Parse a URDF file as bytes (so encoding declarations work) into XML and yourdfpy.
+
+    A ``<robot>`` without a name gets the file's stem, as ROS tools assume.
+    """
+    path = Path(source)
+    if not path.is_file():
+        raise KinesphereError("invalid_eurdf", f"URDF file not found: {path}")
+    try:
+        root = ET.fromstring(path.read_bytes())
+        if root.tag == "robot" and not root.get("name"):
+            root.set("name", path.stem)
+        if root.tag == "robot" and root.find("link") is None:
+            raise ValueError("it has no <link>: nothing to label")
+        _unbounded_revolutes(root)
+        urdf = yourdfpy.URDF.load(
+            io.BytesIO(ET.tostring(root)), load_meshes=False, build_scene_graph=True
+        )
+    except Exception as exc:  # ElementTree and yourdfpy raise assorted types
+        raise KinesphereError("invalid_eurdf", f"{path}: cannot read URDF ({exc})") from None
+    return root, urdf
+
+
+def _unbounded_revolutes(root: ET.Element) -> None:
+    """A revolute joint without limits turns without end (wheels often come so): say it with
+    ``continuous``, which the eURDF loader accepts, and leave a comment for the reader."""
+    for el in root.findall("joint"):
+        lim = el.find("limit")
+        if el.get("type") != "revolute" or el.find("mimic") is not None:
+            continue
+        if lim is None or lim.get("lower") is None or lim.get("upper") is None:
+            el.set("type", "continuous")
+            el.insert(0, ET.Comment(" kinesphere label: revolute without limits, read as "
+                                    "continuous "))
 
 
 def propose_eurdf(source: str | Path, merge_distance: float = 0.01) -> str:
     """Return eURDF text: the URDF unchanged plus proposed ``<body_part>`` elements."""
-    path = Path(source)
-    if not path.is_file():
-        raise KinesphereError("invalid_eurdf", f"URDF file not found: {path}")
-    text = path.read_text(encoding="utf-8")
-    try:
-        root_el = ET.fromstring(text)
-        urdf = yourdfpy.URDF.load(io.StringIO(text), load_meshes=False, build_scene_graph=True)
-    except Exception as exc:
-        raise KinesphereError("invalid_eurdf", f"{path}: cannot read URDF ({exc})") from None
+    root_el, urdf = read_urdf(source)
     for old in root_el.findall("body_part"):
         root_el.remove(old)
-    for part in _proposal(urdf, merge_distance):
+    for part in propose(urdf, merge_distance).elements():
         root_el.append(part)
     ET.indent(root_el)
     return ET.tostring(root_el, encoding="unicode") + "\n"
 
 
-def _actuated(j: yourdfpy.Joint) -> bool:
-    return j.type in ("revolute", "prismatic", "continuous") and j.mimic is None
+def actuated(j: yourdfpy.Joint) -> bool:
+    return j.type in ACTUATED_TYPES and j.mimic is None
 
 
-def _proposal(urdf: yourdfpy.URDF, merge_distance: float) -> list[ET.Element]:
-    children: dict[str, list[yourdfpy.Joint]] = {}
-    for j in urdf.robot.joints:
-        children.setdefault(j.parent, []).append(j)
-    root = str(urdf.base_link)
-    core: list[str] = []
-    chain_roots: list[yourdfpy.Joint] = []
-    stack = [root]
-    while stack:
-        link = stack.pop()
-        core.append(link)
-        for j in children.get(link, []):
-            if _actuated(j):
-                chain_roots.append(j)
-            else:
-                stack.append(j.child)
+@dataclass
+class Location:
+    """One joint location: its label, alias and joints (first joint = the origin)."""
 
-    def anchor(j: yourdfpy.Joint) -> np.ndarray:
-        return np.asarray(urdf.get_transform(j.child, root)[:3, 3])
+    label: str
+    alias: str | None
+    joints: list[yourdfpy.Joint]
 
-    def subtree(link: str) -> list[str]:
+
+@dataclass
+class Limb:
+    """One limb label: the links below its location."""
+
+    label: str
+    alias: str | None
+    location: Location
+    links: list[str]
+
+
+@dataclass
+class Proposal:
+    """The labels the labeller proposes: core parts and their joints, chains of limbs."""
+
+    core: list[tuple[str, str | None, list[str]]] = field(default_factory=list)
+    core_joints: list[Location] = field(default_factory=list)
+    limbs: list[Limb] = field(default_factory=list)
+    hands: list[str] = field(default_factory=list)  # limb labels that are hands or grippers
+
+    def elements(self) -> list[ET.Element]:
+        out: list[ET.Element] = []
+        for name, alias, links in self.core:
+            el = _part(name, "C", alias)
+            for ln in links:
+                ET.SubElement(el, "link", name=ln)
+            out.append(el)
+        for loc in self.core_joints:
+            out.append(_location(loc))
+        for limb in self.limbs:
+            el = _part(limb.label, "L", limb.alias, distal=limb.location.label)
+            for ln in limb.links:
+                ET.SubElement(el, "link", name=ln)
+            out += [el, _location(limb.location)]
+        return out
+
+
+def _part(name: str, pset: str, alias: str | None, **extra: str) -> ET.Element:
+    attrs = {"name": name, "set": pset, **({"alias": alias} if alias else {}), **extra}
+    return ET.Element("body_part", attrs)
+
+
+def _location(loc: Location) -> ET.Element:
+    el = _part(loc.label, "J", loc.alias)
+    for j in loc.joints:
+        ET.SubElement(el, "joint", name=j.name)
+    return el
+
+
+class _Tree:
+    """The kinematic tree at the zero pose, with the questions the labeller asks of it."""
+
+    def __init__(self, urdf: yourdfpy.URDF) -> None:
+        self.urdf = urdf
+        self.root = str(urdf.base_link)
+        self.children: dict[str, list[yourdfpy.Joint]] = {}
+        for j in urdf.robot.joints:
+            self.children.setdefault(j.parent, []).append(j)
+        self.pos = {
+            ln: np.asarray(urdf.get_transform(ln, self.root)[:3, 3]) for ln in urdf.link_map
+        }
+        pts = np.array(list(self.pos.values()))
+        self.size = float(np.linalg.norm(pts.max(axis=0) - pts.min(axis=0))) or 1.0
+        self.mimicked = {j.mimic.joint for j in urdf.robot.joints if j.mimic is not None}
+
+    def subtree(self, link: str) -> list[str]:
         out, todo = [], [link]
         while todo:
             cur = todo.pop()
             out.append(cur)
-            todo.extend(j.child for j in children.get(cur, []))
+            todo.extend(j.child for j in reversed(self.children.get(cur, [])))
         return out
 
-    def n_actuated(link: str) -> int:
-        return sum(_actuated(j) for ln in subtree(link) for j in children.get(ln, []))
+    def joints_below(self, link: str) -> list[yourdfpy.Joint]:
+        return [j for ln in self.subtree(link) for j in self.children.get(ln, [])]
 
-    def chain_key(j: yourdfpy.Joint) -> tuple[int, float, float]:
-        x, y, z = anchor(j)
-        return (1 if abs(y) < 0.02 else 0, -round(float(z), 2), float(y))
+    def actuated_in(self, j: yourdfpy.Joint) -> list[yourdfpy.Joint]:
+        """The actuated joints of a branch: ``j`` itself and everything below it."""
+        return [x for x in (j, *self.joints_below(j.child)) if actuated(x)]
 
-    parts: list[ET.Element] = []
-    core_el = ET.Element("body_part", name="c_1", set="C", alias="core")
-    for link in core:
-        ET.SubElement(core_el, "link", name=link)
-    parts.append(core_el)
-    for i, first in enumerate(sorted(chain_roots, key=chain_key), start=1):
-        if i > 9:
-            break  # limb_<i><j> uses one digit per index; the super-user can relabel
-        groups: list[list[yourdfpy.Joint]] = []
-        cur: yourdfpy.Joint | None = first
-        while cur is not None:
-            if groups and np.linalg.norm(anchor(cur) - anchor(groups[-1][-1])) < merge_distance:
-                groups[-1].append(cur)
+    def branches(self, link: str) -> list[yourdfpy.Joint]:
+        """Child joints of ``link`` whose branch holds an actuated joint."""
+        return [j for j in self.children.get(link, []) if self.actuated_in(j)]
+
+    def extent(self, j: yourdfpy.Joint) -> float:
+        base = self.pos[j.parent]
+        return max(float(np.linalg.norm(self.pos[ln] - base)) for ln in self.subtree(j.child))
+
+    def first_actuated(self, link: str) -> list[yourdfpy.Joint]:
+        """The first actuated joint on each branch below ``link`` (through fixed and mimic)."""
+        out: list[yourdfpy.Joint] = []
+        for j in self.children.get(link, []):
+            out += [j] if actuated(j) else self.first_actuated(j.child)
+        return out
+
+    def anchor(self, j: yourdfpy.Joint) -> np.ndarray:
+        return self.pos[j.child]
+
+    def is_drive(self, j: yourdfpy.Joint) -> bool:
+        """A wheel, caster, suspension or rotor branch: part of the core, like the paper's
+        youBot wheels."""
+        joints = self.actuated_in(j)
+        if any(is_limb_name(x.name) for x in joints):
+            return False
+        if all(is_drive_name(x.name) for x in joints):
+            return True
+        return len(joints) == 1 and joints[0].type == "continuous"
+
+    def is_limb_branch(self, j: yourdfpy.Joint) -> bool:
+        """A branch that is an arm, leg or head rather than a finger or a sensor mount."""
+        names = [x.name for x in self.actuated_in(j)]
+        if is_finger_name(names[0]):
+            return False
+        return any(is_limb_name(n) for n in names) or self.extent(j) >= HAND_FRACTION * self.size
+
+    def gripper_joint(self, j: yourdfpy.Joint) -> bool:
+        """A single joint that closes a gripper: named so, or driving mimic fingers."""
+        return is_finger_name(j.name) or (
+            j.name in self.mimicked and not self.first_actuated(j.child)
+        )
+
+
+def propose(urdf: yourdfpy.URDF, merge_distance: float = 0.01) -> Proposal:
+    """The labels for a URDF: core parts and joints, then chains in the paper's order."""
+    tree = _Tree(urdf)
+    core_joints = _core_joints(tree)
+    namer = Namer()
+    proposal = Proposal()
+    parts: list[list[str]] = [[]]
+    part_of: dict[str, int] = {tree.root: 0}
+    chain_roots: list[tuple[yourdfpy.Joint, int]] = []
+    todo = [tree.root]
+    while todo:
+        link = todo.pop(0)
+        k = part_of[link]
+        parts[k].append(link)
+        for j in tree.children.get(link, []):
+            if j.name in core_joints and len(proposal.core_joints) < MAX_INDEX:
+                prev = proposal.core_joints[-1] if proposal.core_joints else None
+                if (
+                    prev is not None
+                    and prev.joints[-1].child == j.parent
+                    and _close(tree, prev.joints[-1], j, merge_distance)
+                ):
+                    prev.joints.append(j)  # same location: the link between joins the part
+                    part_of[j.child] = k
+                else:
+                    n = len(proposal.core_joints) + 1
+                    proposal.core_joints.append(
+                        Location(f"distal_{n}", namer.core_joint(j.name), [j])
+                    )
+                    parts.append([])
+                    part_of[j.child] = len(parts) - 1
+                todo.append(j.child)
+            elif actuated(j) and not tree.is_drive(j):
+                chain_roots.append((j, k))
             else:
-                groups.append([cur])
-            cur = _next_actuated(cur.child, children, n_actuated)
-        if len(groups) > 1 and n_actuated(groups[-1][-1].child) == 0:
-            groups.pop()  # the end effector: no label of its own
-        for depth, group in enumerate(groups[:9], start=1):
-            tag = f"{i}{depth}"
-            limb = ET.Element("body_part", name=f"limb_{tag}", set="L", distal=f"distal_{tag}")
-            for link in subtree(group[0].child):
-                ET.SubElement(limb, "link", name=link)
-            distal = ET.Element("body_part", name=f"distal_{tag}", set="J")
-            for jj in group:
-                ET.SubElement(distal, "joint", name=jj.name)
-            parts += [limb, distal]
-    return parts
+                part_of[j.child] = k
+                todo.append(j.child)
+    chains = sorted(chain_roots, key=lambda c: _chain_key(tree, c[0]))
+    for i, (first, k) in enumerate(chains, start=1):
+        if i > MAX_INDEX:
+            parts[k] += tree.subtree(first.child)  # the super-user may relabel these
+            continue
+        _label_chain(tree, proposal, namer, i, first, merge_distance, len(chains) == 1)
+    for k, links in enumerate(parts, start=1):
+        alias = "core" if k == 1 else namer.core_part(links)
+        proposal.core.append((f"c_{k}", alias, links))
+    return proposal
 
 
-def _next_actuated(
-    link: str,
-    children: dict[str, list[yourdfpy.Joint]],
-    n_actuated: Callable[[str], int],
-) -> yourdfpy.Joint | None:
-    """The next actuated joint down the chain, following the richest branch."""
-    frontier = [link]
+def _close(tree: _Tree, a: yourdfpy.Joint, b: yourdfpy.Joint, merge_distance: float) -> bool:
+    return float(np.linalg.norm(tree.anchor(a) - tree.anchor(b))) < merge_distance
+
+
+def _core_joints(tree: _Tree) -> set[str]:
+    """Actuated joints between the root and every link where two or more limbs branch off,
+    plus torso/waist/spine joints leaving the root core."""
+    parent_joint = {j.child: j for j in tree.urdf.robot.joints}
+
+    def path_to(link: str) -> list[yourdfpy.Joint]:
+        out = []
+        while link in parent_joint:
+            j = parent_joint[link]
+            out.append(j)
+            link = j.parent
+        return out
+
+    core: set[str] = set()
+    for link in tree.urdf.link_map:
+        limbs = [j for j in tree.branches(link) if tree.is_limb_branch(j)]
+        if len(limbs) >= 2:
+            core |= {j.name for j in path_to(link) if actuated(j)}
+    # a named torso/waist/spine chain leaving the root core is core as far as its names say so
+    frontier = [tree.root]
+    seen: set[str] = set()
     while frontier:
-        found = [j for ln in frontier for j in children.get(ln, []) if _actuated(j)]
-        if found:
-            return max(found, key=lambda j: n_actuated(j.child))
-        frontier = [j.child for ln in frontier for j in children.get(ln, [])]
-    return None
+        link = frontier.pop()
+        if link in seen:
+            continue
+        seen.add(link)
+        for j in tree.children.get(link, []):
+            if not actuated(j) or j.name in core or is_core_name(j.name):
+                if actuated(j):
+                    core.add(j.name)
+                frontier.append(j.child)
+    return core
+
+
+def _chain_key(tree: _Tree, j: yourdfpy.Joint) -> tuple[int, float, float, int]:
+    """Lateral before central, higher before lower, front before back, right before left."""
+    links = tree.subtree(j.child)
+    centroid = np.mean([tree.pos[ln] for ln in links], axis=0)
+    side = Namer.side_of([j.name, *links])
+    lateral = abs(float(centroid[1])) > max(0.02, 0.03 * tree.size) or side is not None
+    x, _, z = tree.anchor(j)
+    rank = {"right": 0, "left": 1}.get(side or "", 2)
+    return (0 if lateral else 1, -round(float(z), 2), -round(float(x), 2), rank)
+
+
+def _label_chain(
+    tree: _Tree,
+    proposal: Proposal,
+    namer: Namer,
+    i: int,
+    first: yourdfpy.Joint,
+    merge_distance: float,
+    only: bool,
+) -> None:
+    """Walk one chain from the core: its joint locations, then its hand if it has one."""
+    groups: list[list[yourdfpy.Joint]] = []
+    hand: list[yourdfpy.Joint] = []
+    cur: yourdfpy.Joint | None = first
+    finger = is_finger_name(first.name)  # a chain that is a finger (a robot finger) goes on
+    while cur is not None:
+        if groups and _close(tree, groups[-1][-1], cur, merge_distance):
+            groups[-1].append(cur)
+        else:
+            groups.append([cur])
+        nxt = tree.first_actuated(cur.child)
+        if len(nxt) > 1 or (len(nxt) == 1 and not finger and tree.gripper_joint(nxt[0])):
+            hand = nxt
+            break
+        cur = nxt[0] if nxt else None
+    if not hand and len(groups) > 1 and not tree.actuated_in(groups[-1][-1])[1:]:
+        groups.pop()  # the end effector: no label of its own
+    if hand:
+        parents = {j.parent for j in hand}
+        hand += [  # a gripper's mimic fingers belong to its location
+            j
+            for p in parents
+            for j in tree.children.get(p, [])
+            if j.mimic is not None and j.type in ACTUATED_TYPES
+        ]
+    chain_names = [j.name for g in groups for j in g] + tree.subtree(first.child)
+    centroid = np.mean([tree.pos[ln] for ln in tree.subtree(first.child)], axis=0)
+    kind = namer.chain(chain_names, float(centroid[1]), len(groups), only)
+    for depth, group in enumerate(groups[: MAX_INDEX - (1 if hand else 0)], start=1):
+        tag = f"{i}{depth}"
+        words = [j.name for j in group]
+        loc = Location(f"distal_{tag}", namer.location(kind, depth, words), group)
+        links = tree.subtree(group[0].child)
+        proposal.limbs.append(Limb(f"limb_{tag}", namer.limb(kind, depth, words), loc, links))
+    if hand:
+        tag = f"{i}{min(len(groups), MAX_INDEX - 1) + 1}"
+        gripper = len(tree.first_actuated(hand[0].parent)) <= 2 or any(
+            has_word(j.name, "gripper") for j in hand
+        )
+        loc = Location(f"distal_{tag}", None, hand)
+        links = [ln for j in hand for ln in tree.subtree(j.child)]
+        proposal.limbs.append(Limb(f"limb_{tag}", namer.hand(kind, gripper), loc, links))
+        proposal.hands.append(f"limb_{tag}")
