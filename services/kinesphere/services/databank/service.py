@@ -36,6 +36,7 @@ from kinesphere.protocol import CompoundRequest, check_spatial, decode
 from kinesphere.ratelog import RateLog
 from kinesphere.robots.platform import platform_names
 from kinesphere.services.databank import records
+from kinesphere.services.databank.body import body_model
 from kinesphere.services.databank.replies import (
     DEFERRED,
     Answer,
@@ -240,6 +241,8 @@ class DatabankService:
                 answer = ok(pose)
             elif rest == "catalogue":
                 answer = ok(st.ecl.catalogue())
+            elif rest == "body":
+                answer = ok(body_model(st.ecl.platform))
             elif rest == "compound":
                 return self._compound(st, query, key)
             elif rest == "record":
@@ -281,7 +284,7 @@ class DatabankService:
         return error(
             "malformed",
             f"{key} is not a databank key; under {self._head}{platform}/ query "
-            "pose/<limb>/<origin>/<direction>/<size>, compound, catalogue or record",
+            "pose/<limb>/<origin>/<direction>/<size>, compound, catalogue, body or record",
         )
 
     def _unknown(self, platform: str) -> Answer:
