@@ -1,36 +1,100 @@
 """Command-line options every role's sub-commands share: the ``zenoh`` option group.
 
-Each role keeps its own rule for what happens when no endpoint is given (a databank listens,
-agents and clients connect) and says so in ``default_help``; the options themselves are
-spelled the same everywhere. Importing this module does not load Zenoh, so ``--help`` stays
-quick.
+One rule for every command (after zenoh-python's ``examples/common/common.py``): the session
+starts from ``--zenoh-config FILE`` (or Zenoh's defaults), ``--mode``, ``--connect`` and
+``--listen`` override it, and ``--cfg KEY:VALUE`` pairs are applied last. Given none of
+``--connect``, ``--listen`` and ``--zenoh-config``, a command uses its :class:`ZenohDefaults`
+(a databank listens, agents and clients connect), declared once where its parser is built and
+named in its ``--help``. :func:`kinesphere.zconfig.session_from_args` applies the rule.
+Importing this module does not load Zenoh, so ``--help`` stays quick.
 """
 
 from __future__ import annotations
 
 import argparse
 from collections.abc import Sequence
+from dataclasses import dataclass
 
-from kinesphere.endpoints import DEFAULT_ENDPOINT
+from kinesphere.endpoints import DEFAULT_ENDPOINT, LOOPBACK_ANY_PORT
 from kinesphere.keyexpr import DEFAULT_PREFIX
+
+
+@dataclass(frozen=True)
+class ZenohDefaults:
+    """What a command does when given no --connect, --listen or --zenoh-config.
+
+    ``listen=None`` keeps Zenoh's own listen endpoints (all interfaces, a random port); a
+    Zenoh client never listens, so in client mode ``listen`` is not used. ``fallback`` is tried
+    when a session with these endpoints cannot open (a databank whose port is taken joins the
+    one holding it). ``mode`` is also the mode without --mode and without a config file.
+    """
+
+    connect: tuple[str, ...] = (DEFAULT_ENDPOINT,)
+    listen: tuple[str, ...] | None = None
+    mode: str = "peer"
+    fallback: ZenohDefaults | None = None
+    note: str = ""
+    """A sentence the help adds after the rule, e.g. who listens on the endpoint."""
+
+    def describe(self) -> str:
+        """The help sentence: what the command does without endpoint options."""
+
+        def where(endpoints: tuple[str, ...]) -> str:
+            return ", ".join(
+                "loopback, any port" if ep == LOOPBACK_ANY_PORT else ep for ep in endpoints
+            )
+
+        def action(d: ZenohDefaults) -> str:
+            parts = []
+            if d.connect:
+                parts.append(f"connect to {where(d.connect)}")
+            if d.listen:
+                parts.append(f"listen on {where(d.listen)}")
+            if d.listen == () and d.mode != "client":
+                parts.append("listen nowhere")
+            return " and ".join(parts) or "open a session without endpoints"
+
+        text = action(self)
+        if self.fallback is not None:
+            text += f", or {action(self.fallback)} if that fails"
+        if self.mode != "peer":
+            text += f" (as a Zenoh {self.mode})"
+        return f"{text}.{' ' + self.note if self.note else ''}"
+
+
+AGENT = ZenohDefaults(
+    listen=(LOOPBACK_ANY_PORT,), note="'kinesphere databank serve' listens there."
+)
+"""Robots join the databank's endpoint and accept peers on loopback only."""
+OPERATOR = ZenohDefaults(note="'kinesphere databank serve' listens there.")
+"""Operator commands join the databank's endpoint."""
+SERVICE = ZenohDefaults(
+    connect=(),
+    listen=(DEFAULT_ENDPOINT,),
+    fallback=ZenohDefaults(listen=(LOOPBACK_ANY_PORT,)),
+)
+"""A databank holds the well-known endpoint, or joins the replica already holding it."""
+QUERY = ZenohDefaults(mode="client")
+"""A one-shot question joins the databank's endpoint as a client."""
+WATCHER = ZenohDefaults(listen=())
+"""A short-lived observer (``status``) joins the databank's endpoint and opens no port."""
 
 
 def add_zenoh_arguments(
     parser: argparse.ArgumentParser,
+    defaults: ZenohDefaults = OPERATOR,
     *,
-    default_help: str,
     listen: bool = True,
     modes: Sequence[str] = ("peer", "client"),
-    default_mode: str = "peer",
 ) -> None:
-    """Add the ``zenoh`` group: --connect, --listen (unless ``listen=False``), --zenoh-config,
-    --mode and --prefix.
-
-    ``default_help`` is the sentence describing what the command does without --connect,
-    --listen or --zenoh-config; ``default_mode`` is only named in the help (the option's
-    value stays None so the role can tell "not given" apart).
-    """
-    group = parser.add_argument_group("zenoh", description=default_help)
+    """Add the ``zenoh`` group: --connect, --listen (unless ``listen=False``: then the
+    defaults' listen endpoints always apply without a config file), --zenoh-config, --cfg,
+    --mode and --prefix; ``defaults`` go into the parsed arguments for
+    :func:`kinesphere.zconfig.session_from_args`."""
+    given = "--connect, --listen or --zenoh-config" if listen else "--connect or --zenoh-config"
+    group = parser.add_argument_group(
+        "zenoh", description=f"Without {given}: {defaults.describe()}"
+    )
     group.add_argument(
         "--connect",
         action="append",
@@ -47,19 +111,39 @@ def add_zenoh_arguments(
     group.add_argument(
         "--zenoh-config",
         metavar="FILE",
-        help="Zenoh JSON5 config file (access control, TLS...); the options above override it",
+        help="Zenoh JSON5 config file (access control, TLS...); the options here override it",
+    )
+    group.add_argument(
+        "--cfg",
+        action="append",
+        default=[],
+        metavar="KEY:VALUE",
+        help="set one Zenoh config KEY to a JSON5 VALUE, applied last (repeatable), e.g. "
+        "--cfg 'transport/link/tx/lease:3000'",
     )
     group.add_argument(
         "--mode",
         choices=tuple(modes),
         default=None,
-        help=f"Zenoh session mode (default {default_mode})",
+        help=f"Zenoh session mode (default {defaults.mode}, or the config file's)",
     )
     group.add_argument(
         "--prefix",
         default=DEFAULT_PREFIX,
         help=f"key prefix shared by every process of a deployment (default {DEFAULT_PREFIX})",
     )
+    parser.set_defaults(zenoh_defaults=defaults)
+    if not listen:
+        parser.set_defaults(listen=None, zenoh_fixed_listen=True)
 
 
-__all__ = ["DEFAULT_ENDPOINT", "add_zenoh_arguments"]
+__all__ = [
+    "AGENT",
+    "DEFAULT_ENDPOINT",
+    "OPERATOR",
+    "QUERY",
+    "SERVICE",
+    "WATCHER",
+    "ZenohDefaults",
+    "add_zenoh_arguments",
+]

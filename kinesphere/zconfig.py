@@ -12,6 +12,7 @@ exits. A peer that vanishes is noticed after the link lease (10 s by default, ``
 
 from __future__ import annotations
 
+import argparse
 import json
 import socket
 import threading
@@ -22,6 +23,7 @@ from typing import Any, Protocol
 
 import zenoh
 
+from kinesphere.cliargs import OPERATOR, ZenohDefaults
 from kinesphere.endpoints import DEFAULT_ENDPOINT as DEFAULT_ENDPOINT
 from kinesphere.endpoints import LOOPBACK_ANY_PORT as LOOPBACK_ANY_PORT
 from kinesphere.endpoints import LOOPBACK_HOST as LOOPBACK_HOST
@@ -167,6 +169,65 @@ def session(
         yield s
     finally:
         close_session(s)
+
+
+def _apply_cfg(config: zenoh.Config, pairs: Sequence[str]) -> None:
+    """``--cfg KEY:VALUE`` pairs: VALUE is JSON5 text (the first ``:`` splits)."""
+    for pair in pairs:
+        key, sep, value = pair.partition(":")
+        if not sep or not key.strip() or not value.strip():
+            raise KinesphereError("malformed", f"--cfg {pair!r}: expected KEY:VALUE")
+        try:
+            config.insert_json5(key.strip(), value)
+        except zenoh.ZError as exc:
+            raise KinesphereError("malformed", f"--cfg {pair!r}: {_zmsg(exc)}") from None
+
+
+def configs_from_args(args: argparse.Namespace) -> list[zenoh.Config]:
+    """The configs a command tries in turn, from its ``zenoh`` options (see
+    :mod:`kinesphere.cliargs` for the rule); more than one only when its defaults apply and
+    have a fallback."""
+    d: ZenohDefaults = getattr(args, "zenoh_defaults", OPERATOR)
+    file = args.zenoh_config
+    listen: list[str] | None = getattr(args, "listen", None)
+    mode = args.mode if args.mode is not None or file is not None else d.mode
+    plans: list[tuple[Sequence[str] | None, Sequence[str] | None]]
+    from_defaults = file is None and args.connect is None and listen is None
+    if from_defaults:
+        chain = [d] if d.fallback is None else [d, d.fallback]
+        plans = [(x.connect, x.listen) for x in chain]
+    else:
+        if file is None and getattr(args, "zenoh_fixed_listen", False):
+            listen = None if d.listen is None else list(d.listen)
+        plans = [(args.connect, listen)]
+    configs = []
+    for connect, listen_eps in plans:
+        if mode == "client" and from_defaults:
+            listen_eps = None  # a client never listens unless told to
+        config = session_config(
+            mode,
+            listen=None if listen_eps is None else list(listen_eps),
+            connect=None if connect is None else list(connect),
+            config_file=file,
+        )
+        _apply_cfg(config, getattr(args, "cfg", None) or ())
+        configs.append(config)
+    return configs
+
+
+def session_from_args(args: argparse.Namespace) -> zenoh.Session:
+    """Open the session a command's ``zenoh`` options ask for (the caller closes it).
+
+    The one place the "no endpoint given" rule lives: every role's commands call this with the
+    namespace that :func:`kinesphere.cliargs.add_zenoh_arguments` filled.
+    """
+    configs = configs_from_args(args)
+    for config in configs[:-1]:
+        try:
+            return open_session(config=config)
+        except KinesphereError:
+            continue  # e.g. the default port is taken: try the fallback
+    return open_session(config=configs[-1])
 
 
 def free_port(host: str = LOOPBACK_HOST) -> int:

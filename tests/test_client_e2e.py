@@ -30,8 +30,9 @@ from kinesphere.clients import input as pad
 from kinesphere.clients import mapfile
 from kinesphere.clients import targets as tg
 from kinesphere.clients.link import RobotLink
+from kinesphere.clients.options import TeleopOptions
 from kinesphere.clients.state import Action, ControllerState
-from kinesphere.clients.teleop import Teleop, TeleopOptions, run
+from kinesphere.clients.teleop import Teleop, run
 from kinesphere.keyexpr import Keys
 from kinesphere.protocol import RobotState, decode
 

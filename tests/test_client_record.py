@@ -24,8 +24,9 @@ from test_client_support import (
 from kinesphere.clients import input as pad
 from kinesphere.clients import mapfile, record
 from kinesphere.clients import targets as tg
+from kinesphere.clients.options import TeleopOptions
 from kinesphere.clients.state import NEUTRAL, Action, ControllerState
-from kinesphere.clients.teleop import Teleop, TeleopOptions, run
+from kinesphere.clients.teleop import Teleop, run
 from kinesphere.errors import KinesphereError
 
 __all__ = ["hub", "pygame_up"]  # fixtures

@@ -33,7 +33,8 @@ from kinesphere.clients import mapfile
 from kinesphere.clients import targets as tg
 from kinesphere.clients.limbs import CatalogueCache, Selection, pairs_of
 from kinesphere.clients.link import RobotLink
-from kinesphere.clients.teleop import Teleop, TeleopOptions, run
+from kinesphere.clients.options import TeleopOptions
+from kinesphere.clients.teleop import Teleop, run
 from kinesphere.laban import Direction
 from kinesphere.protocol import Catalogue, LimbEntry, SpatialCommand
 

@@ -9,8 +9,9 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from kinesphere.cliargs import DEFAULT_ENDPOINT, add_zenoh_arguments
+from kinesphere.cliargs import add_zenoh_arguments
 from kinesphere.clients import commands
+from kinesphere.clients.options import TeleopOptions
 
 KEYS_HELP = """keys (keyboard fallback, the HUD window needs focus):
   arrows      right stick: the limb's horizontal direction (diagonals: two arrows)
@@ -30,15 +31,13 @@ gamepad (SDL layout, see clients/mappings/default.toml):
 """
 
 
-def _zenoh(p: argparse.ArgumentParser) -> None:
-    add_zenoh_arguments(
-        p,
-        default_help=f"Without --connect, --listen or --zenoh-config: connect to "
-        f"{DEFAULT_ENDPOINT},\nwhere 'kinesphere databank serve' listens.",
-    )
+STREAM = TeleopOptions()
+"""The defaults the streaming commands show and use."""
 
 
-def _targeting(p: argparse.ArgumentParser, ttl_default: str = "300", wait: bool = True) -> None:
+def _targeting(
+    p: argparse.ArgumentParser, ttl_default: str = f"{STREAM.ttl_ms}", wait: bool = True
+) -> None:
     p.add_argument(
         "--groups",
         metavar="FILE",
@@ -93,9 +92,9 @@ def register(sub: Any) -> None:
     g.add_argument(
         "--rate",
         type=float,
-        default=30.0,
+        default=STREAM.rate_hz,
         metavar="HZ",
-        help="command rate while engaged (default 30)",
+        help=f"command rate while engaged (default {STREAM.rate_hz:g})",
     )
     g.add_argument(
         "--no-deadman",
@@ -105,7 +104,7 @@ def register(sub: Any) -> None:
     g.add_argument("--duration", type=float, metavar="S", help="quit after S seconds")
     g.add_argument("--screenshot", metavar="PNG", help="save the HUD to PNG when quitting")
     _targeting(g, wait=False)
-    _zenoh(g)
+    add_zenoh_arguments(g)
     g.set_defaults(func=commands.gamepad)
 
     s = sub.add_parser(
@@ -140,11 +139,12 @@ def register(sub: Any) -> None:
         help="repeat the command for S seconds, then stop",
     )
     s.add_argument(
-        "--rate", type=float, default=30.0, metavar="HZ", help="repeat rate with --for (default 30)"
+        "--rate", type=float, default=STREAM.rate_hz, metavar="HZ",
+        help=f"repeat rate with --for (default {STREAM.rate_hz:g})",
     )
     s.add_argument("--mapping", metavar="FILE", help="mapping file whose [groups] to use")
-    _targeting(s, "0: the pose is reached whatever happens next; 300 with --for")
-    _zenoh(s)
+    _targeting(s, f"0: the pose is reached whatever happens next; {STREAM.ttl_ms} with --for")
+    add_zenoh_arguments(s)
     s.set_defaults(func=commands.send)
 
     p = sub.add_parser(
@@ -157,10 +157,11 @@ def register(sub: Any) -> None:
     )
     p.add_argument("phrase", metavar="PHRASE", help="phrase file (TOML) or shipped name")
     p.add_argument("--target", default="all", help="robot id, group name or 'all' (default)")
-    p.add_argument("--rate", type=float, default=30.0, metavar="HZ", help="default 30")
+    p.add_argument("--rate", type=float, default=STREAM.rate_hz, metavar="HZ",
+                   help=f"default {STREAM.rate_hz:g}")
     p.add_argument("--mapping", metavar="FILE", help="mapping file whose [groups] to use")
-    _targeting(p, "the phrase's ttl_ms, else 300")
-    _zenoh(p)
+    _targeting(p, f"the phrase's ttl_ms, else {STREAM.ttl_ms}")
+    add_zenoh_arguments(p)
     p.set_defaults(func=commands.play)
 
     e = sub.add_parser(
@@ -173,5 +174,5 @@ def register(sub: Any) -> None:
     e.add_argument("--target", default="all", help="robots to release (default all)")
     e.add_argument("--mapping", metavar="FILE", help="mapping file whose [groups] to use")
     _targeting(e)
-    _zenoh(e)
+    add_zenoh_arguments(e)
     e.set_defaults(func=commands.estop)

@@ -18,6 +18,7 @@ from contextlib import contextmanager
 from types import FrameType
 from typing import Any
 
+from kinesphere.clients.options import TeleopOptions
 from kinesphere.errors import KinesphereError
 
 ESTOP_REPEATS = 3
@@ -31,23 +32,13 @@ moment later still gets one."""
 
 
 @contextmanager
-def _session(args: argparse.Namespace) -> Iterator[Any]:
-    from kinesphere import zconfig
-
-    connect = args.connect
-    if connect is None and args.listen is None and args.zenoh_config is None:
-        connect = [zconfig.DEFAULT_ENDPOINT]
-    with zconfig.session(args.mode, args.listen, connect, args.zenoh_config) as s:
-        yield s
-
-
-@contextmanager
 def _link(args: argparse.Namespace, watch: bool = False) -> Iterator[Any]:
     from kinesphere.clients.link import RobotLink
     from kinesphere.keyexpr import Keys
+    from kinesphere.zconfig import session_from_args
 
     keys = Keys(args.prefix)
-    with _session(args) as session:
+    with session_from_args(args) as session:
         link = RobotLink(session, keys, watch=watch)
         try:
             yield link
@@ -95,10 +86,10 @@ def gamepad(args: argparse.Namespace) -> int:
     groups = _groups(args)
     mapping = dataclasses.replace(mapping, groups=groups)
     target = targets.parse_target(args.target, groups)
-    ttl = 300 if args.ttl_ms is None else args.ttl_ms
+    ttl = TeleopOptions.ttl_ms if args.ttl_ms is None else args.ttl_ms
     if args.rate <= 0 or ttl < 0:
         raise KinesphereError("malformed", "--rate must be > 0 and --ttl-ms >= 0")
-    options = teleop.TeleopOptions(args.rate, ttl, not args.no_deadman)
+    options = TeleopOptions(args.rate, ttl, not args.no_deadman)
     replay = record.Replay.from_file(args.replay) if args.replay else None
     hud = None
     use_pygame = replay is None or not args.headless
@@ -179,7 +170,7 @@ def send(args: argparse.Namespace) -> int:
         raise KinesphereError("malformed", "nothing to send: give L O D S parts and/or --drive")
     target = targets.parse_target(args.target, _groups(args))
     hold = args.hold
-    ttl = args.ttl_ms if args.ttl_ms is not None else (300 if hold else 0)
+    ttl = args.ttl_ms if args.ttl_ms is not None else (TeleopOptions.ttl_ms if hold else 0)
     seq = Sequencer(new_sender("send"), ttl)
     stopping = False
 
@@ -208,7 +199,7 @@ def play(args: argparse.Namespace) -> int:
 
     phrase = phrases.load_phrase(args.phrase)
     target = targets.parse_target(args.target, _groups(args))
-    ttl = args.ttl_ms if args.ttl_ms is not None else (phrase.ttl_ms or 300)
+    ttl = args.ttl_ms if args.ttl_ms is not None else (phrase.ttl_ms or TeleopOptions.ttl_ms)
     seq = Sequencer(new_sender("play"), ttl)
     stopping = False
 

@@ -31,6 +31,7 @@ from pathlib import Path
 from typing import Any
 
 from kinesphere.clients.link import RobotLink, Sequencer
+from kinesphere.clients.options import TeleopOptions
 from kinesphere.errors import KinesphereError
 from kinesphere.laban import Direction
 from kinesphere.protocol import Drive, SpatialCommand
@@ -181,7 +182,7 @@ def play(
     keys: Sequence[str],
     seq: Sequencer,
     *,
-    rate_hz: float = 30.0,
+    rate_hz: float = TeleopOptions.rate_hz,
     on_step: Callable[[int, Step], None] | None = None,
     should_stop: Callable[[], bool] = lambda: False,
 ) -> int:

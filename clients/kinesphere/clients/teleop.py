@@ -41,6 +41,7 @@ from kinesphere.clients.mapping import (
     MapperState,
     map_controls,
 )
+from kinesphere.clients.options import TeleopOptions
 from kinesphere.clients.state import Action, ControllerState
 from kinesphere.laban import Direction
 from kinesphere.protocol import SpatialCommand, Status
@@ -55,13 +56,6 @@ class Source(Protocol):
     """Anything that yields controller snapshots: pygame input or a replayed recording."""
 
     def poll(self) -> ControllerState: ...
-
-
-@dataclass(frozen=True)
-class TeleopOptions:
-    rate_hz: float = 30.0
-    ttl_ms: int = 300
-    deadman_required: bool = True
 
 
 @dataclass(frozen=True)

@@ -10,8 +10,11 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from kinesphere.cliargs import DEFAULT_ENDPOINT, add_zenoh_arguments
-from kinesphere.keyexpr import DEFAULT_PREFIX
+from kinesphere.cliargs import WATCHER, add_zenoh_arguments
+from kinesphere.deploy.plan import DEFAULT_ROBOTS, UpOptions
+
+UP = UpOptions(robots=[], phrases=[])
+"""The defaults ``kinesphere up`` shows and uses."""
 
 
 def register(sub: Any) -> None:
@@ -24,26 +27,27 @@ def register(sub: Any) -> None:
         "--out, then stop every process (also on Ctrl-C). Exit 0 after the demo.",
     )
     up.add_argument(
-        "--robots", default="baxter,nao,youbot,packbot", metavar="LIST",
-        help="comma-separated platforms, optionally PLATFORM:ID (default "
-        "baxter,nao,youbot,packbot)",
+        "--robots", default=",".join(DEFAULT_ROBOTS), metavar="LIST",
+        help=f"comma-separated platforms, optionally PLATFORM:ID (default "
+        f"{','.join(DEFAULT_ROBOTS)})",
     )
     up.add_argument(
         "--phrase", action="append", default=[], metavar="FILE[@ROBOT]",
         help="play this phrase, on every robot or on ROBOT (repeatable, in order; default: the "
         "paper's Left-High example on all robots, then the PackBot sweep on the packbot)",
     )
-    up.add_argument("--out", type=Path, default=Path("out"), metavar="DIR",
-                    help="where pictures, summary.json and logs/ go (default out/)")
+    up.add_argument("--out", type=Path, default=UP.out, metavar="DIR",
+                    help=f"where pictures, summary.json and logs/ go (default {UP.out}/)")
     up.add_argument("--headless", action="store_true",
                     help="no viewer windows and no live redraw: print tables instead")
     up.add_argument("--keep-running", action="store_true",
                     help="after the demo, keep the system up until Ctrl-C")
-    up.add_argument("--start-timeout", type=float, default=120.0, metavar="S",
-                    help="seconds allowed for every process to come up (default 120)")
+    up.add_argument("--start-timeout", type=float, default=UP.start_timeout, metavar="S",
+                    help="seconds allowed for every process to come up (default "
+                    f"{UP.start_timeout:g})")
     up.add_argument("--db", action="append", default=[], metavar="PLATFORM=PATH",
                     help="serve this databank file instead of the shipped one (repeatable)")
-    up.add_argument("--prefix", default=DEFAULT_PREFIX, help="key prefix (default kinesphere)")
+    up.add_argument("--prefix", default=UP.prefix, help=f"key prefix (default {UP.prefix})")
     up.set_defaults(func=_up)
 
     st = sub.add_parser(
@@ -55,12 +59,7 @@ def register(sub: Any) -> None:
     st.add_argument("--timeout", type=float, default=2.0, metavar="S",
                     help="seconds to wait for answers (default 2)")
     st.add_argument("--json", action="store_true", help="print JSON instead of a table")
-    add_zenoh_arguments(
-        st,
-        default_help=f"Without --connect or --zenoh-config: connect to {DEFAULT_ENDPOINT} "
-        "(peer mode, listening nowhere).",
-        listen=False,
-    )
+    add_zenoh_arguments(st, WATCHER, listen=False)
     st.set_defaults(func=_status)
 
     rt = sub.add_parser(
@@ -80,7 +79,8 @@ def register(sub: Any) -> None:
 
 
 def _up(args: argparse.Namespace) -> int:
-    from kinesphere.deploy.up import Demo, UpOptions, default_phrases, parse_phrase, parse_robots
+    from kinesphere.deploy.plan import default_phrases, parse_phrase, parse_robots
+    from kinesphere.deploy.up import Demo
 
     robots = parse_robots(args.robots)
     phrases = [parse_phrase(p) for p in args.phrase] or default_phrases(robots)
@@ -92,8 +92,11 @@ def _up(args: argparse.Namespace) -> int:
 
 def _status(args: argparse.Namespace) -> int:
     from kinesphere.deploy.status import collect, print_status
+    from kinesphere.keyexpr import Keys
+    from kinesphere.zconfig import session_from_args
 
-    info = collect(args.connect, args.zenoh_config, args.mode, args.timeout, args.prefix)
+    with session_from_args(args) as session:
+        info = collect(session, Keys(args.prefix), args.timeout)
     return print_status(info, args.json)
 
 

@@ -9,42 +9,27 @@ from __future__ import annotations
 
 import json
 import time
-from collections.abc import Sequence
-from pathlib import Path
 from typing import Any
 
+import zenoh
 from rich.console import Console
 
 from kinesphere.deploy.table import robot_table, state_dict, wide_console
 from kinesphere.deploy.watch import StateRecorder, query_alive
 from kinesphere.keyexpr import Keys
-from kinesphere.zconfig import DEFAULT_ENDPOINT, session
 
 
-def collect(
-    connect: Sequence[str] | None,
-    zenoh_config: Path | None = None,
-    mode: str | None = None,
-    timeout: float = 2.0,
-    prefix: str = "kinesphere",
-) -> dict[str, Any]:
+def collect(session: zenoh.Session, keys: Keys, timeout: float) -> dict[str, Any]:
     """Liveliness plus each robot's last state, as a JSON-ready dict."""
-    keys = Keys(prefix)
-    if connect is None and zenoh_config is None:
-        connect = [DEFAULT_ENDPOINT]
-    if mode is None and zenoh_config is None:
-        mode = "peer"
-    listen: list[str] | None = [] if zenoh_config is None else None
     recorder = StateRecorder(keys, history=False)
     deadline = time.monotonic() + timeout
-    with session(mode, listen=listen, connect=connect, config_file=zenoh_config) as s:
-        recorder.start(s)
-        try:
-            databanks, robots = query_alive(s, keys, timeout)
-            left = max(0.05, deadline - time.monotonic())
-            recorder.wait_for(lambda st: set(robots) <= set(st), left if robots else 0.3)
-        finally:
-            recorder.close()
+    recorder.start(session)
+    try:
+        databanks, robots = query_alive(session, keys, timeout)
+        left = max(0.05, deadline - time.monotonic())
+        recorder.wait_for(lambda st: set(robots) <= set(st), left if robots else 0.3)
+    finally:
+        recorder.close()
     states = recorder.snapshot()
     return {
         "databanks": databanks,

@@ -11,7 +11,7 @@ from pathlib import Path
 from types import FrameType
 from typing import Any
 
-from kinesphere.cliargs import DEFAULT_ENDPOINT, add_zenoh_arguments
+from kinesphere.cliargs import AGENT, add_zenoh_arguments
 from kinesphere.signals import handle_signals
 
 log = logging.getLogger(__name__)
@@ -37,12 +37,7 @@ def register(sub: Any) -> None:
     p.add_argument("--group", action="append", default=[], metavar="NAME",
                    help="also obey {prefix}/group/NAME/command (repeatable)")
     p.add_argument("--viewer", action="store_true", help="open a MuJoCo viewer window")
-    add_zenoh_arguments(
-        p,
-        default_help=f"Without --listen, --connect or --zenoh-config: connect to "
-        f"{DEFAULT_ENDPOINT}, where 'kinesphere databank serve' listens, and listen on "
-        "loopback, any port.",
-    )
+    add_zenoh_arguments(p, AGENT)
     p.set_defaults(func=_agent)
 
 
@@ -62,7 +57,7 @@ def _viewer(controller: Any) -> Any:
 
 def _agent(args: argparse.Namespace) -> int:
     from kinesphere.robots.agent.runtime import Agent, AgentOptions
-    from kinesphere.zconfig import LOOPBACK_ANY_PORT, close_session, open_session
+    from kinesphere.zconfig import close_session, session_from_args
 
     robot_id = args.robot_id or Path(args.platform).name
     options = AgentOptions(rate=args.rate, state_rate=args.state_rate, speed=args.speed,
@@ -74,11 +69,7 @@ def _agent(args: argparse.Namespace) -> int:
         stop.set()
 
     with handle_signals(on_signal, (signal.SIGINT, signal.SIGTERM)):
-        listen, connect = args.listen, args.connect
-        if listen is None and connect is None and args.zenoh_config is None:
-            listen, connect = [LOOPBACK_ANY_PORT], [DEFAULT_ENDPOINT]  # one machine, no set-up
-        session = open_session(args.mode, listen=listen, connect=connect,
-                               config_file=args.zenoh_config)
+        session = session_from_args(args)
         agent: Agent | None = None
         viewer = None
         try:

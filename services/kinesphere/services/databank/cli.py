@@ -10,7 +10,7 @@ import json
 import sys
 from typing import Any
 
-from kinesphere.cliargs import DEFAULT_ENDPOINT, add_zenoh_arguments
+from kinesphere.cliargs import QUERY, SERVICE, add_zenoh_arguments
 from kinesphere.errors import KinesphereError
 
 
@@ -27,9 +27,8 @@ def register(sub: Any) -> None:
         help="serve databanks until SIGTERM or Ctrl-C",
         description="Serve every shipped databank (embedded SQLite, no set-up), or those "
         "named. Several replicas may serve the same platforms: each query gets one answer, and "
-        "when a replica stops the others answer. Without --listen/--connect/--zenoh-config it "
-        f"listens on {DEFAULT_ENDPOINT}, or connects there if that port is taken. Logs one line "
-        "on start and one on stop; exits 0 on SIGTERM/SIGINT.",
+        "when a replica stops the others answer. Logs one line on start and one on stop; exits "
+        "0 on SIGTERM/SIGINT.",
     )
     s.add_argument(
         "--platform", action="append", default=[], metavar="NAME",
@@ -55,11 +54,7 @@ def register(sub: Any) -> None:
         help="a platform other replicas serve: never answer unknown_platform for it "
         "(shipped platforms are always known)",
     )
-    add_zenoh_arguments(
-        s,
-        default_help=f"Without --listen, --connect or --zenoh-config: listen on "
-        f"{DEFAULT_ENDPOINT}, or connect there if that port is taken.",
-    )
+    add_zenoh_arguments(s, SERVICE)
     s.set_defaults(func=_serve)
 
     q = sub.add_parser(
@@ -68,8 +63,7 @@ def register(sub: Any) -> None:
         description="Print the joint targets f_SB(L, O, D, S) of PLATFORM, plus the base "
         "translation when S is beyond the largest stored size. L and O are labels or aliases "
         "(limb_11, right_arm), D a Laban direction (left-high), S a size (1, 2.5, far). "
-        f"Connects to {DEFAULT_ENDPOINT} unless told otherwise. Exit 2 with the error code when "
-        "the databank refuses or nobody answers.",
+        "Exit 2 with the error code when the databank refuses or nobody answers.",
     )
     q.add_argument("platform", help="platform name, e.g. baxter")
     q.add_argument("params", nargs="*", metavar="L O D S", help="limb origin direction size")
@@ -78,40 +72,18 @@ def register(sub: Any) -> None:
     q.add_argument("--json", action="store_true", help="print the reply message as JSON")
     q.add_argument("--timeout", type=float, default=2.0, metavar="S",
                    help="seconds to wait for an answer (default 2)")
-    add_zenoh_arguments(
-        q,
-        default_help=f"Without --connect or --zenoh-config: connect to {DEFAULT_ENDPOINT} "
-        "as a Zenoh client.",
-        default_mode="client",
-    )
+    add_zenoh_arguments(q, QUERY)
     q.set_defaults(func=_query)
-
-
-def _session_args(args: argparse.Namespace) -> dict[str, Any]:
-    return {
-        "mode": args.mode,
-        "listen": args.listen,
-        "connect": args.connect,
-        "config_file": args.zenoh_config,
-    }
 
 
 def _serve(args: argparse.Namespace) -> int:
     from kinesphere.keyexpr import Keys
-    from kinesphere.services.databank.serve import (
-        default_replica_id,
-        open_default_session,
-        open_ecls,
-        run,
-    )
-    from kinesphere.zconfig import open_session
+    from kinesphere.services.databank.serve import default_replica_id, open_ecls, run
+    from kinesphere.zconfig import session_from_args
 
     keys = Keys(args.prefix)
     ecls = open_ecls(args.platform, args.db)
-    if args.listen is None and args.connect is None and args.zenoh_config is None:
-        session = open_default_session(args.mode)
-    else:
-        session = open_session(**_session_args(args))
+    session = session_from_args(args)
     replica = args.replica or default_replica_id()
     return run(session, ecls, keys, replica, args.allow_writes, args.known_platform)
 
@@ -127,17 +99,10 @@ def _query(args: argparse.Namespace) -> int:
         raise KinesphereError("malformed", "--catalogue takes no LIMB ORIGIN DIRECTION SIZE")
     from kinesphere.keyexpr import Keys
     from kinesphere.services.databank import client
-    from kinesphere.zconfig import session
+    from kinesphere.zconfig import session_from_args
 
-    zargs = _session_args(args)
-    if args.connect is None and args.zenoh_config is None:
-        zargs["connect"] = [DEFAULT_ENDPOINT]
-    if zargs["mode"] is None and args.zenoh_config is None:
-        zargs["mode"] = "client"
-    if zargs["mode"] == "client":
-        zargs["listen"] = None
     keys = Keys(args.prefix)
-    with session(**zargs) as s:
+    with session_from_args(args) as s:
         if args.catalogue:
             msg: Any = client.query_catalogue(s, args.platform, keys=keys, timeout=args.timeout)
         else:

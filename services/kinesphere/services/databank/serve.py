@@ -27,7 +27,7 @@ from kinesphere.services.databank.service import DatabankService
 from kinesphere.services.ecl.ecl import Ecl
 from kinesphere.services.ecl.store import DATA_DIR
 from kinesphere.signals import handle_signals
-from kinesphere.zconfig import DEFAULT_ENDPOINT, LOOPBACK_ANY_PORT, close_session, open_session
+from kinesphere.zconfig import close_session
 
 log = logging.getLogger("kinesphere.databank")
 
@@ -84,17 +84,6 @@ def default_replica_id() -> str:
     """``<host>-<pid>``, made a valid key segment."""
     text = f"{socket.gethostname()}-{os.getpid()}"
     return re.sub(r"[/*$?#\s]", "_", text).lstrip("@") or f"databank-{os.getpid()}"
-
-
-def open_default_session(mode: str | None) -> zenoh.Session:
-    """No endpoints given: listen on DEFAULT_ENDPOINT, or join whoever already holds it
-    (a client only joins)."""
-    if mode == "client":
-        return open_session(mode, connect=[DEFAULT_ENDPOINT])
-    try:
-        return open_session(mode, listen=[DEFAULT_ENDPOINT], connect=[])
-    except KinesphereError:
-        return open_session(mode, listen=[LOOPBACK_ANY_PORT], connect=[DEFAULT_ENDPOINT])
 
 
 def run(

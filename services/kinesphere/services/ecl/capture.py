@@ -18,12 +18,7 @@ from kinesphere.protocol import RobotState, decode
 
 
 def capture_state(
-    robot_id: str,
-    keys: Keys,
-    *,
-    connect: list[str] | None = None,
-    zenoh_config: str | None = None,
-    timeout: float = 5.0,
+    session: zenoh.Session, robot_id: str, keys: Keys, timeout: float
 ) -> RobotState:
     """The next RobotState the robot publishes, or ``unavailable`` after ``timeout`` s."""
     got: list[RobotState] = []
@@ -38,20 +33,17 @@ def capture_state(
             return  # not a state we can read; wait for the next one
         ready.set()
 
-    if not connect and not zenoh_config:
-        connect = [zconfig.DEFAULT_ENDPOINT]
-    with zconfig.session(connect=connect, config_file=zenoh_config) as s:
-        sub = s.declare_subscriber(keys.state(robot_id), on_state)
-        try:
-            if not ready.wait(timeout):
-                raise KinesphereError(
-                    "unavailable",
-                    f"no state from robot {robot_id!r} on {keys.state(robot_id)} within "
-                    f"{timeout:g} s; is 'kinesphere agent ... --id {robot_id}' running and "
-                    "reachable (--connect)?",
-                )
-        finally:
-            zconfig.undeclare(sub)
+    sub = session.declare_subscriber(keys.state(robot_id), on_state)
+    try:
+        if not ready.wait(timeout):
+            raise KinesphereError(
+                "unavailable",
+                f"no state from robot {robot_id!r} on {keys.state(robot_id)} within "
+                f"{timeout:g} s; is 'kinesphere agent ... --id {robot_id}' running and "
+                "reachable (--connect)?",
+            )
+    finally:
+        zconfig.undeclare(sub)
     return got[0]
 
 

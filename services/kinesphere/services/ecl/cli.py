@@ -15,7 +15,7 @@ import msgspec
 from rich.console import Console
 from rich.table import Table
 
-from kinesphere.endpoints import DEFAULT_ENDPOINT
+from kinesphere.cliargs import add_zenoh_arguments
 from kinesphere.errors import KinesphereError
 from kinesphere.protocol import Pose
 
@@ -76,15 +76,10 @@ def register(sub: Any) -> None:
         help="capture the limb's joints from the running agent ID (its next RobotState)",
     )
     r.add_argument(
-        "--connect", action="append", metavar="EP",
-        help=f"with --from-robot: Zenoh endpoint to join (default {DEFAULT_ENDPOINT})",
-    )
-    r.add_argument("--zenoh-config", metavar="FILE", help="with --from-robot: Zenoh config file")
-    r.add_argument("--prefix", default="kinesphere", help="key prefix (default kinesphere)")
-    r.add_argument(
         "--timeout", type=float, default=5.0, help="with --from-robot: seconds to wait (default 5)"
     )
     r.add_argument("--json", action="store_true", help="print the stored Pose as JSON")
+    add_zenoh_arguments(r, listen=False)  # used with --from-robot only
     r.set_defaults(func=_record)
 
     s = ecl_sub.add_parser(
@@ -181,9 +176,10 @@ def _record(args: argparse.Namespace) -> int:
     if args.from_robot:
         from kinesphere.keyexpr import Keys
         from kinesphere.services.ecl.capture import capture_state, limb_joints_of
+        from kinesphere.zconfig import session_from_args
 
-        state = capture_state(args.from_robot, Keys(args.prefix), connect=args.connect,
-                              zenoh_config=args.zenoh_config, timeout=args.timeout)
+        with session_from_args(args) as session:
+            state = capture_state(session, args.from_robot, Keys(args.prefix), args.timeout)
         if state.platform != ecl.platform.name:
             raise KinesphereError(
                 "unknown_platform",

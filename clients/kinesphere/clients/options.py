@@ -1,0 +1,20 @@
+"""How the operator's command streams run: the defaults every client command reads.
+
+``gamepad``, ``send --for`` and ``play`` stream Commands; their command-line defaults and help
+texts come from :class:`TeleopOptions`, so a changed default changes every command at once.
+Cheap to import: the CLI builds its parsers from it before any handler runs.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class TeleopOptions:
+    """``rate_hz`` Commands per second, each carrying ``ttl_ms`` (a robot that hears nothing
+    newer for that long holds); ``deadman_required``: stream only while the deadman is held."""
+
+    rate_hz: float = 30.0
+    ttl_ms: int = 300
+    deadman_required: bool = True
