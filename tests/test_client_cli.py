@@ -4,6 +4,9 @@ replay; user mistakes print ``error: ...`` and exit 2."""
 from __future__ import annotations
 
 import json
+import os
+import subprocess
+import sys
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -141,3 +144,26 @@ def test_gamepad_with_its_hud_saves_a_screenshot(
     png = tmp_path / "hud.png"
     code = cli(hub[1], "gamepad", "--duration", "0.3", "--screenshot", str(png))
     assert code == 0 and png.stat().st_size > 5000
+
+
+def _kinesphere(endpoint: str, *args: str, env: dict[str, str]) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "kinesphere.cli", *args, "--connect", endpoint,
+         "--prefix", KEYS.prefix],
+        env=env, capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+
+
+def test_without_a_display_the_hud_says_use_headless(hub: tuple[zenoh.Session, str]) -> None:
+    """SDL would fall back to its offscreen driver and run a HUD nobody sees."""
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("DISPLAY", "WAYLAND_DISPLAY", "SDL_VIDEODRIVER")}  # fmt: skip
+    proc = _kinesphere(hub[1], "gamepad", "--duration", "0.2", env=env)
+    assert proc.returncode == 2
+    assert "no display: use --headless" in proc.stderr
+
+
+def test_headless_without_a_controller_says_so(hub: tuple[zenoh.Session, str]) -> None:
+    proc = _kinesphere(hub[1], "gamepad", "--headless", "--duration", "0.2", env=dict(os.environ))
+    assert proc.returncode == 0
+    assert "no game controller found" in proc.stderr

@@ -1,5 +1,6 @@
-"""The HUD renders under SDL's dummy driver: the commanded cell is lit, symbols and statuses
-are drawn, and a screenshot can be saved (``KINESPHERE_HUD_PNG=path`` keeps one to look at)."""
+"""The HUD renders under SDL's dummy driver: the commanded cell is lit where the stick points,
+missing directions are crossed out, statuses are in operator words and never cut off, and a
+screenshot can be saved (``KINESPHERE_HUD_PNG=path`` keeps one to look at)."""
 
 from __future__ import annotations
 
@@ -13,10 +14,14 @@ os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
 import pygame  # noqa: E402
 import pytest  # noqa: E402
 
-from kinesphere.clients import hud  # noqa: E402
+from kinesphere.clients import hud, report  # noqa: E402
 from kinesphere.clients import targets as tg  # noqa: E402
+from kinesphere.clients.drive import Steering  # noqa: E402
 from kinesphere.clients.link import Seen  # noqa: E402
-from kinesphere.clients.mapping import Intent  # noqa: E402
+from kinesphere.clients.mapping import Intent, MapperState, map_controls  # noqa: E402
+from kinesphere.clients.state import ControllerState  # noqa: E402
+from kinesphere.clients.sticks import Tuning  # noqa: E402
+from kinesphere.clients.symbols import draw_symbol  # noqa: E402
 from kinesphere.clients.teleop import View  # noqa: E402
 from kinesphere.laban import Direction, Horizontal, Level  # noqa: E402
 from kinesphere.protocol import Drive, RobotState  # noqa: E402
@@ -42,7 +47,8 @@ def view(**kw: object) -> View:
         limb="limb_11", origin="distal_11",
         aliases={"limb_11": "arm", "distal_11": "shoulder"},
         intent=Intent(direction=Direction.LEFT_LOW, size=2.4, deadman=True, reach=0.8,
-                      drive=Drive(direction="forward-middle", speed=0.6), drive_vec=(0.6, 0.0)),
+                      drive=Drive(direction="forward-middle", speed=0.6, forward=0.6, yaw=0.3),
+                      steering=Steering.ARCADE),
         engaged=True, deadman_required=True, estopped=False, remote_estop=[],
         need_fresh_deadman=False, connected=True, source="controller",
         robots={
@@ -52,25 +58,78 @@ def view(**kw: object) -> View:
             "baxter-1": state("baxter-1", "baxter", "holding"),
             "nao-1": state("nao-1", "nao", "databank_unreachable",
                            detail="no databank answers kinesphere/ecl/nao/catalogue"),
-            "youbot-1": state("youbot-1", "youbot", "estop", detail="e-stop latched"),
+            "youbot-1": state("youbot-1", "youbot", "estop", detail="e-stop latched",
+                              estop_by="gamepad-me"),
         },
-        seq=1234, message="target: group sweepers: packbot-1, packbot-2",
+        seq=1234, message="target: group sweepers: packbot-1, packbot-2", sender="gamepad-me",
     )  # fmt: skip
     base.update(kw)
     return View(**base)  # type: ignore[arg-type]
 
 
 def cell_centre(d: Direction) -> tuple[int, int]:
-    """Where the chart puts a direction (mirrors hud._chart's layout)."""
-    j, i = hud.COLUMNS.index(d.horizontal), hud.ROWS.index(d.level)
-    return 80 + j * 52 + 4, 110 + 20 + i * 74 + 4
+    """A point inside the cell's background, off the symbol."""
+    r = hud.cell_rect(d)
+    return r.left + 3, r.top + 3
+
+
+def lit_cells(surf: pygame.Surface) -> list[Direction]:
+    return [d for d in Direction if surf.get_at(cell_centre(d))[:3] == hud.LIT]
+
+
+def test_the_chart_is_laid_out_as_the_stick_points() -> None:
+    """Seen from above, robot facing up: left is left, forward is up, in every level's block."""
+    for lvl in ("high", "middle", "low"):
+        c = {h: hud.cell_rect(Direction((h, lvl))).center for h in
+             ("left", "place", "right", "forward", "back", "left-forward", "right-back")}
+        assert c["left"][0] < c["place"][0] < c["right"][0]
+        assert c["forward"][1] < c["place"][1] < c["back"][1]
+        assert c["left-forward"][0] < c["place"][0] and c["left-forward"][1] < c["place"][1]
+        assert c["right-back"][0] > c["place"][0] and c["right-back"][1] > c["place"][1]
+    high, low = hud.cell_rect(Direction.PLACE_HIGH), hud.cell_rect(Direction.PLACE_LOW)
+    assert high.right < low.left, "blocks side by side: high, middle, low"
+
+
+@pytest.mark.parametrize(("sx", "sy", "side"), [(-1.0, 0.0, "left"), (1.0, 0.0, "right"),
+                                                (0.0, -1.0, "up"), (0.0, 1.0, "down")])
+def test_pushing_the_stick_lights_the_cell_on_that_side(
+    window: hud.Hud, sx: float, sy: float, side: str
+) -> None:
+    intent = map_controls(ControllerState(rx=sx, ry=sy, lt=1.0), MapperState(), 0.0, Tuning())[0]
+    hud.render(window.screen, view(intent=intent), window.fonts)
+    (lit,) = lit_cells(window.screen)
+    x, y = hud.cell_rect(lit).center
+    px, py = hud.cell_rect(Direction.PLACE_LOW).center
+    assert {"left": x < px, "right": x > px, "up": y < py, "down": y > py}[side], lit
+
+
+def test_missing_directions_are_crossed_out(window: hud.Hud) -> None:
+    have = frozenset({Direction.LEFT_FORWARD_LOW, Direction.FORWARD_LOW, Direction.PLACE_HIGH})
+    hud.render(window.screen, view(available=have, asked=Direction.LEFT_LOW,
+               intent=Intent(direction=Direction.LEFT_FORWARD_LOW, size=3.0, deadman=True)),
+               window.fonts)  # fmt: skip
+    surf = window.screen
+    for d in Direction:
+        r = hud.cell_rect(d)
+        bg = surf.get_at((r.left + 3, r.bottom - 12))[:3]
+        diagonal = [surf.get_at((r.left + 4 + k, r.top + 4 + k))[:3] for k in range(4, 8)]
+        if d is Direction.LEFT_FORWARD_LOW:
+            assert bg == hud.LIT
+        elif d in have or d is Direction.PLACE_MIDDLE:
+            assert bg == hud.CELL_BG, d
+            assert hud.UNAVAILABLE not in diagonal and hud.BAD not in diagonal, d
+        else:
+            assert bg == hud.UNAVAILABLE_BG, d
+            cross = hud.BAD if d is Direction.LEFT_LOW else hud.UNAVAILABLE
+            assert cross in diagonal, d
+    assert surf.get_at(hud.cell_rect(Direction.LEFT_LOW).topleft)[:3] != hud.UNAVAILABLE_BG
 
 
 def test_the_commanded_cell_is_lit(window: hud.Hud, tmp_path: Path) -> None:
     hud.render(window.screen, view(), window.fonts)
     lit = window.screen.get_at(cell_centre(Direction.LEFT_LOW))[:3]
     other = window.screen.get_at(cell_centre(Direction.RIGHT_HIGH))[:3]
-    assert lit == hud.LIT and other == hud.BG
+    assert lit == hud.LIT and other == hud.CELL_BG
     hud.render(window.screen, view(engaged=False), window.fonts)
     assert window.screen.get_at(cell_centre(Direction.LEFT_LOW))[:3] == hud.DIM
     window.screenshot(tmp_path / "hud.png")
@@ -87,7 +146,7 @@ def test_level_shading_follows_laban(window: hud.Hud) -> None:
     inks = {}
     for lvl in Level:
         surf.fill(hud.BG)
-        hud.draw_symbol(surf, Direction((Horizontal.PLACE.value, lvl.value)),
+        draw_symbol(surf, Direction((Horizontal.PLACE.value, lvl.value)),
                         pygame.Rect(10, 10, 40, 60), hud.INK)  # fmt: skip
         inks[lvl] = sum(surf.get_at((x, y))[:3] == hud.INK for x in range(13, 48)
                         for y in range(13, 68))  # fmt: skip

@@ -105,12 +105,14 @@ def test_raw_joystick_uses_the_joystick_numbers(inp: pad.PygameInput) -> None:
     post(pygame.JOYAXISMOTION, instance_id=JOY, axis=3, value=-1.0)  # right x: left
     post(pygame.JOYAXISMOTION, instance_id=JOY, axis=2, value=1.0)  # left trigger in
     post(pygame.JOYBUTTONDOWN, instance_id=JOY, button=4)  # LB: deadman
-    post(pygame.JOYHATMOTION, instance_id=JOY, hat=0, value=(1, 0))  # d-pad right
+    post(pygame.JOYHATMOTION, instance_id=JOY, hat=0, value=(1, 0))  # d-pad right: turn
     cs = inp.poll()
     assert cs.source == "joystick"
-    assert cs.held == {Action.DEADMAN, Action.LIMB_NEXT}
-    assert Action.LIMB_NEXT in cs.pressed
+    assert cs.held == {Action.DEADMAN, Action.TURN_RIGHT}
     assert direction(cs) == (Direction.LEFT_LOW, 3.0)
+    post(pygame.JOYHATMOTION, instance_id=JOY, hat=0, value=(0, -1))  # d-pad down: next limb
+    cs = inp.poll()
+    assert Action.TURN_RIGHT not in cs.held and Action.LIMB_NEXT in cs.pressed
     post(pygame.JOYHATMOTION, instance_id=JOY, hat=0, value=(0, 0))
     assert Action.LIMB_NEXT not in inp.poll().held
 
@@ -161,10 +163,14 @@ def test_keyboard_offers_the_same_actions(inp: pad.PygameInput) -> None:
     tuning = mapfile.load().tuning
     i = map_controls(inp.poll(), MapperState(), 0.0, tuning)[0]
     assert i.drive is not None and i.drive.direction == "forward-middle"
-    assert i.drive.speed == pytest.approx(tuning.keyboard_drive, abs=1e-3)
+    assert i.drive.forward == tuning.drive_scale and not i.turbo
     key(pygame.K_LSHIFT)
+    key(pygame.K_z)
     i = map_controls(inp.poll(), MapperState(), 0.0, tuning)[0]
-    assert i.drive is not None and i.drive.speed == 1.0
+    assert i.turbo and i.drive is not None
+    assert (i.drive.forward, i.drive.yaw) == (tuning.drive_turbo, tuning.turn_turbo)
+    for k in (pygame.K_w, pygame.K_LSHIFT, pygame.K_z):
+        key(k, down=False)
     for k, action in [(pygame.K_ESCAPE, Action.ESTOP), (pygame.K_TAB, Action.LIMB_NEXT),
                       (pygame.K_l, Action.ORIGIN_NEXT), (pygame.K_t, Action.TARGET_NEXT),
                       (pygame.K_RETURN, Action.RELEASE), (pygame.K_F10, Action.QUIT)]:  # fmt: skip

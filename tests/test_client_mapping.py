@@ -8,12 +8,8 @@ from pathlib import Path
 import pytest
 
 from kinesphere.clients import mapfile
-from kinesphere.clients.mapping import (
-    Intent,
-    MapperState,
-    Tuning,
-    map_controls,
-)
+from kinesphere.clients.mapping import Intent, MapperState, map_controls
+from kinesphere.clients.sticks import Tuning
 from kinesphere.clients.state import Action, ControllerState
 from kinesphere.errors import KinesphereError
 from kinesphere.laban import Direction
@@ -141,16 +137,11 @@ def test_beyond_grows_past_far_while_held_at_the_rim() -> None:
 
 
 def test_left_stick_drives_the_base() -> None:
+    """Holonomic by default; the full mapping per base kind is in test_client_drive."""
     assert intent(ControllerState()).drive is None
     i = intent(ControllerState(ly=-1.0))
-    assert i.drive is not None and i.drive.direction == "forward-middle" and i.drive.speed == 1.0
-    assert i.drive_vec == pytest.approx((1.0, 0.0))
-    half = T.stick_deadzone + (T.rim - T.stick_deadzone) / 2
-    i = intent(ControllerState(lx=-half))
-    assert i.drive is not None and i.drive.direction == "left-middle"
-    assert i.drive.speed == pytest.approx(0.5, abs=1e-3)
-    i = intent(ControllerState(lx=0.7, ly=0.7))
-    assert i.drive is not None and i.drive.direction == "right-back-middle"
+    assert i.drive is not None and (i.drive.forward, i.drive.left, i.drive.yaw) == (0.5, 0, 0)
+    assert (i.drive.direction, i.drive.speed) == ("forward-middle", 0.5)
     assert intent(ControllerState(lx=0.1)).drive is None  # dead zone
 
 
@@ -183,7 +174,10 @@ def test_default_mapping_loads() -> None:
     assert m.tuning == Tuning()
     assert m.controller.buttons["deadman"] == (mapfile.CONTROLLER_BUTTONS["leftshoulder"],)
     assert m.controller.axes["low"] == mapfile.CONTROLLER_AXES["lefttrigger"]
-    assert m.joystick.hats["limb_next"] == ((0, "right"),)
+    assert m.joystick.hats["limb_next"] == ((0, "down"),)
+    assert m.joystick.hats["turn_right"] == ((0, "right"),)
+    assert m.controller.buttons["turn_left"] == (mapfile.CONTROLLER_BUTTONS["dpleft"],)
+    assert m.controller.buttons["turbo"] == (mapfile.CONTROLLER_BUTTONS["leftstick"],)
     assert m.keyboard.buttons["deadman"] == ("space",)
     assert m.groups == {}
 

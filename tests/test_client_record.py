@@ -48,7 +48,7 @@ def test_a_replay_sends_what_the_recorded_session_sent(
     script = Script(inp, {
         0: lambda: (p.plug(), p.deadman(), p.right(-1.0, 0.0)),
         3: lambda: p.axis(pygame.CONTROLLER_AXIS_TRIGGERLEFT, 1.0),
-        5: lambda: (p.left(0.0, -0.7), p.tap(pygame.CONTROLLER_BUTTON_DPAD_UP)),
+        5: lambda: (p.left(0.0, -0.7), p.tap(pygame.CONTROLLER_BUTTON_X)),
         8: lambda: p.right(1.0, 0.0),
         11: lambda: p.deadman(False),
         13: lambda: None,

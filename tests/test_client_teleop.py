@@ -100,7 +100,8 @@ def test_stream_content_rate_ttl_and_final_stop(
         c = g.cmd
         assert c.deadman and not c.stop and not c.estop and c.ttl_ms == 300
         assert c.parts == [SpatialCommand("limb_11", "distal_11", "left-low", 3.0)]
-        assert c.drive is not None and (c.drive.direction, c.drive.speed) == ("forward-middle", 1.0)
+        assert c.drive is not None and (c.drive.direction, c.drive.speed) == ("forward-middle", 0.5)
+        assert (c.drive.forward, c.drive.left, c.drive.yaw) == (0.5, 0.0, 0.0)
         assert c.sender == op.seq.sender
     assert [g.cmd.seq for g in got] == list(range(31))
     assert final.cmd.stop and not final.cmd.deadman and final.cmd.parts == []
@@ -324,7 +325,7 @@ def test_shoulder_cycling_follows_the_robots_catalogue(
         assert view.aliases["limb_11"] == "right_arm"
         p = Pad()
         seen = []
-        for b in ("DPAD_RIGHT", "DPAD_UP", "DPAD_UP", "DPAD_RIGHT", "DPAD_RIGHT", "DPAD_LEFT"):
+        for b in ("DPAD_DOWN", "X", "X", "DPAD_DOWN", "DPAD_DOWN", "DPAD_UP"):
             p.tap(getattr(pygame, f"CONTROLLER_BUTTON_{b}"))
             v = op.tick(inp.poll())
             seen.append((v.limb, v.origin))

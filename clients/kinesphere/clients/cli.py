@@ -17,17 +17,19 @@ KEYS_HELP = """keys (keyboard fallback, the HUD window needs focus):
   arrows      right stick: the limb's horizontal direction (diagonals: two arrows)
   1 / 2 / 3   near / mid / far reach for the arrows and Q/E
   Q / E       low / high level (alone: Place Low / Place High)
-  W A S D     left stick: drive the base (hold shift for full speed)
+  W A S D     left stick: drive the base      Z / C   turn the base left / right
+  shift       turbo (full speed and turn rate)
   space       deadman (hold)          B       beyond: reach past far (hold, with 3)
   Tab / L     next limb / origin      T       next target (robot -> group -> all)
-  Escape      E-STOP every robot      Enter   release the e-stop of the target
+  Escape      E-STOP every robot      Enter   release the e-stops you latched
   F10         quit
 
 gamepad (SDL layout, see clients/mappings/default.toml):
-  right stick limb direction + reach   left stick   drive the base
+  right stick limb direction + reach   left stick   drive the base (proportional)
   LT / RT     low / high level         LB (hold)    deadman       RB (hold) beyond
-  d-pad       left/right: limb, up/down: origin     Y  next target
-  B           E-STOP every robot       Start        release the e-stop
+  d-pad left/right: turn the base (hold)            L3 (hold)     turbo
+  d-pad down/up: next/previous limb    X  next origin              Y  next target
+  B           E-STOP every robot       Start        release the e-stops you latched
 """
 
 

@@ -97,6 +97,9 @@ def gamepad(args: argparse.Namespace) -> int:
         from kinesphere.clients import input as pad
 
         pad.init_pygame(args.headless)
+        if args.headless and replay is None and pad.controllers() == 0:
+            print("no game controller found: waiting for one to be plugged in; nothing moves "
+                  "until then (--headless has no keyboard)", file=sys.stderr)
     try:
         with _link(args, watch=True) as link:
             op = teleop.Teleop(link, mapping, target, options)

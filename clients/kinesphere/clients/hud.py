@@ -1,11 +1,13 @@
-"""A small pygame window that shows what the robots are about to do, and what they are doing.
+"""A pygame window that shows what the robots are about to do, and what they are doing.
 
-Left: the 27 Laban directions as a 3 x 9 chart (rows high / middle / low, columns place and
-the 8 horizontals clockwise from forward), each cell a Laban direction symbol shaded by level
-as in Laban notation (high striped, middle a dot, low filled); the commanded cell is lit and
-directions the selected limb has no poses for are greyed out.
-Right: the size as near / mid / far rings with the current reach, the drive vector, deadman
-and e-stop state, then one line per robot with its live ``RobotState`` status.
+Left: the 27 Laban directions as three 3 x 3 blocks (high, middle, low), each laid out as
+seen from above with the robot facing up: forward is the top row, left the left column, place
+in the centre. So the cell that lights is where the stick points. Each cell is a Laban
+direction symbol shaded by level as in Laban notation (high striped, middle a dot, low
+filled); a direction the selected limb has no poses for is crossed out on a dark cell.
+Right: the size as near / mid / far rings, and the base drive (an arrow for the velocity, an
+arc for the turn). Below: every robot in the operator's words (:mod:`kinesphere.clients.report`):
+status, odometry, link age, control lease, wrapped, never cut off.
 
 :func:`render` draws onto any surface (tests use SDL's dummy driver and save a PNG);
 :class:`Hud` owns the window.
@@ -22,131 +24,50 @@ os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
 
 import pygame  # noqa: E402
 
+from kinesphere.clients.drive import Steering  # noqa: E402
+from kinesphere.clients.report import Line, robot_lines  # noqa: E402
+from kinesphere.clients.symbols import draw_symbol  # noqa: E402
 from kinesphere.clients.teleop import View  # noqa: E402
 from kinesphere.errors import KinesphereError  # noqa: E402
 from kinesphere.laban import Direction, Horizontal, Level  # noqa: E402
-from kinesphere.protocol import Status  # noqa: E402
 from kinesphere.sizes import size_name  # noqa: E402
 
-SIZE = (980, 600)
-COLUMNS = (
-    Horizontal.PLACE,
-    Horizontal.FORWARD,
-    Horizontal.RIGHT_FORWARD,
-    Horizontal.RIGHT,
-    Horizontal.RIGHT_BACK,
-    Horizontal.BACK,
-    Horizontal.LEFT_BACK,
-    Horizontal.LEFT,
-    Horizontal.LEFT_FORWARD,
+SIZE = (1100, 720)
+BLOCK = (
+    (Horizontal.LEFT_FORWARD, Horizontal.FORWARD, Horizontal.RIGHT_FORWARD),
+    (Horizontal.LEFT, Horizontal.PLACE, Horizontal.RIGHT),
+    (Horizontal.LEFT_BACK, Horizontal.BACK, Horizontal.RIGHT_BACK),
 )
-ROWS = (Level.HIGH, Level.MIDDLE, Level.LOW)
-SHORT = {"place": "P", "forward": "F", "back": "B", "left": "L", "right": "R"}
-STALE_S = 0.5
+"""One level's 9 horizontals as seen from above, robot facing up (rows top to bottom)."""
+LEVELS = (Level.HIGH, Level.MIDDLE, Level.LOW)
+"""The blocks, left to right."""
+CHART = (70, 150)
+"""Top-left corner of the first block's first cell."""
+CELL = 46
+BLOCK_STEP = 3 * CELL + 24
 
 BG = (24, 26, 30)
 FG = (225, 228, 232)
 DIM = (120, 126, 134)
 INK = (235, 235, 235)
-UNAVAILABLE = (72, 76, 84)
+CELL_BG = (44, 48, 56)
+UNAVAILABLE_BG = (30, 30, 34)
+UNAVAILABLE = (88, 60, 60)
 LIT = (250, 200, 60)
 GOOD = (70, 190, 110)
 WARN = (235, 160, 50)
 BAD = (225, 70, 60)
-STATUS_COLOURS: dict[str, tuple[int, int, int]] = {
-    Status.MOVING: GOOD,
-    Status.HOLDING: (110, 160, 230),
-    Status.IDLE: DIM,
-    Status.STOPPED: WARN,
-    Status.CLAMPED: WARN,
-    Status.ESTOP: BAD,
-    Status.DATABANK_UNREACHABLE: BAD,
-    Status.ERROR: BAD,
-}
+INFO = (110, 160, 230)
+TONES = {"ok": GOOD, "info": INFO, "warn": WARN, "bad": BAD, "dim": DIM}
 
 
-def _short(h: Horizontal) -> str:
-    return "".join(SHORT[w] for w in h.value.split("-"))
-
-
-def symbol_outline(h: Horizontal, rect: pygame.Rect) -> list[tuple[float, float]]:
-    """Polygon of the Laban direction symbol for ``h`` inside ``rect``.
-
-    Place is a rectangle; side directions are wedges pointing that way; forward has a pin on
-    top and back a notch below; the diagonals are rectangles cut on the side they point to.
-    """
-    x0, y0, x1, y1 = rect.left, rect.top, rect.right, rect.bottom
-    w, hgt = rect.width, rect.height
-    xm = (x0 + x1) / 2
-    cut = 0.35 * hgt
-    if h is Horizontal.PLACE:
-        return [(x0, y0), (x1, y0), (x1, y1), (x0, y1)]
-    if h is Horizontal.LEFT:
-        return [(x1, y0), (x1, y1), (x0, (y0 + y1) / 2)]
-    if h is Horizontal.RIGHT:
-        return [(x0, y0), (x1, (y0 + y1) / 2), (x0, y1)]
-    if h is Horizontal.FORWARD:
-        pin = 0.18 * w
-        top = y0 + cut / 1.5
-        return [
-            (x0, top),
-            (xm - pin, top),
-            (xm - pin, y0),
-            (xm + pin, y0),
-            (xm + pin, top),
-            (x1, top),
-            (x1, y1),
-            (x0, y1),
-        ]
-    if h is Horizontal.BACK:
-        notch = 0.18 * w
-        bottom = y1 - cut / 1.5
-        return [
-            (x0, y0),
-            (x1, y0),
-            (x1, y1),
-            (xm + notch, y1),
-            (xm + notch, bottom),
-            (xm - notch, bottom),
-            (xm - notch, y1),
-            (x0, y1),
-        ]
-    right = "right" in h.value
-    forward = "forward" in h.value
-    if forward:  # the top is cut, rising towards the side pointed to
-        return (
-            [(x0, y0), (x1, y0 + cut), (x1, y1), (x0, y1)]
-            if not right
-            else [(x0, y0 + cut), (x1, y0), (x1, y1), (x0, y1)]
-        )
-    return (
-        [(x0, y0), (x1, y0), (x1, y1 - cut), (x0, y1)]
-        if not right
-        else [(x0, y0), (x1, y0), (x1, y1), (x0, y1 - cut)]
-    )
-
-
-def draw_symbol(
-    surf: pygame.Surface, d: Direction, rect: pygame.Rect, ink: tuple[int, int, int]
-) -> None:
-    """One direction symbol with Laban's level shading."""
-    poly = symbol_outline(d.horizontal, rect)
-    if d.level is Level.LOW:
-        pygame.draw.polygon(surf, ink, poly)
-        return
-    if d.level is Level.HIGH:  # diagonal hatching, clipped to the symbol
-        mask = pygame.Surface(rect.size, pygame.SRCALPHA)
-        local = [(x - rect.left, y - rect.top) for x, y in poly]
-        pygame.draw.polygon(mask, (255, 255, 255, 255), local)
-        stripes = pygame.Surface(rect.size, pygame.SRCALPHA)
-        for k in range(-rect.height, rect.width, 6):
-            pygame.draw.line(stripes, (*ink, 255), (k, rect.height), (k + rect.height, 0), 2)
-        stripes.blit(mask, (0, 0), special_flags=pygame.BLEND_RGBA_MIN)
-        surf.blit(stripes, rect.topleft)
-    else:
-        cx, cy = rect.center
-        pygame.draw.circle(surf, ink, (cx, cy), max(2, rect.width // 8))
-    pygame.draw.polygon(surf, ink, poly, 2)
+def cell_rect(d: Direction) -> pygame.Rect:
+    """Where the chart draws ``d``."""
+    b = LEVELS.index(d.level)
+    row = next(i for i, r in enumerate(BLOCK) if d.horizontal in r)
+    col = BLOCK[row].index(d.horizontal)
+    x = CHART[0] + b * BLOCK_STEP + col * CELL
+    return pygame.Rect(x, CHART[1] + row * CELL, CELL - 4, CELL - 4)
 
 
 def _text(
@@ -161,32 +82,74 @@ def _text(
     return pos[1] + img.get_height() + 2
 
 
-def _chart(
-    surf: pygame.Surface, fonts: dict[str, pygame.font.Font], view: View, x: int, y: int
-) -> None:
-    cw, ch = 52, 74
+def wrap(font: pygame.font.Font, text: str, width: int) -> list[str]:
+    """``text`` broken at spaces into lines no wider than ``width`` (long words are split)."""
+    lines: list[str] = []
+    current = ""
+    for word in text.split(" "):
+        candidate = f"{current} {word}" if current else word
+        if font.size(candidate)[0] <= width:
+            current = candidate
+            continue
+        if current:
+            lines.append(current)
+        while font.size(word)[0] > width and len(word) > 1:
+            cut = len(word)
+            while cut > 1 and font.size(word[:cut])[0] > width:
+                cut -= 1
+            lines.append(word[:cut])
+            word = word[cut:]
+        current = word
+    lines.append(current)
+    return lines
+
+
+def _paragraph(
+    surf: pygame.Surface, font: pygame.font.Font, text: str, x: int, y: int, width: int,
+    colour: tuple[int, int, int] = FG, indent: int = 0,
+) -> int:  # fmt: skip
+    """Draw ``text`` wrapped to ``width``; later lines indented; returns the next y."""
+    for i, line in enumerate(wrap(font, text, width - indent)):
+        y = _text(surf, font, line, (x + (indent if i else 0), y), colour)
+    return y
+
+
+def _cross(surf: pygame.Surface, rect: pygame.Rect, colour: tuple[int, int, int]) -> None:
+    pygame.draw.line(surf, colour, rect.topleft, rect.bottomright, 3)
+    pygame.draw.line(surf, colour, rect.topright, rect.bottomleft, 3)
+
+
+def _chart(surf: pygame.Surface, fonts: dict[str, pygame.font.Font], view: View) -> None:
     active = view.intent.direction
-    for j, h in enumerate(COLUMNS):
-        _text(surf, fonts["small"], _short(h), (x + j * cw + 18, y), DIM)
-    for i, lvl in enumerate(ROWS):
-        _text(surf, fonts["small"], lvl.value, (x - 56, y + 22 + i * ch + ch // 2 - 8), DIM)
-        for j, h in enumerate(COLUMNS):
-            d = Direction((h.value, lvl.value))
-            cell = pygame.Rect(x + j * cw, y + 20 + i * ch, cw - 4, ch - 4)
-            lit = d is active
-            if lit:
-                pygame.draw.rect(surf, LIT if view.engaged else DIM, cell, border_radius=4)
-            if view.asked is d:  # the stick's own choice, replaced by the nearest available
-                pygame.draw.rect(surf, LIT, cell, 2, border_radius=4)
-            missing = view.available is not None and d not in view.available
-            ink = BG if lit else UNAVAILABLE if missing and d is not Direction.PLACE_MIDDLE else INK
-            draw_symbol(surf, d, cell.inflate(-18, -16), ink)
+    x0, y0 = CHART
+    for b, lvl in enumerate(LEVELS):
+        _text(surf, fonts["mid"], lvl.value.upper(), (x0 + b * BLOCK_STEP, y0 - 24), DIM)
+    _text(surf, fonts["tiny"], "seen from above, robot facing up: stick up = forward row, "
+          "stick left = left column", (x0, y0 - 44), DIM)  # fmt: skip
+    for d in Direction:
+        cell = cell_rect(d)
+        lit = d is active
+        missing = view.available is not None and d not in view.available
+        missing = missing and d is not Direction.PLACE_MIDDLE
+        if lit:
+            bg = LIT if view.engaged else DIM
+        else:
+            bg = UNAVAILABLE_BG if missing else CELL_BG
+        pygame.draw.rect(surf, bg, cell, border_radius=4)
+        if view.asked is d:  # the stick's own choice, replaced by the nearest available
+            pygame.draw.rect(surf, LIT, cell, 3, border_radius=4)
+        ink = BG if lit else UNAVAILABLE if missing else INK
+        draw_symbol(surf, d, cell.inflate(-16, -12), ink)
+        if missing:
+            _cross(surf, cell.inflate(-8, -8), BAD if view.asked is d else UNAVAILABLE)
     size = view.intent.size
     label = f"{active.slug}   size {size:.2f} ({size_name(size if size > 3 else round(size))})"
     if view.asked is not None:
         label = f"{view.asked.slug} -> {label}"
-    _text(surf, fonts["big"], label, (x, y + 20 + 3 * ch + 6), LIT if view.engaged else FG)
-    _text(surf, fonts["tiny"], "grey: no pose stored for this limb", (x, y + 20 + 3 * ch + 38), DIM)
+    y = y0 + 3 * CELL + 8
+    y = _text(surf, fonts["big"], label, (x0, y), LIT if view.engaged else FG)
+    _text(surf, fonts["tiny"], "crossed out: no pose stored for this limb; a push there is "
+          "served by the nearest stored direction on the same side", (x0, y), DIM)  # fmt: skip
 
 
 def _rings(
@@ -209,51 +172,92 @@ def _rings(
     _text(surf, fonts["small"], "size", (cx - r0 * 3, cy - r0 * 3 - 18), DIM)
 
 
+def _arrowhead(surf: pygame.Surface, colour: tuple[int, int, int], tip: tuple[float, float],
+               ang: float) -> None:  # fmt: skip
+    for s in (-1, 1):
+        a = ang + math.pi + s * 0.5
+        end = (tip[0] + 12 * math.cos(a), tip[1] + 12 * math.sin(a))
+        pygame.draw.line(surf, colour, tip, end, 4)
+
+
+STEERING_WORDS = {
+    Steering.NONE: "fixed base: the left stick does nothing",
+    Steering.HOLONOMIC: "holonomic: stick = velocity, d-pad left/right turns",
+    Steering.ARCADE: "tracks/wheels: stick up/down drives, left/right turns",
+}
+
+
 def _drive(
     surf: pygame.Surface, fonts: dict[str, pygame.font.Font], view: View, cx: int, cy: int
 ) -> None:
     r = 60
     pygame.draw.circle(surf, DIM, (cx, cy), r, 1)
-    fwd, left = view.intent.drive_vec
-    tip = (cx - left * r, cy - fwd * r)  # screen: up = forward, left = left
-    if view.intent.drive is not None:
-        colour = LIT if view.engaged else FG
+    drive = view.intent.drive
+    colour = LIT if view.engaged else FG
+    if drive is not None and (drive.forward or drive.left):
+        tip = (cx - drive.left * r, cy - drive.forward * r)  # screen: up = forward
         pygame.draw.line(surf, colour, (cx, cy), tip, 4)
-        ang = math.atan2(tip[1] - cy, tip[0] - cx)
-        for s in (-1, 1):
-            a = ang + math.pi + s * 0.5
-            pygame.draw.line(
-                surf, colour, tip, (tip[0] + 12 * math.cos(a), tip[1] + 12 * math.sin(a)), 4
-            )
-        text = f"drive {view.intent.drive.direction} {view.intent.drive.speed:.0%}"
+        _arrowhead(surf, colour, tip, math.atan2(tip[1] - cy, tip[0] - cx))
     else:
         pygame.draw.circle(surf, DIM, (cx, cy), 3)
+    if drive is not None and drive.yaw:
+        # an arc above the robot, sweeping the way it turns (positive = counter-clockwise)
+        sweep = math.pi * 0.8 * abs(drive.yaw)
+        start = math.pi / 2
+        end = start + sweep if drive.yaw > 0 else start - sweep
+        rect = pygame.Rect(cx - r - 10, cy - r - 10, 2 * r + 20, 2 * r + 20)
+        lo, hi = min(start, end), max(start, end)
+        pygame.draw.arc(surf, colour, rect, lo, hi, 4)
+        tip = (cx + (r + 10) * math.cos(end), cy - (r + 10) * math.sin(end))
+        _arrowhead(surf, colour, tip, -end - (math.pi / 2 if drive.yaw > 0 else -math.pi / 2))
+    if drive is None:
         text = "base still"
-    img = fonts["small"].render(text, True, FG)
-    surf.blit(
-        img, (min(cx - img.get_width() // 2, surf.get_width() - img.get_width() - 4), cy + r + 4)
-    )
+    else:
+        text = (f"forward {drive.forward:+.0%}  left {drive.left:+.0%}  "
+                f"turn {drive.yaw:+.0%}")  # fmt: skip
+    if view.intent.turbo:
+        text += "  TURBO"
+    y = _text(surf, fonts["small"], text, (cx - 110, cy + r + 14), FG)
+    _text(surf, fonts["tiny"], STEERING_WORDS[view.intent.steering], (cx - 110, y), DIM)
 
 
-def _robots(
-    surf: pygame.Surface, fonts: dict[str, pygame.font.Font], view: View, x: int, y: int
-) -> None:
-    y = _text(surf, fonts["mid"], "robots", (x, y), DIM)
+def _robots(surf: pygame.Surface, fonts: dict[str, pygame.font.Font], view: View, top: int
+            ) -> None:  # fmt: skip
+    """Every robot, wrapped, in one or two columns; robots that do not fit are counted."""
+    x, width, bottom = 16, surf.get_width() - 32, surf.get_height() - 8
+    y = _text(surf, fonts["mid"], "robots  (> = targeted)", (x, top), DIM)
     now = time.monotonic()
     if not view.robots:
-        _text(surf, fonts["small"], "none heard yet", (x, y), DIM)
+        _text(surf, fonts["small"], "none heard yet: no robot state has arrived", (x, y), DIM)
+        return
+    entries: list[tuple[str, list[Line], bool]] = []
     for rid, seen in sorted(view.robots.items()):
         st = seen.state
-        stale = now - seen.at > STALE_S
-        mark = ">" if view.target.includes(rid) else " "
-        status = "silent" if stale else st.status
-        colour = DIM if stale else STATUS_COLOURS.get(st.status, FG)
-        line = f"{mark} {rid:<12} {st.platform:<8} {status}"
-        if st.clamped and not stale:
-            line += f" ({', '.join(st.clamped[:3])})"
-        y = _text(surf, fonts["small"], line, (x, y), colour)
-        if st.detail and not stale and st.status not in (Status.MOVING, Status.IDLE):
-            y = _text(surf, fonts["tiny"], f"    {st.detail[:60]}", (x, y), DIM)
+        lines = robot_lines(st, now - seen.at, view.sender)
+        entries.append((f"{rid}  ({st.platform})", lines, view.target.includes(rid)))
+    columns = 1 if len(entries) <= 3 else 2
+    col_w = width // columns - 12
+    per_col = -(-len(entries) // columns)
+    start_y = y
+    shown = 0
+    for i, (title, lines, targeted) in enumerate(entries):
+        col = i // per_col
+        if i % per_col == 0:
+            y = start_y
+        cx = x + col * (col_w + 24)
+        need = 22 + sum(len(wrap(fonts["small"], ln.text, col_w - 16)) * 20 for ln in lines)
+        if y + need > bottom:
+            continue
+        mark = "> " if targeted else "  "
+        y = _text(surf, fonts["mid"], mark + title, (cx, y), FG if targeted else DIM)
+        for ln in lines:
+            for part in wrap(fonts["small"], ln.text, col_w - 16):
+                y = _text(surf, fonts["small"], part, (cx + 16, y), TONES.get(ln.tone, FG))
+        y += 4
+        shown += 1
+    if shown < len(entries):
+        _text(surf, fonts["small"], f"... and {len(entries) - shown} more (kinesphere status)",
+              (x + width - 300, bottom - 18), WARN)  # fmt: skip
 
 
 def _alias(view: View, label: str) -> str:
@@ -261,30 +265,16 @@ def _alias(view: View, label: str) -> str:
     return f"{label} ({alias})" if alias else label
 
 
-def render(surf: pygame.Surface, view: View, fonts: dict[str, pygame.font.Font]) -> None:
-    """Draw the whole HUD for ``view``."""
-    surf.fill(BG)
-    y = _text(surf, fonts["big"], f"target: {view.target.label}", (16, 10))
-    y = _text(
-        surf,
-        fonts["mid"],
-        f"limb {_alias(view, view.limb)}  from  {_alias(view, view.origin)}",
-        (16, y),
-    )
-    src = view.source if view.connected else "DISCONNECTED"
-    _text(
-        surf,
-        fonts["small"],
-        f"input: {src}   seq {view.seq}",
-        (16, y),
-        FG if view.connected else BAD,
-    )
+def _banners(surf: pygame.Surface, fonts: dict[str, pygame.font.Font], view: View) -> None:
+    x, w = 700, 384
     if view.estopped or view.remote_estop:
-        who = "this client" if view.estopped else ", ".join(view.remote_estop)
-        banner = pygame.Rect(600, 10, 364, 44)
+        who = "by you" if view.estopped else ", ".join(view.remote_estop)
+        banner = pygame.Rect(x, 10, w, 44)
         pygame.draw.rect(surf, BAD, banner, border_radius=6)
-        _text(surf, fonts["big"], f"E-STOP ({who})"[:30], (banner.x + 10, banner.y + 8), INK)
-    dm = pygame.Rect(600, 60, 364, 34)
+        lines = wrap(fonts["big"], f"E-STOP ({who})", w - 20)
+        _text(surf, fonts["big"], lines[0] + (" ..." if len(lines) > 1 else ""),
+              (banner.x + 10, banner.y + 8), INK)  # fmt: skip
+    dm = pygame.Rect(x, 60, w, 34)
     if not view.deadman_required:
         colour, text = WARN, "deadman OFF (--no-deadman)"
     elif view.engaged:
@@ -297,14 +287,27 @@ def render(surf: pygame.Surface, view: View, fonts: dict[str, pygame.font.Font])
         colour, text = DIM, "deadman released: robots hold"
     pygame.draw.rect(surf, colour, dm, border_radius=6)
     _text(surf, fonts["mid"], text, (dm.x + 10, dm.y + 7), BG)
-    _chart(surf, fonts, view, 80, 110)
-    _rings(surf, fonts, view, 650, 240)
-    _drive(surf, fonts, view, 860, 230)
-    _robots(surf, fonts, view, 560, 360)
-    if view.catalogue_errors:
-        p, msg = next(iter(view.catalogue_errors.items()))
-        _text(surf, fonts["small"], f"catalogue {p}: {msg}"[:90], (16, 540), BAD)
-    _text(surf, fonts["small"], view.message[:110], (16, 566), FG)
+
+
+def render(surf: pygame.Surface, view: View, fonts: dict[str, pygame.font.Font]) -> None:
+    """Draw the whole HUD for ``view``."""
+    surf.fill(BG)
+    width = 670
+    y = _paragraph(surf, fonts["big"], f"target: {view.target.label}", 16, 10, width)
+    y = _text(surf, fonts["mid"],
+              f"limb {_alias(view, view.limb)}  from  {_alias(view, view.origin)}", (16, y))
+    src = view.source if view.connected else "DISCONNECTED: plug a controller in"
+    y = _text(surf, fonts["small"], f"input: {src}   you: {view.sender}   seq {view.seq}",
+              (16, y), FG if view.connected else BAD)  # fmt: skip
+    if view.message:
+        y = _paragraph(surf, fonts["small"], view.message, 16, y, width, LIT)
+    for p, msg in view.catalogue_errors.items():
+        y = _paragraph(surf, fonts["small"], f"catalogue of {p}: {msg}", 16, y, width, BAD)
+    _banners(surf, fonts, view)
+    _chart(surf, fonts, view)
+    _rings(surf, fonts, view, 640, 230)
+    _drive(surf, fonts, view, 900, 230)
+    _robots(surf, fonts, view, 410)
 
 
 def load_fonts() -> dict[str, pygame.font.Font]:

@@ -15,6 +15,7 @@ centred stick, holds and presses add up); window focus loss releases every key.
 
 from __future__ import annotations
 
+import logging
 import os
 from dataclasses import dataclass, field
 
@@ -30,19 +31,36 @@ from kinesphere.clients.state import Action, ControllerState  # noqa: E402
 from kinesphere.errors import KinesphereError  # noqa: E402
 
 AXIS_MAX = 32767.0
+log = logging.getLogger(__name__)
+
+
+NO_DISPLAY = "no display: use --headless (or run where DISPLAY or WAYLAND_DISPLAY is set)"
+HIDDEN_DRIVERS = frozenset({"offscreen", "dummy"})
+"""SDL video drivers that draw into memory: a HUD there would run unseen."""
 
 
 def init_pygame(headless: bool) -> None:
     """Initialise what input needs: an event queue (video) and the joystick subsystems.
 
     Headless runs use SDL's dummy video driver (no window); keyboard input then has nowhere
-    to come from, so a pad is needed.
+    to come from, so a pad is needed. Without a display SDL would quietly fall back to its
+    offscreen driver and the HUD would run unseen: that is an error (:data:`NO_DISPLAY`),
+    unless the user chose the driver with ``SDL_VIDEODRIVER``.
     """
     if headless:
         os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
+    chosen = os.environ.get("SDL_VIDEODRIVER")
     pygame.display.init()
+    if not headless and not chosen and pygame.display.get_driver() in HIDDEN_DRIVERS:
+        pygame.quit()
+        raise KinesphereError("unavailable", NO_DISPLAY)
     pygame.joystick.init()
     sdl_controller.init()
+
+
+def controllers() -> int:
+    """Game controllers and joysticks SDL sees now."""
+    return int(pygame.joystick.get_count())
 
 
 def axis_value(value: float | int) -> float:
@@ -142,12 +160,17 @@ class PygameInput:
         known = self.devices.get(iid)
         if known is None or (known.kind == "joystick" and kind == "controller"):
             self.devices[iid] = _Device(kind, name or event.dict.get("name", ""), handle)
+            if handle is not None:
+                log.info("%s connected: %s", kind, name or "unnamed")
         self.lost = False
 
     def _removed(self, iid: int) -> None:
-        if self.devices.pop(iid, None) is not None and self.active == iid:
+        dev = self.devices.pop(iid, None)
+        if dev is not None and self.active == iid:
             self.active = None
             self.lost = True
+            log.warning("%s %s removed: robots stopped; plug one in and press the deadman anew",
+                        dev.kind, dev.name or "unnamed")
 
     def _device(self, d: dict[str, object], kind: str) -> _Device:
         """The device an input event came from, registered on first sight."""
@@ -253,8 +276,7 @@ class PygameInput:
         right = self._key_stick("right", self._kb_reach)
         if right is not None:
             rx, ry, keyboard = right[0], right[1], True
-        speed = 1.0 if self._key("fast") else self.map.tuning.keyboard_drive
-        left = self._key_stick("drive", speed)
+        left = self._key_stick("drive", 1.0)
         if left is not None:
             lx, ly, keyboard = left[0], left[1], True
         if self._key("low"):

@@ -14,8 +14,8 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from kinesphere.clients.mapping import Tuning
 from kinesphere.clients.state import ACTIONS
+from kinesphere.clients.sticks import Tuning
 from kinesphere.errors import KinesphereError, choices
 from kinesphere.keyexpr import check_segment
 
@@ -37,9 +37,9 @@ HAT_DIRECTIONS = ("left", "right", "up", "down")
 KEY_AXES = (
     "right_forward", "right_back", "right_left", "right_right",
     "drive_forward", "drive_back", "drive_left", "drive_right",
-    "low", "high", "near", "mid", "far", "fast",
+    "low", "high", "near", "mid", "far",
 )  # fmt: skip
-"""Keyboard keys standing in for stick directions, triggers, reach and the drive's speed."""
+"""Keyboard keys standing in for stick directions, triggers and reach."""
 
 
 @dataclass(frozen=True)

@@ -17,6 +17,9 @@ class Action:
 
     DEADMAN: Final = "deadman"  # hold: nothing moves unless held
     BEYOND: Final = "beyond"  # hold at the rim: sizes past far, translating the base
+    TURN_LEFT: Final = "turn_left"  # hold: the base turns left (counter-clockwise)
+    TURN_RIGHT: Final = "turn_right"  # hold: the base turns right
+    TURBO: Final = "turbo"  # hold: the drive's turbo scales
     LIMB_NEXT: Final = "limb_next"
     LIMB_PREV: Final = "limb_prev"
     ORIGIN_NEXT: Final = "origin_next"
@@ -27,7 +30,9 @@ class Action:
     QUIT: Final = "quit"
 
 
-HOLD_ACTIONS: Final = frozenset({Action.DEADMAN, Action.BEYOND})
+HOLD_ACTIONS: Final = frozenset(
+    {Action.DEADMAN, Action.BEYOND, Action.TURN_LEFT, Action.TURN_RIGHT, Action.TURBO}
+)
 ACTIONS: Final = frozenset(v for k, v in vars(Action).items() if k.isupper())
 
 

@@ -25,6 +25,7 @@ from dataclasses import dataclass, field, replace
 from typing import Protocol
 
 from kinesphere.clients import targets as tg
+from kinesphere.clients.drive import Steering, base_kind, steering_for
 from kinesphere.clients.limbs import (
     CatalogueCache,
     Selection,
@@ -78,6 +79,8 @@ class View:
     seq: int
     message: str
     catalogue_errors: dict[str, str] = field(default_factory=dict)
+    sender: str = ""
+    """This operator's sender id (robots name it as their lease holder or e-stop latcher)."""
     available: frozenset[Direction] | None = None
     """Directions the limb has poses for (None: no catalogue yet)."""
     asked: Direction | None = None
@@ -104,6 +107,7 @@ class Teleop:
         self.catalogues = CatalogueCache(link)
         self.mstate = MapperState()
         self.intent = NEUTRAL_INTENT
+        self.steering = Steering.HOLONOMIC
         self.streaming = False
         self.estopped = False
         self.need_fresh = False
@@ -170,9 +174,12 @@ class Teleop:
         now = time.monotonic() if now is None else now
         dt = 0.0 if self._last is None else now - self._last
         self._last = now
-        self.intent, self.mstate = map_controls(cs, self.mstate, dt, self.map.tuning)
         self._presses(cs)
         cats = self.catalogues.get(self._platforms())
+        self.steering = steering_for(base_kind(c) for c in cats)
+        self.intent, self.mstate = map_controls(
+            cs, self.mstate, dt, self.map.tuning, self.steering
+        )
         self.selection.update(pairs_of(cats))
         self._aliases = aliases_of(cats)
         self._available = available_directions(cats, self.selection.limb, self.selection.origin)
@@ -227,6 +234,7 @@ class Teleop:
             catalogue_errors=self.catalogues.errors(),
             available=self._available,
             asked=self._asked,
+            sender=self.seq.sender,
         )
 
     def shutdown(self) -> None:
