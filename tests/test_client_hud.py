@@ -14,7 +14,7 @@ os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
 import pygame  # noqa: E402
 import pytest  # noqa: E402
 
-from kinesphere.clients import hud, report  # noqa: E402
+from kinesphere.clients import hud  # noqa: E402
 from kinesphere.clients import targets as tg  # noqa: E402
 from kinesphere.clients.drive import Steering  # noqa: E402
 from kinesphere.clients.link import Seen  # noqa: E402

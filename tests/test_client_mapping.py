@@ -9,8 +9,8 @@ import pytest
 
 from kinesphere.clients import mapfile
 from kinesphere.clients.mapping import Intent, MapperState, map_controls
-from kinesphere.clients.sticks import Tuning
 from kinesphere.clients.state import Action, ControllerState
+from kinesphere.clients.sticks import Tuning
 from kinesphere.errors import KinesphereError
 from kinesphere.laban import Direction
 

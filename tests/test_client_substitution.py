@@ -14,8 +14,8 @@ import pytest
 
 from kinesphere.clients.limbs import available_directions, pairs_of, served
 from kinesphere.clients.mapping import MapperState, map_controls
-from kinesphere.clients.sticks import RING, Tuning
 from kinesphere.clients.state import ControllerState
+from kinesphere.clients.sticks import RING, Tuning
 from kinesphere.laban import Direction, Level
 from kinesphere.protocol import Catalogue
 from kinesphere.robots.platform import platform_names
