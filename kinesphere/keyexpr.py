@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 from kinesphere.errors import KinesphereError
+from kinesphere.protocol import MAX_NAME
 from kinesphere.sizes import parse_size
 
 DEFAULT_PREFIX = "kinesphere"
@@ -21,11 +22,17 @@ _FORBIDDEN = frozenset("/*$?#")
 
 
 def check_segment(text: str, what: str = "name", *, wildcard: bool = False) -> str:
-    """``text`` if it is one valid key segment (or ``"*"`` when ``wildcard``), else malformed."""
+    """``text`` if it is one valid key segment (or ``"*"`` when ``wildcard``) of at most
+    :data:`~kinesphere.protocol.MAX_NAME` characters, else malformed (quoting at most 80)."""
     if wildcard and text == WILDCARD:
         return text
     if not isinstance(text, str) or not text:
-        raise KinesphereError("malformed", f"{what} must be a non-empty string, got {text!r}")
+        raise KinesphereError("malformed", f"{what} must be a non-empty string, got {text!r:.80}")
+    if len(text) > MAX_NAME:
+        raise KinesphereError(
+            "malformed", f"{what} {text[:40]!r}... has {len(text)} characters, at most "
+            f"{MAX_NAME} allowed",
+        )
     bad = sorted(set(text) & _FORBIDDEN)
     if bad:
         raise KinesphereError(
@@ -155,7 +162,7 @@ class Keys:
         if len(parts) != 6 or parts[1] != "pose":
             raise KinesphereError(
                 "malformed",
-                f"{key!r} is not a pose key "
+                f"{key!r:.200} is not a pose key "
                 f"{head}<platform>/pose/<limb>/<origin>/<direction>/<size>",
             )
         platform, _, limb, origin, direction, size = parts
@@ -178,14 +185,15 @@ class Keys:
                 return check_segment(rest[1], "robot id")
             if len(rest) == 3 and rest[:2] == ["alive", "robot"]:
                 return check_segment(rest[2], "robot id")
-        raise KinesphereError("malformed", f"{key!r} is not a robot key under {self.prefix!r}")
+        raise KinesphereError("malformed",
+                              f"{key!r:.200} is not a robot key under {self.prefix!r}")
 
     def replica_of(self, key: str) -> str:
         """The replica name in a databank liveliness key."""
         key = str(key)
         head = f"{self.prefix}/alive/databank/"
         if not key.startswith(head) or "/" in key[len(head) :]:
-            raise KinesphereError("malformed", f"{key!r} is not a key {head}<replica>")
+            raise KinesphereError("malformed", f"{key!r:.200} is not a key {head}<replica>")
         return check_segment(key[len(head) :], "replica")
 
     def _ecl(self, platform: str) -> str:

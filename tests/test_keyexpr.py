@@ -136,3 +136,17 @@ def test_robot_id_and_replica_of_keys() -> None:
     for bad in ["kinesphere/alive/robot/r1", "kinesphere/alive/databank/a/b"]:
         with pytest.raises(KinesphereError):
             K.replica_of(bad)
+
+
+def test_names_are_capped_and_not_echoed_whole() -> None:
+    """A 30 KB name was echoed (and cached) whole by the databank's unknown_platform reply."""
+    assert KEYS.command("r" * 64)
+    for build in (KEYS.command, KEYS.catalogue, KEYS.alive_robot, KEYS.group_command):
+        with pytest.raises(KinesphereError) as info:
+            build("x" * 30_000)
+        assert info.value.code == "malformed" and "30000 characters, at most 64" in str(
+            info.value)
+        assert len(info.value.message) < 200
+    with pytest.raises(KinesphereError) as info:
+        KEYS.parse_pose_key(f"kinesphere/ecl/baxter/pose/{'l' * 30_000}/o/d/1")
+    assert len(info.value.message) < 300

@@ -52,7 +52,8 @@ def on_query(svc: DatabankService, st: Served, query: zenoh.Query) -> Answer | D
     which answers and drops it (:data:`DEFERRED` tells the caller to keep it)."""
     if not svc.writes_enabled:
         return error("forbidden", forbidden(st).message)
-    svc.submit(lambda: _answer(svc, st, query))
+    if not svc.submit(lambda: _answer(svc, st, query)):
+        return error("unavailable", f"{st.name}: too many records queued; retry later")
     return DEFERRED
 
 
@@ -78,7 +79,9 @@ def put_handler(svc: DatabankService, st: Served) -> Callable[[zenoh.Sample], No
             svc.refused((st.name, "put"), "%s", forbidden(st))
             return
         payload = sample.payload.to_bytes()
-        svc.submit(lambda: _put(svc, st, payload))
+        if not svc.submit(lambda: _put(svc, st, payload)):
+            svc.refused((st.name, "put", "busy"), "record put on %s dropped: too many queued",
+                        st.name)
 
     return on_put
 
@@ -128,7 +131,10 @@ def peer_handler(svc: DatabankService, st: Served) -> Callable[[zenoh.Sample], N
         if origin == me:
             return
         payload = sample.payload.to_bytes()
-        svc.submit(lambda: _catch_up(svc, st, payload, origin.decode("utf-8", "replace")))
+        peer = origin.decode("utf-8", "replace")[:64]
+        if not svc.submit(lambda: _catch_up(svc, st, payload, peer)):
+            svc.refused((st.name, "changed", "busy"), "cannot follow %s's record on %s: too "
+                        "many records queued; this replica may serve older poses", peer, st.name)
 
     return on_changed
 

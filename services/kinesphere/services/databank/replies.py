@@ -3,13 +3,16 @@
 Encoding a Pose with msgspec and wrapping it in ZBytes costs more than the rest of the hot
 path together, and agents ask the same few keys again and again. Answers (errors included:
 a flood of bad keys must not cost more than good ones) are kept per request text until the
-databank changes. The cache is bounded so a querier inventing keys cannot grow it forever.
+databank changes. Caches are bounded in bytes (keys and payloads counted), errors in a small
+one of their own, so a querier inventing keys can neither grow memory nor evict good answers.
 """
 
 from __future__ import annotations
 
 import threading
+from collections import OrderedDict
 from collections.abc import Hashable
+from dataclasses import dataclass
 from typing import Final, NamedTuple
 
 import msgspec
@@ -18,7 +21,26 @@ import zenoh
 from kinesphere.errors import KinesphereError
 from kinesphere.protocol import MAX_PAYLOAD, Error, encode
 
-MAX_ENTRIES: Final = 65_536
+ANSWER_BYTES: Final = 32 * 1024 * 1024
+"""Budget of the answers to well-formed pose and catalogue keys (a few thousand per platform,
+but every fractional size is a key of its own)."""
+ERROR_BYTES: Final = 1024 * 1024
+"""Budget of cached errors: a flood of invented keys may not cost more than good ones to
+answer, nor push good answers out or hold much memory."""
+COMPOUND_BYTES: Final = 16 * 1024 * 1024
+"""Budget of compound answers, keyed by their (up to 64 KiB) request payloads."""
+
+
+@dataclass(frozen=True)
+class CacheBudget:
+    """Bytes each reply cache of a databank service may hold (:func:`entry_bytes`)."""
+
+    answers: int = ANSWER_BYTES
+    errors: int = ERROR_BYTES
+    compounds: int = COMPOUND_BYTES
+
+
+DEFAULT_BUDGET: Final = CacheBudget()
 
 
 class Answer(NamedTuple):
@@ -67,35 +89,67 @@ def request_bytes(query: zenoh.Query, what: str) -> bytes:
     return payload.to_bytes()
 
 
-class ReplyCache:
-    """Answers by request (key text, or key and payload), all dropped when a databank changes.
+ENTRY_BYTES: Final = 256
+"""Bytes counted per cached answer on top of its key and payload (dict slot, objects)."""
 
-    Readers call :meth:`get` without a lock (a dict read is atomic under the GIL). A writer
-    passes the :attr:`generation` it read before computing, so an answer computed from the
-    old databank while a record was swapping it in is never stored. :meth:`put` returns the
-    answer, so a miss reads ``return cache.put(key, compute(), generation)``.
+
+def entry_bytes(key: Hashable, answer: Answer) -> int:
+    """What one cache entry is charged: its key's and payload's lengths plus ENTRY_BYTES."""
+    parts = key if isinstance(key, tuple) else (key,)
+    return ENTRY_BYTES + len(answer.payload) + sum(
+        len(p) for p in parts if isinstance(p, (str, bytes))
+    )
+
+
+class ReplyCache:
+    """Answers by request (key text, or key and payload), bounded in bytes, least recently
+    used evicted first, all dropped when a databank changes.
+
+    Readers call :meth:`get` without a lock (dict reads and ``move_to_end`` are atomic under
+    the GIL). A writer passes the :attr:`generation` it read before computing, so an answer
+    computed from the old databank while a record was swapping it in is never stored.
+    :meth:`put` returns the answer, so a miss reads ``return cache.put(key, compute(), g)``.
+    An answer bigger than a quarter of the budget is not cached at all.
     """
 
-    def __init__(self, max_entries: int = MAX_ENTRIES) -> None:
-        self._answers: dict[Hashable, Answer] = {}
-        self._max = max_entries
+    def __init__(self, max_bytes: int) -> None:
+        self._answers: OrderedDict[Hashable, Answer] = OrderedDict()
+        self.max_bytes = max_bytes
+        self.bytes = 0
+        """Bytes charged (:func:`entry_bytes`) by the answers held now."""
         self._lock = threading.Lock()
         self.generation = 0
-        self.get = self._answers.get
-        """``get(key) -> Answer | None``, bound once for the hot path."""
 
     def __len__(self) -> int:
         return len(self._answers)
 
+    def get(self, key: Hashable) -> Answer | None:
+        answer = self._answers.get(key)
+        if answer is not None:
+            try:
+                self._answers.move_to_end(key)
+            except KeyError:  # evicted by another thread meanwhile
+                pass
+        return answer
+
     def put(self, key: Hashable, answer: Answer, generation: int) -> Answer:
+        cost = entry_bytes(key, answer)
+        if cost > self.max_bytes // 4:
+            return answer
         with self._lock:
             if generation == self.generation:
-                if len(self._answers) >= self._max:
-                    self._answers.clear()
+                old = self._answers.pop(key, None)
+                if old is not None:
+                    self.bytes -= entry_bytes(key, old)
+                while self._answers and self.bytes + cost > self.max_bytes:
+                    k, a = self._answers.popitem(last=False)
+                    self.bytes -= entry_bytes(k, a)
                 self._answers[key] = answer
+                self.bytes += cost
         return answer
 
     def invalidate(self) -> None:
         with self._lock:
             self.generation += 1
             self._answers.clear()
+            self.bytes = 0

@@ -26,7 +26,7 @@ import logging
 import threading
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
-from typing import Any, Final
+from typing import Any
 
 import zenoh
 
@@ -38,8 +38,10 @@ from kinesphere.robots.platform import platform_names
 from kinesphere.services.databank import records
 from kinesphere.services.databank.body import body_model
 from kinesphere.services.databank.replies import (
+    DEFAULT_BUDGET,
     DEFERRED,
     Answer,
+    CacheBudget,
     Deferred,
     ReplyCache,
     error,
@@ -52,7 +54,6 @@ from kinesphere.services.ecl.ecl import Ecl
 from kinesphere.sizes import parse_size
 
 log = logging.getLogger(__name__)
-COMPOUND_CACHE: Final = 4096
 
 
 Routed = Answer | Deferred | None  # None: answered already (wildcards) or silent
@@ -94,6 +95,7 @@ class DatabankService:
         writes_enabled: bool = False,
         *,
         known_platforms: Iterable[str] | None = None,
+        budget: CacheBudget = DEFAULT_BUDGET,
     ) -> None:
         if not ecls:
             raise KinesphereError("malformed", "a databank service needs at least one platform")
@@ -115,9 +117,9 @@ class DatabankService:
         known = platform_names() if known_platforms is None else known_platforms
         self.known = frozenset(known) | set(self.served)
         self.serves_all_known = self.known == set(self.served)
-        self.answers = ReplyCache()
-        self.compounds = ReplyCache(COMPOUND_CACHE)
-        self._unknowns = ReplyCache(COMPOUND_CACHE)
+        self.answers = ReplyCache(budget.answers)
+        self.errors = ReplyCache(budget.errors)
+        self.compounds = ReplyCache(budget.compounds)
         self.refused = RateLog(log)
         """One warning line per malformed-request kind and platform every 10 s."""
         self._head = f"{keys.prefix}/ecl/"
@@ -189,15 +191,17 @@ class DatabankService:
         """Serve ``ecl`` for ``st`` from now on; answers computed before are dropped."""
         st.ecl = ecl
         self.answers.invalidate()
+        self.errors.invalidate()
         self.compounds.invalidate()
 
-    def submit(self, job: Callable[[], None]) -> None:
-        """Run ``job`` on the worker thread (records: SQL stays off Zenoh's threads)."""
-        self._worker.submit(job)
+    def submit(self, job: Callable[[], None]) -> bool:
+        """Run ``job`` on the worker thread (records: SQL stays off Zenoh's threads); False
+        when the worker's bounded queue is full."""
+        return self._worker.submit(job)
 
     # -- the hot path ------------------------------------------------------------------------
     def _handler(self, scope: Mapping[str, Served]) -> Callable[[zenoh.Query], None]:
-        get = self.answers.get
+        get, get_error = self.answers.get, self.errors.get
         route = self._route
 
         def on_query(query: zenoh.Query) -> None:
@@ -205,7 +209,7 @@ class DatabankService:
             try:
                 ke = query.key_expr
                 key = str(ke)
-                answer = get(key)
+                answer = get(key) or get_error(key)
                 if answer is None:
                     routed = route(scope, query, key)
                     if not isinstance(routed, Answer):
@@ -227,13 +231,14 @@ class DatabankService:
     def _route(self, scope: Mapping[str, Served], query: zenoh.Query, key: str) -> Routed:
         """Answer a key the cache does not hold (and cache what may be cached)."""
         generation = self.answers.generation  # read before any ECL: see ReplyCache
+        failed = self.errors.generation
         if "*" in key or "$" in key:
             self._wildcard(scope, query, key)
             return None
         platform, _, rest = key[len(self._head) :].partition("/")
         st = scope.get(platform)
         if st is None:  # only when this replica serves every known platform
-            return self.answers.put(key, self._unknown(platform), generation)
+            return self.errors.put(key, self._unknown(platform), failed)
         try:
             if rest.startswith("pose/"):
                 pk = self.keys.parse_pose_key(key)
@@ -252,9 +257,11 @@ class DatabankService:
         except KinesphereError as exc:
             answer = error(exc.code, exc.message)
         except Exception as exc:  # a bug: say so, and do not cache it
-            log.exception("query %s failed", key)
+            log.exception("query %.200s failed", key)
             return error("internal", f"{type(exc).__name__}: {exc}")
-        return self.answers.put(key, answer, generation)
+        if answer.ok:
+            return self.answers.put(key, answer, generation)
+        return self.errors.put(key, answer, failed)
 
     def _compound(self, st: Served, query: zenoh.Query, key: str) -> Answer:
         generation = self.compounds.generation
@@ -283,11 +290,15 @@ class DatabankService:
     def _bad_key(self, key: str, platform: str) -> Answer:
         return error(
             "malformed",
-            f"{key} is not a databank key; under {self._head}{platform}/ query "
+            f"{key:.200} is not a databank key; under {self._head}{platform:.64}/ query "
             "pose/<limb>/<origin>/<direction>/<size>, compound, catalogue, body or record",
         )
 
     def _unknown(self, platform: str) -> Answer:
+        try:
+            check_segment(platform, "platform")
+        except KinesphereError as exc:  # too long, say: the name is not echoed whole
+            return error(exc.code, exc.message)
         return error(
             "unknown_platform", f"no platform {platform!r}; known platforms: {choices(self.known)}"
         )
@@ -310,5 +321,6 @@ class DatabankService:
         platform = key[len(self._head) :].partition("/")[0]
         if platform in self.known:
             return None  # served here (its own queryable answers) or maybe by another replica
-        hit = self._unknowns.get(platform)
-        return hit or self._unknowns.put(platform, self._unknown(platform), 0)
+        generation = self.errors.generation
+        hit = self.errors.get(platform)
+        return hit or self.errors.put(platform, self._unknown(platform), generation)

@@ -1,4 +1,8 @@
-"""One background thread for slow jobs (SQL writes), so Zenoh's threads never wait on disk."""
+"""One background thread for slow jobs (SQL writes), so Zenoh's threads never wait on disk.
+
+The queue is bounded: each job holds a request payload (up to 64 KiB), so a flood of records
+must be refused, not queued without end.
+"""
 
 from __future__ import annotations
 
@@ -6,22 +10,30 @@ import logging
 import queue
 import threading
 from collections.abc import Callable
+from typing import Final
 
 log = logging.getLogger(__name__)
+MAX_JOBS: Final = 64
+"""Jobs waiting at most; :meth:`Worker.submit` refuses more."""
 
 
 class Worker:
     """Runs submitted jobs in order; :meth:`stop` finishes the queued ones first."""
 
-    def __init__(self, name: str) -> None:
-        self._jobs: queue.SimpleQueue[Callable[[], None] | None] = queue.SimpleQueue()
+    def __init__(self, name: str, max_jobs: int = MAX_JOBS) -> None:
+        self._jobs: queue.Queue[Callable[[], None] | None] = queue.Queue(max_jobs)
         self._thread = threading.Thread(target=self._run, name=name, daemon=True)
 
     def start(self) -> None:
         self._thread.start()
 
-    def submit(self, job: Callable[[], None]) -> None:
-        self._jobs.put(job)
+    def submit(self, job: Callable[[], None]) -> bool:
+        """Queue ``job``; False (and not queued) when MAX_JOBS are already waiting."""
+        try:
+            self._jobs.put_nowait(job)
+        except queue.Full:
+            return False
+        return True
 
     def stop(self, timeout: float = 30.0) -> None:
         if self._thread.is_alive():
