@@ -4,8 +4,8 @@ The MuJoCo base is three kinematic joints (world x, y, yaw) tracked by position 
 anything is possible in simulation; the controller restricts itself to what the real base
 can do:
 
-* ``omni`` (holonomic): Ruckig over world ``(x, y, yaw)``. A translation moves in a straight
-  line by a displacement given in the body frame at command time; a Drive is Ruckig's
+* ``omni`` (holonomic): Ruckig (``otg.py``) over world ``(x, y, yaw)``. A translation moves in
+  a straight line by a displacement given in the body frame at command time; a Drive is Ruckig's
   velocity interface towards ``speed * max_speed`` along the direction. Per-axis limits are
   scaled by the direction's components, so speed, acceleration and jerk are bounded as
   vectors (a diagonal is not sqrt(2) faster).
@@ -16,43 +16,21 @@ can do:
   what a tank or a two-wheeled robot does with a stick.
 
 ``stop`` brakes to rest with the same limits (the fastest jerk-limited stop). A new command
-mid-motion starts from the current state, so the base never jumps in velocity.
+mid-motion starts from the current state, so the base never jumps in velocity. What a body is
+sent each step is :attr:`BaseController.body_twist`, the body-frame velocity that carries the
+base along the planned pose over that step (what a real base's ``cmd_vel`` takes).
 """
 
 from __future__ import annotations
 
-import logging
 import math
 from collections.abc import Sequence
 
 import numpy as np
-from ruckig import (
-    ControlInterface,
-    InputParameter,
-    OutputParameter,
-    Result,
-    Ruckig,
-    Synchronization,
-)
+from ruckig import Synchronization
 
+from kinesphere.robots.agent.otg import Otg
 from kinesphere.robots.platform import BaseSpec
-
-_FLOOR = 0.3
-"""Smallest per-axis share of a limit. Ruckig needs positive limits on every DoF, and an axis
-the motion does not use may still carry velocity from the previous one, which it must brake
-in reasonable time; for axis-aligned motions this loosens the vector bound by at most 4 %."""
-_WORKING = (Result.Working, Result.Finished)
-log = logging.getLogger(__name__)
-
-
-def update(otg: Ruckig, inp: InputParameter, out: OutputParameter) -> Result | None:
-    """``otg.update``, None on failure (the binding raises ValueError on codes it lacks)."""
-    try:
-        result = otg.update(inp, out)
-    except (ValueError, RuntimeError) as exc:
-        log.debug("ruckig failed: %s", exc)
-        return None
-    return result if result in _WORKING else None
 
 
 def wrap_angle(a: float) -> float:
@@ -60,95 +38,45 @@ def wrap_angle(a: float) -> float:
     return math.atan2(math.sin(a), math.cos(a))
 
 
-class _Otg:
-    """A Ruckig instance with its input/output, stepping online (output fed back as input)."""
+def yaw_limits(spec: BaseSpec) -> tuple[float, float]:
+    """Yaw acceleration and jerk: the linear limits scaled by yaw rate / speed."""
+    scale = spec.max_yaw_rate / max(spec.max_speed, 1e-9)
+    return spec.max_acceleration * scale, spec.max_jerk * scale
 
-    def __init__(self, n: int, dt: float, vmax: Sequence[float], amax: Sequence[float],
-                 jmax: Sequence[float]) -> None:
-        self.n = n
-        self.otg = Ruckig(n, dt)
-        self.inp = InputParameter(n)
-        self.out = OutputParameter(n)
-        self.vmax, self.amax, self.jmax = list(vmax), list(amax), list(jmax)
-        inp = self.inp
-        inp.current_position = [0.0] * n
-        inp.current_velocity = [0.0] * n
-        inp.current_acceleration = [0.0] * n
-        inp.target_position = [0.0] * n
-        inp.target_velocity = [0.0] * n
-        inp.target_acceleration = [0.0] * n
-        self.scale([1.0] * n)
-        self.active = False
-        self.position = np.zeros(n)
-        self.velocity = np.zeros(n)
-        self.acceleration = np.zeros(n)
 
-    def scale(self, share: Sequence[float]) -> None:
-        """Limits per axis = limit x share (a direction's components, floored)."""
-        s = [max(abs(x), _FLOOR) for x in share]
-        self.inp.max_velocity = [v * k for v, k in zip(self.vmax, s, strict=True)]
-        self.inp.max_acceleration = [a * k for a, k in zip(self.amax, s, strict=True)]
-        self.inp.max_jerk = [j * k for j, k in zip(self.jmax, s, strict=True)]
-
-    def go_to(self, target: Sequence[float]) -> None:
-        self.inp.control_interface = ControlInterface.Position
-        self.inp.synchronization = Synchronization.Phase
-        self.inp.target_position = list(target)
-        self.active = True
-
-    def go_at(self, velocity: Sequence[float]) -> None:
-        self.inp.control_interface = ControlInterface.Velocity
-        self.inp.synchronization = Synchronization.Phase
-        self.inp.target_velocity = list(velocity)
-        self.active = True
-
-    def step(self) -> bool:
-        """Advance one cycle; True when the motion just finished."""
-        if not self.active:
-            return False
-        result = update(self.otg, self.inp, self.out)
-        if result is None:  # scaled limits below the current state: use the full ones
-            self.scale([1.0] * self.n)
-            self.inp.synchronization = Synchronization.No
-            result = update(self.otg, self.inp, self.out)
-        if result is None:  # never seen; never let it take the control loop down either
-            log.error("ruckig cannot plan the base from %s; holding", list(self.position))
-            self.inp.current_velocity = [0.0] * self.n
-            self.inp.current_acceleration = [0.0] * self.n
-            self.go_to(list(self.position))
-            self.active = False
-            self.velocity[:] = 0.0
-            self.acceleration[:] = 0.0
-            return True
-        out = self.out
-        self.position[:] = out.new_position
-        self.velocity[:] = out.new_velocity
-        self.acceleration[:] = out.new_acceleration
-        out.pass_to_input(self.inp)
-        if result != Result.Finished:
-            return False
-        if self.inp.control_interface == ControlInterface.Velocity:
-            if any(self.inp.target_velocity):
-                return False  # cruising: Ruckig extrapolates at the reached velocity
-            self.go_to(list(self.position))  # a stop came to rest: hold here
-        self.active = False
-        self.velocity[:] = 0.0
-        self.acceleration[:] = 0.0
-        return True
+def rotate(x: float, y: float, yaw: float) -> tuple[float, float]:
+    """``(x, y)`` rotated by ``yaw`` (body to world; ``-yaw``: world to body)."""
+    c, s = math.cos(yaw), math.sin(yaw)
+    return c * x - s * y, s * x + c * y
 
 
 class BaseController:
     """Common face of the planar bases; ``pose`` is the commanded world ``[x, y, yaw]``."""
 
-    def __init__(self, spec: BaseSpec, dt: float) -> None:
+    def __init__(self, spec: BaseSpec, dt: float, otg: Otg) -> None:
         self.spec = spec
         self.dt = dt
+        self._otg = otg
         self.pose = np.zeros(3)
-        self.twist = np.zeros(3)  # world vx, vy, yaw rate
+        """Planned world ``[x, y, yaw]``."""
+        self.twist = np.zeros(3)
+        """Planned world ``[vx, vy, yaw rate]``."""
+        self.body_twist = np.zeros(3)
+        """Body-frame ``[vx, vy, yaw rate]`` that carried the base along the plan over the last
+        step (integrated with the mid-step heading, it lands exactly on :attr:`pose`)."""
         self.driving = False
 
     @property
     def moving(self) -> bool:
+        return self._otg.active
+
+    @property
+    def fault(self) -> str:
+        """Why the last motion was braked instead of followed ("" when it was not)."""
+        return self._otg.fault
+
+    def reset(self, pose: Sequence[float]) -> None:
+        """Start planning from world ``pose`` ``[x, y, yaw]`` (where the body is), at rest."""
         raise NotImplementedError
 
     def translate(self, displacement: Sequence[float], yaw: float | None = None) -> None:
@@ -166,32 +94,24 @@ class BaseController:
     def step(self) -> None:
         raise NotImplementedError
 
-    def yaw_limits(self) -> tuple[float, float]:
-        """Yaw acceleration and jerk: the linear limits scaled by yaw rate / speed."""
-        scale = self.spec.max_yaw_rate / max(self.spec.max_speed, 1e-9)
-        return self.spec.max_acceleration * scale, self.spec.max_jerk * scale
-
 
 class OmniBase(BaseController):
     """Holonomic base: Ruckig over world (x, y, yaw)."""
 
     def __init__(self, spec: BaseSpec, dt: float) -> None:
-        super().__init__(spec, dt)
-        yaw_acc, yaw_jerk = self.yaw_limits()
-        self._otg = _Otg(
+        yaw_acc, yaw_jerk = yaw_limits(spec)
+        super().__init__(spec, dt, Otg(
             3, dt, [spec.max_speed, spec.max_speed, spec.max_yaw_rate],
             [spec.max_acceleration, spec.max_acceleration, yaw_acc],
             [spec.max_jerk, spec.max_jerk, yaw_jerk],
-        )
+        ))
 
-    @property
-    def moving(self) -> bool:
-        return self._otg.active
+    def reset(self, pose: Sequence[float]) -> None:
+        self.pose[:] = pose
+        self._otg.reset(pose)
 
     def _world(self, body: Sequence[float], yaw: float | None = None) -> tuple[float, float]:
-        yaw = float(self.pose[2]) if yaw is None else yaw
-        c, s = math.cos(yaw), math.sin(yaw)
-        return c * body[0] - s * body[1], s * body[0] + c * body[1]
+        return rotate(float(body[0]), float(body[1]), float(self.pose[2]) if yaw is None else yaw)
 
     def _share(self, wx: float, wy: float) -> list[float]:
         norm = math.hypot(wx, wy)
@@ -203,7 +123,8 @@ class OmniBase(BaseController):
         wx, wy = self._world(displacement, yaw)
         self.driving = False
         self._otg.scale(self._share(wx, wy))
-        self._otg.go_to([self.pose[0] + wx, self.pose[1] + wy, self.pose[2]])
+        self._otg.go_to([self.pose[0] + wx, self.pose[1] + wy, self.pose[2]],
+                        Synchronization.Phase)
 
     def drive(self, direction: Sequence[float], speed: float) -> None:
         wx, wy = self._world(direction)
@@ -222,25 +143,37 @@ class OmniBase(BaseController):
             return
         vx, vy = self._otg.velocity[:2]
         self._otg.scale(self._share(vx, vy))
-        self._otg.go_at([0.0, 0.0, 0.0])
+        self._otg.brake()
 
     def step(self) -> None:
+        if not self._otg.active:
+            if self.body_twist.any():
+                self.body_twist[:] = 0.0
+            return
+        x0, y0, yaw0 = self.pose.tolist()
         self._otg.step()
         self.pose[:] = self._otg.position
         self.twist[:] = self._otg.velocity
+        x1, y1, yaw1 = self.pose.tolist()
+        vx, vy = rotate((x1 - x0) / self.dt, (y1 - y0) / self.dt, -0.5 * (yaw0 + yaw1))
+        self.body_twist[:] = (vx, vy, (yaw1 - yaw0) / self.dt)
 
 
 class DiffBase(BaseController):
     """Non-holonomic base: Ruckig over (path length s, yaw), integrated as a unicycle."""
 
     def __init__(self, spec: BaseSpec, dt: float) -> None:
-        super().__init__(spec, dt)
-        yaw_acc, yaw_jerk = self.yaw_limits()
-        self._otg = _Otg(
+        yaw_acc, yaw_jerk = yaw_limits(spec)
+        super().__init__(spec, dt, Otg(
             2, dt, [spec.max_speed, spec.max_yaw_rate],
             [spec.max_acceleration, yaw_acc], [spec.max_jerk, yaw_jerk],
-        )
+        ))
         self._queue: list[tuple[float, float]] = []  # (s, yaw) waypoints still to reach
+
+    def reset(self, pose: Sequence[float]) -> None:
+        self.pose[:] = pose
+        self._queue.clear()
+        self._otg.reset([0.0, float(pose[2])])
 
     @property
     def moving(self) -> bool:
@@ -267,7 +200,7 @@ class DiffBase(BaseController):
     def _next(self) -> None:
         s, yaw = self._queue.pop(0)
         self._otg.scale([1.0, 1.0])
-        self._otg.go_to([s, yaw])
+        self._otg.go_to([s, yaw], Synchronization.Phase)
 
     def drive(self, direction: Sequence[float], speed: float) -> None:
         fx, fy = float(direction[0]), float(direction[1])
@@ -286,12 +219,16 @@ class DiffBase(BaseController):
         self._queue.clear()
         if self._otg.active:
             self._otg.scale([1.0, 1.0])
-            self._otg.go_at([0.0, 0.0])
+            self._otg.brake()
 
     def step(self) -> None:
-        s0, yaw0 = self._otg.position
+        if not self._otg.active:
+            if self.body_twist.any():
+                self.body_twist[:] = 0.0
+            return
+        s0, yaw0 = self._otg.position.tolist()
         done = self._otg.step()
-        s1, yaw1 = self._otg.position
+        s1, yaw1 = self._otg.position.tolist()
         mid = 0.5 * (yaw0 + yaw1)
         ds = s1 - s0
         self.pose[0] += ds * math.cos(mid)
@@ -299,7 +236,8 @@ class DiffBase(BaseController):
         self.pose[2] = yaw1
         v, w = self._otg.velocity
         self.twist[:] = (v * math.cos(yaw1), v * math.sin(yaw1), w)
-        if done and self._queue and not self._otg.active:
+        self.body_twist[:] = (ds / self.dt, 0.0, (yaw1 - yaw0) / self.dt)
+        if done and self._queue and not self._otg.active and not self._otg.fault:
             self._next()
 
 

@@ -9,30 +9,23 @@ velocity and acceleration and the motion stays continuous and jerk-limited.
 Targets are clamped inside the joint limits by a margin (the position servos lag and
 overshoot a little; the margin keeps the simulated joint off its hard stop), and Ruckig is
 also given the hard limits so a retarget that would brake past one is rejected in favour of a
-less synchronised, shorter profile. Joints a pose does not name keep their last target.
+less synchronised, shorter profile (``otg.py`` has the fallbacks). Joints a pose does not name
+keep their last target.
 """
 
 from __future__ import annotations
 
-import logging
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
-from ruckig import (
-    ControlInterface,
-    InputParameter,
-    OutputParameter,
-    Result,
-    Ruckig,
-    Synchronization,
-)
 
-from kinesphere.eurdf import JointLimit
-from kinesphere.robots.agent.base import update
+from kinesphere.robots.agent.otg import Otg, Values
 
-log = logging.getLogger(__name__)
+if TYPE_CHECKING:
+    from kinesphere.eurdf import JointLimit
 
 DEFAULT_MARGIN = 0.01
 """Target clamp margin inside each limit, rad (or m); shrunk for joints with a tiny range."""
@@ -75,7 +68,7 @@ class JointTrajectory:
         max_acceleration: float,
         max_jerk: float,
         dt: float,
-        start: Sequence[float],
+        start: Values,
         margin: float = DEFAULT_MARGIN,
     ) -> None:
         n = len(limits)
@@ -93,28 +86,10 @@ class JointTrajectory:
         )
         self.max_acceleration = float(max_acceleration)
         self.max_jerk = float(max_jerk)
-        self.position = np.array(start, dtype=float)
-        self.velocity = np.zeros(n)
-        self.acceleration = np.zeros(n)
-        self.target = self.position.copy()
         self.clamped: dict[str, Clamp] = {}
-        self.stopping = False
-        self.active = False
-        self._otg = Ruckig(n, dt) if n else None
-        self._inp = InputParameter(n)
-        self._out = OutputParameter(n)
-        inp = self._inp
-        inp.current_position = list(self.position)
-        inp.current_velocity = [0.0] * n
-        inp.current_acceleration = [0.0] * n
-        inp.target_position = list(self.target)
-        inp.target_velocity = [0.0] * n
-        inp.target_acceleration = [0.0] * n
-        inp.max_velocity = list(self.max_velocity)
-        inp.max_acceleration = [self.max_acceleration] * n
-        inp.max_jerk = [self.max_jerk] * n
-        inp.min_position = [lim.lower for lim in limits]
-        inp.max_position = [lim.upper for lim in limits]
+        self._otg = Otg(n, dt, self.max_velocity, [self.max_acceleration] * n,
+                        [self.max_jerk] * n, start, [lim.lower for lim in limits],
+                        [lim.upper for lim in limits])
 
     @property
     def dof(self) -> int:
@@ -123,7 +98,29 @@ class JointTrajectory:
     @property
     def moving(self) -> bool:
         """True while a trajectory (or a stop) is still being followed."""
-        return self.active
+        return self._otg.active
+
+    @property
+    def position(self) -> np.ndarray:
+        return self._otg.position
+
+    @property
+    def velocity(self) -> np.ndarray:
+        return self._otg.velocity
+
+    @property
+    def acceleration(self) -> np.ndarray:
+        return self._otg.acceleration
+
+    @property
+    def target(self) -> np.ndarray:
+        """Where the joints are going, or are held (after a stop: where they came to rest)."""
+        return self._otg.target
+
+    @property
+    def fault(self) -> str:
+        """Why the last motion was braked instead of followed ("" when it was not)."""
+        return self._otg.fault
 
     def clamp(self, joints: Mapping[str, float]) -> tuple[dict[str, float], list[Clamp]]:
         """``joints`` inside the limits with margin, and the joints that had to move."""
@@ -150,77 +147,29 @@ class JointTrajectory:
         if unknown:
             raise KeyError(", ".join(unknown))
         targets, clamps = self.clamp(joints)
+        goal = self.target.copy()
         for name, value in targets.items():
-            self.target[self.index[name]] = value
+            goal[self.index[name]] = value
         for name in targets:
             self.clamped.pop(name, None)
         self.clamped.update({c.joint: c for c in clamps if c.beyond})
-        self.stopping = False
-        self._inp.control_interface = ControlInterface.Position
-        self._inp.synchronization = Synchronization.Time
-        self._inp.target_position = list(self.target)
-        self.active = True
+        if self.dof:
+            self._otg.go_to(goal)
         return clamps
+
+    def reset(self, q: Values) -> None:
+        """At rest at ``q`` (where the body was found), held there."""
+        if self.dof:
+            self._otg.reset(q)
 
     def stop(self) -> None:
         """Brake every joint to rest where it is, jerk-limited (the fastest stop the limits allow).
 
         The targets become wherever the joints come to rest.
         """
-        self.stopping = True
-        self.active = True
-        inp = self._inp
-        inp.control_interface = ControlInterface.Velocity
-        inp.synchronization = Synchronization.No
-        inp.target_velocity = [0.0] * self.dof
+        if self.dof:
+            self._otg.brake()
 
     def step(self) -> None:
         """Advance one control cycle along the current trajectory."""
-        if self._otg is None or not self.active:
-            return
-        result = update(self._otg, self._inp, self._out)
-        if result is None:
-            result = self._recover()
-        if result is None:  # never seen: hold where the last output was, rather than crash
-            log.error("ruckig cannot brake from %s; holding", list(self.position))
-            self._inp.current_position = list(self.position)
-            self._inp.current_velocity = [0.0] * self.dof
-            self._inp.current_acceleration = [0.0] * self.dof
-            self.stopping = True
-            self._settle()
-            return
-        out = self._out
-        self.position[:] = out.new_position
-        self.velocity[:] = out.new_velocity
-        self.acceleration[:] = out.new_acceleration
-        out.pass_to_input(self._inp)
-        if result == Result.Finished:
-            self._settle()
-
-    def _recover(self) -> Result | None:
-        """A profile Ruckig refused (limits, synchronisation): try looser ones, then brake."""
-        inp, otg = self._inp, self._otg
-        assert otg is not None
-        if inp.synchronization != Synchronization.No:
-            inp.synchronization = Synchronization.No
-            result = update(otg, inp, self._out)
-            if result is not None:
-                return result
-        log.warning("ruckig cannot reach targets %s; braking instead", list(self.target))
-        inp.control_interface = ControlInterface.Velocity
-        inp.target_velocity = [0.0] * self.dof
-        self.stopping = True
-        return update(otg, inp, self._out)
-
-    def _settle(self) -> None:
-        """At rest: hold here in position mode (after a stop, here is the new target)."""
-        self.active = False
-        if self.stopping:
-            self.target[:] = self.position
-            self.stopping = False
-        inp = self._inp
-        inp.control_interface = ControlInterface.Position
-        inp.synchronization = Synchronization.Time
-        inp.target_position = list(self.target)
-        self.velocity[:] = 0.0
-        self.acceleration[:] = 0.0
+        self._otg.step()

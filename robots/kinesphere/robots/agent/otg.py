@@ -1,0 +1,226 @@
+"""One online Ruckig generator, stepped once per control cycle; the joints and the base share it.
+
+The idiom is Ruckig's own: ``update`` then ``pass_to_input`` every cycle, so a new target
+mid-motion starts from the current position, velocity and acceleration and the motion stays
+continuous and jerk-limited; a stop is the velocity interface towards zero without
+synchronisation (Ruckig's ``examples/06_stop.py``).
+
+Why one wrapper: both users need the same promise. A profile Ruckig refuses is retried looser
+(no synchronisation, the full limits instead of scaled ones); if that fails too, the motion
+brakes to rest; if even the brake fails, it holds where the last output was. Nothing here
+raises into the control loop (the binding raises ``RuckigError`` or ``ValueError`` for some
+failures, e.g. a 10 km translation whose duration exceeds Ruckig's maximum): a failure is a
+braked hold and a reason in :attr:`Otg.fault`, which the agent reports as ``error``.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Sequence
+
+import numpy as np
+from ruckig import (
+    ControlInterface,
+    InputParameter,
+    OutputParameter,
+    Result,
+    Ruckig,
+    Synchronization,
+)
+
+log = logging.getLogger(__name__)
+
+Values = Sequence[float] | np.ndarray
+"""Per-DoF values: a sequence or a numpy vector."""
+
+FLOOR = 0.3
+"""Smallest per-axis share of a limit (:meth:`Otg.scale`). Ruckig needs positive limits on every
+DoF, and an axis the motion does not use may still carry velocity from the previous one, which
+it must brake in reasonable time; for axis-aligned motions this loosens a vector bound by at
+most 4 %."""
+_WORKING = (Result.Working, Result.Finished)
+_CODES = {
+    -100: "invalid input", -101: "the trajectory would last longer than Ruckig allows",
+    -102: "a position limit is in the way", -104: "a limit is zero",
+    -110: "no execution time found", -111: "no synchronisation found",
+}
+"""Ruckig's error results by code (the binding knows only some of them)."""
+
+
+def _reason(failure: object) -> str:
+    """A short reason for a failed ``update``: its result, or the exception it raised."""
+    code = getattr(failure, "value", None)
+    if isinstance(failure, ValueError):  # "-101 is not a valid Result"
+        head = str(failure).split()[0] if str(failure).split() else ""
+        code = int(head) if head.lstrip("-").isdigit() else None
+    if isinstance(code, int) and code in _CODES:
+        return _CODES[code]
+    text = str(failure).strip().splitlines()
+    if not text:
+        return repr(failure)
+    return text[0].removeprefix("[ruckig]").strip().removesuffix("input:").strip(" ,:")
+
+
+class Otg:
+    """Ruckig over ``n`` DoFs with its input and output; :meth:`step` advances one cycle.
+
+    After each step :attr:`position`, :attr:`velocity` and :attr:`acceleration` hold the
+    commanded state at the new time. :attr:`target` is the position the DoFs are held at once
+    at rest (after a brake: wherever they stopped).
+    """
+
+    def __init__(
+        self, n: int, dt: float, vmax: Values, amax: Values,
+        jmax: Values, start: Values | None = None,
+        lower: Values | None = None, upper: Values | None = None,
+    ) -> None:
+        self.n = n
+        self.dt = dt
+        self.vmax, self.amax, self.jmax = list(vmax), list(amax), list(jmax)
+        self.position = np.zeros(n) if start is None else np.array(start, dtype=float)
+        self.velocity = np.zeros(n)
+        self.acceleration = np.zeros(n)
+        self.target = self.position.copy()
+        self.active = False
+        self.braking = False
+        self.fault = ""
+        """Why the last motion was braked instead of followed; "" when it was not."""
+        self._why = ""
+        self._otg = Ruckig(n, dt)
+        self._inp = InputParameter(n)
+        self._out = OutputParameter(n)
+        inp = self._inp
+        inp.current_position = list(self.position)
+        inp.current_velocity = [0.0] * n
+        inp.current_acceleration = [0.0] * n
+        inp.target_position = list(self.target)
+        inp.target_velocity = [0.0] * n
+        inp.target_acceleration = [0.0] * n
+        if lower is not None and upper is not None:
+            inp.min_position = list(lower)
+            inp.max_position = list(upper)
+        self.scale([1.0] * n)
+
+    def reset(self, position: Values) -> None:
+        """At rest at ``position`` (where the body was found)."""
+        self.position[:] = position
+        self._inp.current_position = list(self.position)
+        self._inp.current_velocity = [0.0] * self.n
+        self._inp.current_acceleration = [0.0] * self.n
+        self.braking = True  # so that resting takes ``position`` as the target
+        self._rest()
+
+    def scale(self, share: Values) -> None:
+        """Limits per axis = limit x share (a direction's components, at least :data:`FLOOR`)."""
+        s = [max(abs(x), FLOOR) for x in share]
+        self._inp.max_velocity = [v * k for v, k in zip(self.vmax, s, strict=True)]
+        self._inp.max_acceleration = [a * k for a, k in zip(self.amax, s, strict=True)]
+        self._inp.max_jerk = [j * k for j, k in zip(self.jmax, s, strict=True)]
+
+    def go_to(self, target: Values,
+              sync: Synchronization = Synchronization.Time) -> None:
+        """Reach ``target`` at rest."""
+        self.target[:] = target
+        self._plan(ControlInterface.Position, sync)
+        self._inp.target_position = list(self.target)
+
+    def go_at(self, velocity: Values,
+              sync: Synchronization = Synchronization.Phase) -> None:
+        """Reach ``velocity`` and cruise at it until told otherwise."""
+        self._plan(ControlInterface.Velocity, sync)
+        self._inp.target_velocity = list(velocity)
+
+    def brake(self) -> None:
+        """Come to rest where the brake ends, the fastest jerk-limited stop the limits allow."""
+        self.go_at([0.0] * self.n, Synchronization.No)
+        self.braking = True
+
+    def _plan(self, interface: ControlInterface, sync: Synchronization) -> None:
+        self._inp.control_interface = interface
+        self._inp.synchronization = sync
+        self.active = self.n > 0  # Ruckig cannot step zero DoFs
+        self.braking = False
+        self.fault = ""
+
+    @property
+    def cruising(self) -> bool:
+        """Following a non-zero target velocity (a drive)."""
+        return (self.active and self._inp.control_interface == ControlInterface.Velocity
+                and any(self._inp.target_velocity))
+
+    def step(self) -> bool:
+        """Advance one cycle; True when the motion just came to rest (reached or braked)."""
+        if not self.active:
+            return False
+        result = self._update()
+        if result is None:
+            result = self._recover()
+        if result is None:
+            return self._hold()
+        out = self._out
+        self.position[:] = out.new_position
+        self.velocity[:] = out.new_velocity
+        self.acceleration[:] = out.new_acceleration
+        out.pass_to_input(self._inp)
+        if result != Result.Finished:
+            return False
+        if self.cruising:
+            return False  # a cruise that reached its velocity extrapolates at it
+        return self._rest()
+
+    def _update(self) -> Result | None:
+        """``update``, or None on failure with the reason kept for :meth:`_recover`."""
+        try:
+            result = self._otg.update(self._inp, self._out)
+        except Exception as exc:  # RuckigError, or ValueError for codes the binding lacks
+            self._why = _reason(exc)
+            return None
+        if result in _WORKING:
+            return result
+        self._why = _reason(result)
+        return None
+
+    def _recover(self) -> Result | None:
+        """A profile Ruckig refused: loosen it (full limits, no synchronisation), else brake."""
+        inp = self._inp
+        self.scale([1.0] * self.n)
+        if inp.synchronization != Synchronization.No:
+            inp.synchronization = Synchronization.No
+            result = self._update()
+            if result is not None:
+                return result
+        if self.braking:
+            return None
+        wanted = (f"target {[round(x, 4) for x in inp.target_position]}"
+                  if inp.control_interface == ControlInterface.Position
+                  else f"velocity {[round(x, 4) for x in inp.target_velocity]}")
+        self.fault = f"ruckig cannot plan to {wanted} ({self._why}); braked"
+        log.warning("%s", self.fault)
+        fault = self.fault
+        self.brake()
+        self.fault = fault
+        return self._update()
+
+    def _hold(self) -> bool:
+        """Even the brake failed (never seen): hold where the last output was."""
+        self.fault = self.fault or f"ruckig cannot brake ({self._why}); holding"
+        log.error("%s at %s", self.fault, list(self.position))
+        self._inp.current_position = list(self.position)
+        self._inp.current_velocity = [0.0] * self.n
+        self._inp.current_acceleration = [0.0] * self.n
+        return self._rest()
+
+    def _rest(self) -> bool:
+        """At rest: hold here in position mode (after a brake, here is the new target)."""
+        if self.braking or self._inp.control_interface == ControlInterface.Velocity:
+            self.target[:] = self.position
+        self.active = False
+        self.braking = False
+        inp = self._inp
+        inp.control_interface = ControlInterface.Position
+        inp.synchronization = Synchronization.Time
+        inp.target_position = list(self.target)
+        inp.target_velocity = [0.0] * self.n
+        self.velocity[:] = 0.0
+        self.acceleration[:] = 0.0
+        return True
