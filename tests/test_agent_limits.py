@@ -21,12 +21,13 @@ from test_agent_support import WAIT_S, Databank, databank, hub
 from kinesphere import zconfig
 from kinesphere.errors import KinesphereError
 from kinesphere.protocol import SpatialCommand
+from kinesphere.robots.agent.body import make_body
 from kinesphere.robots.agent.controller import Controller
 from kinesphere.robots.agent.resolver import Resolver, parts_key
-from kinesphere.robots.mjcf import platform_model
 
 __all__ = ["databank", "hub"]  # fixtures
 PLATFORMS = ["baxter", "nao", "youbot", "packbot", "khepera"]
+DT = 0.002
 HOLD_S = 0.25
 """Robot time each pose is followed before the next command (shorter than most motions)."""
 
@@ -46,7 +47,7 @@ def test_limits_hold_for_every_ecl_pose(
         sequences += [[SpatialCommand(c, c, d, 2.0) for c in cat.core
                        for d in cat.directions_for_core]]
         parts = [p for seq in sequences for p in seq]
-        ctrl = Controller(platform_model(platform))
+        ctrl = Controller(make_body("mujoco", platform, DT))
         neutral = dict(zip(ctrl.joint_names, ctrl.joints.position.tolist(), strict=True))
         limits = [ctrl.platform.eurdf.limits[j] for j in ctrl.joint_names]
         lower = np.array([lim.lower for lim in limits])

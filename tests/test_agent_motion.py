@@ -15,11 +15,12 @@ from kinesphere.errors import KinesphereError
 from kinesphere.eurdf import JointLimit
 from kinesphere.protocol import Command, Drive
 from kinesphere.robots.agent.base import DiffBase, OmniBase, make_base, wrap_angle
+from kinesphere.robots.agent.body import make_body
 from kinesphere.robots.agent.controller import Controller
+from kinesphere.robots.agent.otg import Otg
 from kinesphere.robots.agent.runtime import SETTLE_S, Agent, AgentOptions
 from kinesphere.robots.agent.safety import DRIVE_TTL_S, Safety, Verdict
 from kinesphere.robots.agent.trajectory import DEFAULT_MARGIN, JointTrajectory
-from kinesphere.robots.mjcf import platform_model
 from kinesphere.robots.platform import BaseSpec
 
 DT = 0.002
@@ -154,6 +155,28 @@ def test_diff_drive_lateral_component_turns() -> None:
     assert np.hypot(*base.pose[:2]) < 1e-9
 
 
+def test_ruckig_failures_become_a_braked_hold_with_a_reason() -> None:
+    otg = Otg(3, DT, [0.8] * 3, [1.0] * 3, [5.0] * 3)
+    otg.go_to([1e4, 0.0, 0.0])  # longer than Ruckig allows: the binding raises ValueError
+    assert otg.step() and "longer than Ruckig allows" in otg.fault
+    assert not otg.active and otg.position.tolist() == otg.target.tolist() == [0.0] * 3
+    otg.go_to([1e8, 0.0, 0.0])  # the binding raises RuckigError
+    assert otg.step() and "ruckig cannot plan" in otg.fault and not otg.active
+    otg.go_to([0.5, 0.0, 0.0])
+    assert not otg.fault, "a new target clears the fault"
+
+    base = make_base(OMNI, DT)
+    assert isinstance(base, OmniBase)
+    base.drive((1.0, 0.0), 1.0)
+    for _ in range(500):
+        base.step()
+    base.translate([2.5e9, 0.0, 0.0])  # mid-drive, like `send ... 1e10` on a youBot
+    for _ in range(2000):
+        base.step()
+    assert "ruckig cannot plan" in base.fault
+    assert not base.moving and np.abs(base.twist).max() == 0.0 and 0.0 < base.pose[0] < 1.0
+
+
 def cmd(**kw: object) -> Command:
     fields: dict[str, object] = {"seq": 1, "sent_ns": 0, "deadman": True, "ttl_ms": 0}
     fields.update(kw)
@@ -188,7 +211,7 @@ def test_safety_watchdog_and_deadman() -> None:
 
 
 def test_controller_tracks_ruckig_inside_limits() -> None:
-    c = Controller(platform_model("tests/data/toyarm"))
+    c = Controller(make_body("mujoco", "tests/data/toyarm", DT))
     c.joints.retarget({"yaw": 1.99, "elbow": -1.0, "wrist": 1.4})
     assert c.base is not None
     c.base.translate([0.2, 0.0, 0.0])

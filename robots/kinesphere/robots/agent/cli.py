@@ -12,11 +12,14 @@ from types import FrameType
 from typing import Any
 
 from kinesphere.cliargs import AGENT, add_zenoh_arguments
+from kinesphere.robots.agent.body import BODIES
+from kinesphere.robots.agent.options import AgentOptions
 from kinesphere.signals import handle_signals
 
 log = logging.getLogger(__name__)
 
 VIEWER_HZ = 60.0
+DEFAULTS = AgentOptions()
 
 
 def register(sub: Any) -> None:
@@ -29,11 +32,16 @@ def register(sub: Any) -> None:
     )
     p.add_argument("platform", help="platform name (see 'kinesphere platforms') or folder")
     p.add_argument("--id", dest="robot_id", help="robot id (default: the platform name)")
-    p.add_argument("--rate", type=float, default=500.0, help="control rate in Hz (default 500)")
-    p.add_argument("--state-rate", type=float, default=50.0,
-                   help="RobotState rate in Hz (default 50)")
-    p.add_argument("--speed", type=float, default=1.0,
-                   help="robot seconds per wall second; 0 = as fast as possible (default 1)")
+    d = DEFAULTS
+    p.add_argument("--body", choices=sorted(BODIES), default=d.body,
+                   help=f"what the agent drives (default {d.body}: the platform's MuJoCo model)")
+    p.add_argument("--rate", type=float, default=d.rate,
+                   help=f"control rate in Hz (default {d.rate:g})")
+    p.add_argument("--state-rate", type=float, default=d.state_rate,
+                   help=f"RobotState rate in Hz (default {d.state_rate:g})")
+    p.add_argument("--speed", type=float, default=d.speed,
+                   help=f"robot seconds per wall second; 0 = as fast as possible "
+                   f"(default {d.speed:g})")
     p.add_argument("--group", action="append", default=[], metavar="NAME",
                    help="also obey {prefix}/group/NAME/command (repeatable)")
     p.add_argument("--viewer", action="store_true", help="open a MuJoCo viewer window")
@@ -41,27 +49,30 @@ def register(sub: Any) -> None:
     p.set_defaults(func=_agent)
 
 
-def _viewer(controller: Any) -> Any:
-    """A passive MuJoCo viewer, or None (with a warning) where no display exists."""
+def _viewer(body: Any) -> Any:
+    """A passive MuJoCo viewer, or None (with a warning) where no display or model exists."""
     if not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
         log.warning("--viewer: no display (DISPLAY/WAYLAND_DISPLAY unset); running headless")
+        return None
+    if not (hasattr(body, "model") and hasattr(body, "data")):
+        log.warning("--viewer: the %s body has no MuJoCo model to show", type(body).__name__)
         return None
     try:
         import mujoco.viewer
 
-        return mujoco.viewer.launch_passive(controller.model, controller.data)
+        return mujoco.viewer.launch_passive(body.model, body.data)
     except Exception as exc:  # GL or windowing failures must not kill the robot
         log.warning("--viewer: cannot open a window (%s); running headless", exc)
         return None
 
 
 def _agent(args: argparse.Namespace) -> int:
-    from kinesphere.robots.agent.runtime import Agent, AgentOptions
+    from kinesphere.robots.agent.runtime import Agent
     from kinesphere.zconfig import close_session, session_from_args
 
     robot_id = args.robot_id or Path(args.platform).name
     options = AgentOptions(rate=args.rate, state_rate=args.state_rate, speed=args.speed,
-                           prefix=args.prefix, groups=tuple(args.group))
+                           prefix=args.prefix, groups=tuple(args.group), body=args.body)
     stop = threading.Event()
 
     def on_signal(signum: int, frame: FrameType | None) -> None:
@@ -77,7 +88,7 @@ def _agent(args: argparse.Namespace) -> int:
             agent.declare()
             on_tick = None
             if args.viewer:
-                viewer = _viewer(agent.controller)
+                viewer = _viewer(agent.controller.body)
             if viewer is not None:
                 every = max(1, round(args.rate / VIEWER_HZ))
                 v = viewer

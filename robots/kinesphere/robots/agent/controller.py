@@ -1,68 +1,47 @@
-"""The robot's body without the network: MuJoCo plus the trajectory generators.
+"""Motion without the network: the trajectory generators driving a :class:`Body`.
 
-One control step is: Ruckig update for the joints (and the base), the outputs written to the
-position actuators' ``ctrl``, and ``mj_step``. It is single-threaded and knows nothing about
-wall-clock time, so the runtime can pace it to real time while tests and benchmarks step it
-as fast as they like.
+One control step is: Ruckig update for the joints (and the base), the outputs commanded to the
+body (joint positions, base body-frame velocity), and the body's step. It is single-threaded
+and knows nothing about wall-clock time, so the runtime can pace it to real time while tests
+and benchmarks step it as fast as they like.
 """
 
 from __future__ import annotations
 
-import copy
-import math
 from collections.abc import Callable
 
-import mujoco
 import numpy as np
 
-from kinesphere.robots.agent.base import BaseController, make_base, wrap_angle
+from kinesphere.robots.agent.base import BaseController, make_base
+from kinesphere.robots.agent.body import Body, Reading
 from kinesphere.robots.agent.trajectory import DEFAULT_MARGIN, JointTrajectory
-from kinesphere.robots.mjcf import BASE_JOINTS, PlatformModel, robot_contacts
 
 BLOCKED_TOL = 0.05
 """rad (m): a joint this far from where its finished trajectory ended is blocked."""
+_FIXED = np.zeros(3)
 
 
 class Controller:
-    """A platform's MuJoCo model and data, driven at ``rate`` Hz by Ruckig outputs."""
+    """Joint and base trajectories for one body, stepped every ``body.dt`` seconds."""
 
-    def __init__(self, pm: PlatformModel, rate: float = 500.0, margin: float = DEFAULT_MARGIN):
-        if not (math.isfinite(rate) and rate > 0):
-            raise ValueError(f"control rate must be > 0 Hz, got {rate}")
-        self.pm = pm
-        self.platform = pm.platform
-        self.dt = 1.0 / rate
-        model = pm.model
-        self.substeps = max(1, round(self.dt / model.opt.timestep))
-        timestep = self.dt / self.substeps
-        if abs(timestep - model.opt.timestep) > 1e-12:
-            model = copy.copy(model)  # platform_model() is cached and shared: never mutate it
-            model.opt.timestep = timestep
-        self.model = model
-        self.data = mujoco.MjData(model)
-        template = pm.make_data()
-        self.data.qpos[:] = template.qpos
-        self.data.ctrl[:] = template.ctrl
-        mujoco.mj_forward(model, self.data)
-        names = self.platform.joint_names
-        self.joint_names = names
-        self._qadr = np.array([pm.qpos_index[j] for j in names], dtype=int)
-        self._dadr = np.array([pm.dof_index[j] for j in names], dtype=int)
-        self._act = np.array([pm.actuator_index[j] for j in names], dtype=int)
-        limits = [self.platform.eurdf.limits[j] for j in names]
+    def __init__(self, body: Body, margin: float = DEFAULT_MARGIN):
+        self.body = body
+        self.platform = body.platform
+        self.dt = body.dt
+        self.joint_names = body.joint_names
+        self._reading: Reading | None = None
+        start = self.reading()
         self.joints = JointTrajectory(
-            limits,
+            body.limits,
             self.platform.max_acceleration,
             self.platform.max_jerk,
             self.dt,
-            self.data.qpos[self._qadr],
+            start.q,
             margin,
         )
         self.base: BaseController | None = make_base(self.platform.base, self.dt)
         if self.base is not None:
-            self._base_q = np.array([pm.qpos_index[j] for j in BASE_JOINTS], dtype=int)
-            self._base_act = np.array([pm.actuator_index[j] for j in BASE_JOINTS], dtype=int)
-            self.base.pose[:] = self.data.qpos[self._base_q]
+            self.base.reset(start.base_pose)
         self.time = 0.0
         self.steps = 0
         self.on_step: Callable[[Controller], None] | None = None
@@ -74,16 +53,15 @@ class Controller:
         return self.joints.moving or (self.base is not None and self.base.moving)
 
     def step(self) -> None:
-        """One control cycle: trajectories forward, ctrl set, physics forward."""
-        joints = self.joints
-        joints.step()
-        ctrl = self.data.ctrl
-        ctrl[self._act] = joints.position
+        """One control cycle: trajectories forward, body commanded, body stepped."""
+        self.joints.step()
+        twist = _FIXED
         if self.base is not None:
             self.base.step()
-            ctrl[self._base_act] = self.base.pose
-        for _ in range(self.substeps):
-            mujoco.mj_step(self.model, self.data)
+            twist = self.base.body_twist
+        self.body.command(self.joints.position, twist)
+        self.body.step()
+        self._reading = None
         self.time += self.dt
         self.steps += 1
         if self.on_step is not None:
@@ -95,19 +73,37 @@ class Controller:
         if self.base is not None:
             self.base.stop()
 
+    def fail_safe(self) -> None:
+        """The last resort when a step failed: the body holds where it is and the
+        trajectories start again from there, at rest."""
+        self.body.halt()
+        self._reading = None
+        now = self.reading()
+        self.joints.reset(now.q)
+        if self.base is not None:
+            self.base.reset(now.base_pose)
+
+    def fault(self) -> str:
+        """Why a trajectory was braked instead of followed ("" when none was)."""
+        base = self.base.fault if self.base is not None else ""
+        return "; ".join(f for f in (self.joints.fault, base) if f)
+
+    def reading(self) -> Reading:
+        """The body's measurement after the last step (read once, when first asked for)."""
+        if self._reading is None:
+            self._reading = self.body.read()
+        return self._reading
+
     def q(self) -> list[float]:
         """Measured joint positions in P order."""
-        return self.data.qpos[self._qadr].tolist()  # type: ignore[no-any-return]
+        return self.reading().q.tolist()  # type: ignore[no-any-return]
 
     def qd(self) -> list[float]:
-        return self.data.qvel[self._dadr].tolist()  # type: ignore[no-any-return]
+        return self.reading().qd.tolist()  # type: ignore[no-any-return]
 
     def base_pose(self) -> list[float]:
         """Measured ``[x, y, yaw]`` of the base, yaw in (-pi, pi] (zeros for a fixed base)."""
-        if self.base is None:
-            return [0.0, 0.0, 0.0]
-        x, y, yaw = self.data.qpos[self._base_q].tolist()
-        return [x, y, wrap_angle(yaw)]
+        return list(self.reading().base_pose)
 
     def commanded_base_yaw(self) -> float | None:
         return None if self.base is None else float(self.base.pose[2])
@@ -128,11 +124,12 @@ class Controller:
         The ECL checks its poses, not the joint-space path to them: an arm can catch on the
         other one on the way and stay there. Saying "at target" then would be a lie.
         """
-        error = np.abs(np.asarray(self.q()) - self.joints.target)
+        error = np.abs(self.reading().q - self.joints.target)
         worst = int(np.argmax(error)) if error.size else 0
-        if not error.size or error[worst] <= tol:
+        if not error.size or not error[worst] > tol:
             return ""
-        contacts = sorted({f"{a}/{b}" for a, b in robot_contacts(self.model, self.data)})
+        contacts = sorted({f"{a}/{b}" for a, b in self.body.contacts()})
         touching = f"; self-contact {', '.join(contacts[:3])}" if contacts else ""
         return (f"blocked: {self.joint_names[worst]} is {error[worst]:.3f} from its target"
                 f"{touching}")
+

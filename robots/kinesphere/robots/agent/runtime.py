@@ -2,17 +2,17 @@
 
 Threads: Zenoh callbacks only decode and append to an inbox (a deque: lock-free, never
 blocks the network); the resolver's worker does the blocking databank queries; the control
-loop alone touches the Controller, drains the inbox at the start of each step and publishes
-state every ``1/state_rate`` s of robot time. Commands whose poses are cached are applied in
-the very step that drains them.
+loop alone touches the Controller and its :class:`~kinesphere.robots.agent.body.Body`, drains
+the inbox at the start of each step and publishes state every ``1/state_rate`` s of robot time.
+Commands whose poses are cached are applied in the very step that drains them. Whatever fails
+in a step (a command, a trajectory, the body) is reported in the state; the loop never stops
+stepping and publishing.
 
 Clock: the loop's own simulated time drives the trajectories and the watchdog. ``speed`` sets
 how it is paced (``pacing.py``): 1 = real time (wall clock), k = k times faster, 0 = as fast
 as possible (tests and benchmarks).
 
-Ordering: per ``sender``, a command older than the newest one seen (lower or equal ``seq`` *and*
-no later ``sent_ns``) is dropped as stale; a restarted client (seq from 0, newer clock) is
-accepted. E-stop and stop are never dropped. See ``safety.py`` for the safety rules.
+Ordering rules are in ``ordering.py``, safety rules in ``safety.py``.
 """
 
 from __future__ import annotations
@@ -32,14 +32,15 @@ from kinesphere.errors import KinesphereError
 from kinesphere.keyexpr import Keys
 from kinesphere.laban import Direction
 from kinesphere.protocol import Command, Payload, Pose, RobotState, Status, decode, encode
+from kinesphere.robots.agent.body import Body, make_body
 from kinesphere.robots.agent.controller import BLOCKED_TOL as BLOCKED_TOL
 from kinesphere.robots.agent.controller import Controller
 from kinesphere.robots.agent.options import AgentOptions as AgentOptions
-from kinesphere.robots.agent.pacing import LoopStats, run_paced
+from kinesphere.robots.agent.ordering import Ordering
+from kinesphere.robots.agent.pacing import WARN_EVERY_S, LoopStats, run_paced
 from kinesphere.robots.agent.resolver import Answer, Resolver, parts_key
 from kinesphere.robots.agent.safety import Safety, Verdict
 from kinesphere.robots.agent.status import reported_status
-from kinesphere.robots.mjcf import platform_model
 from kinesphere.zconfig import undeclare
 
 log = logging.getLogger(__name__)
@@ -65,19 +66,23 @@ class _Resolved:
 
 
 class Agent:
-    """One robot: a Controller, its safety rules, its databank resolver, its Zenoh face."""
+    """One robot: a body and its Controller, safety rules, databank resolver, Zenoh face.
+
+    ``body`` defaults to ``options.body`` made for ``platform`` (``body.py``'s registry).
+    """
 
     def __init__(
         self, platform: str, robot_id: str, session: zenoh.Session,
-        options: AgentOptions | None = None,
+        options: AgentOptions | None = None, body: Body | None = None,
     ) -> None:
         self.options = options or AgentOptions()
         self.keys = Keys(self.options.prefix)
         self.keys.command(robot_id)  # validates the id as a key segment
         self.robot_id = robot_id
         self.session = session
-        self.controller = Controller(platform_model(platform), self.options.rate,
-                                     self.options.margin)
+        if body is None:
+            body = make_body(self.options.body, platform, 1.0 / self.options.rate)
+        self.controller = Controller(body, self.options.margin)
         self.platform = self.controller.platform.name
         self.resolver = Resolver(session, self.platform, self.keys, self.options.query_timeout_s)
         self.safety = Safety()
@@ -86,14 +91,12 @@ class Agent:
         """(seq, sent_ns, first moving step ns) per pose command applied."""
         self.last_state: RobotState | None = None
         self._inbox: deque[_Received | _Bad | _Resolved] = deque()
-        self._ticket = 0
-        self._latest: dict[str, tuple[int, int]] = {}
-        self._last_seq = -1
-        self._pending: tuple[int, Command, float | None] | None = None
-        """(ticket, command, base yaw at receipt) of the command waiting for the databank."""
-        self._probe: tuple[int, int] | None = None
+        self.ordering = Ordering()
         self._status: str = Status.IDLE
         self._detail = "no command yet"
+        self._fault = ""
+        self._failed_at = -1e9
+        self._ticks = 0
         self._state_seq = 0
         self._moved_at = 0.0
         self._publish_every = max(1, round(self.options.rate / self.options.state_rate))
@@ -179,66 +182,96 @@ class Agent:
         run_paced(step, period, stopped, self.stats, f"agent {self.robot_id}", failed)
 
     def tick(self) -> None:
-        """One control cycle: commands, watchdog, physics, and state when due."""
+        """One control cycle: commands, watchdog, one step, and state when due.
+
+        Each part is guarded on its own: a failing step still lets the watchdog, the state
+        and the next commands through, and leaves the body held where it is.
+        """
         inbox = self._inbox
         while inbox:
             self._handle(inbox.popleft())
         ctrl = self.controller
         if self.safety.expired(ctrl.time) and ctrl.moving:
             self._halt(Status.HOLDING, "no new command within ttl_ms: holding")
-        ctrl.step()
+        try:
+            ctrl.step()
+        except Exception as exc:
+            self._step_failed(exc)
+        self._ticks += 1
         self.stats.steps += 1
+        self._after_step()
+        if self._ticks % self._publish_every == 0:
+            self.publish()
+
+    def _after_step(self) -> None:
+        ctrl = self.controller
         if ctrl.moving:
             self._moved_at = ctrl.time
-        if self._probe is not None:
-            seq, sent_ns = self._probe
-            self._probe = None
-            self.latencies.append((seq, sent_ns, time.time_ns()))
-        if ctrl.steps % self._publish_every == 0:
-            self.publish()
+        fault = ctrl.fault()
+        if fault != self._fault:
+            self._fault = fault
+            if fault:
+                self._set(Status.ERROR, f"{fault} and holding")
+        moved = self.ordering.stepped()
+        if moved is not None:
+            self.latencies.append((moved.seq, moved.sent_ns, time.time_ns()))
+
+    def _step_failed(self, exc: Exception) -> None:
+        """A step raised (a bug, or a body that failed): hold the body and say so."""
+        now = time.monotonic()
+        if now - self._failed_at > WARN_EVERY_S:
+            self._failed_at = now
+            log.exception("agent %s: control step failed", self.robot_id)
+        self.ordering.overtake()
+        self._set(Status.ERROR, f"internal: control step failed: {exc!r}; holding")
+        try:
+            self.controller.fail_safe()
+        except Exception:
+            log.debug("fail-safe hold failed too", exc_info=True)
 
     # --- commands (control thread) ------------------------------------------------------------
 
     def _handle(self, item: _Received | _Bad | _Resolved) -> None:
         """Act on one inbox item; whatever goes wrong is reported, never raised into the loop."""
-        what = "command" if isinstance(item, _Bad) else f"command {self._seq_of(item)}"
+        cmd: Command | None = None
         try:
             if isinstance(item, _Resolved):
-                self._apply(item.ticket, item.answer)
+                waiting = self.ordering.answer(item.ticket)
+                if waiting is None:
+                    return  # overtaken by a newer command, a stop or an e-stop
+                cmd = waiting.cmd
+                self.ordering.acted(cmd.seq)
+                if isinstance(item.answer, KinesphereError):
+                    raise item.answer
+                self._apply_pose(item.answer, waiting.yaw, cmd)
             elif isinstance(item, _Bad):
                 raise item.error
             else:
-                self._command(item.cmd)
+                cmd = item.cmd
+                self._command(cmd)
         except KinesphereError as exc:
-            self._last_seq = max(self._last_seq, self._seq_of(item))
-            self._error(exc, what)
+            self._rejected(exc, cmd)
         except Exception as exc:  # a bug must not take the robot's control loop down
-            log.exception("agent %s: %s failed", self.robot_id, what)
-            self._last_seq = max(self._last_seq, self._seq_of(item))
-            self._error(KinesphereError("internal", repr(exc)), what)
+            log.exception("agent %s: %s failed", self.robot_id, self._what(cmd))
+            self._rejected(KinesphereError("internal", repr(exc)), cmd)
 
-    def _seq_of(self, item: _Received | _Bad | _Resolved) -> int:
-        if isinstance(item, _Received):
-            return item.cmd.seq
-        if isinstance(item, _Resolved) and self._pending is not None:
-            return self._pending[1].seq
-        return self._last_seq
+    @staticmethod
+    def _what(cmd: Command | None) -> str:
+        return "command" if cmd is None else f"command {cmd.seq}"
 
-    def _stale(self, cmd: Command) -> bool:
-        last = self._latest.get(cmd.sender)
-        if last is not None and cmd.seq <= last[0] and cmd.sent_ns <= last[1]:
-            return not (cmd.estop or cmd.stop)
-        self._latest[cmd.sender] = (cmd.seq, cmd.sent_ns)
-        return False
+    def _rejected(self, exc: KinesphereError, cmd: Command | None) -> None:
+        if cmd is not None:
+            self.ordering.acted(cmd.seq)
+        self._error(exc, self._what(cmd))
 
     def _command(self, cmd: Command) -> None:
-        if self._stale(cmd):
+        if self.ordering.stale(cmd):
             log.debug("stale command %s from %r dropped", cmd.seq, cmd.sender)
             return
         ctrl = self.controller
         verdict = self.safety.on_command(cmd, ctrl.time)
         if verdict is not Verdict.MOVE or not cmd.parts:
-            self._last_seq = cmd.seq  # acted on now; poses count once resolved
+            self.ordering.acted(cmd.seq)  # acted on now; poses count once resolved
         if verdict is Verdict.ESTOP:
             self._halt(Status.ESTOP, f"e-stop from {cmd.sender or 'a client'}; release with "
                        "a command with release=true (kinesphere estop --release)")
@@ -274,25 +307,15 @@ class Agent:
         if not cmd.parts:
             return
         key = parts_key(cmd.parts)
-        self._ticket += 1
         hit = self.resolver.cached(key)
         yaw = ctrl.commanded_base_yaw()
         if hit is not None:
-            self._last_seq = cmd.seq
+            self.ordering.overtake()
+            self.ordering.acted(cmd.seq)
             self._apply_pose(hit, yaw, cmd)
         else:
-            self._pending = (self._ticket, cmd, yaw)
-            self.resolver.submit(self._ticket, key, self._on_resolved)
-
-    def _apply(self, ticket: int, answer: Answer) -> None:
-        if ticket != self._ticket or self._pending is None or self._pending[0] != ticket:
-            return  # overtaken by a newer command, a stop or an e-stop
-        _, cmd, yaw = self._pending
-        self._last_seq = cmd.seq
-        if isinstance(answer, KinesphereError):
-            self._error(answer, f"command {cmd.seq}")
-            return
-        self._apply_pose(answer, yaw, cmd)
+            ticket, _ = self.ordering.wait(cmd, yaw)
+            self.resolver.submit(ticket, key, self._on_resolved)
 
     def _apply_pose(self, pose: Pose, yaw: float | None, cmd: Command) -> None:
         ctrl = self.controller
@@ -315,10 +338,10 @@ class Agent:
         else:
             detail = f"to {pose.limb}/{pose.origin}/{pose.direction}/{pose.size:g}"
         self._set(Status.MOVING, detail)
-        self._probe = (cmd.seq, cmd.sent_ns)
+        self.ordering.applied(cmd)
 
     def _halt(self, status: str, detail: str) -> None:
-        self._ticket += 1  # pending resolutions no longer apply
+        self.ordering.overtake()  # a pose still waiting for the databank no longer applies
         self.controller.halt()
         self._set(status, detail)
 
@@ -354,7 +377,7 @@ class Agent:
             robot_id=self.robot_id, platform=self.platform, seq=self._state_seq,
             stamp_ns=time.time_ns(), joint_names=list(ctrl.joint_names), q=ctrl.q(),
             qd=ctrl.qd(), base_pose=ctrl.base_pose(), status=status,
-            last_command_seq=self._last_seq, detail=detail,
+            last_command_seq=self.ordering.last_seq, detail=detail,
             clamped=sorted(ctrl.joints.clamped),
         )
         self.last_state = state

@@ -1,0 +1,99 @@
+"""The simulated body: a platform's MuJoCo model stepped in robot time (``--body mujoco``).
+
+Position servos track the joint targets; the planar base is three kinematic joints (x, y, yaw)
+whose servos track a target pose this body integrates from the commanded body-frame velocity,
+with the mid-step heading (so a plan's own integration lands on the same pose). One
+:meth:`MujocoBody.step` is ``dt`` of physics, in as many ``mj_step`` substeps as the model's
+timestep needs.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from collections.abc import Sequence
+
+import mujoco
+import numpy as np
+
+from kinesphere.robots.agent.base import rotate, wrap_angle
+from kinesphere.robots.agent.body import Body, Reading
+from kinesphere.robots.mjcf import BASE_JOINTS, PlatformModel, robot_contacts
+
+
+class MujocoBody(Body):
+    """A platform's MuJoCo model and data, ``dt`` of physics per step."""
+
+    def __init__(self, pm: PlatformModel, dt: float) -> None:
+        if not (math.isfinite(dt) and dt > 0):
+            raise ValueError(f"control period must be > 0 s, got {dt}")
+        self.pm = pm
+        self.platform = pm.platform
+        self.dt = dt
+        model = pm.model
+        self.substeps = max(1, round(dt / model.opt.timestep))
+        timestep = dt / self.substeps
+        if abs(timestep - model.opt.timestep) > 1e-12:
+            model = copy.copy(model)  # platform_model() is cached and shared: never mutate it
+            model.opt.timestep = timestep
+        self.model = model
+        self.data = mujoco.MjData(model)
+        template = pm.make_data()
+        self.data.qpos[:] = template.qpos
+        self.data.ctrl[:] = template.ctrl
+        mujoco.mj_forward(model, self.data)
+        names = self.platform.joint_names
+        self._qadr = np.array([pm.qpos_index[j] for j in names], dtype=int)
+        self._dadr = np.array([pm.dof_index[j] for j in names], dtype=int)
+        self._act = np.array([pm.actuator_index[j] for j in names], dtype=int)
+        self._act_slice = _as_slice(self._act)
+        self._mobile = self.platform.base.mobile
+        if self._mobile:
+            self._base_q = np.array([pm.qpos_index[j] for j in BASE_JOINTS], dtype=int)
+            self._base_act = np.array([pm.actuator_index[j] for j in BASE_JOINTS], dtype=int)
+            self._base_slice = _as_slice(self._base_act)
+            self._base_target = [float(v) for v in self.data.qpos[self._base_q]]
+
+    def read(self) -> Reading:
+        data = self.data
+        pose = (0.0, 0.0, 0.0)
+        if self._mobile:
+            x, y, yaw = data.qpos[self._base_q].tolist()
+            pose = (x, y, wrap_angle(yaw))
+        return Reading(data.qpos[self._qadr].copy(), data.qvel[self._dadr].copy(), pose)
+
+    def command(self, q: np.ndarray, base_twist: Sequence[float] | np.ndarray) -> None:
+        ctrl = self.data.ctrl
+        ctrl[self._act_slice] = q
+        if self._mobile:
+            vx, vy, w = base_twist
+            target = self._base_target
+            if vx or vy or w:
+                dt = self.dt
+                dyaw = float(w) * dt
+                dx, dy = rotate(float(vx) * dt, float(vy) * dt, target[2] + 0.5 * dyaw)
+                target[0] += dx
+                target[1] += dy
+                target[2] += dyaw
+            ctrl[self._base_slice] = target
+
+    def step(self) -> None:
+        for _ in range(self.substeps):
+            mujoco.mj_step(self.model, self.data)
+
+    def halt(self) -> None:
+        data = self.data
+        data.ctrl[self._act_slice] = data.qpos[self._qadr]
+        if self._mobile:
+            self._base_target = [float(v) for v in data.qpos[self._base_q]]
+            data.ctrl[self._base_slice] = self._base_target
+
+    def contacts(self) -> list[tuple[str, str]]:
+        return robot_contacts(self.model, self.data)
+
+
+def _as_slice(index: np.ndarray) -> slice | np.ndarray:
+    """A contiguous run of indices as a slice (a quicker numpy assignment), else the indices."""
+    if index.size and (np.diff(index) == 1).all():
+        return slice(int(index[0]), int(index[-1]) + 1)
+    return index

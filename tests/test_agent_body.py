@@ -1,0 +1,171 @@
+"""The Body seam: the agent drives any body, and a failing plan or body never stops its loop.
+
+A kinematic body (joints are where they were commanded, the base integrates its commanded
+velocity; no MuJoCo anywhere) runs the real agent over real Zenoh against the real databank;
+a body that fails, and a target Ruckig cannot plan, show that the loop goes on stepping and
+publishing with ``error`` and a reason.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+import pytest
+import zenoh
+from test_agent_support import (
+    Databank,
+    Operator,
+    StateWatch,
+    databank,
+    hub,
+    joints_close,
+)
+
+from kinesphere import zconfig
+from kinesphere.errors import KinesphereError
+from kinesphere.laban import Direction
+from kinesphere.protocol import SpatialCommand
+from kinesphere.robots.agent.base import rotate
+from kinesphere.robots.agent.body import Body, Reading, make_body
+from kinesphere.robots.agent.runtime import Agent, AgentOptions
+from kinesphere.robots.platform import load_platform
+
+__all__ = ["databank", "hub"]  # fixtures
+
+
+class KinematicBody(Body):
+    """A perfect body: joints at their commanded positions, base at its integrated velocity.
+
+    It records every command, so a test sees exactly what crossed the seam.
+    """
+
+    def __init__(self, platform: str, dt: float) -> None:
+        self.platform = load_platform(platform)
+        self.dt = dt
+        self.q = self.platform.neutral_vector()
+        self.qd = np.zeros_like(self.q)
+        self.pose = np.zeros(3)
+        self.commands: list[np.ndarray] = []
+        self.halts = 0
+
+    def read(self) -> Reading:
+        return Reading(self.q.copy(), self.qd.copy(),
+                       (float(self.pose[0]), float(self.pose[1]), float(self.pose[2])))
+
+    def command(self, q: np.ndarray, base_twist: Sequence[float] | np.ndarray) -> None:
+        self.qd = (q - self.q) / self.dt
+        self.q = np.array(q, dtype=float)
+        vx, vy, w = base_twist
+        dx, dy = rotate(vx * self.dt, vy * self.dt, float(self.pose[2]) + 0.5 * w * self.dt)
+        self.pose += (dx, dy, w * self.dt)
+        self.commands.append(self.q.copy())
+
+    def step(self) -> None:
+        pass
+
+    def halt(self) -> None:
+        self.halts += 1
+        self.qd[:] = 0.0
+
+
+class FailingBody(KinematicBody):
+    """Fails every step from step ``after`` on, like a body whose driver died."""
+
+    def __init__(self, platform: str, dt: float, after: int) -> None:
+        super().__init__(platform, dt)
+        self.after = after
+        self.steps = 0
+
+    def step(self) -> None:
+        self.steps += 1
+        if self.steps > self.after:
+            raise RuntimeError("driver lost")
+
+
+def test_an_agent_drives_a_kinematic_body_over_the_wire(
+    hub: tuple[zenoh.Session, str], databank: Databank
+) -> None:
+    session, endpoint = hub
+    cat = databank.catalogue("youbot")
+    entry = cat.limbs[0]
+    pulls = [d for d in entry.directions if Direction.parse(d).horizontal.name != "PLACE"]
+    reach = SpatialCommand(entry.limb, entry.origin, pulls[0], float(max(entry.sizes)))
+    beyond = SpatialCommand(entry.limb, entry.origin, pulls[0], max(entry.sizes) + 2.0)
+    pose, far = databank.query("youbot", reach), databank.query("youbot", beyond)
+    assert far.translation is not None
+    body = KinematicBody("youbot", 1.0 / 500.0)
+    with zconfig.session(config=zconfig.loopback_config(endpoint)) as s:
+        agent = Agent("youbot", "kinematic", s, AgentOptions(speed=0.0), body=body)
+        watch = StateWatch(s, "kinematic")
+        agent.start()
+        try:
+            op = Operator(session, agent.robot_id)
+            target, _ = agent.controller.joints.clamp(pose.joints)
+            seq = op.send((reach.limb, reach.origin, reach.direction, reach.size))
+            watch.after(seq, lambda st: st.status == "idle" and joints_close(st, target, 1e-9),
+                        "the kinematic body exactly at the pose")
+            seq = op.send((beyond.limb, beyond.origin, beyond.direction, beyond.size))
+            goal = far.translation
+            done = watch.after(seq, lambda st: st.status == "idle" and math.dist(
+                st.base_pose[:2], goal[:2]) < 1e-6, "the base translated")
+            seq = op.send(estop=True)
+            watch.after(seq, lambda st: st.status == "estop", "e-stop obeyed")
+            op.close()
+        finally:
+            agent.close()
+            watch.close()
+    assert done.robot_id == "kinematic" and done.platform == "youbot"
+    q = np.array(body.commands)
+    dv = np.abs(np.diff(q, n=2, axis=0)).max() / agent.controller.dt**2
+    assert dv <= load_platform("youbot").max_acceleration * (1 + 1e-6), \
+        "the body was sent Ruckig's jerk-limited positions"
+
+
+def test_a_body_that_fails_never_stops_the_state_stream(hub: tuple[zenoh.Session, str]) -> None:
+    _, endpoint = hub
+    body = FailingBody("baxter", 1.0 / 500.0, after=50)
+    with zconfig.session(config=zconfig.loopback_config(endpoint)) as s:
+        agent = Agent("baxter", "failing", s, AgentOptions(speed=0.0), body=body)
+        watch = StateWatch(s, "failing")
+        agent.start()
+        try:
+            first = watch.wait(lambda st: st.status == "error", "the failure reported")
+            later = watch.wait(lambda st: st.seq >= first.seq + 20, "states keep coming")
+        finally:
+            agent.close()
+            watch.close()
+    assert "control step failed" in first.detail and "driver lost" in first.detail
+    assert later.status == "error" and body.halts > 0
+
+
+def test_the_agent_reports_an_unplannable_target_and_keeps_publishing(
+    hub: tuple[zenoh.Session, str],
+) -> None:
+    _, endpoint = hub
+    with zconfig.session(config=zconfig.loopback_config(endpoint)) as s:
+        agent = Agent("youbot", "unplannable", s, AgentOptions(speed=0.0))
+        watch = StateWatch(s, "unplannable")
+        agent.declare()
+        try:
+            assert agent.controller.base is not None
+            agent.controller.base.translate([2.5e9, 0.0, 0.0])
+            agent._set("moving", "test")
+            for _ in range(1000):
+                agent.tick()
+            state = watch.wait(lambda st: st.seq >= 10 and st.status == "error",
+                               "error published")
+        finally:
+            agent.close()
+            watch.close()
+    assert "ruckig cannot plan" in state.detail and "holding" in state.detail
+    assert not agent.controller.moving and abs(state.base_pose[0]) < 1e-3
+
+
+def test_unknown_bodies_are_named() -> None:
+    with pytest.raises(KinesphereError) as err:
+        make_body("hydraulic", "youbot", 0.002)
+    assert err.value.code == "malformed" and "mujoco" in err.value.message
+    with pytest.raises(KinesphereError):
+        AgentOptions(body="hydraulic")
