@@ -54,20 +54,35 @@ def test_send_one_command(hub: tuple[zenoh.Session, str], boxes: dict[str, Inbox
 
 
 def test_send_to_a_group_with_a_drive_held(
-    hub: tuple[zenoh.Session, str], boxes: dict[str, Inbox], tmp_path: Path
+    hub: tuple[zenoh.Session, str], boxes: dict[str, Inbox]
 ) -> None:
-    groups = tmp_path / "fleet.toml"
-    groups.write_text('[groups]\npair = ["c1", "c2"]\n')
-    code = cli(hub[1], "send", "pair", "arm", "shoulder", "left-low", "far",
-               "--drive", "forward", "0.4", "--for", "0.2", "--groups", str(groups))  # fmt: skip
-    assert code == 0
-    for r in ("c1", "c2"):
-        stop = boxes[r].wait(lambda g: g.cmd.stop, "the stop").cmd
-        moves = [c for c in boxes[r].commands() if not c.stop]
+    """One put on the group's key (agents run with --group pair subscribe there)."""
+    pair = Inbox(hub[0], KEYS.group_command("pair"))
+    try:
+        code = cli(hub[1], "send", "group:pair", "arm", "shoulder", "left-low", "far",
+                   "--drive", "forward", "0.4", "--for", "0.2")  # fmt: skip
+        assert code == 0
+        stop = pair.wait(lambda g: g.cmd.stop, "the stop").cmd
+        moves = [c for c in pair.commands() if not c.stop]
         assert moves and stop.seq == moves[-1].seq + 1
         assert moves[0].drive is not None and moves[0].drive.speed == 0.4
         assert moves[0].ttl_ms == 300
-    assert boxes["c3"].commands() == []  # (the stops above came after any stray command)
+        assert {g.key for g in pair.got} == {KEYS.group_command("pair")}
+    finally:
+        pair.close()
+    for r in ROBOTS:  # (the group's stop came after any stray command)
+        assert boxes[r].commands() == [], "robots outside the group hear nothing"
+
+
+def test_a_group_named_like_a_robot_is_suggested(
+    hub: tuple[zenoh.Session, str], capsys: pytest.CaptureFixture[str]
+) -> None:
+    field = Inbox(hub[0], KEYS.group_command("field"))
+    try:
+        assert cli(hub[1], "send", "field", "a", "b", "left", "1", "--wait", "0.5") == 2
+    finally:
+        field.close()
+    assert "did you mean --target group:field?" in capsys.readouterr().err
 
 
 def test_estop_reaches_every_robot_and_release_one(
@@ -76,6 +91,7 @@ def test_estop_reaches_every_robot_and_release_one(
     assert cli(hub[1], "estop") == 0
     for r in ROBOTS:
         boxes[r].wait(lambda g: g.cmd.estop and g.key == KEYS.command("*"), f"e-stop at {r}")
+    assert cli(hub[1], "estop", "--release") == 2, "whose e-stop: --target is required"
     assert cli(hub[1], "estop", "--release", "--target", "c2") == 0
     release = boxes["c2"].wait(lambda g: not g.cmd.estop, "the release").cmd
     assert release.release and release.deadman and not release.stop and release.parts == []
@@ -122,6 +138,7 @@ def test_gamepad_replays_a_recording_headless(
         (["send", "c1", "limb_11", "distal_11", "left"], "parts come in fours"),
         (["send", "c1"], "nothing to send"),
         (["send", "c/1", "a", "b", "left", "1"], "target 'c/1'"),
+        (["send", "group:", "a", "b", "left", "1"], "target 'group:'"),
         (["send", "c1", "a", "b", "left", "1", "--drive", "up", "1"], "unknown direction"),
         (["send", "nobody", "a", "b", "left", "1", "--wait", "0.2"], "no robot listens"),
         (["play", "nonexistent_phrase"], "shipped phrases"),

@@ -43,7 +43,7 @@ def state(robot_id: str, platform: str, status: str, **kw: object) -> Seen:
 
 def view(**kw: object) -> View:
     base = dict(
-        target=tg.Target("group", "sweepers", ("packbot-1", "packbot-2")),
+        target=tg.group("sweepers"), members=["packbot-1", "packbot-2"],
         limb="limb_11", origin="distal_11",
         aliases={"limb_11": "arm", "distal_11": "shoulder"},
         intent=Intent(direction=Direction.LEFT_LOW, size=2.4, deadman=True, reach=0.8,
@@ -52,16 +52,16 @@ def view(**kw: object) -> View:
         engaged=True, deadman_required=True, estopped=False, remote_estop=[],
         need_fresh_deadman=False, connected=True, source="controller",
         robots={
-            "packbot-1": state("packbot-1", "packbot", "moving"),
+            "packbot-1": state("packbot-1", "packbot", "moving", groups=["sweepers"]),
             "packbot-2": state("packbot-2", "packbot", "clamped", clamped=["turret"],
-                               detail="turret target clamped to its limit"),
+                               groups=["sweepers"], detail="turret target clamped to its limit"),
             "baxter-1": state("baxter-1", "baxter", "holding"),
             "nao-1": state("nao-1", "nao", "databank_unreachable",
                            detail="no databank answers kinesphere/ecl/nao/catalogue"),
             "youbot-1": state("youbot-1", "youbot", "estop", detail="e-stop latched",
                               estop_by="gamepad-me"),
         },
-        seq=1234, message="target: group sweepers: packbot-1, packbot-2", sender="gamepad-me",
+        seq=1234, message="target: group sweepers (packbot-1, packbot-2)", sender="gamepad-me",
     )  # fmt: skip
     base.update(kw)
     return View(**base)  # type: ignore[arg-type]

@@ -186,19 +186,23 @@ class FakeRobot:
     not put before the client's subscription has reached the hub.
     """
 
-    def __init__(self, session: zenoh.Session, robot_id: str, platform: str) -> None:
+    def __init__(self, session: zenoh.Session, robot_id: str, platform: str,
+                 groups: Sequence[str] = ()) -> None:  # fmt: skip
         self.robot_id = robot_id
         self.platform = platform
+        self.groups = list(groups)
         self.seq = 0
         self.pub = session.declare_publisher(KEYS.state(robot_id))
         assert zconfig.wait_matching(self.pub, WAIT_S), "no state subscriber"
 
-    def state(self, status: str = "idle") -> None:
+    def state(self, status: str = "idle", **fields: object) -> None:
+        """Publish one state; ``fields`` set any other RobotState field (``estop_by``...)."""
         self.seq += 1
         st = RobotState(
             robot_id=self.robot_id, platform=self.platform, seq=self.seq,
             stamp_ns=time.time_ns(), joint_names=[], q=[], qd=[], base_pose=[0.0, 0.0, 0.0],
-            status=status, last_command_seq=-1,
+            status=status, last_command_seq=-1, groups=self.groups,
+            **fields,  # type: ignore[arg-type]
         )  # fmt: skip
         self.pub.put(encode(st))
 

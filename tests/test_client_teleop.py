@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import statistics
 from collections.abc import Iterator
-from dataclasses import replace
 
 import msgspec
 import pygame
@@ -41,7 +40,6 @@ from kinesphere.protocol import Catalogue, LimbEntry, SpatialCommand
 __all__ = ["hub", "pygame_up"]  # fixtures
 
 ROBOTS = ("r1", "r2", "r3")
-GROUPS = {"arms": ("r1", "r2")}
 
 
 @pytest.fixture
@@ -68,8 +66,7 @@ def inp(pygame_up: None) -> pad.PygameInput:
 
 
 def teleop(link: RobotLink, target: tg.Target, **options: object) -> Teleop:
-    mapping = replace(mapfile.load(), groups=GROUPS)
-    return Teleop(link, mapping, target, TeleopOptions(**options))  # type: ignore[arg-type]
+    return Teleop(link, mapfile.load(), target, TeleopOptions(**options))  # type: ignore[arg-type]
 
 
 def settle(link: RobotLink, boxes: dict[str, Inbox]) -> None:
@@ -156,19 +153,27 @@ def engage(op: Teleop, inp: pad.PygameInput, p: Pad, ticks: int = 2) -> None:
 
 
 def test_group_and_all_reach_every_intended_robot_and_no_other(
-    link: RobotLink, inboxes: dict[str, Inbox], inp: pad.PygameInput
-) -> None:
-    p = Pad()
-    op = teleop(link, tg.parse_target("arms", GROUPS))
-    engage(op, inp, p)
-    p.deadman(False)
-    op.tick(inp.poll())
-    settle(link, inboxes)
-    for r in ("r1", "r2"):
-        cmds = inboxes[r].commands()
+    hub: tuple[zenoh.Session, str], link: RobotLink, inboxes: dict[str, Inbox],
+    inp: pad.PygameInput,
+) -> None:  # fmt: skip
+    session, _ = hub
+    arms = Inbox(session, KEYS.group_command("arms"))  # what r1 and r2, run with --group arms, hear
+    try:
+        assert link.wait_subscribers([KEYS.group_command("arms")], WAIT_S) == []
+        p = Pad()
+        op = teleop(link, tg.parse_target("group:arms"))
+        engage(op, inp, p)
+        p.deadman(False)
+        op.tick(inp.poll())
+        sentinel(link, [KEYS.group_command("arms"), *(KEYS.command(r) for r in ROBOTS)],
+                 [arms, *inboxes.values()])  # fmt: skip
+        cmds = arms.commands()
         assert len(cmds) == 3 and cmds[-1].stop
-        assert {g.key for g in inboxes[r].got if g.cmd.sender != "sentinel"} == {KEYS.command(r)}
-    assert inboxes["r3"].commands() == [], "a robot outside the group hears nothing"
+        assert {g.key for g in arms.got} == {KEYS.group_command("arms")}
+        for r in ROBOTS:
+            assert inboxes[r].commands() == [], "robots hear a group only on the group's key"
+    finally:
+        arms.close()
 
     op.target = tg.ALL
     engage(op, inp, p)
@@ -181,20 +186,24 @@ def test_group_and_all_reach_every_intended_robot_and_no_other(
         assert last[-1].cmd.stop
 
 
-def test_target_button_cycles_robot_group_all(
+def test_target_button_cycles_robots_then_the_groups_they_report_then_all(
     hub: tuple[zenoh.Session, str], link: RobotLink, inp: pad.PygameInput
 ) -> None:
     session, _ = hub
     for r in ROBOTS:
-        FakeRobot(session, r, "fakebot").state()
-    assert link.wait_for(lambda lk: set(lk.robots()) >= set(ROBOTS), WAIT_S)
+        FakeRobot(session, r, "fakebot", ["arms"] if r != "r3" else ["tail", "arms"]).state()
+    assert link.wait_for(lambda lk: set(lk.states()) >= set(ROBOTS), WAIT_S)
     op = teleop(link, tg.robot("r1"))
     p = Pad()
     seen = []
-    for _ in range(5):
+    for _ in range(6):
         p.tap(pygame.CONTROLLER_BUTTON_Y)
-        seen.append(op.tick(inp.poll()).target.label)
-    assert seen == ["r2", "r3", "group arms: r1, r2", "all robots", "r1"]
+        view = op.tick(inp.poll())
+        seen.append((view.target.spelling, view.members))
+    assert seen == [
+        ("r2", ["r2"]), ("r3", ["r3"]), ("group:arms", ["r1", "r2", "r3"]),
+        ("group:tail", ["r3"]), ("all", ["r1", "r2", "r3"]), ("r1", ["r1"]),
+    ]  # fmt: skip
 
 
 def test_switching_target_stops_the_old_one(
@@ -203,18 +212,21 @@ def test_switching_target_stops_the_old_one(
     p = Pad()
     op = teleop(link, tg.robot("r3"))
     engage(op, inp, p, ticks=1)
-    p.tap(pygame.CONTROLLER_BUTTON_Y)  # no robots heard: r-less cycle goes to group arms
+    p.tap(pygame.CONTROLLER_BUTTON_Y)  # no robots heard: the cycle offers only all
     view = op.tick(inp.poll())
-    assert view.engaged and view.target.name == "arms"
+    assert view.engaged and view.target == tg.ALL
     settle(link, inboxes)
     r3 = inboxes["r3"].commands()
-    assert len(r3) == 2 and r3[-1].stop
+    assert [c.stop for c in r3] == [False, True, False], "move, stop, then all's move"
     assert len(inboxes["r1"].commands()) == 1
 
 
-def test_estop_goes_to_all_latches_and_needs_release_and_fresh_deadman(
-    link: RobotLink, inboxes: dict[str, Inbox], inp: pad.PygameInput
-) -> None:
+def test_estop_goes_to_all_latches_and_start_releases_only_what_it_latched(
+    hub: tuple[zenoh.Session, str], link: RobotLink, inboxes: dict[str, Inbox],
+    inp: pad.PygameInput,
+) -> None:  # fmt: skip
+    session, _ = hub
+    robots = {r: FakeRobot(session, r, "fakebot") for r in ROBOTS}
     p = Pad()
     op = teleop(link, tg.robot("r1"))
     engage(op, inp, p)
@@ -223,14 +235,23 @@ def test_estop_goes_to_all_latches_and_needs_release_and_fresh_deadman(
     assert view.estopped and not view.engaged
     for r in ROBOTS:
         inboxes[r].wait(lambda g: g.cmd.estop and g.key == KEYS.command("*"), f"e-stop at {r}")
+    robots["r1"].state("estop", estop_by=op.seq.sender)  # latched by this operator
+    robots["r2"].state("estop", estop_by="gamepad-someone-else")  # by another one
+    robots["r3"].state("estop")  # a robot that does not say who: ours while our e-stop stands
+    assert link.wait_for(lambda lk: all(status_of(lk, r) == "estop" for r in ROBOTS), WAIT_S)
     for _ in range(3):  # deadman still held, stick still pushed: nothing goes out
         assert not op.tick(inp.poll()).engaged
+    assert op.latched_by_me() == ["r1", "r3"]
     p.tap(pygame.CONTROLLER_BUTTON_START)
     view = op.tick(inp.poll())
     assert not view.estopped and not view.engaged and view.need_fresh_deadman
+    assert view.message.startswith("released the e-stop of r1, r3")
+    assert "still latched by others: r2" in view.message
     p.deadman(False)
     op.tick(inp.poll())
     p.deadman()
+    robots["r1"].state("idle")
+    assert link.wait_for(lambda lk: status_of(lk, "r1") == "idle", WAIT_S)
     assert op.tick(inp.poll()).engaged
     settle(link, inboxes)
     cmds = sorted(inboxes["r1"].commands(), key=lambda c: c.seq)  # the e-stop may overtake
@@ -238,7 +259,10 @@ def test_estop_goes_to_all_latches_and_needs_release_and_fresh_deadman(
              for c in cmds]  # fmt: skip
     assert kinds == ["move", "move", "estop", "release", "move"]
     assert cmds[3].deadman and not cmds[3].parts, "a release moves nothing by itself"
-    assert [c.estop for c in inboxes["r2"].commands()] == [True]
+    assert [c.release for c in inboxes["r3"].commands()] == [False, True]
+    assert [c.estop for c in inboxes["r2"].commands()] == [True], "not released by us"
+    p.tap(pygame.CONTROLLER_BUTTON_START)  # nothing of ours is latched any more
+    assert op.tick(inp.poll()).message.startswith("no robot reports an e-stop latched by you")
 
 
 def test_unplugging_sends_a_final_stop_and_replugging_needs_the_deadman_again(

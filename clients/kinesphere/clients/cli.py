@@ -41,11 +41,6 @@ def _targeting(
     p: argparse.ArgumentParser, ttl_default: str = f"{STREAM.ttl_ms}", wait: bool = True
 ) -> None:
     p.add_argument(
-        "--groups",
-        metavar="FILE",
-        help="TOML file with [groups] name = [robot ids] (adds to the mapping's)",
-    )
-    p.add_argument(
         "--ttl-ms",
         type=int,
         default=None,
@@ -78,8 +73,8 @@ def register(sub: Any) -> None:
     g.add_argument(
         "--target",
         default="all",
-        metavar="ID|GROUP|all",
-        help="robot id, group name or 'all' (default all; cycle with the target button)",
+        metavar="ID|group:NAME|all",
+        help="robot id, group:NAME or 'all' (default all; cycle with the target button)",
     )
     g.add_argument("--headless", action="store_true", help="no HUD window (needs a gamepad)")
     g.add_argument(
@@ -120,7 +115,7 @@ def register(sub: Any) -> None:
         "With --for the command is repeated at --rate for that long (a drive needs that), then "
         "a stop follows.",
     )
-    s.add_argument("target", help="robot id, group name or 'all'")
+    s.add_argument("target", help="robot id, group:NAME (agents run with --group) or 'all'")
     s.add_argument(
         "parts",
         nargs="*",
@@ -144,7 +139,6 @@ def register(sub: Any) -> None:
         "--rate", type=float, default=STREAM.rate_hz, metavar="HZ",
         help=f"repeat rate with --for (default {STREAM.rate_hz:g})",
     )
-    s.add_argument("--mapping", metavar="FILE", help="mapping file whose [groups] to use")
     _targeting(s, f"0: the pose is reached whatever happens next; {STREAM.ttl_ms} with --for")
     add_zenoh_arguments(s)
     s.set_defaults(func=commands.send)
@@ -158,10 +152,9 @@ def register(sub: Any) -> None:
         "left_high, tour_guide, packbot_sweep, packbot_retreat.",
     )
     p.add_argument("phrase", metavar="PHRASE", help="phrase file (TOML) or shipped name")
-    p.add_argument("--target", default="all", help="robot id, group name or 'all' (default)")
+    p.add_argument("--target", default="all", help="robot id, group:NAME or 'all' (default)")
     p.add_argument("--rate", type=float, default=STREAM.rate_hz, metavar="HZ",
                    help=f"default {STREAM.rate_hz:g}")
-    p.add_argument("--mapping", metavar="FILE", help="mapping file whose [groups] to use")
     _targeting(p, f"the phrase's ttl_ms, else {STREAM.ttl_ms}")
     add_zenoh_arguments(p)
     p.set_defaults(func=commands.play)
@@ -173,8 +166,9 @@ def register(sub: Any) -> None:
         "in place and latches until released. --release clears the latch of --target.",
     )
     e.add_argument("--release", action="store_true", help="release instead of stopping")
-    e.add_argument("--target", default="all", help="robots to release (default all)")
-    e.add_argument("--mapping", metavar="FILE", help="mapping file whose [groups] to use")
+    e.add_argument(
+        "--target", help="with --release: whose e-stop to release (ID, group:NAME or all)"
+    )
     _targeting(e)
     add_zenoh_arguments(e)
     e.set_defaults(func=commands.estop)

@@ -9,7 +9,6 @@ KinesphereError.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import signal
 import sys
 import time
@@ -46,21 +45,23 @@ def _link(args: argparse.Namespace, watch: bool = False) -> Iterator[Any]:
             link.close()
 
 
-def _groups(args: argparse.Namespace) -> dict[str, tuple[str, ...]]:
-    from kinesphere.clients import mapfile
+def _reachable(link: Any, target: Any, wait: float) -> list[str]:
+    """The target's command keys, once a robot listens on each; else unavailable, with a hint
+    when a robot id was given for what is a group."""
+    from kinesphere.clients import targets
 
-    groups = dict(mapfile.load(getattr(args, "mapping", None)).groups)
-    if args.groups:
-        groups.update(mapfile.load_groups(args.groups))
-    return groups
-
-
-def _reachable(link: Any, keys: list[str], wait: float) -> None:
+    keys: list[str] = target.keys(link.keys)
     missing = link.wait_subscribers(keys, wait)
     if missing:
+        hint = ""
+        if target.kind == "robot":
+            as_group = targets.group(target.name)
+            if not link.wait_subscribers(as_group.keys(link.keys), 0.5):
+                hint = f"; did you mean --target {as_group.spelling}?"
         raise KinesphereError(
-            "unavailable", f"no robot listens on {', '.join(missing)} (waited {wait:g} s)"
+            "unavailable", f"no robot listens on {', '.join(missing)} (waited {wait:g} s){hint}"
         )
+    return keys
 
 
 @contextmanager
@@ -83,9 +84,7 @@ def gamepad(args: argparse.Namespace) -> int:
     from kinesphere.clients import mapfile, record, targets, teleop
 
     mapping = mapfile.load(args.mapping)
-    groups = _groups(args)
-    mapping = dataclasses.replace(mapping, groups=groups)
-    target = targets.parse_target(args.target, groups)
+    target = targets.parse_target(args.target)
     ttl = TeleopOptions.ttl_ms if args.ttl_ms is None else args.ttl_ms
     if args.rate <= 0 or ttl < 0:
         raise KinesphereError("malformed", "--rate must be > 0 and --ttl-ms >= 0")
@@ -171,7 +170,7 @@ def send(args: argparse.Namespace) -> int:
     drive = make_drive(args.drive[0], args.drive[1], "--drive") if args.drive else None
     if not parts and drive is None:
         raise KinesphereError("malformed", "nothing to send: give L O D S parts and/or --drive")
-    target = targets.parse_target(args.target, _groups(args))
+    target = targets.parse_target(args.target)
     hold = args.hold
     ttl = args.ttl_ms if args.ttl_ms is not None else (TeleopOptions.ttl_ms if hold else 0)
     seq = Sequencer(new_sender("send"), ttl)
@@ -182,8 +181,7 @@ def send(args: argparse.Namespace) -> int:
         stopping = True
 
     with _link(args) as link:
-        keys = target.keys(link.keys)
-        _reachable(link, keys, args.wait)
+        keys = _reachable(link, target, args.wait)
         with _signals(stop):
             link.put(keys, seq.command(parts, drive))
             if hold:
@@ -201,7 +199,7 @@ def play(args: argparse.Namespace) -> int:
     from kinesphere.clients.link import Sequencer, new_sender
 
     phrase = phrases.load_phrase(args.phrase)
-    target = targets.parse_target(args.target, _groups(args))
+    target = targets.parse_target(args.target)
     ttl = args.ttl_ms if args.ttl_ms is not None else (phrase.ttl_ms or TeleopOptions.ttl_ms)
     seq = Sequencer(new_sender("play"), ttl)
     stopping = False
@@ -215,8 +213,7 @@ def play(args: argparse.Namespace) -> int:
         print(f"step {i + 1}/{len(phrase.steps)} ({step.duration:g} s){note}", file=sys.stderr)
 
     with _link(args) as link:
-        keys = target.keys(link.keys)
-        _reachable(link, keys, args.wait)
+        keys = _reachable(link, target, args.wait)
         print(f"playing {phrase.name} ({phrase.duration:g} s) on {target.label}", file=sys.stderr)
         with _signals(stop):
             phrases.play(
@@ -238,9 +235,12 @@ def estop(args: argparse.Namespace) -> int:
     seq = Sequencer(new_sender("estop"), 0)
     with _link(args) as link:
         if args.release:
-            target = targets.parse_target(args.target, _groups(args))
-            keys = target.keys(link.keys)
-            _reachable(link, keys, args.wait)
+            if args.target is None:
+                raise KinesphereError(
+                    "malformed", "--release needs --target ID, group:NAME or all: say whose "
+                    "e-stop to release")
+            target = targets.parse_target(args.target)
+            keys = _reachable(link, target, args.wait)
             link.put(keys, seq.release())
             print(f"released the e-stop of {target.label}", file=sys.stderr)
         else:

@@ -234,7 +234,7 @@ def _robots(surf: pygame.Surface, fonts: dict[str, pygame.font.Font], view: View
     for rid, seen in sorted(view.robots.items()):
         st = seen.state
         lines = robot_lines(st, now - seen.at, view.sender)
-        entries.append((f"{rid}  ({st.platform})", lines, view.target.includes(rid)))
+        entries.append((f"{rid}  ({st.platform})", lines, view.target.includes(rid, st.groups)))
     columns = 1 if len(entries) <= 3 else 2
     col_w = width // columns - 12
     per_col = -(-len(entries) // columns)
@@ -293,7 +293,10 @@ def render(surf: pygame.Surface, view: View, fonts: dict[str, pygame.font.Font])
     """Draw the whole HUD for ``view``."""
     surf.fill(BG)
     width = 670
-    y = _paragraph(surf, fonts["big"], f"target: {view.target.label}", 16, 10, width)
+    target = view.target.label
+    if view.target.kind != "robot":
+        target += f" ({', '.join(view.members) or 'nobody heard yet'})"
+    y = _paragraph(surf, fonts["big"], f"target: {target}", 16, 10, width)
     y = _text(surf, fonts["mid"],
               f"limb {_alias(view, view.limb)}  from  {_alias(view, view.origin)}", (16, y))
     src = view.source if view.connected else "DISCONNECTED: plug a controller in"

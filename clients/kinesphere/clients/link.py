@@ -161,6 +161,13 @@ class RobotLink:
         with self._lock:
             return sorted(self._alive | set(self._states))
 
+    def robot_groups(self) -> dict[str, list[str]]:
+        """Every robot known (alive or streaming state) -> the groups its state says it obeys."""
+        with self._lock:
+            out = {rid: list(seen.state.groups) for rid, seen in self._states.items()}
+            out.update({rid: [] for rid in self._alive if rid not in out})
+            return out
+
     def wait_for(self, predicate: Callable[[RobotLink], bool], timeout: float) -> bool:
         """Wait until ``predicate(link)`` is true (re-checked on every state or liveliness)."""
         deadline = time.monotonic() + timeout

@@ -1,4 +1,4 @@
-"""The mapping file: which physical stick, trigger, button or key does what, plus groups.
+"""The mapping file: which physical stick, trigger, button or key does what.
 
 Defaults live in ``clients/mappings/default.toml`` (the SDL GameController layout, a raw
 joystick fallback and the keyboard). A user file passed with ``--mapping`` is laid over the
@@ -17,7 +17,6 @@ from typing import Any
 from kinesphere.clients.state import ACTIONS
 from kinesphere.clients.sticks import Tuning
 from kinesphere.errors import KinesphereError, choices
-from kinesphere.keyexpr import check_segment
 
 STICK_AXES = ("left_x", "left_y", "right_x", "right_y", "low", "high")
 """Logical axes: the two sticks and the low (left) and high (right) triggers."""
@@ -76,7 +75,6 @@ class MapFile:
     controller: ControllerMap
     joystick: JoystickMap
     keyboard: KeyboardMap
-    groups: dict[str, tuple[str, ...]]
     source: str
 
 
@@ -188,26 +186,18 @@ def _keyboard(table: dict[str, Any]) -> KeyboardMap:
     return KeyboardMap(keys, acts)
 
 
-def _groups(table: dict[str, Any]) -> dict[str, tuple[str, ...]]:
-    out: dict[str, tuple[str, ...]] = {}
-    for name, members in table.items():
-        check_segment(name, "group name")
-        if not isinstance(members, list) or not members:
-            raise _err(f"[groups] {name}", "must be a non-empty list of robot ids")
-        out[name] = tuple(check_segment(m, f"member of group {name!r}") for m in members)
-    return out
-
-
 def parse(data: dict[str, Any], source: str = "<mapping>") -> MapFile:
     """A MapFile from TOML data laid over the defaults."""
     merged = _merge(tomllib.loads(default_text()), data)
-    _only(merged, ("tuning", "controller", "joystick", "keyboard", "groups"), "sections")
+    if "groups" in merged:
+        raise _err("[groups]", "groups are the robots' own now: start agents with --group NAME "
+                   "and target them with --target group:NAME")
+    _only(merged, ("tuning", "controller", "joystick", "keyboard"), "sections")
     return MapFile(
         tuning=_tuning(merged.get("tuning", {})),
         controller=_controller(merged.get("controller", {})),
         joystick=_joystick(merged.get("joystick", {})),
         keyboard=_keyboard(merged.get("keyboard", {})),
-        groups=_groups(merged.get("groups", {})),
         source=source,
     )
 
@@ -227,11 +217,3 @@ def load(path: str | Path | None = None) -> MapFile:
     if path is None:
         return parse({}, "default")
     return parse(_read_toml(path, "mapping"), str(path))
-
-
-def load_groups(path: str | Path) -> dict[str, tuple[str, ...]]:
-    """Only the ``[groups]`` of a TOML file (a fleet file shared by several operators)."""
-    groups = _read_toml(path, "groups file").get("groups")
-    if not isinstance(groups, dict):
-        raise KinesphereError("malformed", f"{path} has no [groups] table")
-    return _groups(groups)

@@ -7,9 +7,13 @@ robot that stops hearing it holds within ``ttl_ms``. When the operator lets go, 
 disconnects, the target changes or the client exits, one final stop goes out.
 
 E-stop goes to every robot (``{p}/robot/*/command``) and latches here too. Robots clear their
-latch only on a command with ``release=True``; the loop also stops streaming while any targeted
-robot reports ``estop`` (pointless commands would only be ignored), and after an e-stop, a
-release or a disconnect it streams again only after the deadman was let go and pressed anew.
+latch only on a command with ``release=True``; the release button sends one to exactly the
+robots whose state says this operator latched them (``RobotState.estop_by``; robots that do not
+say who, only while this operator's own e-stop stands) and names them: a robot somebody else
+stopped needs an explicit ``kinesphere estop --release --target ID``. The loop also stops
+streaming while any targeted robot reports ``estop`` (pointless commands would only be
+refused), and after an e-stop, a release or a disconnect it streams again only after the
+deadman was let go and pressed anew.
 
 A direction the selected limb has no poses for (per the targets' catalogues) is replaced by
 the one :mod:`kinesphere.substitution` chooses (nearest by angle, a front request never served
@@ -79,6 +83,8 @@ class View:
     seq: int
     message: str
     catalogue_errors: dict[str, str] = field(default_factory=dict)
+    members: list[str] = field(default_factory=list)
+    """The robots heard from that the target reaches."""
     sender: str = ""
     """This operator's sender id (robots name it as their lease holder or e-stop latcher)."""
     available: frozenset[Direction] | None = None
@@ -121,19 +127,47 @@ class Teleop:
 
     # --- decisions ----------------------------------------------------------------------
 
+    def _targeted(self) -> dict[str, Seen]:
+        """The robots heard from that the current target reaches (by id or their groups)."""
+        return {rid: seen for rid, seen in self.link.states().items()
+                if self.target.includes(rid, seen.state.groups)}  # fmt: skip
+
     def _platforms(self) -> list[str]:
-        states = self.link.states()
-        return [s.state.platform for rid, s in sorted(states.items()) if self.target.includes(rid)]
+        return [seen.state.platform for _, seen in sorted(self._targeted().items())]
 
     def _remote_estop(self) -> list[str]:
         """Targeted robots that report a latched e-stop (not one we just released)."""
         return sorted(
             rid
-            for rid, seen in self.link.states().items()
-            if self.target.includes(rid)
-            and seen.state.status == Status.ESTOP
-            and seen.at > self.released_at + RELEASE_GRACE_S
+            for rid, seen in self._targeted().items()
+            if seen.state.status == Status.ESTOP and seen.at > self.released_at + RELEASE_GRACE_S
         )
+
+    def latched_by_me(self) -> list[str]:
+        """Robots in e-stop that this operator latched, by their own account."""
+        me = self.seq.sender
+        return sorted(
+            rid
+            for rid, seen in self.link.states().items()
+            if seen.state.status == Status.ESTOP
+            and (seen.state.estop_by == me or (not seen.state.estop_by and self.estopped))
+        )
+
+    def _release(self) -> None:
+        """Release exactly the robots this operator's e-stop latched, and say which."""
+        mine = self.latched_by_me()
+        others = sorted(rid for rid, seen in self.link.states().items()
+                        if seen.state.status == Status.ESTOP and rid not in mine)  # fmt: skip
+        cmd = self.seq.release()
+        self.link.put([self.link.keys.command(rid) for rid in mine], cmd)
+        self.estopped, self.need_fresh = False, True
+        self.released_at = time.monotonic()
+        said = (f"released the e-stop of {', '.join(mine)}" if mine
+                else "no robot reports an e-stop latched by you")  # fmt: skip
+        if others:
+            said += (f"; still latched by others: {', '.join(others)} (kinesphere estop "
+                     "--release --target ID)")  # fmt: skip
+        self.message = said
 
     def _stop_stream(self) -> None:
         if self.streaming:
@@ -147,14 +181,13 @@ class Teleop:
             self.estopped = self.need_fresh = True
             self.message = "E-STOP sent to all robots"
         if cs.was_pressed(Action.RELEASE) and not cs.was_pressed(Action.ESTOP):
-            self.link.put(self.target.keys(self.link.keys), self.seq.release())
-            self.estopped, self.need_fresh = False, True
-            self.released_at = time.monotonic()
-            self.message = f"e-stop released for {self.target.label}"
+            self._release()
         if cs.was_pressed(Action.TARGET_NEXT):
             self._stop_stream()
-            self.target = tg.cycle(self.target, self.link.robots(), self.map.groups)
-            self.message = f"target: {self.target.label}"
+            robots = self.link.robot_groups()
+            self.target = tg.cycle(self.target, robots)
+            reached = tg.members(self.target, robots)
+            self.message = f"target: {self.target.label} ({', '.join(reached) or 'nobody yet'})"
         sel = self.selection
         moves: tuple[tuple[str, Callable[[int], None], int], ...] = (
             (Action.LIMB_NEXT, sel.next_limb, 1),
@@ -234,6 +267,7 @@ class Teleop:
             catalogue_errors=self.catalogues.errors(),
             available=self._available,
             asked=self._asked,
+            members=sorted(self._targeted()),
             sender=self.seq.sender,
         )
 
