@@ -30,6 +30,8 @@ from kinesphere.endpoints import LOOPBACK_HOST as LOOPBACK_HOST
 from kinesphere.errors import KinesphereError
 
 MODES = ("peer", "client", "router")
+_ZENOH_LISTEN = json.loads(zenoh.Config().get_json("listen/endpoints"))
+"""Zenoh's own listen endpoints per mode (every interface): what nobody chose."""
 
 
 class Undeclarable(Protocol):
@@ -210,9 +212,28 @@ def configs_from_args(args: argparse.Namespace) -> list[zenoh.Config]:
             connect=None if connect is None else list(connect),
             config_file=file,
         )
+        if listen_eps is None:
+            listen_where_told(config)
         _apply_cfg(config, getattr(args, "cfg", None) or ())
         configs.append(config)
     return configs
+
+
+def listen_where_told(config: zenoh.Config) -> zenoh.Config:
+    """Unless ``config`` names its listen endpoints, listen on loopback only: a peer on any
+    port, a router on :data:`DEFAULT_ENDPOINT`; a client nowhere. Returns ``config``.
+
+    Zenoh's own default makes a peer listen on every interface in plain TCP: a process told
+    only to connect (to a router with TLS and access control, say) would then accept anyone on
+    the network, bypassing both. A peer still listens on loopback so that peers of one machine,
+    introduced by gossip, can link directly; peers on other machines need ``--listen`` (or,
+    better, a router and client mode), and a router serving other machines a listen endpoint.
+    """
+    mode = json.loads(config.get_json("mode"))
+    if json.loads(config.get_json("listen/endpoints")) == _ZENOH_LISTEN:
+        where = {"client": [], "peer": [LOOPBACK_ANY_PORT], "router": [DEFAULT_ENDPOINT]}
+        _set(config, "listen/endpoints", where.get(mode, []))
+    return config
 
 
 def session_from_args(args: argparse.Namespace) -> zenoh.Session:

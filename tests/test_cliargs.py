@@ -26,8 +26,6 @@ from kinesphere.errors import KinesphereError
 DEFAULT = zc.DEFAULT_ENDPOINT
 ANY = zc.LOOPBACK_ANY_PORT
 OTHER = "tcp/127.0.0.1:7999"
-ZENOH_LISTEN = json.loads(zc.session_config().get_json("listen/endpoints"))
-"""Zenoh's own listen endpoints: what a session gets when nobody sets them."""
 
 
 def parse(defaults: ZenohDefaults, argv: list[str], listen: bool = True) -> argparse.Namespace:
@@ -48,17 +46,19 @@ def plan(defaults: ZenohDefaults, argv: list[str], listen: bool = True) -> list[
     ("defaults", "argv", "listen", "expected"),
     [
         (AGENT, [], True, [("peer", [DEFAULT], [ANY])]),
-        (AGENT, ["--connect", OTHER], True, [("peer", [OTHER], ZENOH_LISTEN)]),
+        (AGENT, ["--connect", OTHER], True, [("peer", [OTHER], [ANY])]),
+        (AGENT, ["--connect", OTHER, "--mode", "client"], True, [("client", [OTHER], [])]),
         (AGENT, ["--listen", OTHER], True, [("peer", [], [OTHER])]),
-        (OPERATOR, [], True, [("peer", [DEFAULT], ZENOH_LISTEN)]),
-        (OPERATOR, ["--mode", "client"], True, [("client", [DEFAULT], ZENOH_LISTEN)]),
-        (QUERY, [], True, [("client", [DEFAULT], ZENOH_LISTEN)]),
-        (QUERY, ["--mode", "peer", "--connect", OTHER], True, [("peer", [OTHER], ZENOH_LISTEN)]),
+        (OPERATOR, [], True, [("peer", [DEFAULT], [ANY])]),
+        (OPERATOR, ["--mode", "client"], True, [("client", [DEFAULT], [])]),
+        (QUERY, [], True, [("client", [DEFAULT], [])]),
+        (QUERY, ["--mode", "peer", "--connect", OTHER], True, [("peer", [OTHER], [ANY])]),
         (WATCHER, [], False, [("peer", [DEFAULT], [])]),
         (WATCHER, ["--connect", OTHER], False, [("peer", [OTHER], [])]),
         (SERVICE, [], True, [("peer", [], [DEFAULT]), ("peer", [DEFAULT], [ANY])]),
         (SERVICE, ["--mode", "client"], True,
-         [("client", [], ZENOH_LISTEN), ("client", [DEFAULT], ZENOH_LISTEN)]),
+         [("client", [], []), ("client", [DEFAULT], [])]),
+        (SERVICE, ["--connect", OTHER], True, [("peer", [OTHER], [ANY])]),
         (SERVICE, ["--listen", OTHER], True, [("peer", [], [OTHER])]),
     ],
 )
@@ -71,13 +71,16 @@ def test_defaults_apply_only_without_endpoint_options(
 def test_a_config_file_replaces_the_defaults(tmp_path: Path) -> None:
     cfg = tmp_path / "z.json5"
     cfg.write_text(f'{{mode: "client", connect: {{endpoints: ["{OTHER}"]}}}}')
-    assert plan(AGENT, ["--zenoh-config", str(cfg)]) == [("client", [OTHER], ZENOH_LISTEN)]
+    assert plan(AGENT, ["--zenoh-config", str(cfg)]) == [("client", [OTHER], [])]
     assert plan(WATCHER, ["--zenoh-config", str(cfg)], listen=False) == [
-        ("client", [OTHER], ZENOH_LISTEN)
+        ("client", [OTHER], [])
     ]
     assert plan(SERVICE, ["--zenoh-config", str(cfg), "--mode", "peer"]) == [
-        ("peer", [OTHER], ZENOH_LISTEN)
+        ("peer", [OTHER], [ANY])
     ]
+    chosen = tmp_path / "listen.json5"
+    chosen.write_text(f'{{mode: "peer", listen: {{endpoints: ["{OTHER}"]}}}}')
+    assert plan(AGENT, ["--zenoh-config", str(chosen)]) == [("peer", [], [OTHER])]
 
 
 def test_cfg_pairs_are_applied_last() -> None:
@@ -157,3 +160,14 @@ def test_zenoh_sessions_close_as_context_managers() -> None:
         with zc.session_from_args(parse(OPERATOR, ["--connect", endpoint])) as s:
             assert isinstance(s, zenoh.Session)
         assert s.is_closed()
+
+
+@pytest.mark.parametrize(("mode", "expected"),
+                         [("peer", [ANY]), ("client", []), ("router", [DEFAULT])])
+def test_nobody_listens_on_every_interface_unless_told(mode: str, expected: list[str]) -> None:
+    """Zenoh's own default is every interface, in plain TCP; kinesphere's is loopback only."""
+    config = zc.session_config(mode)
+    assert "tcp/[::]" in config.get_json("listen/endpoints")  # what Zenoh would do
+    assert json.loads(zc.listen_where_told(config).get_json("listen/endpoints")) == expected
+    told = zc.session_config(mode, listen=[OTHER])
+    assert json.loads(zc.listen_where_told(told).get_json("listen/endpoints")) == [OTHER]

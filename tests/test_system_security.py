@@ -24,6 +24,7 @@ from test_system_support import (
     Observer,
     at_pose,
     databank_args,
+    listeners,
     localize,
     make_certs,
     port_open,
@@ -96,6 +97,16 @@ def test_every_deploy_config_loads() -> None:
     router = zenoh.Config.from_file(str(DEPLOY / "router.json5"))
     assert router.get_json("access_control/enabled") == "true"
     assert router.get_json("transport/link/tls/enable_mtls") == "true"
+
+
+def test_only_the_router_listens(secured: Secured) -> None:
+    """Before: client-mode services were fine, but a peer told only to connect listened on
+    every interface in plain TCP, past the router's TLS and access control."""
+    s = secured
+    found = {name: listeners(child.pid) for name, child in s.sup.children.items()
+             if child.alive()}
+    assert found["router"] == [f"127.0.0.1:{s.port}"], found
+    assert found["databank"] == [] and found["agent"] == [], found
 
 
 def _send(s: Secured, role: str, pose: tuple[str, str, str, int]) -> None:

@@ -12,6 +12,7 @@ import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
+import psutil
 import pytest
 import zenoh
 
@@ -55,6 +56,19 @@ def port_open(port: int, host: str = "127.0.0.1") -> bool:
     with socket.socket() as s:
         s.settimeout(0.2)
         return s.connect_ex((host, port)) == 0
+
+
+def listeners(pid: int) -> list[str]:
+    """``ip:port`` of every TCP/UDP socket process ``pid`` listens on (or has bound, for UDP)."""
+    out = []
+    for c in psutil.Process(pid).net_connections(kind="inet"):
+        if c.status == psutil.CONN_LISTEN or (c.type == 2 and not c.raddr):  # 2: SOCK_DGRAM
+            out.append(f"{c.laddr.ip}:{c.laddr.port}")
+    return sorted(out)
+
+
+def loopback(addresses: list[str]) -> bool:
+    return all(a.startswith(("127.", "::1:", "::ffff:127.")) for a in addresses)
 
 
 def make_certs(out: Path, *extra: str, roles: str | None = None) -> Path:

@@ -10,7 +10,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from kinesphere.cliargs import WATCHER, add_zenoh_arguments
+from kinesphere.cliargs import DEFAULT_ENDPOINT, WATCHER, add_zenoh_arguments
 from kinesphere.deploy.plan import DEFAULT_ROBOTS, UpOptions
 
 UP = UpOptions(robots=[], phrases=[])
@@ -71,8 +71,9 @@ def register(sub: Any) -> None:
     )
     rt.add_argument("--config", type=Path, metavar="FILE", help="Zenoh JSON5 config file")
     rt.add_argument("--listen", action="append", metavar="EP",
-                    help="listen endpoint, overrides the file's (repeatable; default "
-                    "tcp/[::]:7447)")
+                    help="listen endpoint, overrides the file's (repeatable; default: the "
+                    f"file's, else {DEFAULT_ENDPOINT}, loopback only; e.g. tls/0.0.0.0:7447 "
+                    "to serve other machines)")
     rt.add_argument("--log-denials", action=argparse.BooleanOptionalAction, default=None,
                     help="log access-control denials (default: on when access control is)")
     rt.set_defaults(func=_router)

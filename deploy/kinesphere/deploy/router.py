@@ -29,7 +29,7 @@ import zenoh
 
 from kinesphere.errors import KinesphereError
 from kinesphere.signals import handle_signals
-from kinesphere.zconfig import close_session, open_session, session_config
+from kinesphere.zconfig import close_session, listen_where_told, open_session, session_config
 
 log = logging.getLogger("kinesphere.router")
 
@@ -169,6 +169,7 @@ def run_router(
     if config_file is not None and not config_file.is_file():
         raise KinesphereError("malformed", f"router config {config_file}: no such file")
     config = session_config("router", listen=listen or None, config_file=config_file)
+    listen_where_told(config)
     acl = _acl_enabled(config)
     if log_denials is None:
         log_denials = acl
