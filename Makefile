@@ -16,7 +16,7 @@ export PYTHONDONTWRITEBYTECODE := 1
 $(STAMP): pyproject.toml robots/pyproject.toml services/pyproject.toml clients/pyproject.toml deploy/pyproject.toml constraints.txt
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -c constraints.txt -e '.[test]' $(addprefix -e ,$(filter-out .,$(PARTS)))
+	$(BIN)/python -m pip install --quiet -c constraints.txt -e '.[test,ros2]' $(addprefix -e ,$(filter-out .,$(PARTS)))
 	touch $(STAMP)
 
 install: $(STAMP)
@@ -43,7 +43,7 @@ bench: $(STAMP)
 lock:
 	rm -rf .venv-lock && $(PYTHON) -m venv .venv-lock
 	.venv-lock/bin/python -m pip install --quiet --upgrade pip
-	.venv-lock/bin/python -m pip install --quiet -e '.[test]' $(addprefix -e ,$(filter-out .,$(PARTS)))
+	.venv-lock/bin/python -m pip install --quiet -e '.[test,ros2]' $(addprefix -e ,$(filter-out .,$(PARTS)))
 	.venv-lock/bin/python -m pip freeze --exclude-editable | grep -v '^kinesphere' > constraints.txt
 	rm -rf .venv-lock
 

@@ -181,12 +181,7 @@ def load_eurdf(source: str | Path) -> Eurdf:
         if not path.is_file():
             raise invalid(f"eURDF file not found: {path}")
         text = path.read_text(encoding="utf-8")
-    try:
-        root = ET.fromstring(text)
-    except ET.ParseError as exc:
-        raise invalid(f"{path or 'eURDF'}: not well-formed XML ({exc})") from None
-    if root.tag != "robot":
-        raise invalid(f"root element must be <robot>, found <{root.tag}>")
+    root = _robot_element(text, str(path or "eURDF"))
     name = root.get("name") or ""
     if not name:
         raise invalid("<robot> has no name attribute")
@@ -274,3 +269,23 @@ def _parse_part(el: ET.Element) -> BodyPart:
 
 def label_set_summary(parts: Iterable[BodyPart]) -> str:
     return "{" + ", ".join(p.name for p in parts) + "}"
+
+
+def plain_urdf(text: str) -> str:
+    """The URDF inside eURDF text: the same XML without its ``<body_part>`` labels, for tools
+    that read URDF only and may warn about unknown elements (robot_state_publisher, RViz)."""
+    root = _robot_element(text, "eURDF")
+    for part in root.findall("body_part"):
+        root.remove(part)
+    return ET.tostring(root, encoding="unicode")
+
+
+def _robot_element(text: str, source: str) -> ET.Element:
+    """The ``<robot>`` root of eURDF text, or ``invalid_eurdf`` naming ``source``."""
+    try:
+        root = ET.fromstring(text)
+    except ET.ParseError as exc:
+        raise invalid(f"{source}: not well-formed XML ({exc})") from None
+    if root.tag != "robot":
+        raise invalid(f"root element must be <robot>, found <{root.tag}>")
+    return root

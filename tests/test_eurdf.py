@@ -1,5 +1,6 @@
 """The eURDF loader: (C, J, L, P) from a labelled URDF, and a clear error for every broken file."""
 
+import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import pytest
@@ -212,3 +213,20 @@ def test_limb_tip_attribute_overrides_the_deepest_link() -> None:
     assert load_eurdf(text).tip_link("limb_12") == "hand"
     with pytest.raises(KinesphereError, match="tip='base' is not one of its links"):
         load_eurdf(text.replace('tip="hand"', 'tip="base"'))
+
+
+def test_plain_urdf_strips_only_the_labels() -> None:
+    from kinesphere.eurdf import plain_urdf
+    from kinesphere.robots.platform import load_platform
+
+    for name in ("baxter", "nao", "youbot"):
+        platform = load_platform(name)
+        assert platform.eurdf.path is not None
+        text = platform.eurdf.path.read_text(encoding="utf-8")
+        urdf = plain_urdf(text)
+        root = ET.fromstring(urdf)
+        assert root.findall("body_part") == [] and "body_part" in text
+        assert {j.get("name") for j in root.findall("joint")} >= set(platform.joint_names)
+        assert len(root.findall("link")) == len(ET.fromstring(text).findall("link"))
+    with pytest.raises(KinesphereError, match="well-formed"):
+        plain_urdf("<robot")

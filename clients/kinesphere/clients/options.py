@@ -18,3 +18,18 @@ class TeleopOptions:
     rate_hz: float = 30.0
     ttl_ms: int = 300
     deadman_required: bool = True
+
+
+@dataclass(frozen=True)
+class BridgeOptions:
+    """``kinesphere ros2 bridge``: ROS ``domain`` and ``namespace``, ``node`` name, TF parent
+    frame; how long a BodyModel query may take and the pause before asking again; bounds."""
+
+    domain: int = 0
+    namespace: str = "/"
+    node: str = "kinesphere_bridge"
+    odom_frame: str = "odom"
+    body_timeout_s: float = 2.0
+    body_retry_s: float = 5.0
+    max_robots: int = 256
+    max_urdf_bytes: int = 1024 * 1024

@@ -1,0 +1,250 @@
+"""``kinesphere ros2 bridge``: every live kinesphere robot, seen by ROS 2 tools over rmw_zenoh.
+
+An observer on the Zenoh network: it reads each robot's ``RobotState`` and its platform's
+``BodyModel`` (from the databank) and republishes them as one ROS node (``kinesphere_bridge``)
+speaking rmw_zenoh's wire format, so ``ros2 topic list``, RViz, Foxglove and ``ros2 bag``
+see, for robot ``ID`` (``ID`` made a valid ROS name: ``baxter-1`` -> ``baxter_1``)::
+
+    ID/joint_states       sensor_msgs/msg/JointState  every RobotState (names, q, qd)
+    ID/robot_description  std_msgs/msg/String         the URDF (eURDF minus body_part labels),
+                                                      reliable + transient local, depth 1
+    tf                    tf2_msgs/msg/TFMessage      odom -> ID/<URDF root link>, base pose
+
+Names are relative to ``--namespace`` (``/`` by default, so ``/baxter_1/joint_states`` and
+``/tf``). A robot appears when its first state arrives and disappears (publishers and graph
+tokens undeclared) when its liveliness token goes. Bodies are fetched on a worker thread,
+never in a Zenoh callback; until a platform's body arrives its robots publish joint states
+only (the TF child frame is the URDF's root link, which the body names). Bounded: at most
+``max_robots`` robots, states with more than ``MAX_SEQUENCE`` joints and URDFs larger than
+``max_urdf_bytes`` are refused with one log line.
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import threading
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass, field
+
+import zenoh
+
+from kinesphere import ros2msgs as rm
+from kinesphere.clients.options import BridgeOptions
+from kinesphere.errors import KinesphereError
+from kinesphere.keyexpr import Keys
+from kinesphere.protocol import BodyModel, RobotState, decode
+from kinesphere.query import get_one
+from kinesphere.rmw_zenoh import LATCHED, MAX_SEQUENCE, ros_name
+from kinesphere.ros2node import Node, Publisher
+from kinesphere.zconfig import undeclare
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class _Body:
+    urdf: str
+    root_link: str
+
+
+@dataclass
+class _Robot:
+    """The ROS face of one kinesphere robot."""
+
+    robot_id: str
+    ros_id: str
+    platform: str
+    joint_states: Publisher
+    description: Publisher | None = None
+    root_link: str = ""
+    published: int = 0
+
+    def close(self) -> None:
+        self.joint_states.close()
+        if self.description is not None:
+            self.description.close()
+
+
+@dataclass
+class BridgeStats:
+    robots: int = 0
+    states: int = 0
+    refused: dict[str, int] = field(default_factory=dict)
+
+
+class Bridge:
+    """Republishes robots for ROS 2 until :meth:`close`."""
+
+    def __init__(self, session: zenoh.Session, keys: Keys | None = None,
+                 options: BridgeOptions | None = None) -> None:
+        self.session = session
+        self.keys = keys or Keys()
+        self.options = options or BridgeOptions()
+        self.node = Node(session, self.options.node, self.options.namespace, self.options.domain)
+        self.tf = self.node.publisher("tf", rm.TF_MESSAGE)
+        self.stats = BridgeStats()
+        self._robots: dict[str, _Robot] = {}
+        self._bodies: dict[str, _Body] = {}
+        self._wanted: queue.Queue[str | None] = queue.Queue()
+        self._asked: set[str] = set()
+        self._lock = threading.Lock()
+        self._closed = threading.Event()
+        self._worker = threading.Thread(target=self._fetch_bodies, name="ros2-bridge-bodies",
+                                        daemon=True)
+        self._worker.start()
+        self._states = session.declare_subscriber(self.keys.state("*"), self._on_state)
+        self._alive = session.liveliness().declare_subscriber(
+            self.keys.alive_robot("*"), self._on_alive
+        )
+
+    # --- robots ------------------------------------------------------------------------------
+
+    def robots(self) -> dict[str, str]:
+        """kinesphere id -> ROS name of every robot bridged now."""
+        with self._lock:
+            return {r.robot_id: r.ros_id for r in self._robots.values()}
+
+    def _refuse(self, what: str, message: str) -> None:
+        n = self.stats.refused.get(what, 0) + 1
+        self.stats.refused[what] = n
+        if n == 1 or n % 100 == 0:
+            log.warning("%s (%d so far)", message, n)
+
+    def _robot(self, state: RobotState) -> _Robot | None:
+        with self._lock:
+            robot = self._robots.get(state.robot_id)
+            if robot is not None or self._closed.is_set():
+                return robot
+            if len(self._robots) >= self.options.max_robots:
+                self._refuse("max_robots", f"robot {state.robot_id!r} not bridged: "
+                             f"already {self.options.max_robots} robots")
+                return None
+            ros_id = ros_name(state.robot_id)
+            if any(r.ros_id == ros_id for r in self._robots.values()):
+                self._refuse("name_clash", f"robot {state.robot_id!r} not bridged: its ROS name "
+                             f"{ros_id!r} is taken by another robot")
+                return None
+            robot = _Robot(state.robot_id, ros_id, state.platform,
+                           self.node.publisher(f"{ros_id}/joint_states", rm.JOINT_STATE))
+            self._robots[state.robot_id] = robot
+            self.stats.robots = len(self._robots)
+            body = self._bodies.get(state.platform)
+            if body is not None:
+                self._describe(robot, body)
+            elif state.platform not in self._asked:
+                self._asked.add(state.platform)
+                self._wanted.put(state.platform)
+        log.info("bridging robot %s (%s) as %s", state.robot_id, state.platform,
+                 self.node.resolve(ros_id))
+        return robot
+
+    def _describe(self, robot: _Robot, body: _Body) -> None:
+        """Publish the robot's URDF (latched) once its body is known; called with the lock."""
+        robot.root_link = body.root_link
+        robot.description = self.node.publisher(f"{robot.ros_id}/robot_description",
+                                                 rm.STRING, LATCHED)
+        robot.description.put(rm.string(body.urdf))
+
+    def _on_state(self, sample: zenoh.Sample) -> None:
+        try:
+            state = decode(sample.payload, RobotState)
+        except KinesphereError as exc:
+            self._refuse("malformed", f"bad state on {sample.key_expr}: {exc.message}")
+            return
+        if len(state.joint_names) > MAX_SEQUENCE:
+            self._refuse("too_many_joints", f"state of {state.robot_id!r} has "
+                         f"{len(state.joint_names)} joints (at most {MAX_SEQUENCE})")
+            return
+        robot = self._robot(state)
+        if robot is None:
+            return
+        try:
+            robot.joint_states.put(
+                rm.joint_state(state.joint_names, state.q, state.qd, state.stamp_ns)
+            )
+            if robot.root_link:
+                x, y, yaw = state.base_pose
+                self.tf.put(rm.tf_planar(self.options.odom_frame,
+                                         f"{robot.ros_id}/{robot.root_link}", x, y, yaw,
+                                         state.stamp_ns))
+        except zenoh.ZError as exc:  # the session is closing
+            log.debug("state of %s not republished: %s", state.robot_id, exc)
+            return
+        robot.published += 1
+        self.stats.states += 1
+
+    def _on_alive(self, sample: zenoh.Sample) -> None:
+        if sample.kind != zenoh.SampleKind.DELETE:
+            return
+        try:
+            robot_id = self.keys.robot_id_of(str(sample.key_expr))
+        except KinesphereError:
+            return
+        with self._lock:
+            robot = self._robots.pop(robot_id, None)
+            self.stats.robots = len(self._robots)
+        if robot is not None:
+            robot.close()
+            log.info("robot %s left; %s no longer published", robot_id, robot.ros_id)
+
+    # --- bodies ------------------------------------------------------------------------------
+
+    def _fetch_bodies(self) -> None:
+        while not self._closed.is_set():
+            platform = self._wanted.get()
+            if platform is None:
+                return
+            try:
+                body = self._fetch(platform)
+            except KinesphereError as exc:
+                log.warning("no body for platform %s (%s); robot_description and tf wait for "
+                            "it, asking again in %g s", platform, exc.message,
+                            self.options.body_retry_s)
+                if not self._closed.wait(self.options.body_retry_s):
+                    self._wanted.put(platform)
+                continue
+            with self._lock:
+                if self._closed.is_set():
+                    return
+                self._bodies[platform] = body
+                for robot in self._robots.values():
+                    if robot.platform == platform and robot.description is None:
+                        self._describe(robot, body)
+
+    def _fetch(self, platform: str) -> _Body:
+        from kinesphere.eurdf import plain_urdf  # yourdfpy: slow to import, not for --help
+
+        model = get_one(self.session, self.keys.body(platform), BodyModel,
+                        timeout=self.options.body_timeout_s, every_replica=True)
+        if len(model.eurdf.encode()) > self.options.max_urdf_bytes:
+            raise KinesphereError("malformed", f"body of {platform} exceeds "
+                                  f"{self.options.max_urdf_bytes} bytes")
+        urdf = plain_urdf(model.eurdf)
+        return _Body(urdf, _root_link(urdf))
+
+    def close(self) -> None:
+        """Stop listening, undeclare every publisher and graph token."""
+        undeclare(self._states, self._alive)
+        with self._lock:
+            self._closed.set()
+            robots, self._robots = list(self._robots.values()), {}
+        self._wanted.put(None)
+        self._worker.join(timeout=self.options.body_timeout_s + 1.0)
+        for robot in robots:
+            robot.close()
+        self.node.close()
+
+
+def _root_link(urdf: str) -> str:
+    """The link no joint has as its child (the tree's root)."""
+    root = ET.fromstring(urdf)
+    children = set()
+    for joint in root.findall("joint"):
+        child = joint.find("child")
+        if child is not None:
+            children.add(child.get("link"))
+    roots = [str(ln.get("name")) for ln in root.findall("link") if ln.get("name") not in children]
+    if len(roots) != 1:
+        raise KinesphereError("invalid_eurdf", f"URDF has {len(roots)} root links, need 1")
+    return roots[0]

@@ -1,0 +1,86 @@
+"""``kinesphere ros2 ...``: kinesphere seen from ROS 2 over rmw_zenoh (no ROS installation).
+
+Registered through the ``kinesphere.commands`` entry point of the clients distribution; the
+handler imports Zenoh, so ``--help`` stays quick.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import threading
+from types import FrameType
+from typing import Any
+
+from kinesphere.cliargs import ZenohDefaults, add_zenoh_arguments
+from kinesphere.clients.options import BridgeOptions
+
+BRIDGE_EPILOG = """topics, for robot ID (made a ROS name: baxter-1 -> baxter_1), relative to NS:
+  ID/joint_states       sensor_msgs/msg/JointState   at the robot's state rate
+  ID/robot_description  std_msgs/msg/String          the URDF, transient local (RViz)
+  tf                    tf2_msgs/msg/TFMessage       ODOM -> ID/<URDF root link>
+ROS 2 side: RMW_IMPLEMENTATION=rmw_zenoh_cpp, both sides connected to the same Zenoh router
+(ros2 run rmw_zenoh_cpp rmw_zenohd); see docs/ros2.md."""
+
+
+BRIDGE_ZENOH = ZenohDefaults(
+    note="Point it at the router the ROS 2 nodes use: rmw_zenohd listens on 7447 by default."
+)
+"""The bridge joins the default endpoint and listens (ROS peers connect to it directly)."""
+
+
+def register(sub: Any) -> None:
+    r = sub.add_parser(
+        "ros2",
+        help="ROS 2 over rmw_zenoh: show the robots to ROS tools",
+        description="Speak ROS 2's Zenoh middleware (rmw_zenoh_cpp, Jazzy) without a ROS "
+        "installation. The gamepad takes a ROS joystick with --input ros2:/joy; the agent "
+        "drives a ros2_control robot with --body ros2.",
+    )
+    rsub = r.add_subparsers(dest="ros2_command", metavar="COMMAND", required=True)
+    d = BridgeOptions()
+    b = rsub.add_parser(
+        "bridge",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        help="publish every live robot's joint states, URDF and base pose to ROS 2",
+        description="Run one ROS node that republishes every live kinesphere robot for ROS 2 "
+        "tools (ros2 topic, RViz, Foxglove, ros2 bag) until SIGINT/SIGTERM.",
+        epilog=BRIDGE_EPILOG,
+    )
+    b.add_argument("--domain", type=int, default=d.domain,
+                   help=f"ROS domain id (ROS_DOMAIN_ID; default {d.domain})")
+    b.add_argument("--namespace", default=d.namespace, metavar="NS",
+                   help=f"ROS namespace of the node and its topics (default {d.namespace})")
+    b.add_argument("--node", default=d.node, help=f"ROS node name (default {d.node})")
+    b.add_argument("--odom-frame", default=d.odom_frame, metavar="ODOM",
+                   help=f"TF parent frame of every robot's base (default {d.odom_frame})")
+    add_zenoh_arguments(b, BRIDGE_ZENOH)
+    b.set_defaults(func=bridge)
+
+
+def bridge(args: argparse.Namespace) -> int:
+    import dataclasses
+
+    from kinesphere.clients.ros2bridge import Bridge
+    from kinesphere.keyexpr import Keys
+    from kinesphere.signals import handle_signals
+    from kinesphere.zconfig import session_from_args
+
+    options = dataclasses.replace(BridgeOptions(), domain=args.domain, namespace=args.namespace,
+                                  node=args.node, odom_frame=args.odom_frame)
+    stop = threading.Event()
+
+    def on_signal(signum: int, frame: FrameType | None) -> None:
+        stop.set()
+
+    with session_from_args(args) as session, handle_signals(on_signal):
+        br = Bridge(session, Keys(args.prefix), options)
+        try:
+            print(f"bridging kinesphere robots to ROS 2 domain {options.domain} as node "
+                  f"{br.node.resolve(options.node)}; Ctrl-C to stop", file=sys.stderr, flush=True)
+            while not stop.wait(0.5):
+                pass
+        finally:
+            br.close()
+        print(f"bridged {br.stats.states} states", file=sys.stderr)
+    return 0

@@ -1,0 +1,125 @@
+"""The few ROS 2 messages kinesphere reads and writes, built and read in one place.
+
+Messages are rosbags dataclasses (:func:`kinesphere.rmw_zenoh.message_class`); numeric
+sequences are float64 numpy arrays as rosbags wants them. Readers check what a peer could get
+wrong (lengths that disagree, non-finite numbers) and raise ``malformed`` naming the field.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any, Final, NamedTuple
+
+import numpy as np
+
+from kinesphere.errors import KinesphereError
+from kinesphere.rmw_zenoh import message_class
+
+JOINT_STATE: Final = "sensor_msgs/msg/JointState"
+JOY: Final = "sensor_msgs/msg/Joy"
+TF_MESSAGE: Final = "tf2_msgs/msg/TFMessage"
+STRING: Final = "std_msgs/msg/String"
+JOINT_TRAJECTORY: Final = "trajectory_msgs/msg/JointTrajectory"
+FLOAT64_MULTI_ARRAY: Final = "std_msgs/msg/Float64MultiArray"
+
+
+def _f64(values: Sequence[float]) -> np.ndarray:
+    return np.asarray(values, dtype=np.float64)
+
+
+def stamp(ns: int) -> Any:
+    """``builtin_interfaces/msg/Time`` of a ``time.time_ns()`` value."""
+    sec, nanosec = divmod(int(ns), 1_000_000_000)
+    return message_class("builtin_interfaces/msg/Time")(sec=sec, nanosec=nanosec)
+
+
+def duration(seconds: float) -> Any:
+    """``builtin_interfaces/msg/Duration`` of a non-negative number of seconds."""
+    sec, nanosec = divmod(round(max(0.0, seconds) * 1e9), 1_000_000_000)
+    return message_class("builtin_interfaces/msg/Duration")(sec=sec, nanosec=nanosec)
+
+
+def header(stamp_ns: int, frame_id: str = "") -> Any:
+    return message_class("std_msgs/msg/Header")(stamp=stamp(stamp_ns), frame_id=frame_id)
+
+
+def joint_state(names: Sequence[str], position: Sequence[float], velocity: Sequence[float],
+                stamp_ns: int, frame_id: str = "") -> Any:
+    """A JointState; ``velocity`` may be empty (unknown)."""
+    return message_class(JOINT_STATE)(
+        header=header(stamp_ns, frame_id), name=list(names), position=_f64(position),
+        velocity=_f64(velocity), effort=_f64(()),
+    )
+
+
+def tf_planar(parent: str, child: str, x: float, y: float, yaw: float, stamp_ns: int) -> Any:
+    """A TFMessage with one transform: ``child`` at ``(x, y)`` turned by ``yaw`` in ``parent``."""
+    geo = "geometry_msgs/msg/"
+    transform = message_class(f"{geo}Transform")(
+        translation=message_class(f"{geo}Vector3")(x=float(x), y=float(y), z=0.0),
+        rotation=message_class(f"{geo}Quaternion")(
+            x=0.0, y=0.0, z=math.sin(yaw / 2.0), w=math.cos(yaw / 2.0)
+        ),
+    )
+    stamped = message_class(f"{geo}TransformStamped")(
+        header=header(stamp_ns, parent), child_frame_id=child, transform=transform
+    )
+    return message_class(TF_MESSAGE)(transforms=[stamped])
+
+
+def string(text: str) -> Any:
+    return message_class(STRING)(data=text)
+
+
+def joint_trajectory(names: Sequence[str], position: Sequence[float],
+                     velocity: Sequence[float], time_from_start: float) -> Any:
+    """A one-point JointTrajectory with a zero stamp ("start now"), as a streaming client
+    sends to ros2_control's joint_trajectory_controller."""
+    point = message_class("trajectory_msgs/msg/JointTrajectoryPoint")(
+        positions=_f64(position), velocities=_f64(velocity), accelerations=_f64(()),
+        effort=_f64(()), time_from_start=duration(time_from_start),
+    )
+    return message_class(JOINT_TRAJECTORY)(header=header(0), joint_names=list(names),
+                                           points=[point])
+
+
+def float64_multi_array(values: Sequence[float]) -> Any:
+    """A Float64MultiArray with no layout, what a forward_command_controller reads."""
+    layout = message_class("std_msgs/msg/MultiArrayLayout")(dim=[], data_offset=0)
+    return message_class(FLOAT64_MULTI_ARRAY)(layout=layout, data=_f64(values))
+
+
+class Joints(NamedTuple):
+    """Names and positions (and velocities, possibly empty) read from a message."""
+
+    names: tuple[str, ...]
+    position: tuple[float, ...]
+    velocity: tuple[float, ...]
+    stamp_ns: int
+
+
+def read_joint_state(msg: Any) -> Joints:
+    """Names, positions and velocities of a JointState, checked."""
+    names = tuple(str(n) for n in msg.name)
+    pos = tuple(float(v) for v in msg.position)
+    vel = tuple(float(v) for v in msg.velocity)
+    if len(pos) != len(names) or (vel and len(vel) != len(names)):
+        raise KinesphereError(
+            "malformed",
+            f"JointState has {len(names)} names, {len(pos)} positions, {len(vel)} velocities",
+        )
+    if len(set(names)) != len(names):
+        raise KinesphereError("malformed", "JointState names a joint twice")
+    if not all(math.isfinite(v) for v in (*pos, *vel)):
+        raise KinesphereError("malformed", "JointState carries a non-finite number")
+    t = msg.header.stamp
+    return Joints(names, pos, vel, int(t.sec) * 1_000_000_000 + int(t.nanosec))
+
+
+def read_joy(msg: Any) -> tuple[tuple[float, ...], tuple[int, ...]]:
+    """Axes (finite, clamped to -1..1) and buttons of a Joy message."""
+    axes = tuple(float(v) for v in msg.axes)
+    if not all(math.isfinite(v) for v in axes):
+        raise KinesphereError("malformed", "Joy carries a non-finite axis")
+    return tuple(max(-1.0, min(1.0, v)) for v in axes), tuple(int(b) for b in msg.buttons)
