@@ -23,22 +23,61 @@ fresh commands arrive, and the robots' TTL stops them if this process dies mid-p
 from __future__ import annotations
 
 import time
-import tomllib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
+
+import msgspec
 
 from kinesphere.clients.link import RobotLink, Sequencer
 from kinesphere.clients.options import TeleopOptions
+from kinesphere.configfile import convert, parse_toml
 from kinesphere.errors import KinesphereError
 from kinesphere.laban import Direction
-from kinesphere.protocol import Drive, SpatialCommand
+from kinesphere.protocol import MAX_NAME, MAX_TTL_MS, Drive, SpatialCommand
 from kinesphere.sizes import parse_size
 
-PHRASE_KEYS = ("name", "description", "ttl_ms", "step")
-STEP_KEYS = ("duration", "parts", "drive", "note")
+Label = Annotated[str, msgspec.Meta(min_length=1, max_length=MAX_NAME)]
+
+
+# --- the file as written (checked by msgspec) ----------------------------------------------
+
+
+class _PartTable(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
+    limb: Label
+    origin: Label
+    direction: str
+    size: float | str
+
+
+class _DriveTable(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
+    direction: str
+    speed: float
+
+
+class _StepTable(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
+    duration: Annotated[float, msgspec.Meta(gt=0, le=600, description="0 < s <= 600 seconds")]
+    parts: list[str | _PartTable] = []
+    drive: str | _DriveTable | None = None
+    note: str = ""
+
+    def __post_init__(self) -> None:
+        if not self.parts and self.drive is None:
+            raise ValueError("needs parts, a drive, or both")
+
+
+class _PhraseFile(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
+    step: Annotated[
+        list[_StepTable], msgspec.Meta(min_length=1, description="at least one [[step]]")
+    ]
+    name: str | None = None
+    description: str = ""
+    ttl_ms: Annotated[int, msgspec.Meta(ge=0, le=MAX_TTL_MS)] | None = None
+
+
+# --- what the client plays -----------------------------------------------------------------
 
 
 @dataclass(frozen=True)
@@ -61,8 +100,8 @@ class Phrase:
         return sum(s.duration for s in self.steps)
 
 
-def parse_part(value: Any, where: str) -> SpatialCommand:
-    """``"LIMB ORIGIN DIRECTION SIZE"`` or a table with those keys."""
+def parse_part(value: str | _PartTable, where: str) -> SpatialCommand:
+    """``"LIMB ORIGIN DIRECTION SIZE"`` or a part table; direction and size are checked."""
     if isinstance(value, str):
         words = value.split()
         if len(words) != 4:
@@ -70,36 +109,23 @@ def parse_part(value: Any, where: str) -> SpatialCommand:
                 "malformed", f"{where}: {value!r} is not 'LIMB ORIGIN DIRECTION SIZE'"
             )
         limb, origin, direction, size = words
-    elif isinstance(value, dict):
-        unknown = set(value) - {"limb", "origin", "direction", "size"}
-        missing = {"limb", "origin", "direction", "size"} - set(value)
-        if unknown or missing:
-            raise KinesphereError(
-                "malformed",
-                f"{where}: a part needs limb, origin, direction, size"
-                + (f"; unknown {sorted(unknown)}" if unknown else "")
-                + (f"; missing {sorted(missing)}" if missing else ""),
-            )
-        limb, origin, direction, size = (value[k] for k in ("limb", "origin", "direction", "size"))
-    else:
-        raise KinesphereError("malformed", f"{where}: a part is a string or a table")
-    for what, text in (("limb", limb), ("origin", origin)):
-        if not isinstance(text, str) or not text.strip():
-            raise KinesphereError("malformed", f"{where}: {what} must be a non-empty string")
+        value = _PartTable(limb, origin, direction, size)
     return SpatialCommand(
-        limb=limb, origin=origin, direction=Direction.parse(direction).slug, size=parse_size(size)
+        limb=value.limb,
+        origin=value.origin,
+        direction=Direction.parse(value.direction).slug,
+        size=parse_size(value.size),
     )
 
 
-def parse_drive(value: Any, where: str) -> Drive:
-    """``"DIRECTION SPEED"`` or ``{direction, speed}``; a middle horizontal, speed 0..1."""
-    if isinstance(value, str) and len(value.split()) == 2:
+def parse_drive(value: str | _DriveTable, where: str) -> Drive:
+    """``"DIRECTION SPEED"`` or a drive table; a middle horizontal, speed 0..1."""
+    if isinstance(value, str):
+        if len(value.split()) != 2:
+            raise KinesphereError("malformed", f"{where}: drive is 'DIRECTION SPEED' or a table")
         direction, speed = value.split()
-    elif isinstance(value, dict) and set(value) == {"direction", "speed"}:
-        direction, speed = value["direction"], value["speed"]
-    else:
-        raise KinesphereError("malformed", f"{where}: drive is 'DIRECTION SPEED' or a table")
-    return make_drive(direction, speed, where)
+        return make_drive(direction, speed, where)
+    return make_drive(value.direction, value.speed, where)
 
 
 def make_drive(direction: Any, speed: Any, where: str = "drive") -> Drive:
@@ -119,35 +145,16 @@ def make_drive(direction: Any, speed: Any, where: str = "drive") -> Drive:
 
 
 def parse_phrase(data: dict[str, Any], source: str) -> Phrase:
-    unknown = set(data) - set(PHRASE_KEYS)
-    if unknown:
-        raise KinesphereError(
-            "malformed", f"{source}: unknown {sorted(unknown)}; valid: {', '.join(PHRASE_KEYS)}"
-        )
-    raw = data.get("step")
-    if not isinstance(raw, list) or not raw:
-        raise KinesphereError("malformed", f"{source}: a phrase needs at least one [[step]]")
+    """A phrase from TOML data: the schema by msgspec, then labels' vocabulary per step."""
+    f = convert(data, _PhraseFile, source, name_lists=True)
     steps = []
-    for i, st in enumerate(raw, start=1):
+    for i, st in enumerate(f.step, start=1):
         where = f"{source} step {i}"
-        bad = set(st) - set(STEP_KEYS)
-        if bad:
-            raise KinesphereError(
-                "malformed", f"{where}: unknown {sorted(bad)}; valid: {', '.join(STEP_KEYS)}"
-            )
-        dur = st.get("duration")
-        if isinstance(dur, bool) or not isinstance(dur, (int, float)) or not 0 < dur <= 600:
-            raise KinesphereError("malformed", f"{where}: duration must be 0 < s <= 600")
-        parts = tuple(parse_part(p, where) for p in st.get("parts", []))
-        drive = parse_drive(st["drive"], where) if "drive" in st else None
-        if not parts and drive is None:
-            raise KinesphereError("malformed", f"{where}: needs parts, a drive, or both")
-        steps.append(Step(float(dur), parts, drive, str(st.get("note", ""))))
-    ttl = data.get("ttl_ms")
-    if ttl is not None and (isinstance(ttl, bool) or not isinstance(ttl, int) or ttl < 0):
-        raise KinesphereError("malformed", f"{source}: ttl_ms must be an integer >= 0")
-    name = str(data.get("name", Path(source).stem))
-    return Phrase(name, tuple(steps), str(data.get("description", "")), ttl)
+        parts = tuple(parse_part(p, where) for p in st.parts)
+        drive = parse_drive(st.drive, where) if st.drive is not None else None
+        steps.append(Step(st.duration, parts, drive, st.note))
+    name = f.name if f.name is not None else Path(source).stem
+    return Phrase(name, tuple(steps), f.description, f.ttl_ms)
 
 
 def shipped() -> list[str]:
@@ -169,10 +176,7 @@ def load_phrase(ref: str | Path) -> Phrase:
             )
         res = resources.files("kinesphere.clients").joinpath(f"phrases/{name}.toml")
         text, source = res.read_text(encoding="utf-8"), f"{name}.toml"
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise KinesphereError("malformed", f"{source} is not TOML: {exc}") from None
+    data = parse_toml(text, source)
     return parse_phrase(data, source)
 
 

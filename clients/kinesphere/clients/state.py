@@ -9,31 +9,33 @@ Sticks keep SDL's convention (x right +, y down +, -1..1) so a recording reads l
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from enum import StrEnum
 from typing import Any, Final
 
 
-class Action:
-    """Names of the operator's buttons (the same for every device and the keyboard)."""
+class Action(StrEnum):
+    """The operator's buttons (the same for every device and the keyboard); a mapping file
+    names them by value (``deadman = ["leftshoulder"]``)."""
 
-    DEADMAN: Final = "deadman"  # hold: nothing moves unless held
-    BEYOND: Final = "beyond"  # hold at the rim: sizes past far, translating the base
-    TURN_LEFT: Final = "turn_left"  # hold: the base turns left (counter-clockwise)
-    TURN_RIGHT: Final = "turn_right"  # hold: the base turns right
-    TURBO: Final = "turbo"  # hold: the drive's turbo scales
-    LIMB_NEXT: Final = "limb_next"
-    LIMB_PREV: Final = "limb_prev"
-    ORIGIN_NEXT: Final = "origin_next"
-    ORIGIN_PREV: Final = "origin_prev"
-    TARGET_NEXT: Final = "target_next"
-    ESTOP: Final = "estop"  # halts every robot, latches
-    RELEASE: Final = "release"  # clears the e-stop latch of the targeted robots
-    QUIT: Final = "quit"
+    DEADMAN = "deadman"  # hold: nothing moves unless held
+    BEYOND = "beyond"  # hold at the rim: sizes past far, translating the base
+    TURN_LEFT = "turn_left"  # hold: the base turns left (counter-clockwise)
+    TURN_RIGHT = "turn_right"  # hold: the base turns right
+    TURBO = "turbo"  # hold: the drive's turbo scales
+    LIMB_NEXT = "limb_next"
+    LIMB_PREV = "limb_prev"
+    ORIGIN_NEXT = "origin_next"
+    ORIGIN_PREV = "origin_prev"
+    TARGET_NEXT = "target_next"
+    ESTOP = "estop"  # halts every robot, latches
+    RELEASE = "release"  # clears the e-stop latch of the targeted robots
+    QUIT = "quit"
 
 
 HOLD_ACTIONS: Final = frozenset(
     {Action.DEADMAN, Action.BEYOND, Action.TURN_LEFT, Action.TURN_RIGHT, Action.TURBO}
 )
-ACTIONS: Final = frozenset(v for k, v in vars(Action).items() if k.isupper())
+ACTIONS: Final = frozenset(Action)
 
 
 @dataclass(frozen=True)

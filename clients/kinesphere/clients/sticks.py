@@ -12,7 +12,8 @@ robot).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+
+import msgspec
 
 from kinesphere.errors import KinesphereError
 from kinesphere.laban import Horizontal
@@ -31,9 +32,9 @@ RING: tuple[Horizontal, ...] = (
 """The 8 horizontals counter-clockwise seen from above, from forward; sector k is at k*45 deg."""
 
 
-@dataclass(frozen=True)
-class Tuning:
-    """How hands become numbers; every field is overridable in the mapping file's [tuning]."""
+class Tuning(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    """How hands become numbers; every field is overridable in the mapping file's [tuning]
+    (a Struct so the file decodes straight into it; the ranges below relate fields)."""
 
     stick_deadzone: float = 0.15
     """Radial dead zone of both sticks (fraction of full deflection): centred below it."""

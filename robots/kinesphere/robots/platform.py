@@ -9,30 +9,46 @@ from __future__ import annotations
 
 import functools
 import math
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Literal, get_args
 
+import msgspec
 import numpy as np
 
+from kinesphere.configfile import load_toml
 from kinesphere.errors import KinesphereError
 from kinesphere.eurdf import Eurdf, load_eurdf
 
 PLATFORMS_DIR = Path(__file__).resolve().parent / "platforms"
-BASE_KINDS = ("fixed", "omni", "diff", "skid")
+BaseKind = Literal["fixed", "omni", "diff", "skid"]
+BASE_KINDS: tuple[str, ...] = get_args(BaseKind)
 
 
-@dataclass(frozen=True)
-class BaseSpec:
-    """How the core moves: not at all, omnidirectionally, or differentially (diff/skid)."""
+# Bounds on every number of platform.toml: a negative or absurd limit is an error.
+Height = Annotated[float, msgspec.Meta(ge=0, le=10, description="0..10 m")]
+Speed = Annotated[float, msgspec.Meta(ge=0, le=100, description="0..100 m/s")]
+YawRate = Annotated[float, msgspec.Meta(ge=0, le=100, description="0..100 rad/s")]
+Acceleration = Annotated[float, msgspec.Meta(ge=0, le=1000, description="0..1000 m/s^2")]
+Jerk = Annotated[float, msgspec.Meta(ge=0, le=10_000, description="0..10000 m/s^3")]
+JointAcceleration = Annotated[
+    float, msgspec.Meta(gt=0, le=1000, description="> 0 and <= 1000 rad/s^2 (m/s^2)")
+]
+JointJerk = Annotated[
+    float, msgspec.Meta(gt=0, le=10_000, description="> 0 and <= 10000 rad/s^3 (m/s^3)")
+]
 
-    kind: str
-    height: float
-    max_speed: float
-    max_yaw_rate: float
-    max_acceleration: float
-    max_jerk: float
+
+class BaseSpec(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    """How the core moves: not at all, omnidirectionally, or differentially (diff/skid).
+    Also the ``[base]`` table of platform.toml, decoded as is."""
+
+    kind: BaseKind = "fixed"
+    height: Height = 0.0
+    max_speed: Speed = 0.0
+    max_yaw_rate: YawRate = 0.0
+    max_acceleration: Acceleration = 0.0
+    max_jerk: Jerk = 0.0
 
     @property
     def mobile(self) -> bool:
@@ -41,6 +57,26 @@ class BaseSpec:
     @property
     def holonomic(self) -> bool:
         return self.kind == "omni"
+
+
+class _PlatformTable(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    name: str | None = None
+    title: str | None = None
+    eurdf: str | None = None
+
+
+class _MotionTable(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    max_acceleration: JointAcceleration = 4.0
+    max_jerk: JointJerk = 40.0
+
+
+class _PlatformFile(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    """platform.toml as written; the neutral pose is checked against P after decoding."""
+
+    platform: _PlatformTable = msgspec.field(default_factory=_PlatformTable)
+    base: BaseSpec = msgspec.field(default_factory=BaseSpec)
+    motion: _MotionTable = msgspec.field(default_factory=_MotionTable)
+    neutral: dict[str, float] = {}
 
 
 @dataclass(frozen=True)
@@ -87,26 +123,11 @@ def load_platform(name: str) -> Platform:
 
 @functools.cache
 def _load(folder: Path) -> Platform:
-    with open(folder / "platform.toml", "rb") as fh:
-        cfg: dict[str, Any] = tomllib.load(fh)
-    meta = cfg.get("platform", {})
-    name = str(meta.get("name", folder.name))
-    eurdf = load_eurdf(folder / str(meta.get("eurdf", f"{name}.eurdf")))
-    b = cfg.get("base", {})
-    base = BaseSpec(
-        kind=str(b.get("kind", "fixed")),
-        height=float(b.get("height", 0.0)),
-        max_speed=float(b.get("max_speed", 0.0)),
-        max_yaw_rate=float(b.get("max_yaw_rate", 0.0)),
-        max_acceleration=float(b.get("max_acceleration", 0.0)),
-        max_jerk=float(b.get("max_jerk", 0.0)),
-    )
-    if base.kind not in BASE_KINDS:
-        raise KinesphereError(
-            "invalid_eurdf", f"{folder}/platform.toml: base kind {base.kind!r} not in {BASE_KINDS}"
-        )
-    motion = cfg.get("motion", {})
-    neutral = {str(k): float(v) for k, v in cfg.get("neutral", {}).items()}
+    path = folder / "platform.toml"
+    cfg = load_toml(path, _PlatformFile, "platform file", code="invalid_eurdf")
+    name = cfg.platform.name or folder.name
+    eurdf = load_eurdf(folder / (cfg.platform.eurdf or f"{name}.eurdf"))
+    neutral = cfg.neutral
     for joint, value in neutral.items():
         lim = eurdf.limits.get(joint)
         if lim is None:
@@ -125,11 +146,11 @@ def _load(folder: Path) -> Platform:
             )
     return Platform(
         name=name,
-        title=str(meta.get("title", name)),
+        title=cfg.platform.title or name,
         folder=folder,
         eurdf=eurdf,
-        base=base,
-        max_acceleration=float(motion.get("max_acceleration", 4.0)),
-        max_jerk=float(motion.get("max_jerk", 40.0)),
-        neutral=neutral,
+        base=cfg.base,
+        max_acceleration=cfg.motion.max_acceleration,
+        max_jerk=cfg.motion.max_jerk,
+        neutral=dict(neutral),
     )

@@ -9,21 +9,53 @@ get the derived core entries ``(c_1, c_1, d)`` for the 8 middle horizontals.
 from __future__ import annotations
 
 import json
-import math
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any, Final, Literal
 
-from kinesphere.errors import KinesphereError, choices
+import msgspec
+
+from kinesphere.configfile import convert, read_toml
+from kinesphere.errors import KinesphereError
 from kinesphere.laban import Direction
 from kinesphere.robots.platform import Platform, load_platform
 from kinesphere.sizes import DEFAULT_SIZES
 
-LABAN_27 = "laban-27"
-LABAN_26 = "laban-26"
-_TOP_KEYS = frozenset({"sizes", "directions", "translation_step", "entry"})
-_ENTRY_KEYS = frozenset({"limb", "origin", "directions"})
+LABAN_27: Final = "laban-27"
+LABAN_26: Final = "laban-26"
+_DirectionSpec = (
+    Literal["laban-27", "laban-26"]
+    | Annotated[list[str], msgspec.Meta(min_length=1, max_length=len(Direction))]
+)
+_Sizes = Annotated[
+    list[Annotated[int, msgspec.Meta(ge=1, le=64, description="a positive integer")]],
+    msgspec.Meta(min_length=1, max_length=64, description="a non-empty list of positive integers",
+                 extra={"code": "size_out_of_range"}),
+]
+_Step = Annotated[
+    float, msgspec.Meta(gt=0, le=100, description="> 0 metres (per size unit past the largest)")
+]
+
+
+class _EntryTable(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    limb: str
+    origin: str
+    directions: _DirectionSpec | None = None
+
+
+class _VsamFile(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    """vsam.toml as written (or a databank's copy in its meta table)."""
+
+    sizes: _Sizes = msgspec.field(default_factory=lambda: list(DEFAULT_SIZES))
+    directions: _DirectionSpec = LABAN_27
+    translation_step: _Step | None = None
+    entry: list[_EntryTable] = []
+
+    def __post_init__(self) -> None:
+        if any(b <= a for a, b in zip(self.sizes, self.sizes[1:], strict=False)):
+            raise KinesphereError(
+                "size_out_of_range", f"sizes must be strictly increasing, got {self.sizes!r}"
+            )
 
 
 @dataclass(frozen=True)
@@ -93,37 +125,24 @@ def load_vsam(platform: Platform | str) -> Vsam:
     path = plat.vsam_path
     if not path.is_file():
         raise KinesphereError("unavailable", f"{plat.name} has no VSAM file: {path} is missing")
-    try:
-        with open(path, "rb") as fh:
-            data = tomllib.load(fh)
-    except tomllib.TOMLDecodeError as exc:
-        raise KinesphereError("malformed", f"{path}: not valid TOML ({exc})") from None
-    return vsam_from_dict(data, plat, source=path)
+    return vsam_from_dict(read_toml(path, "VSAM file"), plat, source=path)
 
 
 def vsam_from_dict(data: dict[str, Any], plat: Platform, source: str | Path = "vsam") -> Vsam:
     """Validate VSAM data (from TOML or a databank's meta) against the platform's labels."""
+    f = convert(data, _VsamFile, str(source))
     try:
-        return _build(data, plat)
+        return _build(f, plat)
     except KinesphereError as exc:
         raise KinesphereError(exc.code, f"{source}: {exc.message}") from None
 
 
-def _build(data: dict[str, Any], plat: Platform) -> Vsam:
-    unknown = sorted(set(data) - _TOP_KEYS)
-    if unknown:
-        raise KinesphereError(
-            "malformed", f"unknown key {unknown[0]!r}; valid keys: {choices(_TOP_KEYS)}"
-        )
-    sizes = _sizes(data.get("sizes", list(DEFAULT_SIZES)))
-    directions = _directions(data.get("directions", LABAN_27), "directions")
-    step = _step(data.get("translation_step"), plat)
-    raw_entries = data.get("entry", [])
-    if not isinstance(raw_entries, list):
-        raise KinesphereError("malformed", "'entry' must be an array of tables ([[entry]])")
+def _build(f: _VsamFile, plat: Platform) -> Vsam:
+    directions = _directions(f.directions, "directions")
+    step = _step(f.translation_step, plat)
     entries: list[VsamEntry] = []
     seen: set[tuple[str, str]] = set()
-    for i, raw in enumerate(raw_entries, start=1):
+    for i, raw in enumerate(f.entry, start=1):
         entry = _entry(raw, i, plat, directions)
         if (entry.limb, entry.origin) in seen:
             raise KinesphereError(
@@ -139,39 +158,16 @@ def _build(data: dict[str, Any], plat: Platform) -> Vsam:
             "malformed", f"no [[entry]]: a fixed-base platform needs at least one (limb, origin) "
             f"pair; limbs: {', '.join(plat.eurdf.L) or 'none'}"
         )
-    return Vsam(plat.name, sizes, directions, step, tuple(entries))
+    return Vsam(plat.name, tuple(f.sizes), directions, step, tuple(entries))
 
 
-def _sizes(raw: object) -> tuple[int, ...]:
-    if not isinstance(raw, list) or not raw:
-        raise KinesphereError("size_out_of_range", f"sizes must be a non-empty list, got {raw!r}")
-    for s in raw:
-        if isinstance(s, bool) or not isinstance(s, int) or s < 1:
-            raise KinesphereError(
-                "size_out_of_range", f"sizes must be positive integers, got {s!r} in {raw!r}"
-            )
-    if any(b <= a for a, b in zip(raw, raw[1:], strict=False)):
-        raise KinesphereError(
-            "size_out_of_range", f"sizes must be strictly increasing, got {raw!r}"
-        )
-    return tuple(raw)
-
-
-def _directions(raw: object, where: str) -> tuple[Direction, ...]:
+def _directions(raw: str | list[str], where: str) -> tuple[Direction, ...]:
     if raw == LABAN_27:
         return tuple(Direction)
     if raw == LABAN_26:
         return Direction.pulls()
-    if not isinstance(raw, list) or not raw:
-        raise KinesphereError(
-            "malformed",
-            f"{where} must be {LABAN_27!r}, {LABAN_26!r} or a non-empty list of names, "
-            f"got {raw!r}",
-        )
     out: list[Direction] = []
     for name in raw:
-        if not isinstance(name, str):
-            raise KinesphereError("unknown_direction", f"{where}: {name!r} is not a name")
         d = Direction.parse(name)
         if d in out:
             raise KinesphereError("malformed", f"{where}: direction {d.slug} appears twice")
@@ -180,7 +176,7 @@ def _directions(raw: object, where: str) -> tuple[Direction, ...]:
     return tuple(sorted(out, key=order.index))
 
 
-def _step(raw: object, plat: Platform) -> float | None:
+def _step(raw: float | None, plat: Platform) -> float | None:
     if not plat.base.mobile:
         if raw is not None:
             raise KinesphereError(
@@ -194,39 +190,25 @@ def _step(raw: object, plat: Platform) -> float | None:
             f"{plat.name} has a mobile base ({plat.base.kind}); translation_step "
             "(metres per size unit beyond the largest size) is required",
         )
-    if isinstance(raw, bool) or not isinstance(raw, (int, float)):
-        raise KinesphereError("malformed", f"translation_step must be a number, got {raw!r}")
-    if not math.isfinite(raw) or raw <= 0:
-        raise KinesphereError("malformed", f"translation_step must be > 0 metres, got {raw!r}")
-    return float(raw)
+    return raw
 
 
-def _entry(raw: object, i: int, plat: Platform, k_d: tuple[Direction, ...]) -> VsamEntry:
-    if not isinstance(raw, dict):
-        raise KinesphereError("malformed", f"entry {i} must be a table with limb and origin")
-    unknown = sorted(set(raw) - _ENTRY_KEYS)
-    if unknown:
-        raise KinesphereError(
-            "malformed", f"entry {i}: unknown key {unknown[0]!r}; valid: {choices(_ENTRY_KEYS)}"
-        )
-    for key in ("limb", "origin"):
-        if not isinstance(raw.get(key), str):
-            raise KinesphereError("malformed", f"entry {i}: {key} must be a label name")
+def _entry(raw: _EntryTable, i: int, plat: Platform, k_d: tuple[Direction, ...]) -> VsamEntry:
     e = plat.eurdf
     try:
-        limb = e.limb(raw["limb"]).name
-        origin = e.origin(raw["origin"])
+        limb = e.limb(raw.limb).name
+        origin = e.origin(raw.origin)
     except KinesphereError as exc:
         raise KinesphereError(exc.code, f"entry {i}: {exc.message}") from None
     if origin.set != "J":
         raise KinesphereError(
             "unknown_origin",
-            f"entry {i}: origin {raw['origin']!r} is a core label; origins are joint locations "
+            f"entry {i}: origin {raw.origin!r} is a core label; origins are joint locations "
             f"(k_o = J): {', '.join(e.J)}",
         )
     directions = k_d
-    if "directions" in raw:
-        directions = _directions(raw["directions"], f"entry {i} directions")
+    if raw.directions is not None:
+        directions = _directions(raw.directions, f"entry {i} directions")
         outside = [d.slug for d in directions if d not in k_d]
         if outside:
             raise KinesphereError(
