@@ -233,13 +233,16 @@ class Operator:
         self.seq = 0
         zconfig.wait_matching(self.pub)
 
-    def send(self, *parts: tuple[str, str, str, float], drive: tuple[str, float] | None = None,
+    def send(self, *parts: tuple[str, str, str, float],
+             drive: tuple[str, float] | Drive | None = None,
              deadman: bool = True, ttl_ms: int = 0, estop: bool = False,
              stop: bool = False, release: bool = False) -> int:
         self.seq += 1
+        if isinstance(drive, tuple):
+            drive = Drive(*drive)
         self.pub.put(encode(Command(
             seq=self.seq, sent_ns=time.time_ns(), parts=[SpatialCommand(*p) for p in parts],
-            drive=Drive(*drive) if drive else None, deadman=deadman, ttl_ms=ttl_ms,
+            drive=drive, deadman=deadman, ttl_ms=ttl_ms,
             estop=estop, stop=stop, release=release, sender=self.sender)))
         return self.seq
 

@@ -15,6 +15,11 @@ can do:
   component to linear speed and the lateral one to a yaw rate (left turns left), which is
   what a tank or a two-wheeled robot does with a stick.
 
+A continuous drive (``follow``: forward, left, yaw as fractions of the limits) is a body-frame
+velocity and a turn rate: ``omni`` follows all three (its world-frame target velocity turns
+with the base every step, so "forward while turning" is an arc), ``diff``/``skid`` follow
+forward and yaw (arcade) and ignore ``left``.
+
 ``stop`` brakes to rest with the same limits (the fastest jerk-limited stop). A new command
 mid-motion starts from the current state, so the base never jumps in velocity. What a body is
 sent each step is :attr:`BaseController.body_twist`, the body-frame velocity that carries the
@@ -29,6 +34,9 @@ from collections.abc import Sequence
 import numpy as np
 from ruckig import Synchronization
 
+from kinesphere.errors import KinesphereError
+from kinesphere.laban import Direction
+from kinesphere.protocol import Drive
 from kinesphere.robots.agent.otg import Otg
 from kinesphere.robots.platform import BaseSpec
 
@@ -88,6 +96,12 @@ class BaseController:
         """Move continuously along body-frame ``direction`` at ``speed`` (0..1) of the maximum."""
         raise NotImplementedError
 
+    def follow(self, forward: float, left: float, yaw: float) -> None:
+        """Move continuously at body-frame velocity ``(forward, left)`` x the maximum speed (a
+        vector: a diagonal is no faster than straight), turning at ``yaw`` x the maximum yaw
+        rate (positive: to the left); each in -1..1. A diff/skid base ignores ``left``."""
+        raise NotImplementedError
+
     def stop(self) -> None:
         raise NotImplementedError
 
@@ -105,9 +119,12 @@ class OmniBase(BaseController):
             [spec.max_acceleration, spec.max_acceleration, yaw_acc],
             [spec.max_jerk, spec.max_jerk, yaw_jerk],
         ))
+        self._follow: tuple[float, float, float] | None = None
+        """Body-frame (vx, vy, yaw rate) being followed; its world velocity turns with the base."""
 
     def reset(self, pose: Sequence[float]) -> None:
         self.pose[:] = pose
+        self._follow = None
         self._otg.reset(pose)
 
     def _world(self, body: Sequence[float], yaw: float | None = None) -> tuple[float, float]:
@@ -122,6 +139,7 @@ class OmniBase(BaseController):
     def translate(self, displacement: Sequence[float], yaw: float | None = None) -> None:
         wx, wy = self._world(displacement, yaw)
         self.driving = False
+        self._follow = None
         self._otg.scale(self._share(wx, wy))
         self._otg.go_to([self.pose[0] + wx, self.pose[1] + wy, self.pose[2]],
                         Synchronization.Phase)
@@ -134,11 +152,33 @@ class OmniBase(BaseController):
             return
         v = speed * self.spec.max_speed / norm
         self.driving = True
+        self._follow = None
         self._otg.scale(self._share(wx, wy))
         self._otg.go_at([wx * v, wy * v, 0.0])
 
+    def follow(self, forward: float, left: float, yaw: float) -> None:
+        norm = math.hypot(forward, left)
+        if norm > 1.0:
+            forward, left = forward / norm, left / norm
+        vmax = self.spec.max_speed
+        self._follow = (forward * vmax, left * vmax, yaw * self.spec.max_yaw_rate)
+        if not any(self._follow):
+            self.stop()
+            return
+        self.driving = True
+        self._aim()
+
+    def _aim(self) -> None:
+        """Target the followed body-frame velocity in the world frame at today's heading."""
+        assert self._follow is not None
+        vx, vy, w = self._follow
+        wx, wy = rotate(vx, vy, float(self.pose[2]))
+        self._otg.scale(self._share(wx, wy))
+        self._otg.go_at([wx, wy, w])
+
     def stop(self) -> None:
         self.driving = False
+        self._follow = None
         if not self._otg.active:
             return
         vx, vy = self._otg.velocity[:2]
@@ -150,6 +190,8 @@ class OmniBase(BaseController):
             if self.body_twist.any():
                 self.body_twist[:] = 0.0
             return
+        if self._follow is not None and self._follow[2]:
+            self._aim()  # turning: the body-frame velocity points elsewhere in the world
         x0, y0, yaw0 = self.pose.tolist()
         self._otg.step()
         self.pose[:] = self._otg.position
@@ -214,6 +256,16 @@ class DiffBase(BaseController):
         self._otg.go_at([speed * self.spec.max_speed * fx / norm,
                          speed * self.spec.max_yaw_rate * fy / norm])
 
+    def follow(self, forward: float, left: float, yaw: float) -> None:
+        self._queue.clear()
+        v, w = forward * self.spec.max_speed, yaw * self.spec.max_yaw_rate
+        if not (v or w):
+            self.stop()
+            return
+        self.driving = True
+        self._otg.scale([1.0, 1.0])
+        self._otg.go_at([v, w])
+
     def stop(self) -> None:
         self.driving = False
         self._queue.clear()
@@ -248,3 +300,33 @@ def make_base(spec: BaseSpec, dt: float) -> BaseController | None:
     if spec.max_speed <= 0 or spec.max_acceleration <= 0 or spec.max_jerk <= 0:
         raise ValueError(f"mobile base {spec.kind!r} needs positive speed, acceleration, jerk")
     return OmniBase(spec, dt) if spec.holonomic else DiffBase(spec, dt)
+
+
+def drive_base(base: BaseController | None, drive: Drive, platform: str) -> str:
+    """Apply ``drive`` to ``base`` and say what it does (the status detail).
+
+    The continuous form wins when any of its fields is non-zero; otherwise the version-1
+    ``direction``/``speed`` (an empty direction: the base comes to rest). Raises
+    ``malformed`` for a version-1 direction that is not a middle horizontal and
+    ``cannot_translate`` for a fixed base.
+    """
+    if not drive.is_continuous and drive.direction:
+        d = Direction.parse(drive.direction)
+        if not d.is_translation:
+            raise KinesphereError(
+                "malformed", f"drive direction {d.slug!r} is not a middle horizontal; valid: "
+                + ", ".join(t.slug for t in Direction.translations()))
+    if base is None:
+        raise KinesphereError("cannot_translate", f"{platform} has a fixed base")
+    if drive.is_continuous:
+        base.follow(drive.forward, drive.left, drive.yaw)
+        ignored = ("" if base.spec.holonomic or not drive.left
+                   else f" (left ignored: a {base.spec.kind} base cannot slide)")
+        return (f"driving forward {drive.forward:+.2f} left {drive.left:+.2f} "
+                f"yaw {drive.yaw:+.2f}{ignored}")
+    if not drive.direction:
+        base.stop()
+        return "drive at rest"
+    d = Direction.parse(drive.direction)
+    base.drive(d.vector[:2], drive.speed)
+    return f"driving {d.slug} at {drive.speed:.2f}"

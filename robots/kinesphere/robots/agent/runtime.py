@@ -30,8 +30,8 @@ import zenoh
 
 from kinesphere.errors import KinesphereError
 from kinesphere.keyexpr import Keys
-from kinesphere.laban import Direction
 from kinesphere.protocol import Command, Payload, Pose, RobotState, Status, decode, encode
+from kinesphere.robots.agent.base import drive_base
 from kinesphere.robots.agent.body import Body, make_body
 from kinesphere.robots.agent.controller import BLOCKED_TOL as BLOCKED_TOL
 from kinesphere.robots.agent.controller import Controller
@@ -293,15 +293,7 @@ class Agent:
         ctrl = self.controller
         base = ctrl.base
         if cmd.drive is not None:
-            d = Direction.parse(cmd.drive.direction)
-            if not d.is_translation:
-                raise KinesphereError(
-                    "malformed", f"drive direction {d.slug!r} is not a middle horizontal; valid: "
-                    + ", ".join(t.slug for t in Direction.translations()))
-            if base is None:
-                raise KinesphereError("cannot_translate", f"{self.platform} has a fixed base")
-            base.drive(d.vector[:2], cmd.drive.speed)
-            self._set(Status.MOVING, f"driving {d.slug} at {cmd.drive.speed:.2f}")
+            self._set(Status.MOVING, drive_base(base, cmd.drive, self.platform))
         elif base is not None and base.driving:
             base.stop()
         if not cmd.parts:
