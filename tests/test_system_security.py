@@ -1,8 +1,10 @@
-"""The deploy/ configs as shipped: mutual TLS and role-based access control (issue 7, test b).
+"""The deploy/ configs as shipped: mutual TLS, role-based access control, per-robot identity.
 
-Certificates come from deploy/make-certs.sh; the JSON5 files are deploy/'s with only the
-certificate directory and the port rewritten. A real databank (writes enabled on a copy) and
-a real youBot agent run behind ``kinesphere router`` as TLS clients, so the rules are checked
+Certificates come from deploy/make-certs.sh (roles, and robots youbot-1 and baxter-1 of
+deploy/robots.toml); the JSON5 files are deploy/'s with only the certificate directory and
+the port rewritten. A real databank (writes enabled on a copy) and a real youBot agent (with
+its own certificate, CN=youbot-1, as kinesphere-agent@.service passes it) run behind
+``kinesphere router --robots deploy/robots.toml`` as TLS clients, so the rules are checked
 against the services' real traffic, not a stand-in.
 """
 
@@ -35,10 +37,30 @@ from test_system_support import (
 
 from kinesphere.deploy.procs import Supervisor
 from kinesphere.errors import KinesphereError
-from kinesphere.protocol import Command, Pose, RecordRequest, SpatialCommand, decode, encode
-from kinesphere.zconfig import close_session, free_port, open_session, session, session_config
+from kinesphere.protocol import (
+    Ack,
+    AckStage,
+    Command,
+    Pose,
+    RecordRequest,
+    RobotState,
+    SpatialCommand,
+    decode,
+    encode,
+)
+from kinesphere.zconfig import (
+    close_session,
+    free_port,
+    open_session,
+    session,
+    session_config,
+    undeclare,
+)
 
 ROBOT = "youbot-1"
+OTHER = "baxter-1"
+"""Another robot of deploy/robots.toml (not running): youbot-1's certificate may not speak
+for it."""
 POSE_A = ("limb_11", "distal_11", "left-high", 2)
 POSE_B = ("limb_11", "distal_11", "right-high", 2)
 
@@ -56,6 +78,21 @@ class Secured:
         return any("access denied" in line and text in line
                    for line in self.router_log.read_text(errors="replace").splitlines())
 
+    def robot_config(self, robot_id: str) -> zenoh.Config:
+        """deploy/agent.json5 with ``robot_id``'s own certificate, as the agent unit runs it."""
+        config = session_config(config_file=self.configs["agent"])
+        for option in robot_cert(self.certs, robot_id)[1::2]:
+            key, _, value = option.partition(":")
+            config.insert_json5(key, value)
+        return config
+
+
+def robot_cert(certs: Path, robot_id: str) -> list[str]:
+    """The --cfg options that give an agent its robot's own certificate (CN = robot id)."""
+    tls = "transport/link/tls"
+    return ["--cfg", f'{tls}/connect_certificate:"{certs}/robots/{robot_id}.pem"',
+            "--cfg", f'{tls}/connect_private_key:"{certs}/robots/{robot_id}.key"']
+
 
 def _db_copy(tmp: Path) -> str:
     """A private copy of the youBot databank, so an ECL write never touches shipped data."""
@@ -70,16 +107,17 @@ def _db_copy(tmp: Path) -> str:
 def secured(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Secured]:
     tmp = tmp_path_factory.mktemp("secured")
     db = _db_copy(tmp)
-    certs = make_certs(tmp / "certs")
+    certs = make_certs(tmp / "certs", robots=f"{ROBOT} {OTHER}")
     port = free_port()
     configs = localize(tmp / "conf", certs, port)
     for sup in supervisor(tmp / "logs"):
-        router = sup.spawn("router", ["router", "--config", str(configs["router"])])
+        router = sup.spawn("router", ["router", "--config", str(configs["router"]),
+                                      "--robots", str(DEPLOY / "robots.toml")])
         until(lambda s=sup: s.check() or port_open(port), WAIT_S, "the TLS router to listen")
         sup.spawn("databank", ["databank", "serve", "--db", db, "--allow-writes", "--replica",
                                "db-1", "--zenoh-config", str(configs["databank"])])
         sup.spawn("agent", ["agent", "youbot", "--id", ROBOT, "--rate", "250",
-                            "--zenoh-config", str(configs["agent"])])
+                            "--zenoh-config", str(configs["agent"]), *robot_cert(certs, ROBOT)])
         obs = Observer(session_config(config_file=configs["operator"]))
         try:
             obs.wait_alive({ROBOT}, databank=True, sup=sup)
@@ -127,14 +165,15 @@ def test_only_the_operator_moves_robots(secured: Secured) -> None:
     assert before is not None
 
     _send(s, "superuser", POSE_B)
-    for role in ("agent", "databank"):
+    for role, config in (("robot", s.robot_config(ROBOT)),
+                         ("databank", session_config(config_file=s.configs["databank"]))):
         cmd = Command(seq=0, sent_ns=time.time_ns(), parts=[SpatialCommand(*POSE_B)],
                       deadman=True, ttl_ms=0, sender=f"intruding-{role}")
-        with session(config_file=s.configs[role]) as intruder:
+        with session(config=config) as intruder:
             intruder.put(KEYS.command(ROBOT), encode(cmd))
             intruder.put(KEYS.command("*"), encode(cmd))
-    for cn, key in (("superuser", KEYS.command(ROBOT)), ("agent", KEYS.command("*")),
-                    ("databank", KEYS.command(ROBOT))):
+    for cn, key in (("superuser", KEYS.command(ROBOT)), (ROBOT, KEYS.command("*")),
+                    (ROBOT, KEYS.command(ROBOT)), ("databank", KEYS.command(ROBOT))):
         until(lambda cn=cn, key=key: s.denied(f"Put (ingress) on {key} by CN={cn}"), WAIT_S,
               f"the router to log the denied command of CN={cn}")
 
@@ -195,3 +234,45 @@ def test_tls_refuses_sessions_without_a_ca_certificate(secured: Secured, tmp_pat
     assert _refused(plain)
     # while the genuine operator certificate still connects
     assert not _refused(session_config(config_file=s.configs["operator"]))
+
+
+def test_a_robot_cannot_speak_for_another(secured: Secured) -> None:
+    """Before: any agent certificate put a spoofed e-stop on another robot's state key (it
+    reached the operator 5/5) and declared ``alive/robot/ghost-robot``. Now youbot-1's
+    certificate is admitted to youbot-1's keys only."""
+    s, obs = secured, secured.obs
+    acks: list[str] = []
+    ack_sub = obs.session.declare_subscriber(KEYS.ack("*"), lambda smp: acks.append(
+        str(smp.key_expr)))
+    heard: list[bytes] = []
+    spoof = RobotState(robot_id=OTHER, platform="baxter", seq=10**9, stamp_ns=time.time_ns(),
+                       joint_names=[], q=[], qd=[], base_pose=[0.0, 0.0, 0.0], status="estop",
+                       last_command_seq=-1, detail="SPOOFED")
+    ack = Ack(robot_id=OTHER, sender="op", seq=1, stage=AckStage.ESTOPPED,
+              stamp_ns=time.time_ns())
+    with session(config=s.robot_config(ROBOT)) as robot_a:
+        robot_a.put(KEYS.state(OTHER), encode(spoof))
+        robot_a.put(KEYS.ack(OTHER), encode(ack))
+        ghost = robot_a.liveliness().declare_token(KEYS.alive_robot("ghost-robot"))
+        eavesdrop = robot_a.declare_subscriber(KEYS.command(OTHER),
+                                               lambda smp: heard.append(smp.payload.to_bytes()))
+        for what, key in (("Put", KEYS.state(OTHER)), ("Put", KEYS.ack(OTHER)),
+                          ("Liveliness Token", KEYS.alive_robot("ghost-robot")),
+                          ("Declare Subscriber", KEYS.command(OTHER))):
+            until(lambda what=what, key=key: s.denied(f"{what} (ingress) on {key} by "
+                                                      f"CN={ROBOT}"),
+                  WAIT_S, f"the router to deny {what} on {key}")
+        # the operator commands the other robot; then a fresh state of youbot-1 shows that
+        # traffic crossed the router after the spoofs and the command
+        stop = Command(seq=1, sent_ns=time.time_ns(), deadman=False, ttl_ms=0, stop=True,
+                       sender="security-test")
+        with session(config_file=s.configs["operator"]) as op:
+            op.put(KEYS.command(OTHER), encode(stop))
+        assert obs.states.wait_fresh([ROBOT], time.time_ns() + 300_000_000, WAIT_S)
+        undeclare(ghost, eavesdrop)
+    ack_sub.undeclare()  # type: ignore[no-untyped-call]
+    assert obs.states.last(OTHER) is None, "a spoofed state reached the operator"
+    assert "ghost-robot" not in obs.alive.robots
+    assert KEYS.ack(OTHER) not in acks
+    assert heard == [], "a robot heard another robot's commands"
+    assert obs.states.last(ROBOT) is not None and obs.states.last(ROBOT).detail != "SPOOFED"

@@ -71,8 +71,8 @@ def loopback(addresses: list[str]) -> bool:
     return all(a.startswith(("127.", "::1:", "::ffff:127.")) for a in addresses)
 
 
-def make_certs(out: Path, *extra: str, roles: str | None = None) -> Path:
-    env = dict(os.environ)
+def make_certs(out: Path, *extra: str, roles: str | None = None, robots: str = "") -> Path:
+    env = dict(os.environ, ROBOTS=robots)
     if roles is not None:
         env["ROLES"] = roles
     subprocess.run([str(DEPLOY / "make-certs.sh"), str(out), *extra], check=True, env=env,

@@ -12,6 +12,7 @@ from typing import Any
 
 from kinesphere.cliargs import DEFAULT_ENDPOINT, WATCHER, add_zenoh_arguments
 from kinesphere.deploy.plan import DEFAULT_ROBOTS, UpOptions
+from kinesphere.errors import KinesphereError
 
 UP = UpOptions(robots=[], phrases=[])
 """The defaults ``kinesphere up`` shows and uses."""
@@ -74,6 +75,11 @@ def register(sub: Any) -> None:
                     help="listen endpoint, overrides the file's (repeatable; default: the "
                     f"file's, else {DEFAULT_ENDPOINT}, loopback only; e.g. tls/0.0.0.0:7447 "
                     "to serve other machines)")
+    rt.add_argument("--robots", type=Path, metavar="FILE",
+                    help="fleet file (deploy/robots.toml): admit each robot by its own "
+                    "certificate (CN = robot id) to its own keys only")
+    rt.add_argument("--print-acl", action="store_true",
+                    help="print the access-control rules --robots generates, and exit")
     rt.add_argument("--log-denials", action=argparse.BooleanOptionalAction, default=None,
                     help="log access-control denials (default: on when access control is)")
     rt.set_defaults(func=_router)
@@ -102,6 +108,11 @@ def _status(args: argparse.Namespace) -> int:
 
 
 def _router(args: argparse.Namespace) -> int:
-    from kinesphere.deploy.router import run_router
+    from kinesphere.deploy.router import print_acl, run_router
 
-    return run_router(args.config, args.listen, log_denials=args.log_denials)
+    if args.print_acl:
+        if args.robots is None:
+            raise KinesphereError("malformed", "--print-acl needs --robots FILE")
+        return print_acl(args.robots)
+    return run_router(args.config, args.listen, robots=args.robots,
+                      log_denials=args.log_denials)

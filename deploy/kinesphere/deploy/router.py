@@ -27,6 +27,7 @@ from typing import IO
 
 import zenoh
 
+from kinesphere.deploy.acl import add_robots, load_fleet, robot_acl
 from kinesphere.errors import KinesphereError
 from kinesphere.signals import handle_signals
 from kinesphere.zconfig import close_session, listen_where_told, open_session, session_config
@@ -158,18 +159,35 @@ def _acl_enabled(config: zenoh.Config) -> bool:
         return False
 
 
-def run_router(
-    config_file: Path | None,
-    listen: Sequence[str] | None,
-    *,
-    log_denials: bool | None = None,
-    stop: threading.Event | None = None,
-) -> int:
-    """Run a router until SIGINT/SIGTERM (or ``stop``); returns the exit code."""
+def router_config(
+    config_file: Path | None, listen: Sequence[str] | None, robots: Path | None = None
+) -> tuple[zenoh.Config, int]:
+    """The router's config (the file, ``listen`` over it, loopback when neither says) with
+    the fleet file's robots admitted (:mod:`kinesphere.deploy.acl`), and the robot count."""
     if config_file is not None and not config_file.is_file():
         raise KinesphereError("malformed", f"router config {config_file}: no such file")
     config = session_config("router", listen=listen or None, config_file=config_file)
     listen_where_told(config)
+    admitted = 0 if robots is None else add_robots(config, load_fleet(robots))
+    return config, admitted
+
+
+def print_acl(robots: Path) -> int:
+    """``--print-acl``: the generated per-robot rules, subjects and policies as JSON."""
+    print(json.dumps({"access_control": robot_acl(load_fleet(robots))}, indent=2))
+    return 0
+
+
+def run_router(
+    config_file: Path | None,
+    listen: Sequence[str] | None,
+    *,
+    robots: Path | None = None,
+    log_denials: bool | None = None,
+    stop: threading.Event | None = None,
+) -> int:
+    """Run a router until SIGINT/SIGTERM (or ``stop``); returns the exit code."""
+    config, admitted = router_config(config_file, listen, robots)
     acl = _acl_enabled(config)
     if log_denials is None:
         log_denials = acl
@@ -190,10 +208,11 @@ def run_router(
         try:
             endpoints = json.loads(config.get_json("listen/endpoints"))
             log.info(
-                "router %s up, listening on %s, access control %s, denials %s",
+                "router %s up, listening on %s, access control %s%s, denials %s",
                 session.zid(),
                 endpoints,
                 "on" if acl else "off",
+                f" ({admitted} robots admitted by id)" if admitted else "",
                 "logged" if log_denials else "not logged",
             )
             while not stop.wait(0.5):
