@@ -5,6 +5,8 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 # The five distributions of this repository (docs/architecture.md): the core and one per role.
 PARTS  := . robots services clients deploy
+# Everything editable, with the extras the tests and `kinesphere up` use (README, "Install").
+EDITABLE := -e '.[test,ros2]' -e robots -e services -e clients -e 'deploy[up]'
 SRC    := kinesphere robots services clients deploy tests bench
 export MUJOCO_GL ?= egl
 export SDL_VIDEODRIVER ?= dummy
@@ -16,7 +18,7 @@ export PYTHONDONTWRITEBYTECODE := 1
 $(STAMP): pyproject.toml robots/pyproject.toml services/pyproject.toml clients/pyproject.toml deploy/pyproject.toml constraints.txt
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -c constraints.txt -e '.[test,ros2]' $(addprefix -e ,$(filter-out .,$(PARTS)))
+	$(BIN)/python -m pip install --quiet -c constraints.txt $(EDITABLE)
 	touch $(STAMP)
 
 install: $(STAMP)
@@ -43,7 +45,7 @@ bench: $(STAMP)
 lock:
 	rm -rf .venv-lock && $(PYTHON) -m venv .venv-lock
 	.venv-lock/bin/python -m pip install --quiet --upgrade pip
-	.venv-lock/bin/python -m pip install --quiet -e '.[test,ros2]' $(addprefix -e ,$(filter-out .,$(PARTS)))
+	.venv-lock/bin/python -m pip install --quiet $(EDITABLE)
 	.venv-lock/bin/python -m pip freeze --exclude-editable | grep -v '^kinesphere' > constraints.txt
 	rm -rf .venv-lock
 

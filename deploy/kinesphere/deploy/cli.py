@@ -86,7 +86,9 @@ def register(sub: Any) -> None:
 
 
 def _up(args: argparse.Namespace) -> int:
-    from kinesphere.deploy.plan import default_phrases, parse_phrase, parse_robots
+    from kinesphere.deploy.plan import check_installed, default_phrases, parse_phrase, parse_robots
+
+    check_installed()
     from kinesphere.deploy.up import Demo
 
     robots = parse_robots(args.robots)

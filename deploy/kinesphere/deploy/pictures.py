@@ -2,22 +2,24 @@
 
 Poses are rendered off-screen by MuJoCo (``MUJOCO_GL=egl`` on a headless machine) from the
 q each robot last reported, so the picture shows what the robots did, not what was asked.
-Plots are drawn with Pillow (already a dependency of the stack), not matplotlib.
+Sheets and plots are laid out by matplotlib (Agg, no display needed).
 """
 
 from __future__ import annotations
 
 import logging
-import math
 import os
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-from PIL import Image, ImageDraw, ImageFont
+import matplotlib
 
-from kinesphere.protocol import RobotState
+matplotlib.use("Agg")  # files only: never look for a display
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from kinesphere.protocol import RobotState  # noqa: E402
 
 log = logging.getLogger(__name__)
 logging.getLogger("OpenGL").setLevel(logging.WARNING)  # MuJoCo's renderer imports PyOpenGL
@@ -25,18 +27,8 @@ logging.getLogger("OpenGL").setLevel(logging.WARNING)  # MuJoCo's renderer impor
 TILE = 360
 MARGIN = 1.35
 """Camera distance relative to the ECL's tight framing of the pose."""
-PALETTE = [
-    (31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40), (148, 103, 189),
-    (140, 86, 75), (227, 119, 194), (127, 127, 127), (188, 189, 34), (23, 190, 207),
-]
 MAX_LEGEND = 10
-
-
-def _font(size: int) -> ImageFont.FreeTypeFont | ImageFont.ImageFont:
-    try:
-        return ImageFont.load_default(size=size)
-    except TypeError:  # Pillow without FreeType sizing
-        return ImageFont.load_default()
+DPI = 100
 
 
 def _qpos(pm: Any, state: RobotState) -> np.ndarray:
@@ -53,7 +45,7 @@ def _qpos(pm: Any, state: RobotState) -> np.ndarray:
     return q
 
 
-def render_poses(states: Sequence[RobotState], size: int = TILE) -> list[Image.Image]:
+def render_poses(states: Sequence[RobotState], size: int = TILE) -> list[np.ndarray]:
     """Render states of one platform (its joints and base pose) with MuJoCo, one camera.
 
     Uses the ECL's camera (the look of its contact sheets), framed on the robot as if at the
@@ -71,7 +63,7 @@ def render_poses(states: Sequence[RobotState], size: int = TILE) -> list[Image.I
     except ImportError as exc:
         log.info("ECL camera not available (%s): plain camera", exc)
         return [_render_plain(pm, _qpos(pm, st), size) for st in states]
-    images: list[Image.Image] = []
+    images: list[np.ndarray] = []
     cam = None
     try:
         for st in states:
@@ -86,14 +78,14 @@ def render_poses(states: Sequence[RobotState], size: int = TILE) -> list[Image.I
             cam.cam.lookat[:] = (v.lookat[0] + st.base_pose[0], v.lookat[1] + st.base_pose[1],
                                  v.lookat[2])
             cam.cam.distance = MARGIN * v.distance  # room for the arm to move in peak poses
-            images.append(cam.shoot(qpos))
+            images.append(np.asarray(cam.shoot(qpos)))
     finally:
         if cam is not None:
             cam.close()
     return images
 
 
-def _render_plain(pm: Any, qpos: np.ndarray, size: int) -> Image.Image:
+def _render_plain(pm: Any, qpos: np.ndarray, size: int) -> np.ndarray:
     import mujoco
 
     data = mujoco.MjData(pm.model)
@@ -112,7 +104,7 @@ def _render_plain(pm: Any, qpos: np.ndarray, size: int) -> Image.Image:
         pixels = renderer.render()
     finally:
         renderer.close()
-    return Image.fromarray(np.asarray(pixels))
+    return np.asarray(pixels)
 
 
 def _robot_bounds(m: Any, d: Any) -> tuple[np.ndarray, float]:
@@ -127,60 +119,52 @@ def _robot_bounds(m: Any, d: Any) -> tuple[np.ndarray, float]:
     return (lo + hi) / 2, max(float(np.linalg.norm(hi - lo)), 0.3)
 
 
-def _caption(img: Image.Image, lines: Sequence[str]) -> Image.Image:
-    font = _font(14)
-    out = Image.new("RGB", (img.width, img.height + 20 * len(lines) + 8), "white")
-    out.paste(img, (0, 0))
-    draw = ImageDraw.Draw(out)
-    for i, text in enumerate(lines):
-        draw.text((6, img.height + 4 + 20 * i), text, fill="black", font=font)
-    return out
+def _save(fig: Any, path: Path) -> Path:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        fig.savefig(path, dpi=DPI, facecolor="white")
+    finally:
+        plt.close(fig)
+    return path
 
 
 def pose_sheets(sheets: dict[Path, dict[str, RobotState]], size: int = TILE) -> list[Path]:
     """Write each sheet: one tile per robot (sorted by id), captioned with id and status."""
     ids = sorted({rid for states in sheets.values() for rid in states})
-    images: dict[tuple[Path, str], Image.Image] = {}
+    images: dict[tuple[Path, str], np.ndarray | str] = {}
     for rid in ids:
         wanted = [(path, states[rid]) for path, states in sheets.items() if rid in states]
+        shots: list[np.ndarray | str]
         try:
-            shots = render_poses([st for _, st in wanted], size)
+            shots = list(render_poses([st for _, st in wanted], size))
         except Exception as exc:  # no GL here: still write the pictures, say why
             log.warning("cannot render %s: %s", rid, exc)
-            blank = Image.new("RGB", (size, size), (235, 235, 235))
-            ImageDraw.Draw(blank).text((10, size // 2), f"no render: {exc}"[:60], fill="black")
-            shots = [blank] * len(wanted)
-        for (path, st), img in zip(wanted, shots, strict=True):
-            images[path, rid] = _caption(
-                img, [f"{rid} ({st.platform})", f"{st.status}: {st.detail}"[:48]])
+            shots = [f"no render: {exc}"[:60]] * len(wanted)
+        for (path, _), img in zip(wanted, shots, strict=True):
+            images[path, rid] = img
     for path, states in sheets.items():
-        tiles = [images[path, rid] for rid in sorted(states)]
-        if not tiles:
+        if not states:
             raise ValueError(f"no robot states to draw in {path}")
-        sheet = Image.new("RGB", (sum(t.width for t in tiles), max(t.height for t in tiles)),
-                          "white")
-        x = 0
-        for t in tiles:
-            sheet.paste(t, (x, 0))
-            x += t.width
-        path.parent.mkdir(parents=True, exist_ok=True)
-        sheet.save(path)
+        rids = sorted(states)
+        fig, axes = plt.subplots(1, len(rids), squeeze=False,
+                                 figsize=(size * len(rids) / DPI, (size + 48) / DPI))
+        for ax, rid in zip(axes[0], rids, strict=True):
+            st, img = states[rid], images[path, rid]
+            ax.set_axis_off()
+            if isinstance(img, str):
+                ax.text(0.5, 0.5, img, ha="center", va="center", wrap=True)
+            else:
+                ax.imshow(img)
+            ax.text(0.02, -0.02, f"{rid} ({st.platform})\n{st.status}: {st.detail}"[:96],
+                    fontsize=9, ha="left", va="top", transform=ax.transAxes)
+        fig.subplots_adjust(left=0, right=1, top=1, bottom=48 / (size + 48), wspace=0.02)
+        _save(fig, path)
     return list(sheets)
 
 
 def final_poses_png(states: dict[str, RobotState], path: Path, size: int = TILE) -> Path:
     """One sheet of every robot's pose, side by side."""
     return pose_sheets({path: states}, size)[0]
-
-
-def _ticks(lo: float, hi: float, n: int = 5) -> list[float]:
-    if hi - lo <= 0:
-        return [lo]
-    raw = (hi - lo) / n
-    mag = 10 ** math.floor(math.log10(raw))
-    step = min((m * mag for m in (1, 2, 5, 10) if m * mag >= raw), default=raw)
-    first = math.ceil(lo / step) * step
-    return [first + i * step for i in range(int((hi - first) / step) + 1)]
 
 
 def trajectory_png(
@@ -192,56 +176,30 @@ def trajectory_png(
     width: int = 960,
     height: int = 540,
 ) -> Path:
-    """Joint positions against time; joints that moved are coloured and named in the legend."""
+    """Joint positions against time: the joints that moved most are coloured and named in the
+    legend (at most MAX_LEGEND), the others drawn in grey."""
     q = np.asarray(qs, dtype=float).reshape(len(times), len(names))
     t = np.asarray(times, dtype=float)
-    img = Image.new("RGB", (width, height), "white")
-    draw = ImageDraw.Draw(img)
-    font = _font(13)
-    left, right, top, bottom = 70, width - 200, 40, height - 50
-    draw.text((left, 12), f"{robot_id}: joint positions (rad or m) vs time (s)", fill="black",
-              font=_font(16))
+    fig, ax = plt.subplots(figsize=(width / DPI, height / DPI))
+    ax.set_title(f"{robot_id}: joint positions", loc="left")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("position (rad or m)")
+    ax.grid(True, color="0.9")
     if t.size == 0:
-        draw.text((left, top + 20), "no states recorded", fill="black", font=font)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        img.save(path)
-        return path
-    t0, t1 = float(t[0]), float(max(t[-1], t[0] + 1e-3))
-    lo, hi = float(q.min()), float(q.max())
-    if hi - lo < 1e-6:
-        lo, hi = lo - 0.5, hi + 0.5
-    pad = 0.05 * (hi - lo)
-    lo, hi = lo - pad, hi + pad
-
-    def px(tt: float, v: float) -> tuple[float, float]:
-        return (left + (tt - t0) / (t1 - t0) * (right - left),
-                bottom - (v - lo) / (hi - lo) * (bottom - top))
-
-    draw.rectangle((left, top, right, bottom), outline="black")
-    for v in _ticks(lo, hi):
-        y = px(t0, v)[1]
-        draw.line((left, y, right, y), fill=(230, 230, 230))
-        draw.text((8, y - 7), f"{v:.2f}", fill="black", font=font)
-    for tt in _ticks(t0, t1):
-        x = px(tt, lo)[0]
-        draw.line((x, top, x, bottom), fill=(230, 230, 230))
-        draw.text((x - 8, bottom + 6), f"{tt:g}", fill="black", font=font)
+        ax.text(0.5, 0.5, "no states recorded", ha="center", va="center",
+                transform=ax.transAxes)
+        return _save(fig, path)
     span = q.max(axis=0) - q.min(axis=0)
-    moved = [i for i in np.argsort(-span) if span[i] > 1e-3][:MAX_LEGEND]
-    for i in range(len(names)):
-        if i in moved:
-            continue
-        draw.line([px(a, b) for a, b in zip(t, q[:, i], strict=True)], fill=(200, 200, 200))
-    for k, i in enumerate(moved):
-        colour = PALETTE[k % len(PALETTE)]
-        draw.line([px(a, b) for a, b in zip(t, q[:, i], strict=True)], fill=colour, width=2)
-        y = top + 18 * k
-        draw.line((right + 12, y + 7, right + 32, y + 7), fill=colour, width=3)
-        draw.text((right + 38, y), names[i][:20], fill="black", font=font)
-    rest = len(names) - len(moved)
-    if rest:
-        draw.text((right + 12, top + 18 * len(moved) + 4), f"{rest} more (grey)", fill="gray",
-                  font=font)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    img.save(path)
-    return path
+    moved = [int(i) for i in np.argsort(-span) if span[i] > 1e-3][:MAX_LEGEND]
+    still = [i for i in range(len(names)) if i not in moved]
+    for i in still:
+        ax.plot(t, q[:, i], color="0.8", linewidth=0.8)
+    for i in moved:
+        ax.plot(t, q[:, i], linewidth=1.6, label=names[i][:20])
+    if still:
+        ax.plot([], [], color="0.8", label=f"{len(still)} more (grey)")
+    if moved or still:
+        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), frameon=False, fontsize=9)
+    ax.margins(x=0)
+    fig.tight_layout()
+    return _save(fig, path)

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from importlib import resources
+from importlib.util import find_spec
 from pathlib import Path
 
 from kinesphere.errors import KinesphereError
@@ -102,3 +103,23 @@ def default_phrases(robots: list[Robot], phrases_dir: Path | None = None) -> lis
     if not out:
         raise KinesphereError("malformed", f"no demo phrases found in {phrases_dir}")
     return out
+
+
+UP_NEEDS = {
+    "kinesphere.robots": "kinesphere-robots",
+    "kinesphere.services": "kinesphere-services",
+    "kinesphere.clients": "kinesphere-clients",
+    "matplotlib": "matplotlib",
+}
+"""What ``kinesphere up`` imports (module: distribution): it runs every role on one machine."""
+
+
+def check_installed() -> None:
+    """Name what ``kinesphere up`` lacks on this host, before anything starts."""
+    missing = [dist for module, dist in UP_NEEDS.items() if find_spec(module) is None]
+    if missing:
+        raise KinesphereError(
+            "unavailable",
+            f"kinesphere up runs every role on this machine; not installed: {', '.join(missing)}"
+            " (install them with: pip install 'kinesphere-deploy[up]')",
+        )

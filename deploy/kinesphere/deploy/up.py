@@ -184,7 +184,7 @@ class Demo:
             self.console.log("[yellow]some robots still moving; pictures show them mid-motion")
 
     def pictures(self) -> dict[str, str]:
-        from kinesphere.deploy.pictures import (  # Pillow and MuJoCo rendering
+        from kinesphere.deploy.pictures import (  # matplotlib and MuJoCo rendering
             pose_sheets,
             trajectory_png,
         )
