@@ -9,6 +9,7 @@ group targets reach only their members; the e-stop halts everyone.
 from __future__ import annotations
 
 import json
+import math
 import os
 import signal
 import subprocess
@@ -23,7 +24,7 @@ from pathlib import Path
 import pygame
 import pytest
 import zenoh
-from test_client_support import Pad, Script, pygame_up
+from test_client_support import Pad, Script, VirtualPad, pygame_up
 
 from kinesphere import zconfig
 from kinesphere.clients import input as pad
@@ -32,8 +33,9 @@ from kinesphere.clients import targets as tg
 from kinesphere.clients.link import RobotLink
 from kinesphere.clients.options import TeleopOptions
 from kinesphere.clients.state import Action, ControllerState
-from kinesphere.clients.teleop import Teleop, run
+from kinesphere.clients.teleop import Teleop, View, run
 from kinesphere.keyexpr import Keys
+from kinesphere.laban import Direction
 from kinesphere.protocol import RobotState, decode
 
 __all__ = ["pygame_up"]  # fixtures
@@ -203,27 +205,21 @@ def operator(fleet: Fleet, target: tg.Target) -> Iterator[tuple[Teleop, pad.Pyga
             link.close()
 
 
-def test_sweep_gesture_translates_the_base_while_the_arm_sweeps(
-    fleet: Fleet, pygame_up: None
-) -> None:
-    p = Pad()
+LEFT, RIGHT = 90, 75
+"""Ticks at 30 Hz of the sweep's strokes. The first one unfolds the arm from its stowed neutral
+(the joints move synchronised, so the turret turns slowly, ~0.2 rad/s); the second swings the
+unfolded arm across at up to the turret's 1 rad/s."""
 
-    def sweep_left() -> None:
-        p.plug()
-        p.deadman()
-        p.axis(pygame.CONTROLLER_AXIS_TRIGGERLEFT, 1.0)  # low
-        p.right(-1.0, 0.0)  # arm: left-low, far
-        p.left(0.0, -0.6)  # base: forward
 
-    with operator(fleet, tg.robot(PB)) as (op, inp):
-        assert (op.selection.limb, op.selection.origin) == ("limb_11", "distal_11")
-        t0 = time.monotonic()
-        script = Script(inp, {0: sweep_left, 50: lambda: p.right(1.0, 0.0),  # arm: right-low
-                              100: lambda: p.deadman(False), 101: lambda: None})  # fmt: skip
-        run(op, script, finished=lambda: script.finished)
-    rest = at_rest(PB, fleet.track, time.monotonic())
-    hs = fleet.track.since(PB, t0)
-    hs = [h for h in hs if h.at <= rest.at]
+def assert_sweep(fleet: Fleet, t0: float, released: float) -> None:
+    """The PackBot sweep as the operator means it: the turret swings in front of the robot,
+    left then right of forward, while the base advances; after the deadman is let go the
+    robot holds within the TTL and comes to rest."""
+    halted = fleet.track.wait(PB, lambda h: h.state.status in ("stopped", "holding"),
+                              "the stop", after=released)  # fmt: skip
+    assert halted.at - released < TTL_MS / 1000
+    rest = at_rest(PB, fleet.track, halted.at)
+    hs = [h for h in fleet.track.since(PB, t0) if h.at <= rest.at]
     turret = [h.state.q[h.state.joint_names.index("turret")] for h in hs]
     tqd = [h.state.qd[h.state.joint_names.index("turret")] for h in hs]
     v = dict(speeds(hs))
@@ -231,10 +227,78 @@ def test_sweep_gesture_translates_the_base_while_the_arm_sweeps(
             if abs(w) > 0.05 and v.get(h.state.stamp_ns / 1e9, 0.0) > 0.05]  # fmt: skip
     assert both and max(both) - min(both) > 1.0, "base and arm move at the same time"
     peak = max(range(len(turret)), key=lambda i: turret[i])
-    assert turret[peak] > 0.3, "the arm swept left (turret positive)"
-    assert min(turret[peak:]) < turret[peak] - 0.6, "then right"
-    x0, x1 = hs[0].state.base_pose, rest.state.base_pose
-    assert ((x1[0] - x0[0]) ** 2 + (x1[1] - x0[1]) ** 2) ** 0.5 > 0.5, "the base drove"
+    assert turret[peak] > 0.5, "the arm swept left of forward (turret positive)"
+    assert min(turret[peak:]) < -0.6, "then right of forward"
+    assert max(map(abs, turret)) < math.pi / 2, "always in front of the robot, never behind"
+    (x0, y0, yaw0), (x1, y1, _) = hs[0].state.base_pose, rest.state.base_pose
+    advance = (x1 - x0) * math.cos(yaw0) + (y1 - y0) * math.sin(yaw0)
+    assert advance > 0.5, "the base drove forward"
+    after = [h for h in fleet.track.since(PB, rest.at)]
+    assert after and all(h.state.status in ("stopped", "holding") for h in after[:10])
+
+
+def test_sweep_gesture_translates_the_base_while_the_arm_sweeps(
+    fleet: Fleet, pygame_up: None
+) -> None:
+    """Posted events (what a pad would send): deadman + LT + right stick left, then right,
+    left stick forward."""
+    p = Pad()
+    released: list[float] = []
+
+    def sweep_left() -> None:
+        p.plug()
+        p.deadman()
+        p.axis(pygame.CONTROLLER_AXIS_TRIGGERLEFT, 1.0)  # low
+        p.right(-1.0, 0.0)  # arm: left-low, far (served as left-forward-low)
+        p.left(0.0, -0.6)  # base: forward
+
+    def let_go() -> None:
+        released.append(time.monotonic())
+        p.deadman(False)
+
+    with operator(fleet, tg.robot(PB)) as (op, inp):
+        assert (op.selection.limb, op.selection.origin) == ("limb_11", "distal_11")
+        t0 = time.monotonic()
+        script = Script(inp, {0: sweep_left, LEFT: lambda: p.right(1.0, 0.0),  # right-low
+                              LEFT + RIGHT: let_go, LEFT + RIGHT + 1: lambda: None})  # fmt: skip
+        run(op, script, finished=lambda: script.finished)
+    assert_sweep(fleet, t0, released[0])
+
+
+def test_sweep_gesture_through_sdls_real_joystick_path(fleet: Fleet, pygame_up: None) -> None:
+    """The same gesture from an SDL virtual GameController: SDL's device, mapping and event
+    path, as a USB pad would drive it."""
+    released: list[float] = []
+    with operator(fleet, tg.robot(PB)) as (op, inp):
+        vpad = VirtualPad()
+        try:
+            op.tick(inp.poll())  # SDL reports the device; the client opens it, nothing held
+
+            def sweep_left() -> None:
+                vpad.deadman()
+                vpad.axis(pygame.CONTROLLER_AXIS_TRIGGERLEFT, 1.0)
+                vpad.right(-1.0, 0.0)
+                vpad.left(0.0, -0.6)
+
+            def let_go() -> None:
+                released.append(time.monotonic())
+                vpad.deadman(False)
+
+            t0 = time.monotonic()
+            end = LEFT + RIGHT
+            script = Script(inp, {0: sweep_left, LEFT: lambda: vpad.right(1.0, 0.0),
+                                  end: let_go, end + 1: lambda: None})  # fmt: skip
+            views: list[View] = []
+            run(op, script, draw=views.append, finished=lambda: script.finished)
+        finally:
+            vpad.unplug()
+    engaged = [v for v in views if v.engaged]
+    assert engaged and {v.source for v in engaged} == {"controller"}, "the SDL device drove it"
+    sent = [(v.asked or v.intent.direction, v.intent.direction) for v in engaged]
+    assert (Direction.LEFT_LOW, Direction.LEFT_FORWARD_LOW) in sent
+    assert (Direction.RIGHT_LOW, Direction.RIGHT_FORWARD_LOW) in sent
+    assert all(d in (Direction.LEFT_FORWARD_LOW, Direction.RIGHT_FORWARD_LOW) for _, d in sent)
+    assert_sweep(fleet, t0, released[0])
 
 
 def test_deadman_release_stops_within_the_ttl(fleet: Fleet, pygame_up: None) -> None:

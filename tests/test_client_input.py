@@ -12,6 +12,7 @@ os.environ.setdefault("SDL_AUDIODRIVER", "dummy")
 
 import pygame  # noqa: E402
 import pytest  # noqa: E402
+from test_client_support import VirtualPad  # noqa: E402
 
 from kinesphere.clients import input as pad  # noqa: E402
 from kinesphere.clients import mapfile  # noqa: E402
@@ -210,3 +211,29 @@ def test_unknown_key_names_are_explained(tmp_path: Path) -> None:
     f.write_text('[keyboard.buttons]\nestop = ["big red"]\n')
     with pytest.raises(KinesphereError, match="unknown key name 'big red'"):
         pad.PygameInput(mapfile.load(f))
+
+
+def test_a_real_sdl_game_controller(inp: pad.PygameInput) -> None:
+    """Through SDL's own joystick path: a virtual GameController attached with SDL's API."""
+    vpad = VirtualPad("kinesphere test pad")
+    try:
+        cs = inp.poll()  # SDL reports it added; the input opens it as a controller
+        assert cs.connected and any(d.name == "kinesphere test pad" and d.kind == "controller"
+                                    for d in inp.devices.values())  # fmt: skip
+        vpad.deadman()
+        vpad.axis(pygame.CONTROLLER_AXIS_TRIGGERLEFT, 1.0)
+        vpad.right(-1.0, 0.0)
+        vpad.left(0.0, -0.6)
+        vpad.button(pygame.CONTROLLER_BUTTON_DPAD_LEFT)
+        cs = inp.poll()
+        assert cs.source == "controller"
+        assert cs.held == {Action.DEADMAN, Action.TURN_LEFT}
+        assert (cs.rx, cs.lt) == (-1.0, 1.0) and cs.ly == pytest.approx(-0.6, abs=1e-3)
+        assert direction(cs) == (Direction.LEFT_LOW, 3.0)
+        vpad.axis(pygame.CONTROLLER_AXIS_TRIGGERLEFT, 0.0)
+        vpad.button(pygame.CONTROLLER_BUTTON_DPAD_LEFT, down=False)
+        vpad.unplug()
+        cs = inp.poll()
+        assert not cs.connected and cs.held == frozenset() and cs.lt == 0.0
+    finally:
+        vpad.unplug()

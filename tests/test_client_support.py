@@ -9,8 +9,10 @@ awaited: Zenoh keeps one publisher's messages in order.
 
 from __future__ import annotations
 
+import ctypes
 import itertools
 import os
+import re
 import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
@@ -36,6 +38,89 @@ WAIT_S = 20.0
 """Upper bound for events on a loaded 2-core machine; tests finish far sooner."""
 SENTINEL = "sentinel"
 MAX = 32767
+
+
+class _VirtualJoystickDesc(ctypes.Structure):
+    """SDL_VirtualJoystickDesc (SDL 2.24+, SDL_VIRTUAL_JOYSTICK_DESC_VERSION 1)."""
+
+    _fields_ = [
+        ("version", ctypes.c_uint16), ("type", ctypes.c_uint16), ("naxes", ctypes.c_uint16),
+        ("nbuttons", ctypes.c_uint16), ("nhats", ctypes.c_uint16),
+        ("vendor_id", ctypes.c_uint16), ("product_id", ctypes.c_uint16),
+        ("padding", ctypes.c_uint16), ("button_mask", ctypes.c_uint32),
+        ("axis_mask", ctypes.c_uint32), ("name", ctypes.c_char_p), ("userdata", ctypes.c_void_p),
+        *((f, ctypes.c_void_p) for f in ("Update", "SetPlayerIndex", "Rumble", "RumbleTriggers",
+                                          "SetLED", "SendEffect")),
+    ]  # fmt: skip
+
+
+def pygames_sdl() -> ctypes.CDLL:
+    """The libSDL2 that pygame loaded into this process (not another copy of it)."""
+    with open("/proc/self/maps", encoding="utf-8") as maps:
+        paths = sorted({m.group(0) for line in maps
+                        if (m := re.search(r"/\S*libSDL2-2[^/\s]*\.so[^/\s]*", line))})  # fmt: skip
+    assert paths, "pygame's libSDL2 is not loaded: import pygame and init it first"
+    lib = ctypes.CDLL(paths[0])
+    lib.SDL_JoystickAttachVirtualEx.argtypes = [ctypes.POINTER(_VirtualJoystickDesc)]
+    lib.SDL_JoystickOpen.argtypes = [ctypes.c_int]
+    lib.SDL_JoystickOpen.restype = ctypes.c_void_p
+    lib.SDL_JoystickSetVirtualAxis.argtypes = [ctypes.c_void_p, ctypes.c_int, ctypes.c_int16]
+    lib.SDL_JoystickSetVirtualButton.argtypes = [ctypes.c_void_p, ctypes.c_int, ctypes.c_uint8]
+    lib.SDL_JoystickClose.argtypes = [ctypes.c_void_p]
+    lib.SDL_JoystickDetachVirtual.argtypes = [ctypes.c_int]
+    lib.SDL_GetError.restype = ctypes.c_char_p
+    return lib
+
+
+class VirtualPad:
+    """An SDL virtual GameController: input goes through SDL's real joystick and game
+    controller path (device added, mapping, axis and button events), as from a USB pad.
+
+    SDL gives a virtual joystick of type GameController the standard mapping: axes 0..5 are
+    leftx, lefty, rightx, righty, lefttrigger, righttrigger, buttons follow
+    ``SDL_GameControllerButton``. Values are applied when SDL next updates its joysticks,
+    which pygame's event pump does.
+    """
+
+    def __init__(self, name: str = "kinesphere virtual pad") -> None:
+        self.sdl = pygames_sdl()
+        self._name = name.encode()
+        desc = _VirtualJoystickDesc(  # type 1: SDL_JOYSTICK_TYPE_GAMECONTROLLER
+            version=1, type=1, naxes=6, nbuttons=pygame.CONTROLLER_BUTTON_MAX, name=self._name
+        )
+        self.index = self.sdl.SDL_JoystickAttachVirtualEx(ctypes.byref(desc))
+        assert self.index >= 0, self.sdl.SDL_GetError().decode()
+        self.joystick = self.sdl.SDL_JoystickOpen(self.index)
+        assert self.joystick, self.sdl.SDL_GetError().decode()
+
+    def axis(self, axis: int, value: float) -> None:
+        """A stick axis in -1..1 (SDL: x right +, y down +) or a trigger in 0..1."""
+        if axis in (pygame.CONTROLLER_AXIS_TRIGGERLEFT, pygame.CONTROLLER_AXIS_TRIGGERRIGHT):
+            raw = round(-32768 + value * 65535)  # the joystick's full range is the trigger's
+        else:
+            raw = max(-32768, min(32767, round(value * 32767)))
+        assert self.sdl.SDL_JoystickSetVirtualAxis(self.joystick, axis, raw) == 0
+
+    def right(self, x: float, y: float) -> None:
+        self.axis(pygame.CONTROLLER_AXIS_RIGHTX, x)
+        self.axis(pygame.CONTROLLER_AXIS_RIGHTY, y)
+
+    def left(self, x: float, y: float) -> None:
+        self.axis(pygame.CONTROLLER_AXIS_LEFTX, x)
+        self.axis(pygame.CONTROLLER_AXIS_LEFTY, y)
+
+    def button(self, b: int, down: bool = True) -> None:
+        assert self.sdl.SDL_JoystickSetVirtualButton(self.joystick, b, int(down)) == 0
+
+    def deadman(self, down: bool = True) -> None:
+        self.button(pygame.CONTROLLER_BUTTON_LEFTSHOULDER, down)
+
+    def unplug(self) -> None:
+        """Detach the device (SDL then reports it removed, like a pulled cable)."""
+        if self.joystick:
+            self.sdl.SDL_JoystickClose(self.joystick)
+            self.joystick = None
+            self.sdl.SDL_JoystickDetachVirtual(self.index)
 
 
 @dataclass(frozen=True)
