@@ -215,11 +215,11 @@ def test_unknown_key_names_are_explained(tmp_path: Path) -> None:
 
 def test_a_real_sdl_game_controller(inp: pad.PygameInput) -> None:
     """Through SDL's own joystick path: a virtual GameController attached with SDL's API."""
-    vpad = VirtualPad("kinesphere test pad")
+    vpad = VirtualPad()
     try:
         cs = inp.poll()  # SDL reports it added; the input opens it as a controller
-        assert cs.connected and any(d.name == "kinesphere test pad" and d.kind == "controller"
-                                    for d in inp.devices.values())  # fmt: skip
+        # (SDL names it after the first mapping made for its GUID: not checked here)
+        assert cs.connected and [d.kind for d in inp.devices.values()] == ["controller"]
         vpad.deadman()
         vpad.axis(pygame.CONTROLLER_AXIS_TRIGGERLEFT, 1.0)
         vpad.right(-1.0, 0.0)

@@ -55,6 +55,8 @@ def init_pygame(headless: bool) -> None:
         pygame.quit()
         raise KinesphereError("unavailable", NO_DISPLAY)
     pygame.joystick.init()
+    if sdl_controller.get_init():  # pygame keeps this flag across pygame.quit(), while SDL
+        sdl_controller.quit()  # shut the subsystem down: controller events would never come
     sdl_controller.init()
 
 
