@@ -78,7 +78,8 @@ class Node:
     def subscription(self, topic: str, ros_type: str, on_message: Callable[[Any], None],
                      qos: rz.Qos | None = None, *, max_bytes: int = rz.MAX_PAYLOAD,
                      any_hash: bool = True) -> Subscription:
-        """Call ``on_message(msg)`` (on a Zenoh thread) for each decodable sample."""
+        """Call ``on_message(msg)`` (on a Zenoh thread) for each decodable sample; a
+        KinesphereError it raises counts the sample as rejected, like one that did not decode."""
         sub = Subscription(self, self.resolve(topic), ros_type, on_message, qos or rz.Qos(),
                            max_bytes, any_hash)
         with self._lock:
@@ -183,16 +184,22 @@ class Subscription:
                 raise KinesphereError("malformed", f"{size} bytes exceed {self.max_bytes}")
             msg = rz.deserialize(sample.payload.to_bytes(), self.ros_type, self.max_bytes)
         except KinesphereError as exc:
-            self.rejected += 1
-            self.last_error = exc.message
-            if self.rejected % LOG_EVERY == 1:
-                log.warning("%s: dropped sample %d: %s", self.topic, self.rejected, exc.message)
+            self._reject(exc)
             return
-        self.received += 1
         try:
             self.on_message(msg)
+        except KinesphereError as exc:  # the handler found the content wrong
+            self._reject(exc)
+            return
         except Exception:  # a callback bug must not kill Zenoh's thread or go unseen
             log.exception("%s: message handler failed", self.topic)
+        self.received += 1
+
+    def _reject(self, exc: KinesphereError) -> None:
+        self.rejected += 1
+        self.last_error = exc.message
+        if self.rejected % LOG_EVERY == 1:
+            log.warning("%s: dropped sample %d: %s", self.topic, self.rejected, exc.message)
 
     def close(self) -> None:
         undeclare(self._token, self._sub)

@@ -11,7 +11,7 @@ from typing import Any
 
 from kinesphere.cliargs import add_zenoh_arguments
 from kinesphere.clients import commands
-from kinesphere.clients.options import TeleopOptions
+from kinesphere.clients.options import JOY_LAYOUTS, JoyOptions, TeleopOptions
 
 KEYS_HELP = """keys (keyboard fallback, the HUD window needs focus):
   arrows      right stick: the limb's horizontal direction (diagonals: two arrows)
@@ -98,6 +98,21 @@ def register(sub: Any) -> None:
         action="store_true",
         help="stream whenever a stick or trigger is deflected (no deadman button)",
     )
+    g.add_argument(
+        "--input",
+        default="pad",
+        metavar="pad|ros2:TOPIC",
+        help="where the hands come from: the local pad and keyboard (default), or "
+        "sensor_msgs/Joy from a ROS 2 joy node over rmw_zenoh, e.g. ros2:/joy (ros2 extra)",
+    )
+    joy = JoyOptions()
+    g.add_argument("--ros2-domain", type=int, default=joy.domain, metavar="N",
+                   help=f"ROS domain of the Joy topic (default {joy.domain})")
+    g.add_argument("--joy-layout", choices=JOY_LAYOUTS, default=joy.layout,
+                   help="Joy axis/button order: game_controller_node's SDL order (default) or "
+                   "joy_node's device order, read with the mapping's [joystick] numbers")
+    g.add_argument("--joy-timeout", type=float, default=joy.timeout_s, metavar="S",
+                   help=f"no Joy message for S seconds = pad unplugged (default {joy.timeout_s})")
     g.add_argument("--duration", type=float, metavar="S", help="quit after S seconds")
     g.add_argument("--screenshot", metavar="PNG", help="save the HUD to PNG when quitting")
     _targeting(g, wait=False)

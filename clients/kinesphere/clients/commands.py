@@ -13,7 +13,7 @@ import signal
 import sys
 import time
 from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from contextlib import ExitStack, contextmanager
 from types import FrameType
 from typing import Any
 
@@ -90,19 +90,23 @@ def gamepad(args: argparse.Namespace) -> int:
         raise KinesphereError("malformed", "--rate must be > 0 and --ttl-ms >= 0")
     options = TeleopOptions(args.rate, ttl, not args.no_deadman)
     replay = record.Replay.from_file(args.replay) if args.replay else None
+    joy_topic = _joy_topic(args.input)
     hud = None
     use_pygame = replay is None or not args.headless
     if use_pygame:
         from kinesphere.clients import input as pad
 
         pad.init_pygame(args.headless)
-        if args.headless and replay is None and pad.controllers() == 0:
+        if args.headless and replay is None and joy_topic is None and pad.controllers() == 0:
             print("no game controller found: waiting for one to be plugged in; nothing moves "
                   "until then (--headless has no keyboard)", file=sys.stderr)
     try:
-        with _link(args, watch=True) as link:
+        with _link(args, watch=True) as link, ExitStack() as stack:
             op = teleop.Teleop(link, mapping, target, options)
             source: teleop.Source = replay if replay is not None else pad.PygameInput(mapping)
+            if joy_topic is not None and replay is None:
+                source = joy = _joy_input(args, link.session, source, joy_topic)
+                stack.callback(joy.close)
             if not args.headless:
                 from kinesphere.clients.hud import Hud
 
@@ -149,6 +153,27 @@ def gamepad(args: argparse.Namespace) -> int:
 
             pygame.quit()
     return 0
+
+
+def _joy_topic(text: str) -> str | None:
+    """The ROS topic of ``--input ros2:TOPIC``, None for ``pad``; anything else is malformed."""
+    if text == "pad":
+        return None
+    if not text.startswith("ros2:"):
+        raise KinesphereError("malformed", f"--input {text!r}: use pad or ros2:TOPIC")
+    from kinesphere.clients.ros2joy import input_topic
+
+    return input_topic(text)
+
+
+def _joy_input(args: argparse.Namespace, session: Any, pad: Any, topic: str) -> Any:
+    from kinesphere.clients.options import JoyOptions
+    from kinesphere.clients.ros2joy import JoyInput
+
+    options = JoyOptions(args.ros2_domain, args.joy_layout, args.joy_timeout)
+    print(f"input: sensor_msgs/Joy on {topic} (ROS domain {options.domain}); nothing moves "
+          "until it arrives", file=sys.stderr, flush=True)
+    return JoyInput(session, pad, topic, options)
 
 
 def _parse_parts(words: list[str]) -> list[Any]:

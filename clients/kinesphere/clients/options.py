@@ -33,3 +33,18 @@ class BridgeOptions:
     body_retry_s: float = 5.0
     max_robots: int = 256
     max_urdf_bytes: int = 1024 * 1024
+
+
+JOY_LAYOUTS = ("controller", "joystick")
+
+
+@dataclass(frozen=True)
+class JoyOptions:
+    """The gamepad's ``--input ros2:TOPIC``: ROS ``domain``; ``layout`` ``controller`` (the
+    SDL GameController order of ``joy``'s game_controller_node) or ``joystick`` (joy_node's
+    raw device order, read with the mapping's ``[joystick]`` numbers); after ``timeout_s``
+    without a message the pad counts as unplugged (everything stops)."""
+
+    domain: int = 0
+    layout: str = "controller"
+    timeout_s: float = 0.5
