@@ -55,7 +55,7 @@ class Node:
         self.node_id = next(_ids)
         self._entities: list[Publisher | Subscription] = []
         self._lock = threading.Lock()
-        self._token = session.liveliness().declare_token(
+        self._token: zenoh.LivelinessToken | None = session.liveliness().declare_token(
             rz.node_token(self.domain, self.zid, self.node_id, self.namespace, self.name)
         )
 
@@ -95,9 +95,10 @@ class Node:
         """Undeclare every entity of the node, then the node's own token."""
         with self._lock:
             entities, self._entities = self._entities, []
+            token, self._token = self._token, None
         for e in entities:
             e.close()
-        undeclare(self._token)
+        undeclare(token)  # None when already closed
 
 
 class Publisher:

@@ -163,9 +163,10 @@ def test_bridge_cli_domain_namespace_and_bad_input() -> None:
         tap.wait(lambda m: len(tap.got) >= 2, what="a second JointState")
         watch = GraphWatch(ros, 7)
         stack.callback(watch.close)
-        tokens = watch.wait(lambda ts: any("%lab%nao_1%joint_states" in t for t in ts), "nao_1")
+        tokens = watch.wait(lambda ts: any("%lab%nao_1%joint_states" in t for t in ts)
+                            and any(t.endswith("/NN/%/%lab/kinesphere_bridge") for t in ts),
+                            "the bridge node and nao_1's publisher")
         assert sum("%lab%nao_1%joint_states" in t for t in tokens) == 1
-        assert any(t.endswith("/NN/%/%lab/kinesphere_bridge") for t in tokens)
         proc.send_signal(signal.SIGTERM)
         _, err = proc.communicate(timeout=WAIT_S)
         assert proc.returncode == 0, err

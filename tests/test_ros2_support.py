@@ -161,3 +161,113 @@ class RosPublisher:
 
     def close(self) -> None:
         zconfig.undeclare(self.token, self.pub)
+
+
+class StandInRobot:
+    """A ros2_control robot as the ROS 2 body sees it, in rmw_zenoh's format only.
+
+    Publishes ``<ns>/joint_states`` at ``rate`` Hz (names shuffled, plus a gripper joint the
+    eURDF does not have); follows a joint_trajectory_controller on
+    ``<ns>/<controller>/joint_trajectory`` (each message replaces the trajectory: linear from
+    where the joints are to the last point at its ``time_from_start``, as the controller
+    interpolates) or a forward position controller on ``<ns>/<controller>/commands`` (jump to
+    the command, in ``order``). Every message received is kept, with its arrival time.
+    """
+
+    def __init__(self, session: zenoh.Session, domain: int, ns: str, joints: dict[str, float],
+                 interface: str = "trajectory", controller: str = "joint_trajectory_controller",
+                 order: list[str] | None = None, rate: float = 100.0) -> None:
+        self.names = list(joints)
+        self.q = {n: float(v) for n, v in joints.items()}
+        self.order = order or self.names
+        self.rate = rate
+        self.interface = interface
+        self.received: list[tuple[float, Any]] = []
+        self.ticks = 0
+        self.moved = (0, time.monotonic())
+        """(tick, time) of the last tick in which any joint moved."""
+        self._last_q: list[float] = []
+        self.publishing = threading.Event()
+        self.publishing.set()
+        self._plan: tuple[float, dict[str, float], dict[str, float], float] | None = None
+        self._cond = threading.Condition()
+        self._stop = threading.Event()
+        ros_type = ("trajectory_msgs/msg/JointTrajectory" if interface == "trajectory"
+                    else "std_msgs/msg/Float64MultiArray")
+        suffix = "joint_trajectory" if interface == "trajectory" else "commands"
+        self.command_type = ros_type
+        self._cmd = session.declare_subscriber(
+            key(domain, f"{ns}/{controller}/{suffix}", ros_type), self._on_command)
+        zid = str(session.info.zid())
+        topic = f"{ns}/{controller}/{suffix}".replace("/", "%")
+        self._token = session.liveliness().declare_token(
+            f"@ros2_lv/{domain}/{zid}/800/802/MS/%/{ns.replace('/', '%')}/{controller}/{topic}/"
+            f"{dds(ros_type)}/{JAZZY.hash_rihs01(ros_type)}/::,10:,:,:,,")
+        self.states = RosPublisher(session, domain, f"{ns}/joint_states",
+                                   "sensor_msgs/msg/JointState", node="joint_state_broadcaster",
+                                   node_id=800, entity_id=801)
+        self._thread = threading.Thread(target=self._run, name="stand-in", daemon=True)
+        self._thread.start()
+
+    def _on_command(self, sample: zenoh.Sample) -> None:
+        read_attachment(sample)  # what rmw_zenoh's subscription would insist on
+        msg = JAZZY.deserialize_cdr(sample.payload.to_bytes(), self.command_type)
+        now = time.monotonic()
+        with self._cond:
+            self.received.append((now, msg))
+            if self.interface == "trajectory":
+                point = msg.points[-1]
+                t = point.time_from_start.sec + point.time_from_start.nanosec * 1e-9
+                goal = dict(zip(msg.joint_names, point.positions.tolist(), strict=True))
+                self._plan = (now, dict(self.q), goal, max(t, 1e-3))
+            else:
+                self.q.update(zip(self.order, msg.data.tolist(), strict=True))
+            self._cond.notify_all()
+
+    def _run(self) -> None:
+        js = JAZZY.types["sensor_msgs/msg/JointState"]
+        header = JAZZY.types["std_msgs/msg/Header"]
+        stamp = JAZZY.types["builtin_interfaces/msg/Time"]
+        import numpy as np
+
+        names = [*reversed(self.names), "gripper_finger"]  # order and extras differ from P
+        while not self._stop.wait(1.0 / self.rate):  # the robot's own cycle, not a test wait
+            with self._cond:
+                if self._plan is not None:
+                    t0, start, goal, dur = self._plan
+                    a = min(1.0, (time.monotonic() - t0) / dur)
+                    for n, g in goal.items():
+                        self.q[n] = start[n] + a * (g - start[n])
+                q = [self.q[n] for n in names[:-1]] + [0.01]
+                self.ticks += 1
+                if q != self._last_q:
+                    self.moved = (self.ticks, time.monotonic())
+                self._last_q = q
+                self._cond.notify_all()
+            if self.publishing.is_set():
+                sec, ns = divmod(time.time_ns(), 1_000_000_000)
+                self.states.put(js(header=header(stamp=stamp(sec=sec, nanosec=ns), frame_id=""),
+                                   name=names, position=np.array(q), velocity=np.array([]),
+                                   effort=np.array([])))
+
+    def wait(self, pred: Callable[[StandInRobot], bool], what: str,
+             timeout: float = WAIT_S) -> None:
+        """Wait (on the robot's own cycle) until ``pred(self)`` holds."""
+        with self._cond:
+            if not self._cond.wait_for(lambda: pred(self), timeout):
+                raise AssertionError(f"stand-in robot never {what}; q = {self.q}")
+
+    def wait_rest(self, ticks: int = 30) -> float:
+        """Wait until no joint has moved for ``ticks`` cycles; when it last moved."""
+        self.wait(lambda r: r.ticks - r.moved[0] >= ticks, f"rested for {ticks} ticks")
+        return self.moved[1]
+
+    def positions(self) -> dict[str, float]:
+        with self._cond:
+            return dict(self.q)
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=5)
+        self.states.close()
+        zconfig.undeclare(self._token, self._cmd)

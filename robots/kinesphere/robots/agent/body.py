@@ -13,7 +13,7 @@ from __future__ import annotations
 import abc
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from kinesphere.errors import KinesphereError, choices
 
@@ -75,25 +75,41 @@ class Body(abc.ABC):
         """Release the body."""
 
 
-BodyFactory = Callable[[str, float], Body]
-"""Makes a body for a platform (a shipped name or a folder) stepped every ``dt`` seconds."""
+BodyFactory = Callable[..., Body]
+"""Makes a body for a platform (a shipped name or a folder) stepped every ``dt`` seconds. The
+agent also passes, by keyword, its ``session`` (Zenoh), ``options`` (AgentOptions) and
+``robot_id``: a body that talks to hardware over the network uses them, a simulation not."""
 
 
-def _mujoco(platform: str, dt: float) -> Body:
+def _mujoco(platform: str, dt: float, **_context: object) -> Body:
     from kinesphere.robots.agent.mujoco_body import MujocoBody  # MuJoCo loads only when chosen
     from kinesphere.robots.mjcf import platform_model
 
     return MujocoBody(platform_model(platform), dt)
 
 
-BODIES: dict[str, BodyFactory] = {"mujoco": _mujoco}
-"""Bodies by the name ``--body`` takes."""
+def _ros2(platform: str, dt: float, *, session: Any = None, options: Any = None,
+          robot_id: str = "robot", **_context: object) -> Body:
+    from kinesphere.robots.agent.options import AgentOptions
+    from kinesphere.robots.agent.ros2_body import make_ros2_body  # rmw_zenoh only when chosen
+    from kinesphere.robots.platform import load_platform
+
+    if session is None:
+        raise KinesphereError("malformed", "the ros2 body needs the agent's Zenoh session")
+    ros2 = (options if options is not None else AgentOptions()).ros2
+    return make_ros2_body(load_platform(platform), dt, session, ros2, robot_id)
+
+
+BODIES: dict[str, BodyFactory] = {"mujoco": _mujoco, "ros2": _ros2}
+"""Bodies by the name ``--body`` takes: the platform's MuJoCo model, or a ros2_control robot
+over rmw_zenoh (``ros2_body.py``)."""
 DEFAULT_BODY = "mujoco"
 
 
-def make_body(kind: str, platform: str, dt: float) -> Body:
-    """The body ``kind`` for ``platform``; an unknown kind is ``malformed`` naming the valid."""
+def make_body(kind: str, platform: str, dt: float, **context: Any) -> Body:
+    """The body ``kind`` for ``platform``; an unknown kind is ``malformed`` naming the valid.
+    ``context`` (``session``, ``options``, ``robot_id``) goes to the factory."""
     factory = BODIES.get(kind)
     if factory is None:
         raise KinesphereError("malformed", f"unknown body {kind!r}; valid: {choices(BODIES)}")
-    return factory(platform, dt)
+    return factory(platform, dt, **context)

@@ -13,7 +13,7 @@ from typing import Any
 
 from kinesphere.cliargs import AGENT, add_zenoh_arguments
 from kinesphere.robots.agent.body import BODIES
-from kinesphere.robots.agent.options import AgentOptions
+from kinesphere.robots.agent.options import ROS2_INTERFACES, AgentOptions, Ros2BodyOptions
 from kinesphere.signals import handle_signals
 
 log = logging.getLogger(__name__)
@@ -25,8 +25,9 @@ DEFAULTS = AgentOptions()
 def register(sub: Any) -> None:
     p = sub.add_parser(
         "agent",
-        help="run a simulated robot that follows spatial commands",
-        description="Run PLATFORM's MuJoCo body in real time: it subscribes to "
+        help="run a robot (simulated, or a ROS 2 one) that follows spatial commands",
+        description="Run PLATFORM's body (its MuJoCo model, or with --body ros2 a ros2_control "
+        "robot) in real time: it subscribes to "
         "{prefix}/robot/ID/command, resolves commands through the databank, moves along "
         "jerk-limited Ruckig trajectories and publishes {prefix}/robot/ID/state.",
     )
@@ -45,6 +46,26 @@ def register(sub: Any) -> None:
     p.add_argument("--group", action="append", default=[], metavar="NAME",
                    help="also obey {prefix}/group/NAME/command (repeatable)")
     p.add_argument("--viewer", action="store_true", help="open a MuJoCo viewer window")
+    r = d.ros2
+    ros2 = p.add_argument_group(
+        "--body ros2", description="Drive a ros2_control robot over rmw_zenoh (ROS 2's Zenoh "
+        "middleware; no ROS installation): read NS/joint_states, stream the trajectory to its "
+        "controller. Connect to the router its nodes use. See docs/ros2.md.")
+    ros2.add_argument("--ros2-namespace", default=r.namespace, metavar="NS",
+                      help=f"the robot's ROS namespace (default {r.namespace})")
+    ros2.add_argument("--ros2-domain", type=int, default=r.domain, metavar="N",
+                      help=f"ROS domain id (default {r.domain})")
+    ros2.add_argument("--ros2-interface", choices=ROS2_INTERFACES, default=r.interface,
+                      help="trajectory: JointTrajectory on CONTROLLER/joint_trajectory; "
+                      "forward: Float64MultiArray on CONTROLLER/commands "
+                      f"(default {r.interface})")
+    ros2.add_argument("--ros2-controller", default=r.controller, metavar="CONTROLLER",
+                      help="controller name (default joint_trajectory_controller, or "
+                      "forward_position_controller with --ros2-interface forward)")
+    ros2.add_argument("--ros2-joints", default="", metavar="J1,J2,...",
+                      help="the forward controller's joint order (default: the eURDF's)")
+    ros2.add_argument("--ros2-timeout", type=float, default=r.timeout_s, metavar="S",
+                      help=f"no joint state for S seconds = error, hold (default {r.timeout_s:g})")
     add_zenoh_arguments(p, AGENT)
     p.set_defaults(func=_agent)
 
@@ -71,8 +92,14 @@ def _agent(args: argparse.Namespace) -> int:
     from kinesphere.zconfig import close_session, session_from_args
 
     robot_id = args.robot_id or Path(args.platform).name
+    ros2 = Ros2BodyOptions(
+        namespace=args.ros2_namespace, domain=args.ros2_domain, interface=args.ros2_interface,
+        controller=args.ros2_controller, timeout_s=args.ros2_timeout,
+        joints=tuple(j.strip() for j in args.ros2_joints.split(",") if j.strip()),
+    )
     options = AgentOptions(rate=args.rate, state_rate=args.state_rate, speed=args.speed,
-                           prefix=args.prefix, groups=tuple(args.group), body=args.body)
+                           prefix=args.prefix, groups=tuple(args.group), body=args.body,
+                           ros2=ros2)
     stop = threading.Event()
 
     def on_signal(signum: int, frame: FrameType | None) -> None:

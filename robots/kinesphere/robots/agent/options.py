@@ -10,6 +10,39 @@ from kinesphere.keyexpr import DEFAULT_PREFIX
 from kinesphere.robots.agent.body import BODIES, DEFAULT_BODY
 from kinesphere.robots.agent.trajectory import DEFAULT_MARGIN
 
+ROS2_INTERFACES = ("trajectory", "forward")
+
+
+@dataclass(frozen=True)
+class Ros2BodyOptions:
+    """``--body ros2``: where the ros2_control robot is and how it takes commands.
+
+    ``namespace`` and ``domain`` of its topics; ``interface`` ``trajectory`` (a
+    joint_trajectory_controller: JointTrajectory on ``<controller>/joint_trajectory``) or
+    ``forward`` (a forward position controller: Float64MultiArray on ``<controller>/commands``
+    in ``joints`` order, default P's); ``controller`` defaults to joint_trajectory_controller or
+    forward_position_controller. No joint state for ``timeout_s`` is an error; the first must
+    come within ``start_timeout_s``. The setpoint stream runs at ``publish_rate`` Hz.
+    """
+
+    namespace: str = "/"
+    domain: int = 0
+    interface: str = "trajectory"
+    controller: str = ""
+    joints: tuple[str, ...] = ()
+    timeout_s: float = 0.5
+    start_timeout_s: float = 10.0
+    publish_rate: float = 100.0
+
+    def __post_init__(self) -> None:
+        if self.interface not in ROS2_INTERFACES:
+            raise KinesphereError("malformed", f"ROS 2 interface {self.interface!r}; valid: "
+                                  f"{', '.join(ROS2_INTERFACES)}")
+        for what, v in (("timeout", self.timeout_s), ("start timeout", self.start_timeout_s),
+                        ("publish rate", self.publish_rate)):
+            if not (math.isfinite(v) and v > 0):
+                raise KinesphereError("malformed", f"ROS 2 {what} must be > 0, got {v}")
+
 
 @dataclass(frozen=True)
 class AgentOptions:
@@ -17,7 +50,7 @@ class AgentOptions:
 
     Control ``rate`` and ``state_rate`` in Hz, ``speed`` (robot seconds per wall second, 0 =
     unpaced), key ``prefix``, ``groups`` it obeys, databank query timeout, joint-limit clamp
-    ``margin``, and the ``body`` it drives (a name in ``body.BODIES``).
+    ``margin``, and the ``body`` it drives (a name in ``body.BODIES``; ``ros2`` reads ``ros2``).
     """
 
     rate: float = 500.0
@@ -28,6 +61,7 @@ class AgentOptions:
     query_timeout_s: float = 1.0
     margin: float = DEFAULT_MARGIN
     body: str = DEFAULT_BODY
+    ros2: Ros2BodyOptions = Ros2BodyOptions()
 
     def __post_init__(self) -> None:
         checks = (

@@ -81,7 +81,8 @@ class Agent:
         self.robot_id = robot_id
         self.session = session
         if body is None:
-            body = make_body(self.options.body, platform, 1.0 / self.options.rate)
+            body = make_body(self.options.body, platform, 1.0 / self.options.rate,
+                             session=session, options=self.options, robot_id=robot_id)
         self.controller = Controller(body, self.options.margin)
         self.platform = self.controller.platform.name
         self.resolver = Resolver(session, self.platform, self.keys, self.options.query_timeout_s)
@@ -96,6 +97,7 @@ class Agent:
         self._detail = "no command yet"
         self._fault = ""
         self._failed_at = -1e9
+        self._body_fault = False
         self._ticks = 0
         self._state_seq = 0
         self._moved_at = 0.0
@@ -130,13 +132,15 @@ class Agent:
         return self
 
     def close(self) -> None:
-        """Stop the loop, undeclare everything (the session stays open: the caller owns it)."""
+        """Stop the loop, undeclare everything, release the body (the session stays open: the
+        caller owns it)."""
         self._stop.set()
         if self._thread is not None and self._thread is not threading.current_thread():
             self._thread.join(timeout=5.0)
         self.resolver.close()
         undeclare(*reversed(self._entities))
         self._entities = []
+        self.controller.body.close()
         log.info("agent %s down after %d steps (%d slips)", self.robot_id, self.stats.steps,
                  self.stats.slips)
 
@@ -197,6 +201,10 @@ class Agent:
             ctrl.step()
         except Exception as exc:
             self._step_failed(exc)
+        else:
+            if self._body_fault:  # e.g. joint states arrive again: say so, keep holding
+                self._body_fault = False
+                self._set(Status.HOLDING, "body working again; holding until a new command")
         self._ticks += 1
         self.stats.steps += 1
         self._after_step()
@@ -219,11 +227,19 @@ class Agent:
     def _step_failed(self, exc: Exception) -> None:
         """A step raised (a bug, or a body that failed): hold the body and say so."""
         now = time.monotonic()
+        if isinstance(exc, KinesphereError):  # the body says what is wrong with it
+            detail = f"body: {exc.message}; holding"
+            self._body_fault = True
+        else:
+            detail = f"internal: control step failed: {exc!r}; holding"
         if now - self._failed_at > WARN_EVERY_S:
             self._failed_at = now
-            log.exception("agent %s: control step failed", self.robot_id)
+            if isinstance(exc, KinesphereError):
+                log.warning("agent %s: %s", self.robot_id, detail)
+            else:
+                log.exception("agent %s: control step failed", self.robot_id)
         self.ordering.overtake()
-        self._set(Status.ERROR, f"internal: control step failed: {exc!r}; holding")
+        self._set(Status.ERROR, detail)
         try:
             self.controller.fail_safe()
         except Exception:
