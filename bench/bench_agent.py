@@ -116,9 +116,9 @@ def step_cost(endpoint: str) -> None:
                   f"{a99:>6.1f}us {b50:>10.1f}us {b99:>6.1f}us {a50 / b50:>8.2f}x")
 
 
-def latency(endpoint: str, hub: zenoh.Session) -> None:
-    print(f"command-to-motion latency, {LATENCY_COMMANDS} commands on loopback, agent at 500 Hz "
-          "real time (put -> first control step moving toward the new target):")
+def put_to_callback(pub_session: zenoh.Session, sub_session: zenoh.Session, n: int,
+                    key: str = "bench/floor") -> list[float]:
+    """Microseconds from a put of a Command to the subscriber's callback: the floor."""
     floor: list[float] = []
     got = threading.Event()
 
@@ -126,29 +126,46 @@ def latency(endpoint: str, hub: zenoh.Session) -> None:
         floor.append((time.time_ns() - decode(sample.payload, Command).sent_ns) / 1e3)
         got.set()
 
+    sub = sub_session.declare_subscriber(key, on_floor)
+    pub = pub_session.declare_publisher(key)
+    zconfig.wait_matching(pub)
+    for i in range(n):
+        got.clear()
+        pub.put(command(i, SpatialCommand("l", "o", "d", 1.0)))
+        got.wait(1.0)
+    zconfig.undeclare(sub, pub)
+    return floor
+
+
+def put_to_moving(agent: Agent, pub_session: zenoh.Session, parts: list[SpatialCommand],
+                  n: int, seq0: int = 1) -> list[float]:
+    """Microseconds from a put of a (cached) pose command to the agent's first moving step.
+
+    The first two commands (one per pose, to fill the cache) are not counted; commands are
+    spaced 4-8 ms at random so they do not phase-lock to the control loop.
+    """
+    cmd = pub_session.declare_publisher(agent.keys.command(agent.robot_id))
+    zconfig.wait_matching(cmd)
+    start = len(agent.latencies)
+    for i in range(n + 2):
+        before = len(agent.latencies)
+        cmd.put(command(seq0 + i, parts[i % 2]))
+        deadline = time.monotonic() + 2.0
+        while len(agent.latencies) == before and time.monotonic() < deadline:
+            time.sleep(0.0005)
+        time.sleep(0.004 + 0.004 * np.random.random())  # do not phase-lock to the loop
+    zconfig.undeclare(cmd)
+    return [(moved - sent) / 1e3 for _, sent, moved in list(agent.latencies)[start + 2:]]
+
+
+def latency(endpoint: str, hub: zenoh.Session) -> None:
+    print(f"command-to-motion latency, {LATENCY_COMMANDS} commands on loopback, agent at 500 Hz "
+          "real time (put -> first control step moving toward the new target):")
     with zconfig.session(config=zconfig.loopback_config(endpoint)) as s:
-        sub = s.declare_subscriber("bench/floor", on_floor)
-        pub = hub.declare_publisher("bench/floor")
-        zconfig.wait_matching(pub)
-        for i in range(LATENCY_COMMANDS):
-            got.clear()
-            pub.put(command(i, SpatialCommand("l", "o", "d", 1.0)))
-            got.wait(1.0)
-        zconfig.undeclare(sub, pub)
+        floor = put_to_callback(hub, s, LATENCY_COMMANDS)
         with Agent("baxter", "bench-latency", s, AgentOptions(speed=1.0)) as agent:
-            parts = two_parts(agent)
-            cmd = hub.declare_publisher(KEYS.command(agent.robot_id))
-            zconfig.wait_matching(cmd)
-            for i in range(LATENCY_COMMANDS + 2):
-                before = len(agent.latencies)
-                cmd.put(command(i + 1, parts[i % 2]))
-                deadline = time.monotonic() + 2.0
-                while len(agent.latencies) == before and time.monotonic() < deadline:
-                    time.sleep(0.0005)
-                time.sleep(0.004 + 0.004 * np.random.random())  # do not phase-lock to the loop
-            zconfig.undeclare(cmd)
+            lat = put_to_moving(agent, hub, two_parts(agent), LATENCY_COMMANDS)
             slips = agent.stats.slips
-        lat = [(moved - sent) / 1e3 for _, sent, moved in list(agent.latencies)[2:]]
     f50, f99 = pct(floor, 50), pct(floor, 99)
     l50, l99 = pct(lat, 50), pct(lat, 99)
     print(f"  bare zenoh put->callback     p50 {f50:8.1f}us  p99 {f99:8.1f}us")

@@ -59,13 +59,17 @@ def _databank(tmp: Path) -> tuple[str, str, tuple[str, str, str, float]]:
     return str(TOYARM), str(path), ("limb_11", "distal_11", "left-high", 2.0)
 
 
-def serve(endpoint: str, platform: str, db: str, reply_size: int) -> None:
-    """The server process: databank + floor on one session until stdin closes."""
+def serve(endpoint: str, platform: str, db: str, reply_size: int, mode: str = "peer") -> None:
+    """The server process: databank + floor on one session until stdin closes; a peer
+    listening on ``endpoint``, or (``mode="client"``) a client of the router there."""
     from kinesphere.services.databank.service import DatabankService
     from kinesphere.zconfig import open_session
 
     ecl = Ecl.open(platform, db)
-    session = open_session("peer", listen=[endpoint], connect=[])
+    if mode == "client":
+        session = open_session("client", listen=[], connect=[endpoint])
+    else:
+        session = open_session("peer", listen=[endpoint], connect=[])
     payload = zenoh.ZBytes(b"\x00" * reply_size)
 
     def echo(query: zenoh.Query) -> None:
@@ -226,7 +230,7 @@ def _report(client: zenoh.Session, keys: dict[str, str]) -> None:
 
 
 if __name__ == "__main__":
-    if len(sys.argv) == 5:
-        serve(sys.argv[1], sys.argv[2], sys.argv[3], int(sys.argv[4]))
+    if len(sys.argv) in (5, 6):
+        serve(sys.argv[1], sys.argv[2], sys.argv[3], int(sys.argv[4]), *sys.argv[5:])
     else:
         main()

@@ -80,6 +80,10 @@ def register(sub: Any) -> None:
                     "certificate (CN = robot id) to its own keys only")
     rt.add_argument("--print-acl", action="store_true",
                     help="print the access-control rules --robots generates, and exit")
+    rt.add_argument("--link", action="append", metavar="EP",
+                    help="another router to link with, e.g. tls/hq.example:7447 (repeatable; "
+                    "overrides the file's connect endpoints; linked routers route for each "
+                    "other's clients, see deploy/README.md, 'Several sites')")
     rt.add_argument("--log-denials", action=argparse.BooleanOptionalAction, default=None,
                     help="log access-control denials (default: on when access control is)")
     rt.set_defaults(func=_router)
@@ -116,5 +120,5 @@ def _router(args: argparse.Namespace) -> int:
         if args.robots is None:
             raise KinesphereError("malformed", "--print-acl needs --robots FILE")
         return print_acl(args.robots)
-    return run_router(args.config, args.listen, robots=args.robots,
+    return run_router(args.config, args.listen, robots=args.robots, links=args.link,
                       log_denials=args.log_denials)

@@ -160,13 +160,20 @@ def _acl_enabled(config: zenoh.Config) -> bool:
 
 
 def router_config(
-    config_file: Path | None, listen: Sequence[str] | None, robots: Path | None = None
+    config_file: Path | None, listen: Sequence[str] | None, robots: Path | None = None,
+    links: Sequence[str] | None = None,
 ) -> tuple[zenoh.Config, int]:
-    """The router's config (the file, ``listen`` over it, loopback when neither says) with
-    the fleet file's robots admitted (:mod:`kinesphere.deploy.acl`), and the robot count."""
+    """The router's config (the file, ``listen`` and ``links`` over it, loopback when neither
+    says where to listen) with the fleet file's robots admitted (:mod:`kinesphere.deploy.acl`),
+    and the robot count.
+
+    ``links`` (other routers, over the file's ``connect/endpoints``) joins sites: a router
+    keeps retrying a link that is down, so sites may start in any order.
+    """
     if config_file is not None and not config_file.is_file():
         raise KinesphereError("malformed", f"router config {config_file}: no such file")
-    config = session_config("router", listen=listen or None, config_file=config_file)
+    config = session_config("router", listen=listen or None, connect=links or None,
+                            config_file=config_file)
     listen_where_told(config)
     admitted = 0 if robots is None else add_robots(config, load_fleet(robots))
     return config, admitted
@@ -183,11 +190,12 @@ def run_router(
     listen: Sequence[str] | None,
     *,
     robots: Path | None = None,
+    links: Sequence[str] | None = None,
     log_denials: bool | None = None,
     stop: threading.Event | None = None,
 ) -> int:
     """Run a router until SIGINT/SIGTERM (or ``stop``); returns the exit code."""
-    config, admitted = router_config(config_file, listen, robots)
+    config, admitted = router_config(config_file, listen, robots, links)
     acl = _acl_enabled(config)
     if log_denials is None:
         log_denials = acl
