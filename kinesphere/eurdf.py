@@ -2,10 +2,10 @@
 
 The labels sit beside the URDF elements, so any URDF tool still reads the file. A limb label
 names a whole subtree, hence a link carries one label per limb that contains it; a distal label
-names the joint location (one or more joints) at the root of its limb. The loader checks every
-label against the kinematic tree (:mod:`kinesphere.eurdf_checks`), so a broken description
-fails at load time with the element and the problem named, never later in the middle of a
-motion.
+names the joint location (one or more joints) at the root of its limb. The loader checks the
+URDF part here and every label against the kinematic tree (:mod:`kinesphere.labels`), so a
+broken description fails at load time with the element and the problem named, never later in
+the middle of a motion.
 """
 
 from __future__ import annotations
@@ -13,26 +13,16 @@ from __future__ import annotations
 import hashlib
 import io
 import math
-import re
 import xml.etree.ElementTree as ET
-from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Literal, cast
 
 import yourdfpy
 
 from kinesphere.errors import KinesphereError
-from kinesphere.eurdf_checks import check_tree, check_urdf_elements, validate
-from kinesphere.eurdf_checks import invalid as invalid
+from kinesphere.labels import BodyPart, invalid, label_order, parse_part, validate
 
-PartSet = Literal["C", "L", "J"]
 ACTUATED_TYPES = ("revolute", "prismatic", "continuous")
-_NAME_RULES: dict[str, re.Pattern[str]] = {
-    "C": re.compile(r"^c_(\d+)$"),
-    "L": re.compile(r"^limb_(\d)(\d+)$"),
-    "J": re.compile(r"^distal_(\d+)$"),
-}
 
 
 @dataclass(frozen=True)
@@ -50,25 +40,6 @@ class JointLimit:
         if lo > hi:
             lo = hi = (self.lower + self.upper) / 2
         return min(max(value, lo), hi)
-
-
-@dataclass(frozen=True)
-class BodyPart:
-    """A label: core (C), limb (L) or distal joint location (J)."""
-
-    name: str
-    set: PartSet
-    alias: str | None
-    links: tuple[str, ...] = ()
-    joints: tuple[str, ...] = ()
-    distal: str | None = None
-    tip: str | None = None
-
-    @property
-    def index(self) -> tuple[int, ...]:
-        """Hierarchy index: ``limb_12`` -> (1, 2), ``distal_51`` -> (5, 1), ``c_1`` -> (1,)."""
-        digits = self.name.split("_", 1)[1]
-        return tuple(int(ch) for ch in digits) if self.set != "C" else (int(digits),)
 
 
 @dataclass(frozen=True)
@@ -185,7 +156,7 @@ def load_eurdf(source: str | Path) -> Eurdf:
     name = root.get("name") or ""
     if not name:
         raise invalid("<robot> has no name attribute")
-    check_urdf_elements(root)
+    _check_urdf_elements(root)
     try:
         urdf = yourdfpy.URDF.load(
             io.BytesIO(text.encode("utf-8")),  # bytes: lxml refuses str with an encoding decl
@@ -196,16 +167,16 @@ def load_eurdf(source: str | Path) -> Eurdf:
     except Exception as exc:  # yourdfpy raises assorted types for broken URDF
         raise invalid(f"URDF part is invalid: {exc}") from None
     children = _children(urdf)
-    check_tree(urdf)
+    _check_tree(urdf)
     limits = _limits(urdf)
-    parts = [_parse_part(el) for el in root.findall("body_part")]
+    parts = [parse_part(el) for el in root.findall("body_part")]
     validate(urdf, children, limits, parts)
     return Eurdf(
         name=name,
         urdf=urdf,
-        core=tuple(sorted((p for p in parts if p.set == "C"), key=_order)),
-        distals=tuple(sorted((p for p in parts if p.set == "J"), key=_order)),
-        limbs=tuple(sorted((p for p in parts if p.set == "L"), key=_order)),
+        core=tuple(sorted((p for p in parts if p.set == "C"), key=label_order)),
+        distals=tuple(sorted((p for p in parts if p.set == "J"), key=label_order)),
+        limbs=tuple(sorted((p for p in parts if p.set == "L"), key=label_order)),
         limits=limits,
         sha256=hashlib.sha256(text.encode("utf-8")).hexdigest(),
         path=path,
@@ -213,10 +184,47 @@ def load_eurdf(source: str | Path) -> Eurdf:
     )
 
 
-def _order(p: BodyPart) -> tuple[int, ...]:
-    """Chain, then depth: limb_11, limb_12, limb_13, limb_21, ...; core joints first."""
-    idx = p.index
-    return idx if len(idx) > 1 else (0, idx[0])
+def _check_urdf_elements(root: ET.Element) -> None:
+    links = [el.get("name") for el in root.findall("link")]
+    if not links:
+        raise invalid("<robot> has no <link>")
+    for i, link_name in enumerate(links):
+        if not link_name:
+            raise invalid(f"<link> number {i + 1} has no name")
+    seen: set[str] = set()
+    for link_name in links:
+        if link_name in seen:
+            raise invalid(f"<link name={link_name!r}> appears twice")
+        seen.add(str(link_name))
+    for el in root.findall("joint"):
+        jn = el.get("name")
+        if not jn:
+            raise invalid("a <joint> has no name")
+        for tag in ("parent", "child"):
+            ref = el.find(tag)
+            target = ref.get("link") if ref is not None else None
+            if not target:
+                raise invalid(f"<joint name={jn!r}> has no <{tag} link=...>")
+            if target not in seen:
+                raise invalid(f"<joint name={jn!r}> {tag} link {target!r} does not exist")
+        jtype = el.get("type")
+        if jtype in ("revolute", "prismatic") and el.find("mimic") is None:
+            lim = el.find("limit")
+            if lim is None or lim.get("lower") is None or lim.get("upper") is None:
+                raise invalid(f"<joint name={jn!r}> ({jtype}) needs <limit lower upper>")
+            if float(lim.get("lower", "0")) > float(lim.get("upper", "0")):
+                raise invalid(f"<joint name={jn!r}> has lower limit above upper limit")
+
+
+def _check_tree(urdf: yourdfpy.URDF) -> None:
+    parent_of: dict[str, str] = {}
+    for j in urdf.robot.joints:
+        if j.child in parent_of:
+            raise invalid(f"link {j.child!r} is the child of two joints; a URDF must be a tree")
+        parent_of[j.child] = j.name
+    roots = [str(link.name) for link in urdf.robot.links if link.name not in parent_of]
+    if len(roots) != 1:
+        raise invalid(f"a URDF has exactly one root link; found {roots or 'none (a cycle)'}")
 
 
 def _children(urdf: yourdfpy.URDF) -> dict[str, list[tuple[str, str]]]:
@@ -239,36 +247,6 @@ def _limits(urdf: yourdfpy.URDF) -> dict[str, JointLimit]:
             lower, upper = float(lim.lower), float(lim.upper)
         out[j.name] = JointLimit(j.name, j.type, lower, upper, velocity)
     return out
-
-
-def _parse_part(el: ET.Element) -> BodyPart:
-    name = el.get("name") or ""
-    pset = el.get("set") or ""
-    if not name:
-        raise invalid("a <body_part> has no name")
-    if pset not in _NAME_RULES:
-        raise invalid(f"<body_part name={name!r}> has set={pset!r}; use C, L or J")
-    if not _NAME_RULES[pset].match(name):
-        pattern = {"C": "c_<i>", "L": "limb_<i><j>", "J": "distal_<i>[<j>]"}[pset]
-        raise invalid(f"<body_part name={name!r}> in set {pset} must be named {pattern}")
-    links = tuple(str(c.get("name")) for c in el.findall("link"))
-    joints = tuple(str(c.get("name")) for c in el.findall("joint"))
-    for child in el:
-        if child.tag not in ("link", "joint") or not child.get("name"):
-            raise invalid(f"<body_part name={name!r}> has a bad child <{child.tag}> (need name)")
-    if pset == "J" and links:
-        raise invalid(f"<body_part name={name!r}> (J) lists links; joint labels list <joint>s")
-    if pset in "CL" and joints:
-        raise invalid(f"<body_part name={name!r}> ({pset}) lists joints; it should list <link>s")
-    tip = el.get("tip") or None
-    if tip is not None and tip not in links:
-        raise invalid(f"<body_part name={name!r}> tip={tip!r} is not one of its links")
-    pset_typed = cast(PartSet, pset)
-    return BodyPart(name, pset_typed, el.get("alias") or None, links, joints, el.get("distal"), tip)
-
-
-def label_set_summary(parts: Iterable[BodyPart]) -> str:
-    return "{" + ", ".join(p.name for p in parts) + "}"
 
 
 def plain_urdf(text: str) -> str:

@@ -32,7 +32,7 @@ from kinesphere import zconfig
 from kinesphere.cli import main
 from kinesphere.errors import KinesphereError
 from kinesphere.services.databank import client
-from kinesphere.services.databank.serve import open_ecls
+from kinesphere.services.databank.process import open_ecls
 
 CMD = ("toyarm", "arm", "shoulder", "left-high", "2")
 

@@ -16,9 +16,10 @@ from kinesphere.laban import Direction
 from kinesphere.robots.mjcf import PlatformModel, platform_model
 from kinesphere.robots.platform import load_platform, platform_names
 from kinesphere.services.ecl.constraints import tip_point
+from kinesphere.services.ecl.db import read_tables
 from kinesphere.services.ecl.ecl import Ecl
 from kinesphere.services.ecl.generate import COS_FAR, COS_SIZE, GENERATOR_VERSION, generate
-from kinesphere.services.ecl.store import default_db_path, read_tables
+from kinesphere.services.ecl.store import default_db_path
 from kinesphere.services.ecl.vsam import load_vsam
 
 TOY = Path(__file__).parent / "data" / "toyarm"

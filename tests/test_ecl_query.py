@@ -15,8 +15,9 @@ from kinesphere.errors import KinesphereError
 from kinesphere.laban import Direction
 from kinesphere.protocol import COMPOUND, NO_ID, Pose, SpatialCommand
 from kinesphere.robots.platform import load_platform
+from kinesphere.services.ecl.db import content_digest
 from kinesphere.services.ecl.ecl import Ecl
-from kinesphere.services.ecl.store import PoseRow, content_digest, write_databank
+from kinesphere.services.ecl.store import PoseRow, write_databank
 from kinesphere.services.ecl.vsam import load_vsam
 
 

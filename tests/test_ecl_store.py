@@ -16,15 +16,9 @@ import pytest
 from kinesphere.errors import KinesphereError
 from kinesphere.laban import Direction
 from kinesphere.robots.platform import Platform, load_platform
+from kinesphere.services.ecl.db import connect, content_digest, quote_ident, read_tables
 from kinesphere.services.ecl.ecl import Ecl
-from kinesphere.services.ecl.store import (
-    PoseRow,
-    connect,
-    content_digest,
-    quote_ident,
-    read_tables,
-    write_databank,
-)
+from kinesphere.services.ecl.store import PoseRow, write_databank
 from kinesphere.services.ecl.vsam import load_vsam
 
 TOY = Path(__file__).resolve().parent / "data" / "toyarm"

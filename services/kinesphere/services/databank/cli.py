@@ -78,7 +78,7 @@ def register(sub: Any) -> None:
 
 def _serve(args: argparse.Namespace) -> int:
     from kinesphere.keyexpr import Keys
-    from kinesphere.services.databank.serve import default_replica_id, open_ecls, run
+    from kinesphere.services.databank.process import default_replica_id, open_ecls, run
     from kinesphere.zconfig import session_from_args
 
     keys = Keys(args.prefix)

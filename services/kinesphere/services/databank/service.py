@@ -17,7 +17,8 @@ routes a query to one complete queryable that covers its key, so a querier gets 
 with its link and the next query goes to another. Replicas must agree on the known set.
 
 Hot path: one dict hit on the key text, then ``query.reply`` with a pre-encoded payload.
-Records (SQL) run on a worker thread (``records.py``).
+Records (SQL) run on the :class:`~kinesphere.services.databank.records.Recorder`'s worker
+thread.
 """
 
 from __future__ import annotations
@@ -25,7 +26,6 @@ from __future__ import annotations
 import logging
 import threading
 from collections.abc import Callable, Iterable, Mapping
-from dataclasses import dataclass
 from typing import Any
 
 import zenoh
@@ -35,8 +35,8 @@ from kinesphere.keyexpr import KEYS, Keys, check_segment
 from kinesphere.protocol import CompoundRequest, check_spatial, decode
 from kinesphere.ratelog import RateLog
 from kinesphere.robots.platform import platform_names
-from kinesphere.services.databank import records
 from kinesphere.services.databank.body import body_model
+from kinesphere.services.databank.records import Recorder, Served
 from kinesphere.services.databank.replies import (
     DEFAULT_BUDGET,
     DEFERRED,
@@ -49,7 +49,6 @@ from kinesphere.services.databank.replies import (
     request_bytes,
     send,
 )
-from kinesphere.services.databank.worker import Worker
 from kinesphere.services.ecl.ecl import Ecl
 from kinesphere.sizes import parse_size
 
@@ -63,18 +62,6 @@ def changed_key(keys: Keys, platform: str) -> str:
     """``{p}/ecl/{platform}/changed``: a put after every successful record (``keys.changed``);
     ``platform`` may be ``*`` to watch every platform."""
     return keys.changed(platform)
-
-
-@dataclass(eq=False)
-class Served:
-    """One served platform: its ECL (replaced whole on change) and its key texts."""
-
-    name: str
-    ecl: Ecl
-    catalogue_key: str
-    compound_key: str
-    record_key: str
-    changed_key: str
 
 
 class DatabankService:
@@ -102,7 +89,6 @@ class DatabankService:
         self.session = session
         self.keys = keys
         self.replica_id = check_segment(replica_id, "replica")
-        self.writes_enabled = writes_enabled
         self.served: dict[str, Served] = {}
         for name, ecl in ecls.items():
             check_segment(name, "platform")
@@ -124,7 +110,8 @@ class DatabankService:
         """One warning line per malformed-request kind and platform every 10 s."""
         self._head = f"{keys.prefix}/ecl/"
         self._entities: list[Any] = []
-        self._worker = Worker(f"databank-{self.replica_id}-records")
+        self.recorder = Recorder(session, self.replica_id, writes_enabled, self.swap,
+                                 self.refused)
         self._started = False
         self._lock = threading.Lock()
 
@@ -135,7 +122,7 @@ class DatabankService:
             if self._started:
                 return self
             self._started = True
-            self._worker.start()
+            self.recorder.start()
             s, add = self.session, self._entities.append
             try:
                 if self.serves_all_known:
@@ -147,8 +134,8 @@ class DatabankService:
                                                 self._handler({st.name: st}), complete=True))
                     add(s.declare_queryable(f"{self._head}*/**", self._on_other))
                 for st in self.served.values():
-                    add(s.declare_subscriber(st.record_key, records.put_handler(self, st)))
-                    add(s.declare_subscriber(st.changed_key, records.peer_handler(self, st)))
+                    add(s.declare_subscriber(st.record_key, self.recorder.put_handler(st)))
+                    add(s.declare_subscriber(st.changed_key, self.recorder.peer_handler(st)))
                 add(s.liveliness().declare_token(self.keys.alive_databank(self.replica_id)))
             except BaseException:
                 self._undeclare()
@@ -163,7 +150,7 @@ class DatabankService:
                 return
             self._started = False
             self._undeclare()
-            self._worker.stop()
+            self.recorder.stop()
             for st in self.served.values():
                 closer = getattr(st.ecl, "close", None)
                 if callable(closer):
@@ -193,11 +180,6 @@ class DatabankService:
         self.answers.invalidate()
         self.errors.invalidate()
         self.compounds.invalidate()
-
-    def submit(self, job: Callable[[], None]) -> bool:
-        """Run ``job`` on the worker thread (records: SQL stays off Zenoh's threads); False
-        when the worker's bounded queue is full."""
-        return self._worker.submit(job)
 
     # -- the hot path ------------------------------------------------------------------------
     def _handler(self, scope: Mapping[str, Served]) -> Callable[[zenoh.Query], None]:
@@ -251,7 +233,7 @@ class DatabankService:
             elif rest == "compound":
                 return self._compound(st, query, key)
             elif rest == "record":
-                return records.on_query(self, st, query)
+                return self.recorder.on_query(st, query)
             else:
                 answer = self._bad_key(key, platform)
         except KinesphereError as exc:

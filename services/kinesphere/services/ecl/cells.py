@@ -17,7 +17,8 @@ import numpy as np
 from kinesphere.errors import KinesphereError
 from kinesphere.laban import Direction
 from kinesphere.robots.platform import Platform
-from kinesphere.services.ecl.store import Tables, limb_neutral
+from kinesphere.services.ecl.db import Tables
+from kinesphere.services.ecl.store import limb_neutral
 
 Cells = dict[tuple[str, str], dict[str, "Cell"]]
 """(limb, origin) -> direction slug -> cell."""

@@ -30,16 +30,8 @@ from kinesphere.services.ecl import transfer
 from kinesphere.services.ecl.cells import Cell, build_cells
 from kinesphere.services.ecl.compound import PartLike as PartLike
 from kinesphere.services.ecl.compound import join
-from kinesphere.services.ecl.store import (
-    Tables,
-    check_record,
-    default_db_path,
-    limb_neutral,
-    read_tables,
-    size_value,
-    upsert_pose,
-    write_tables,
-)
+from kinesphere.services.ecl.db import Tables, read_tables, upsert_pose, write_tables
+from kinesphere.services.ecl.store import check_record, default_db_path, limb_neutral, size_value
 from kinesphere.services.ecl.vsam import Vsam, vsam_from_dict
 
 log = logging.getLogger(__name__)

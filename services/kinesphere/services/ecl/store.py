@@ -20,27 +20,9 @@ from pathlib import Path
 from kinesphere.errors import KinesphereError
 from kinesphere.laban import Direction
 from kinesphere.robots.platform import Platform
-from kinesphere.services.ecl.db import (
-    META_KEYS,
-    Tables,
-    Values,
-    canon,
-    connect,
-    content_digest,
-    quote_ident,
-    read_tables,
-    upsert_pose,
-    write_tables,
-)
+from kinesphere.services.ecl.db import Tables, Values, canon, write_tables
 from kinesphere.services.ecl.vsam import Vsam
 from kinesphere.sizes import parse_size
-
-__all__ = [
-    "DATA_DIR", "LIMIT_TOLERANCE", "META_KEYS", "PoseRow", "Tables", "check_joints",
-    "check_record", "connect", "content_digest", "default_db_path", "limb_neutral",
-    "quote_ident", "read_tables", "size_value", "upsert_pose", "write_databank",
-    "write_tables",
-]
 
 DATA_DIR = Path(__file__).resolve().parent / "data"
 LIMIT_TOLERANCE = 1e-9

@@ -1,4 +1,6 @@
-"""``kinesphere databank serve``: open the databanks and a session, serve until a signal.
+"""The databank process (``kinesphere databank serve``): open the databanks and a session, then
+:func:`run` serves them with a :class:`~kinesphere.services.databank.service.DatabankService`
+until a signal.
 
 Headless: one log line when serving starts, one when it stops. SIGTERM and SIGINT stop it
 cleanly (liveliness token and queryables undeclared, databanks let go, session closed) with

@@ -1,76 +1,95 @@
-"""The eURDF loader's checks: a broken description fails at load time with the element and
-the problem named (see :mod:`kinesphere.eurdf`).
+"""The eURDF's ``<body_part>`` labels: core (C), limb (L) and distal joint location (J).
 
-``check_urdf_elements`` and ``check_tree`` look at the URDF part, ``validate`` at the
-``<body_part>`` labels against the kinematic tree.
+What a label is (:class:`BodyPart`), how one is read from its XML element, and the rules a
+labelling must obey against the kinematic tree (names, subtrees, hierarchy, no unlabelled
+link). :mod:`kinesphere.eurdf` reads the URDF part and calls :func:`validate`; a broken
+labelling fails at load time with the element and the problem named.
 """
 
 from __future__ import annotations
 
+import re
 import xml.etree.ElementTree as ET
-from typing import TYPE_CHECKING, Any
+from collections.abc import Collection
+from dataclasses import dataclass
+from typing import Any, Literal, cast
 
 import yourdfpy
 
 from kinesphere.errors import KinesphereError
 
-if TYPE_CHECKING:
-    from kinesphere.eurdf import BodyPart, JointLimit
+PartSet = Literal["C", "L", "J"]
+_NAME_RULES: dict[str, re.Pattern[str]] = {
+    "C": re.compile(r"^c_(\d+)$"),
+    "L": re.compile(r"^limb_(\d)(\d+)$"),
+    "J": re.compile(r"^distal_(\d+)$"),
+}
 
 
 def invalid(message: str) -> KinesphereError:
+    """The error of a broken eURDF."""
     return KinesphereError("invalid_eurdf", message)
 
 
-def check_urdf_elements(root: ET.Element) -> None:
-    links = [el.get("name") for el in root.findall("link")]
-    if not links:
-        raise invalid("<robot> has no <link>")
-    for i, link_name in enumerate(links):
-        if not link_name:
-            raise invalid(f"<link> number {i + 1} has no name")
-    seen: set[str] = set()
-    for link_name in links:
-        if link_name in seen:
-            raise invalid(f"<link name={link_name!r}> appears twice")
-        seen.add(str(link_name))
-    for el in root.findall("joint"):
-        jn = el.get("name")
-        if not jn:
-            raise invalid("a <joint> has no name")
-        for tag in ("parent", "child"):
-            ref = el.find(tag)
-            target = ref.get("link") if ref is not None else None
-            if not target:
-                raise invalid(f"<joint name={jn!r}> has no <{tag} link=...>")
-            if target not in seen:
-                raise invalid(f"<joint name={jn!r}> {tag} link {target!r} does not exist")
-        jtype = el.get("type")
-        if jtype in ("revolute", "prismatic") and el.find("mimic") is None:
-            lim = el.find("limit")
-            if lim is None or lim.get("lower") is None or lim.get("upper") is None:
-                raise invalid(f"<joint name={jn!r}> ({jtype}) needs <limit lower upper>")
-            if float(lim.get("lower", "0")) > float(lim.get("upper", "0")):
-                raise invalid(f"<joint name={jn!r}> has lower limit above upper limit")
+@dataclass(frozen=True)
+class BodyPart:
+    """A label: core (C), limb (L) or distal joint location (J)."""
+
+    name: str
+    set: PartSet
+    alias: str | None
+    links: tuple[str, ...] = ()
+    joints: tuple[str, ...] = ()
+    distal: str | None = None
+    tip: str | None = None
+
+    @property
+    def index(self) -> tuple[int, ...]:
+        """Hierarchy index: ``limb_12`` -> (1, 2), ``distal_51`` -> (5, 1), ``c_1`` -> (1,)."""
+        digits = self.name.split("_", 1)[1]
+        return tuple(int(ch) for ch in digits) if self.set != "C" else (int(digits),)
 
 
-def check_tree(urdf: yourdfpy.URDF) -> None:
-    parent_of: dict[str, str] = {}
-    for j in urdf.robot.joints:
-        if j.child in parent_of:
-            raise invalid(f"link {j.child!r} is the child of two joints; a URDF must be a tree")
-        parent_of[j.child] = j.name
-    roots = [str(link.name) for link in urdf.robot.links if link.name not in parent_of]
-    if len(roots) != 1:
-        raise invalid(f"a URDF has exactly one root link; found {roots or 'none (a cycle)'}")
+def parse_part(el: ET.Element) -> BodyPart:
+    name = el.get("name") or ""
+    pset = el.get("set") or ""
+    if not name:
+        raise invalid("a <body_part> has no name")
+    if pset not in _NAME_RULES:
+        raise invalid(f"<body_part name={name!r}> has set={pset!r}; use C, L or J")
+    if not _NAME_RULES[pset].match(name):
+        pattern = {"C": "c_<i>", "L": "limb_<i><j>", "J": "distal_<i>[<j>]"}[pset]
+        raise invalid(f"<body_part name={name!r}> in set {pset} must be named {pattern}")
+    links = tuple(str(c.get("name")) for c in el.findall("link"))
+    joints = tuple(str(c.get("name")) for c in el.findall("joint"))
+    for child in el:
+        if child.tag not in ("link", "joint") or not child.get("name"):
+            raise invalid(f"<body_part name={name!r}> has a bad child <{child.tag}> (need name)")
+    if pset == "J" and links:
+        raise invalid(f"<body_part name={name!r}> (J) lists links; joint labels list <joint>s")
+    if pset in "CL" and joints:
+        raise invalid(f"<body_part name={name!r}> ({pset}) lists joints; it should list <link>s")
+    tip = el.get("tip") or None
+    if tip is not None and tip not in links:
+        raise invalid(f"<body_part name={name!r}> tip={tip!r} is not one of its links")
+    pset_typed = cast(PartSet, pset)
+    return BodyPart(name, pset_typed, el.get("alias") or None, links, joints, el.get("distal"), tip)
+
+
+def label_order(p: BodyPart) -> tuple[int, ...]:
+    """Chain, then depth: limb_11, limb_12, limb_13, limb_21, ...; core joints first."""
+    idx = p.index
+    return idx if len(idx) > 1 else (0, idx[0])
 
 
 def validate(
     urdf: yourdfpy.URDF,
     children: dict[str, list[tuple[str, str]]],
-    limits: dict[str, JointLimit],
+    actuated: Collection[str],
     parts: list[BodyPart],
 ) -> None:
+    """Check every label of ``parts`` against the URDF tree (``children``: link -> (joint,
+    child link)) and its ``actuated`` joints (P)."""
     link_names = set(urdf.link_map)
     joint_map: dict[str, Any] = dict(urdf.joint_map)
     names: dict[str, str] = {}
@@ -100,7 +119,7 @@ def validate(
     _check_distals(distals, joint_map)
     limbs = {p.name: p for p in parts if p.set == "L"}
     for limb in limbs.values():
-        _check_limb(limb, distals, joint_map, children, limits)
+        _check_limb(limb, distals, joint_map, children, actuated)
     _check_hierarchy(limbs)
     in_limbs = {ln for p in limbs.values() for ln in p.links}
     in_core = {ln for p in core for ln in p.links}
@@ -133,7 +152,7 @@ def _check_limb(
     distals: dict[str, BodyPart],
     joint_map: dict[str, Any],
     children: dict[str, list[tuple[str, str]]],
-    limits: dict[str, JointLimit],
+    actuated: Collection[str],
 ) -> None:
     expected_distal = "distal_" + limb.name.split("_", 1)[1]
     if limb.distal is None:
@@ -166,7 +185,7 @@ def _check_limb(
             f"<body_part name={limb.name!r}> must list exactly the subtree below joint "
             f"{distal.joints[0]!r} (root link {root!r}); it {what}"
         )
-    if not any(joint_map[j].child in set(subtree) for j in limits):
+    if not any(joint_map[j].child in set(subtree) for j in actuated):
         raise invalid(f"<body_part name={limb.name!r}> contains no actuated joint")
 
 
