@@ -324,6 +324,68 @@ def test_deadman_release_stops_within_the_ttl(fleet: Fleet, pygame_up: None) -> 
     assert (rest.state.stamp_ns - halted.state.stamp_ns) / 1e9 < 3.0
 
 
+def gesture(fleet: Fleet, robot: str, press: Callable[[Pad], None], ticks: int
+            ) -> tuple[list[Heard], Heard]:  # fmt: skip
+    """Hold the deadman and ``press`` for ``ticks`` at 30 Hz, let go; the robot's states from
+    the first tick to rest, and the state at rest."""
+    p = Pad()
+    with operator(fleet, tg.robot(robot)) as (op, inp):
+        t0 = time.monotonic()
+
+        def start() -> None:
+            p.deadman()
+            press(p)
+
+        def let_go() -> None:
+            p.deadman(False)
+            p.left(0.0, 0.0)
+            p.right(0.0, 0.0)
+            p.button(pygame.CONTROLLER_BUTTON_DPAD_LEFT, False)
+
+        script = Script(inp, {0: start, ticks: let_go, ticks + 1: lambda: None})
+        run(op, script, finished=lambda: script.finished)
+    halted = fleet.track.wait(robot, lambda h: h.state.status in ("stopped", "holding"),
+                              "the stop", after=t0)  # fmt: skip
+    rest = at_rest(robot, fleet.track, halted.at)
+    return [h for h in fleet.track.since(robot, t0) if h.at <= rest.at], rest
+
+
+def body_motion(hs: list[Heard], rest: Heard) -> tuple[float, float, float]:
+    """(forward m, left m, turned rad) from the first state to rest, in the first body frame."""
+    (x0, y0, yaw0), (x1, y1, yaw1) = hs[0].state.base_pose, rest.state.base_pose
+    c, s = math.cos(yaw0), math.sin(yaw0)
+    dx, dy = x1 - x0, y1 - y0
+    return c * dx + s * dy, -s * dx + c * dy, math.atan2(math.sin(yaw1 - yaw0),
+                                                         math.cos(yaw1 - yaw0))
+
+
+def test_the_gamepad_turns_a_youbot_in_place_and_drives_it_diagonally_while_its_arm_moves(
+    fleet: Fleet, pygame_up: None
+) -> None:
+    hs, rest = gesture(fleet, YB, lambda p: p.button(pygame.CONTROLLER_BUTTON_DPAD_LEFT), 45)
+    forward, left, turned = body_motion(hs, rest)
+    assert turned > 0.3, "d-pad left turns it counter-clockwise"
+    assert math.hypot(forward, left) < 0.05, "in place"
+
+    s = math.sqrt(0.5)
+    hs, rest = gesture(fleet, YB, lambda p: (p.left(-s, -s), p.right(0.0, -1.0)), 45)
+    forward, left, turned = body_motion(hs, rest)
+    assert forward > 0.2 and left > 0.2 and abs(forward - left) < 0.3 * forward, "diagonally"
+    assert abs(turned) < 0.05
+    arm = [h for h in hs if max(map(abs, h.state.qd)) > 0.05]
+    drove = dict(speeds(hs))
+    assert any(drove.get(h.state.stamp_ns / 1e9, 0.0) > 0.05 for h in arm), "at the same time"
+
+
+def test_the_gamepad_arcs_a_packbot(fleet: Fleet, pygame_up: None) -> None:
+    """Forward on the stick and a turn on the d-pad (or, once the catalogue says 'skid', the
+    stick alone): forward and yaw together, an arc to the left."""
+    press = lambda p: (p.left(0.0, -1.0), p.button(pygame.CONTROLLER_BUTTON_DPAD_LEFT))  # noqa: E731
+    hs, rest = gesture(fleet, PB, press, 45)
+    forward, left, turned = body_motion(hs, rest)
+    assert forward > 0.3 and turned > 0.3 and left > 0.05, "an arc to the left"
+
+
 def test_a_killed_client_leaves_its_robots_stopping_on_their_own(
     fleet: Fleet, tmp_path: Path
 ) -> None:
