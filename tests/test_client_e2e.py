@@ -422,7 +422,8 @@ def test_a_killed_client_leaves_its_robots_stopping_on_their_own(
 
 def test_groups_reach_their_members_only_and_estop_halts_all(fleet: Fleet, pygame_up: None) -> None:
     p = Pad()
-    before = fleet.track.wait(YB, lambda h: True, "a youbot state").state.last_command_seq
+    fleet.track.wait(YB, lambda h: True, "a youbot state")
+    before = fleet.track.since(YB, 0.0)[-1].state.last_command_seq  # the latest, not the first
     with operator(fleet, tg.parse_target("group:sweepers")) as (op, inp):
         p.deadman()
         p.left(0.0, -0.5)
