@@ -263,8 +263,9 @@ def test_joy_stream_drives_the_ros2_robot(hub: tuple[zenoh.Session, str],
         assert proc.returncode == 0, err
 
 
-def test_ros2_body_faults_are_clear(hub: tuple[zenoh.Session, str], databank: Databank) -> None:
-    """Wrong robot, no robot, a robot that goes quiet, and the forward-controller order."""
+def test_ros2_body_faults_and_stops(hub: tuple[zenoh.Session, str], databank: Databank) -> None:
+    """Wrong robot, no robot, targets past the limits, the forward-controller order, TTL and
+    e-stop mid-motion, a robot that goes quiet and comes back."""
     _, endpoint = hub
     ns = "/baxter_f"
     order = list(reversed(load_platform(PLATFORM).joint_names))
@@ -282,14 +283,44 @@ def test_ros2_body_faults_are_clear(hub: tuple[zenoh.Session, str], databank: Da
                           options=AgentOptions(body="ros2", ros2=opts), robot_id="x")
 
         options = Ros2BodyOptions(namespace=ns, interface="forward", joints=tuple(order))
+        body = make_body("ros2", PLATFORM, 0.01, session=ros,
+                         options=AgentOptions(body="ros2", ros2=options), robot_id="clamp")
+        limits = body.limits
+        n = len(robot.received)
+        body.command(np.array([lim.upper + 5.0 for lim in limits]), (0.0, 0.0, 0.0))
+        body.step()  # at 100 Hz with a 10 ms period: every step streams
+        robot.wait(lambda r: len(r.received) > n, "got the clamped command")
+        sent = dict(zip(order, robot.received[-1][1].data.tolist(), strict=True))
+        assert sent == {lim.name: lim.upper for lim in limits}, "clamped to the hard limits"
+        body.halt()  # and back to where the robot is
+        robot.wait(lambda r: r.q == neutral(), "back at neutral")
+        body.close()
+
         with running_agent(endpoint, PLATFORM, "baxter-f", speed=1.0, rate=200.0,
                            body="ros2", ros2=options) as (_, watch):
             part = SpatialCommand(LIMB, ORIGIN, "forward-high", 2.0)
             goal = databank.query(PLATFORM, part).joints
+            far = databank.query(PLATFORM, SpatialCommand(LIMB, ORIGIN, "right-low", 3.0)).joints
             with zconfig.session(config=zconfig.loopback_config(endpoint)) as s:
                 operator = Operator(s, "baxter-f")
                 operator.send((LIMB, ORIGIN, "forward-high", 2.0))
                 robot.wait(lambda r: at(r, goal), "reached forward-high mid via commands")
+                for how in ({"ttl_ms": 150}, {"estop": True}):
+                    start = robot.positions()
+                    deadline = time.monotonic() + WAIT_S
+                    while not robot.within(  # a client streaming every 50 ms ...
+                            lambda r, a=start: max(abs(r.q[j] - a[j]) for j in far) > 0.1, 0.05):
+                        assert time.monotonic() < deadline, "never under way to right-low"
+                        operator.send((LIMB, ORIGIN, "right-low", 3.0), ttl_ms=150)
+                    if "estop" in how:  # ... then an e-stop, or silence past the TTL
+                        operator.send(estop=True)
+                    status = "estop" if "estop" in how else "holding"
+                    watch.wait(lambda st, x=status: st.status == x, status)  # type: ignore[misc]
+                    stopped = time.monotonic()
+                    assert robot.wait_rest() - stopped < 1.0 and not at(robot, far), how
+                    operator.send(release=True)
+                    operator.send((LIMB, ORIGIN, "forward-high", 2.0))
+                    robot.wait(lambda r: at(r, goal), "back at forward-high")
                 operator.close()
             robot.publishing.clear()  # the driver goes quiet
             err = watch.wait(lambda st: st.status == "error", "an error status")

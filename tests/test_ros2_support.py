@@ -250,12 +250,16 @@ class StandInRobot:
                                    name=names, position=np.array(q), velocity=np.array([]),
                                    effort=np.array([])))
 
+    def within(self, pred: Callable[[StandInRobot], bool], timeout: float) -> bool:
+        """Whether ``pred(self)`` holds within ``timeout`` s (checked on the robot's cycle)."""
+        with self._cond:
+            return self._cond.wait_for(lambda: pred(self), timeout)
+
     def wait(self, pred: Callable[[StandInRobot], bool], what: str,
              timeout: float = WAIT_S) -> None:
         """Wait (on the robot's own cycle) until ``pred(self)`` holds."""
-        with self._cond:
-            if not self._cond.wait_for(lambda: pred(self), timeout):
-                raise AssertionError(f"stand-in robot never {what}; q = {self.q}")
+        if not self.within(pred, timeout):
+            raise AssertionError(f"stand-in robot never {what}; q = {self.q}")
 
     def wait_rest(self, ticks: int = 30) -> float:
         """Wait until no joint has moved for ``ticks`` cycles; when it last moved."""
