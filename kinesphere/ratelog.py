@@ -21,10 +21,11 @@ MAX_KEYS = 256
 
 
 class RateLog:
-    """``log(key, msg, *args)``: log ``msg`` unless ``key`` was logged within ``every`` s.
+    """``log(key, msg, *args)``: log ``msg`` unless ``key`` already logged ``burst`` lines in
+    the last ``every`` s.
 
-    The line after a quiet spell says how many were held back: ``... (+12 more in 10 s)``.
-    Thread-safe; :meth:`__call__` returns whether it logged.
+    The first line after a quiet spell says how many were held back: ``... (+12 more in
+    10 s)``. Thread-safe; :meth:`__call__` returns whether it logged.
     """
 
     def __init__(
@@ -34,13 +35,16 @@ class RateLog:
         every: float = EVERY_S,
         max_keys: int = MAX_KEYS,
         clock: Callable[[], float] = time.monotonic,
+        burst: int = 1,
     ) -> None:
         self._log = logger
         self._level = level
         self._every = every
         self._max = max_keys
         self._clock = clock
-        self._seen: OrderedDict[Hashable, list[float]] = OrderedDict()  # key -> [last, held]
+        self._burst = burst
+        # key -> [window start, lines in the window, lines held back]
+        self._seen: OrderedDict[Hashable, list[float]] = OrderedDict()
         self._lock = threading.Lock()
         self.held = 0
         """Lines held back since start (all keys)."""
@@ -48,19 +52,30 @@ class RateLog:
     def __len__(self) -> int:
         return len(self._seen)
 
-    def __call__(self, key: Hashable, msg: str, *args: object) -> bool:
+    def allow(self, key: Hashable) -> tuple[bool, int]:
+        """Whether ``key`` may log now, and how many of its lines were held back before (to
+        report with this one); counts a refusal."""
         now = self._clock()
         with self._lock:
             entry = self._seen.get(key)
             if entry is not None and now - entry[0] < self._every:
+                if entry[1] >= self._burst:
+                    entry[2] += 1
+                    self.held += 1
+                    return False, 0
                 entry[1] += 1
-                self.held += 1
-                return False
-            held = int(entry[1]) if entry is not None else 0
-            self._seen[key] = [now, 0]
+                return True, 0
+            held = int(entry[2]) if entry is not None else 0
+            self._seen[key] = [now, 1, 0]
             self._seen.move_to_end(key)
             while len(self._seen) > self._max:
                 self._seen.popitem(last=False)
+            return True, held
+
+    def __call__(self, key: Hashable, msg: str, *args: object) -> bool:
+        ok, held = self.allow(key)
+        if not ok:
+            return False
         if held:
             msg, args = f"{msg} (+%d more in %.0f s)", (*args, held, self._every)
         self._log.log(self._level, msg, *args)

@@ -39,3 +39,14 @@ def test_keys_are_bounded_oldest_first() -> None:
     assert len(rl) == 100
     assert rl("key-0", "x")  # forgotten, so logged again
     assert not rl("key-9999", "x")  # still remembered
+
+
+def test_a_burst_per_key_then_a_count(caplog: pytest.LogCaptureFixture) -> None:
+    clock = Clock()
+    rl = RateLog(logging.getLogger("t.ratelog"), every=10.0, burst=3, clock=clock)
+    caplog.set_level(logging.INFO, logger="t.ratelog")
+    logged = [rl("who", "line %d", i) for i in range(100)]
+    assert logged == [True] * 3 + [False] * 97
+    clock.now = 10.0
+    assert rl("who", "again")
+    assert caplog.records[-1].getMessage() == "again (+97 more in 10 s)"

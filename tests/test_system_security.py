@@ -10,6 +10,7 @@ against the services' real traffic, not a stand-in.
 
 from __future__ import annotations
 
+import re
 import shutil
 import time
 from collections.abc import Iterator
@@ -232,6 +233,13 @@ def test_tls_refuses_sessions_without_a_ca_certificate(secured: Secured, tmp_pat
     plain = session_config("client", connect=[f"tcp/127.0.0.1:{s.port}"], scouting=False)
     plain.insert_json5("connect/timeout_ms", "0")
     assert _refused(plain)
+    # each refusal is logged as a denial naming the peer (before: a Zenoh warning, no peer)
+    for reason in ("peer sent no certificates", "invalid peer certificate",
+                   "received corrupt message"):
+        until(lambda reason=reason: s.denied(f"TLS handshake refused ({reason}") and
+              re.search(rf"TLS handshake refused \({reason}[^)]*\) from 127\.0\.0\.1:\d+",
+                        s.router_log.read_text()) is not None,
+              WAIT_S, f"the router to log the refusal '{reason}' with the peer")
     # while the genuine operator certificate still connects
     assert not _refused(session_config(config_file=s.configs["operator"]))
 

@@ -17,13 +17,13 @@ from pathlib import Path
 import pytest
 from test_system_support import ROOT, SHIPPED_DBS, WAIT_S, until
 
+from kinesphere.deploy.denials import DenialFilter, describe_subject
 from kinesphere.deploy.plan import (
     default_phrases,
     parse_phrase,
     parse_robots,
     shipped_phrases_dir,
 )
-from kinesphere.deploy.router import DenialFilter, describe_subject
 from kinesphere.errors import KinesphereError
 
 PHRASE = (

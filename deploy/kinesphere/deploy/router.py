@@ -3,11 +3,12 @@
 Why a router at all: on several machines, every service connects to one router (as a client),
 so all traffic crosses one place where TLS is terminated and access control is enforced.
 
-Why the log plumbing: Zenoh 1.x reports an access-control denial only as two TRACE lines
-(``... is unauthorized to Put (ingress) on KEY`` then ``Msg intercepted!``), and its logger
-writes straight to file descriptor 1. With access control on, the router enables those TRACE
-lines, routes fd 1 through a pipe and turns each real denial into one WARNING line
-``access denied: ...`` (rate limited per subject/action/key), dropping the allow chatter.
+Why the log plumbing: Zenoh 1.x reports an access-control denial only as two TRACE lines, a
+refused TLS handshake as a warning without the peer, and its logger writes straight to file
+descriptor 1. With access control on, the router enables those TRACE lines, routes fd 1
+through a pipe and turns each real denial or refusal into one WARNING line ``access denied:
+...`` (:mod:`kinesphere.deploy.denials`: rate limited per identity, in bounded memory),
+dropping the allow chatter.
 """
 
 from __future__ import annotations
@@ -15,111 +16,23 @@ from __future__ import annotations
 import json
 import logging
 import os
-import re
 import signal
 import sys
 import threading
-import time
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from collections.abc import Sequence
 from pathlib import Path
 from typing import IO
 
 import zenoh
 
 from kinesphere.deploy.acl import add_robots, load_fleet, robot_acl
+from kinesphere.deploy.denials import INTERCEPTOR, DenialFilter
+from kinesphere.deploy.sockets import ClosedPeers
 from kinesphere.errors import KinesphereError
 from kinesphere.signals import handle_signals
 from kinesphere.zconfig import close_session, listen_where_told, open_session, session_config
 
 log = logging.getLogger("kinesphere.router")
-
-INTERCEPTOR = "zenoh::net::routing::interceptor"
-_ANSI = re.compile(r"\x1b\[[0-9;]*m")
-_LINE = re.compile(
-    r"^\S+\s+(?P<level>TRACE|DEBUG|INFO|WARN|ERROR)\s+(?P<thread>.*?ThreadId\(\d+\))\s+"
-    r"(?P<target>[\w:]+): (?P<msg>.*)$"
-)
-_DENIED = re.compile(
-    r"(?:Using cached result: )?(?P<zid>[0-9a-f]+)(?: on (?P<subject>\S+))? is unauthorized to "
-    r"(?P<action>.+?) on (?P<key>\S+)$"
-)
-_SUBJECT = re.compile(r"^(?P<zid>[0-9a-f]+) on (?P<subject>\S+) is (?:un)?authorized to ")
-SUPPRESS_S = 1.0
-"""Repeats of one (subject, action, key) denial within this window are counted, not logged."""
-
-
-@dataclass
-class DenialFilter:
-    """Turns Zenoh's ACL trace lines into denial reports; passes other log lines through."""
-
-    report: Callable[[str], None]
-    passthrough: Callable[[str], None]
-    clock: Callable[[], float] = time.monotonic
-    _pending: dict[str, str] = field(default_factory=dict)
-    _last: dict[tuple[str, str, str], tuple[float, int]] = field(default_factory=dict)
-    _subjects: dict[str, str] = field(default_factory=dict)
-    """zid -> ACL subject; Zenoh names the subject only when it first evaluates a key."""
-    denials: int = 0
-
-    def feed(self, raw: str) -> None:
-        line = _ANSI.sub("", raw).rstrip("\n")
-        m = _LINE.match(line)
-        if m is None or not m["target"].startswith(INTERCEPTOR):
-            if line.strip():
-                self.passthrough(line)
-            return
-        if m["level"] != "TRACE":
-            self.passthrough(line)
-            return
-        thread, msg = m["thread"], m["msg"]
-        known = _SUBJECT.match(msg)
-        if known:
-            self._subjects[known["zid"]] = known["subject"]
-        if " is unauthorized to " in msg:
-            self._pending[thread] = msg
-        elif " is authorized to " in msg:
-            self._pending.pop(thread, None)
-        elif msg.startswith("Msg intercepted"):
-            self._denied(self._pending.pop(thread, ""))
-
-    def _denied(self, msg: str) -> None:
-        self.denials += 1
-        d = _DENIED.search(msg)
-        if d is None:  # a session that matched no ACL subject: Zenoh does not say the key
-            who, action, key = "a session without an ACL subject", "a message", "?"
-            subject = who
-        else:
-            zid = d["zid"]
-            subject = d["subject"] or self._subjects.get(zid, "")
-            who = describe_subject(subject, zid) if subject else f"session {zid}"
-            action, key = d["action"], d["key"]
-        ident = (subject, action, key)
-        now = self.clock()
-        last, suppressed = self._last.get(ident, (-1e18, 0))
-        if now - last < SUPPRESS_S:
-            self._last[ident] = (last, suppressed + 1)
-            return
-        more = f" (+{suppressed} more)" if suppressed else ""
-        self._last[ident] = (now, 0)
-        self.report(f"access denied: {action} on {key} by {who}{more}")
-
-
-_PROPERTY = re.compile(r"^(\w+)\((.*)\)$")
-_NAMES = {"CertCommonName": "CN", "Username": "user", "Interface": "interface",
-          "Transport": "link"}
-
-
-def describe_subject(subject: str, zid: str) -> str:
-    """``Interface(lo)+CertCommonName(op)+...+<zid>`` -> ``CN=op (interface=lo, ...)``."""
-    props: dict[str, str] = {}
-    for part in subject.split("+"):
-        m = _PROPERTY.match(part)
-        if m:
-            props[_NAMES.get(m[1], m[1])] = m[2]
-    who = next((f"{k}={props.pop(k)}" for k in ("CN", "user") if k in props), "no certificate")
-    rest = ", ".join([f"{k}={v}" for k, v in props.items()] + [f"zid={zid}"])
-    return f"{who} ({rest})"
 
 
 def _pump(read_fd: int, filt: DenialFilter) -> None:
@@ -131,10 +44,11 @@ def _pump(read_fd: int, filt: DenialFilter) -> None:
                 log.exception("router log filter")
 
 
-def capture_zenoh_log(out: IO[str], rust_log: str) -> DenialFilter:
+def capture_zenoh_log(out: IO[str], rust_log: str, ports: Sequence[int] = ()) -> DenialFilter:
     """Start Zenoh's logger on a pipe that a thread filters into ``log`` and ``out``.
 
     Python's own stdout moves to a duplicate of fd 1, so prints still reach the terminal.
+    ``ports`` are the listen ports where refused TLS peers are looked up.
     """
     saved = os.dup(1)
     read_fd, write_fd = os.pipe()
@@ -145,7 +59,9 @@ def capture_zenoh_log(out: IO[str], rust_log: str) -> DenialFilter:
     def passthrough(line: str) -> None:
         print(line, file=out, flush=True)
 
-    filt = DenialFilter(report=log.warning, passthrough=passthrough)
+    closed = ClosedPeers(ports)
+    claim = closed.claim if closed.start() else None
+    filt = DenialFilter(report=log.warning, passthrough=passthrough, claim=claim)
     threading.Thread(target=_pump, args=(read_fd, filt), name="zenoh-log", daemon=True).start()
     os.environ["RUST_LOG"] = rust_log
     zenoh.init_log_from_env_or("info")
@@ -200,8 +116,11 @@ def run_router(
     if log_denials is None:
         log_denials = acl
     base = os.environ.get("RUST_LOG") or "info"
+    endpoints = json.loads(config.get_json("listen/endpoints"))
+    filt: DenialFilter | None = None
     if log_denials:
-        capture_zenoh_log(sys.stderr, f"{base},{INTERCEPTOR}=trace")
+        filt = capture_zenoh_log(sys.stderr, f"{base},{INTERCEPTOR}=trace",
+                                 endpoint_ports(endpoints))
     else:
         os.environ["RUST_LOG"] = base
         zenoh.init_log_from_env_or("info")
@@ -214,7 +133,6 @@ def run_router(
     with handle_signals(on_signal, (signal.SIGINT, signal.SIGTERM)):
         session = open_session(config=config)
         try:
-            endpoints = json.loads(config.get_json("listen/endpoints"))
             log.info(
                 "router %s up, listening on %s, access control %s%s, denials %s",
                 session.zid(),
@@ -227,5 +145,22 @@ def run_router(
                 pass
         finally:
             close_session(session)
-            log.info("router stopped")
+            if filt is None:
+                log.info("router stopped")
+            else:
+                log.info("router stopped; %d messages denied (%d not logged one by one), "
+                         "%d TLS handshakes refused", filt.denials, filt.held, filt.refusals)
     return 0
+
+
+def endpoint_ports(endpoints: object) -> list[int]:
+    """The ports of listen endpoints like ``tls/0.0.0.0:7447`` (a list, or Zenoh's per-mode
+    map); where refused TLS peers are looked up."""
+    if isinstance(endpoints, dict):
+        endpoints = endpoints.get("router", [])
+    ports = []
+    for ep in endpoints if isinstance(endpoints, list) else []:
+        tail = str(ep).split("#", 1)[0].rsplit(":", 1)[-1]
+        if tail.isdigit():
+            ports.append(int(tail))
+    return ports

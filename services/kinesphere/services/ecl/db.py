@@ -10,6 +10,8 @@ is a safe identifier.
 from __future__ import annotations
 
 import contextlib
+import fcntl
+import glob
 import hashlib
 import json
 import math
@@ -88,11 +90,17 @@ def connect(path: str | Path) -> sqlite3.Connection:
 
 
 def write_tables(path: str | Path, tables: Tables) -> None:
-    """Write ``tables`` to a temp file beside ``path`` in one transaction, then swap it in."""
+    """Write ``tables`` to a temp file beside ``path`` in one transaction, then swap it in.
+
+    The writer holds a lock on its temp file (``flock``, released by the kernel when the
+    process dies), so the temp files of a writer that was killed are recognised and removed
+    by the next write (:func:`remove_stale_temps`), while a live writer's are left alone.
+    """
     target = Path(path)
     target.parent.mkdir(parents=True, exist_ok=True)
+    remove_stale_temps(target)
     fd, tmp_name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
-    os.close(fd)
+    fcntl.flock(fd, fcntl.LOCK_EX)
     tmp = Path(tmp_name)
     try:
         conn = connect(tmp)
@@ -125,9 +133,41 @@ def write_tables(path: str | Path, tables: Tables) -> None:
     except sqlite3.Error as exc:
         raise KinesphereError("internal", f"writing {target} failed: {exc}") from exc
     finally:
-        for leftover in (tmp, Path(f"{tmp}-wal"), Path(f"{tmp}-shm")):
+        _remove_temp(tmp)
+        os.close(fd)
+
+
+def _remove_temp(tmp: Path) -> None:
+    for leftover in (tmp, Path(f"{tmp}-wal"), Path(f"{tmp}-shm")):
+        with contextlib.suppress(FileNotFoundError):
+            leftover.unlink()
+
+
+def remove_stale_temps(target: Path) -> list[Path]:
+    """Remove temp files (and their ``-wal``/``-shm``) that killed writers of ``target``
+    left beside it; returns the temp files removed. A temp file whose lock is held belongs
+    to a live writer and stays."""
+    removed = []
+    for tmp in sorted(target.parent.glob(f".{glob.escape(target.name)}.*.tmp")):
+        try:
+            fd = os.open(tmp, os.O_RDONLY)
+        except FileNotFoundError:
+            continue
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            continue  # a writer is alive
+        else:
+            _remove_temp(tmp)
+            removed.append(tmp)
+        finally:
+            os.close(fd)
+    for side in target.parent.glob(f".{glob.escape(target.name)}.*.tmp-[ws][ah][lm]"):
+        if not Path(str(side)[: -len("-wal")]).exists():  # its temp file is gone
             with contextlib.suppress(FileNotFoundError):
-                leftover.unlink()
+                side.unlink()
+                removed.append(side)
+    return removed
 
 
 def _mode(target: Path) -> int:
