@@ -40,6 +40,8 @@ _DENIED = re.compile(
 _SUBJECT = re.compile(r"^(?P<zid>[0-9a-f]+) on (?P<subject>\S+) is (?:un)?authorized to ")
 _REFUSED = re.compile(r"^(?P<reason>.+?)\. Hint: increase the system open file limit\.$")
 """How Zenoh's TLS listener words a failed handshake (the hint is Zenoh's, not ours)."""
+NOT_REFUSALS: Final = frozenset({"tls handshake eof"})
+"""A peer that closed before any handshake (a port probe, a health check): not a denial."""
 SUPPRESS_S: Final = 1.0
 """Repeats of one (identity, action, key) denial within this window are counted, not logged."""
 BURST: Final = 10
@@ -138,7 +140,7 @@ class DenialFilter:
         m = _LINE.match(line)
         if m is not None and m["target"] == TLS_TARGET and m["level"] == "WARN":
             refused = _REFUSED.match(m["msg"])
-            if refused:
+            if refused and refused["reason"] not in NOT_REFUSALS:
                 self._tls_refused(refused["reason"])
                 return
         if m is None or not m["target"].startswith(INTERCEPTOR):
