@@ -14,6 +14,7 @@ from importlib.metadata import entry_points, version
 from pathlib import Path
 from typing import Any
 
+from kinesphere.cliargs import add_platforms_argument, use_platform_dirs
 from kinesphere.errors import KinesphereError
 
 
@@ -57,6 +58,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--version", action="version", version=f"kinesphere {version('kinesphere')}"
     )
     parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
+    add_platforms_argument(parser)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     _register_core(sub)
     for ep in sorted(entry_points(group="kinesphere.commands"), key=lambda e: e.name):
@@ -67,7 +69,19 @@ def build_parser() -> argparse.ArgumentParser:
                 continue  # that role is not part of this installation
             raise
         register(sub)
+    _platforms_everywhere(parser)
     return parser
+
+
+def _platforms_everywhere(parser: argparse.ArgumentParser) -> None:
+    """Every sub-command also takes --platforms DIR after its name (unless it already has a
+    --platforms option of its own, like ``ecl compare``'s list of names)."""
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for child in dict.fromkeys(action.choices.values()):
+                if "--platforms" not in child._option_string_actions:
+                    add_platforms_argument(child)
+                _platforms_everywhere(child)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -77,6 +91,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         level=logging.DEBUG if args.verbose else logging.INFO,
         format="%(asctime)s %(name)s %(levelname)s %(message)s",
     )
+    use_platform_dirs(getattr(args, "platform_dirs", None) or ())
     func = getattr(args, "func", None)
     if func is None:
         parser.print_help()

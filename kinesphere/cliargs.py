@@ -12,8 +12,10 @@ Importing this module does not load Zenoh, so ``--help`` stays quick.
 from __future__ import annotations
 
 import argparse
-from collections.abc import Sequence
+import os
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 from kinesphere.endpoints import DEFAULT_ENDPOINT, LOOPBACK_ANY_PORT
 from kinesphere.keyexpr import DEFAULT_PREFIX
@@ -137,6 +139,31 @@ def add_zenoh_arguments(
         parser.set_defaults(listen=None, zenoh_fixed_listen=True)
 
 
+PLATFORMS_ENV = "KINESPHERE_PLATFORMS"
+"""Folders holding platform folders (os.pathsep-separated), searched after the shipped ones."""
+
+
+def add_platforms_argument(parser: argparse.ArgumentParser) -> None:
+    """``--platforms DIR`` (repeatable): where to find platform folders by name."""
+    parser.add_argument(
+        "--platforms",
+        dest="platform_dirs",
+        action="append",
+        metavar="DIR",
+        default=argparse.SUPPRESS,
+        help=f"a folder of platform folders to find platforms in by name (repeatable; also "
+        f"${PLATFORMS_ENV}, {os.pathsep}-separated)",
+    )
+
+
+def use_platform_dirs(dirs: Iterable[str | Path]) -> None:
+    """Put folders first on the platform search path, for this process and its children
+    (``kinesphere up`` starts agents and databanks that must find the same platforms)."""
+    new = [str(Path(d).expanduser().resolve()) for d in dirs]
+    old = [p for p in os.environ.get(PLATFORMS_ENV, "").split(os.pathsep) if p]
+    os.environ[PLATFORMS_ENV] = os.pathsep.join(dict.fromkeys([*new, *old]))
+
+
 __all__ = [
     "AGENT",
     "DEFAULT_ENDPOINT",
@@ -146,4 +173,7 @@ __all__ = [
     "WATCHER",
     "ZenohDefaults",
     "add_zenoh_arguments",
+    "PLATFORMS_ENV",
+    "add_platforms_argument",
+    "use_platform_dirs",
 ]

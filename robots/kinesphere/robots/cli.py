@@ -1,4 +1,4 @@
-"""Sub-commands about robot bodies: ``platforms`` and ``describe``."""
+"""Sub-commands about robot bodies: ``platforms``, ``describe`` and ``platform new``."""
 
 from __future__ import annotations
 
@@ -13,7 +13,27 @@ if TYPE_CHECKING:  # imported lazily: yourdfpy/trimesh cost ~1 s at every CLI st
 
 
 def register(sub: Any) -> None:
-    p = sub.add_parser("platforms", help="list the shipped platforms")
+    n = sub.add_parser("platform", help="bring your own robot: 'platform new NAME --urdf FILE'")
+    nsub = n.add_subparsers(dest="platform_command", metavar="ACTION", required=True)
+    new = nsub.add_parser(
+        "new",
+        help="scaffold a platform folder from any URDF",
+        description="Write DIR/NAME/: the eURDF (proposed labels, meshes copied beside it), "
+        "platform.toml (base kind, height, neutral pose) and vsam.toml (Laban-27 for every "
+        "limb). Edit them, then 'kinesphere ecl build DIR/NAME' and run it with "
+        "'--platforms DIR' (or $KINESPHERE_PLATFORMS=DIR) like a shipped platform.",
+    )
+    new.add_argument("name", help="platform name: a-z, 0-9, _ and -, starting with a letter")
+    new.add_argument("--urdf", type=Path, required=True, help="the robot's URDF file")
+    new.add_argument(
+        "--dir", type=Path, default=None,
+        help="folder to create NAME/ in (default: the first --platforms folder, else .)",
+    )
+    new.add_argument("--merge-distance", type=float, default=0.01, metavar="M",
+                     help="joints closer than M metres form one joint location (default 0.01)")
+    new.add_argument("--force", action="store_true", help="replace an existing folder's files")
+    new.set_defaults(func=_platform_new)
+    p = sub.add_parser("platforms", help="list the known platforms (shipped and brought)")
     p.add_argument("--json", action="store_true", help="machine-readable output")
     p.set_defaults(func=_platforms)
     d = sub.add_parser(
@@ -29,9 +49,30 @@ def register(sub: Any) -> None:
     d.set_defaults(func=_describe)
 
 
+def _platform_new(args: argparse.Namespace) -> int:
+    from kinesphere.robots.platform import search_path
+    from kinesphere.robots.scaffold import new_platform
+
+    parent = args.dir if args.dir is not None else (search_path() or [Path(".")])[0]
+    s = new_platform(args.name, args.urdf, parent, args.merge_distance, args.force)
+    e = s.eurdf
+    print(f"wrote {s.folder}/: {e.name}.eurdf ({len(e.limits)} DOF, C={len(e.core)}, "
+          f"{len(e.limbs)} limbs), platform.toml (base {s.base_kind}, height {s.height} m), "
+          f"vsam.toml ({len(s.limbs)} entries)")
+    print(f"meshes: {s.meshes_copied} copied, {s.meshes_hulled} replaced by convex hulls"
+          + (f", {len(s.meshes_missing)} not found: {', '.join(s.meshes_missing[:3])}"
+             if s.meshes_missing else ""))
+    for p in e.limbs:
+        if p.index[1] == 1:
+            print(f"  {p.name:<8} {p.alias or '':<18} from {p.distal}: "
+                  f"{len(e.limb_joints(p.name))} joints")
+    print("next: edit the three files, check with 'kinesphere describe "
+          f"{s.folder}', then 'kinesphere ecl build {s.folder}'")
+    return 0
+
+
 def _platforms(args: argparse.Namespace) -> int:
     from kinesphere.robots.platform import load_platform, platform_names
-
 
     rows = []
     for name in platform_names():
@@ -43,13 +84,15 @@ def _platforms(args: argparse.Namespace) -> int:
                 "dof": len(p.joint_names),
                 "base": p.base.kind,
                 "limbs": len(p.eurdf.limbs),
+                "folder": None if p.shipped else str(p.folder),
             }
         )
     if args.json:
         print(json.dumps(rows, indent=2))
     else:
         for r in rows:
-            print(f"{r['name']:<9} {r['dof']:>3} DOF  base={r['base']:<6} {r['title']}")
+            where = f"  [{r['folder']}]" if r["folder"] else ""
+            print(f"{r['name']:<9} {r['dof']:>3} DOF  base={r['base']:<6} {r['title']}{where}")
     return 0
 
 

@@ -3,7 +3,9 @@
 Why our own builder instead of MuJoCo's URDF importer: we need position actuators on every
 joint of P with gains matched to each joint's inertia, gravity compensation (real arms have
 it, and it keeps position tracking honest), a driveable planar base (x, y, yaw) for mobile
-platforms, and self-collision exclusions derived from the neutral pose. Body, joint and
+platforms, and self-collision exclusions derived from the neutral pose. A brought robot's
+meshes (STL, OBJ, found beside its eURDF) become mesh geoms, and its mimic joints follow their
+leader through an equality constraint, as the URDF says. Body, joint and
 actuator names are the URDF's, so every role can address them by the eURDF's names.
 """
 
@@ -12,11 +14,13 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
 import mujoco
 import numpy as np
 import yourdfpy
 
+from kinesphere.robots.meshes import MUJOCO_READS
 from kinesphere.robots.platform import Platform, load_platform
 
 BASE_JOINTS = ("base_x", "base_y", "base_yaw")
@@ -60,7 +64,9 @@ def _quat(rpy_matrix: np.ndarray) -> np.ndarray:
     return q
 
 
-def _add_geoms(body: mujoco.MjsBody, link: yourdfpy.Link, visual: bool) -> None:
+def _add_geoms(
+    spec: mujoco.MjSpec, body: mujoco.MjsBody, link: yourdfpy.Link, visual: bool, folder: Path
+) -> None:
     items = link.visuals if visual else link.collisions
     for k, item in enumerate(items):
         g = item.geometry
@@ -75,8 +81,17 @@ def _add_geoms(body: mujoco.MjsBody, link: yourdfpy.Link, visual: bool) -> None:
             )
         elif g.sphere is not None:
             kw.update(type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[g.sphere.radius, 0, 0])
+        elif g.mesh is not None and (folder / g.mesh.filename).suffix.lower() in MUJOCO_READS:
+            path = folder / g.mesh.filename
+            if not path.is_file():
+                continue  # 'platform new' lists meshes it could not find
+            mesh = spec.add_mesh(name=f"{link.name}_{'vis' if visual else 'col'}{k}",
+                                 file=str(path))
+            if g.mesh.scale is not None:
+                mesh.scale = np.broadcast_to(np.asarray(g.mesh.scale, dtype=float), 3)
+            kw.update(type=mujoco.mjtGeom.mjGEOM_MESH, meshname=mesh.name)
         else:
-            continue  # meshes are not used by kinesphere platforms
+            continue  # a mesh MuJoCo cannot read: 'platform new' replaces those by hulls
         geom = body.add_geom(name=f"{link.name}_{'vis' if visual else 'col'}{k}", **kw)
         geom.mass = 0.0
         if visual:
@@ -147,16 +162,23 @@ def build_spec(platform: Platform) -> mujoco.MjSpec:
             j = root.add_joint(name=name, type=kind, axis=axis)
             j.limited = mujoco.mjtLimited.mjLIMITED_FALSE
             j.damping = [1.0, 0.0, 0.0]
+    folder = platform.eurdf.path.parent if platform.eurdf.path else platform.folder
     _add_inertial(root, urdf.link_map[root_name], platform.base.mobile)
     for visual in (False, True):
-        _add_geoms(root, urdf.link_map[root_name], visual)
+        _add_geoms(spec, root, urdf.link_map[root_name], visual, folder)
     bodies = {root_name: root}
+    mimics: list[yourdfpy.Joint] = []
     for joint in _joints_in_tree_order(urdf, root_name):
         parent = bodies[joint.parent]
         origin = joint.origin if joint.origin is not None else np.eye(4)
         body = parent.add_body(name=joint.child, pos=origin[:3, 3], quat=_quat(origin))
         bodies[joint.child] = body
         moving = joint.type in ("revolute", "prismatic", "continuous")
+        if moving and joint.mimic is not None:
+            # a mimic moves with its leader; one that follows no degree of freedom is rigid
+            moving = joint.mimic.joint in platform.eurdf.limits
+            if moving:
+                mimics.append(joint)
         if moving:
             axis = joint.axis if joint.axis is not None else [1, 0, 0]
             mj = body.add_joint(
@@ -168,7 +190,7 @@ def build_spec(platform: Platform) -> mujoco.MjSpec:
             )
             mj.armature = 0.01
             mj.damping = [0.05, 0.0, 0.0]
-            if joint.type != "continuous" and joint.limit is not None:
+            if joint.type != "continuous" and joint.limit is not None and not joint.mimic:
                 mj.limited = mujoco.mjtLimited.mjLIMITED_TRUE
                 mj.range = [joint.limit.lower, joint.limit.upper]
                 # Stiffest stable limit (time constant 2 dt): contacts between limbs then
@@ -180,7 +202,11 @@ def build_spec(platform: Platform) -> mujoco.MjSpec:
         link = urdf.link_map[joint.child]
         _add_inertial(body, link, moving)
         for visual in (False, True):
-            _add_geoms(body, link, visual)
+            _add_geoms(spec, body, link, visual, folder)
+    for joint in mimics:
+        eq = spec.add_equality(type=mujoco.mjtEq.mjEQ_JOINT, objtype=mujoco.mjtObj.mjOBJ_JOINT,
+                               name1=joint.name, name2=joint.mimic.joint)
+        eq.data[:5] = [joint.mimic.offset or 0.0, joint.mimic.multiplier or 1.0, 0.0, 0.0, 0.0]
     for name in (*BASE_JOINTS[: 3 if platform.base.mobile else 0], *platform.joint_names):
         act = spec.add_actuator(name=name, target=name, trntype=mujoco.mjtTrn.mjTRN_JOINT)
         act.set_to_position(kp=1.0, kv=0.1)
@@ -263,6 +289,11 @@ def platform_model(name: str) -> PlatformModel:
         actuator_index={model.actuator(i).name: i for i in range(model.nu)},
         excluded_pairs=tuple(excluded),
     )
+
+
+def model_of(platform: Platform) -> PlatformModel:
+    """The compiled model of a loaded platform, shipped (by name) or brought (by folder)."""
+    return platform_model(platform.name if platform.shipped else str(platform.folder))
 
 
 def robot_contacts(model: mujoco.MjModel, data: mujoco.MjData) -> list[tuple[str, str]]:

@@ -1,4 +1,10 @@
-"""The platform registry: each folder under ``platforms/`` is one robot body.
+"""The platform registry: each folder with a ``platform.toml`` is one robot body.
+
+Platforms are found by name among the shipped ones (``platforms/`` in this package), then in
+the folders of the platform search path (``--platforms DIR`` or ``$KINESPHERE_PLATFORMS``; a
+brought robot lives there, made by ``kinesphere platform new``), or opened by folder path. A
+databank opened alone (``--db FILE``) names its platform, which must then be shipped or on
+the search path.
 
 A platform is its eURDF (the Body: labels and configuration space), its ``platform.toml``
 (base kind, motion limits, the Place-Middle neutral pose) and, for the ECL, its ``vsam.toml``.
@@ -9,6 +15,7 @@ from __future__ import annotations
 
 import functools
 import math
+import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Literal, get_args
@@ -16,6 +23,7 @@ from typing import Annotated, Literal, get_args
 import msgspec
 import numpy as np
 
+from kinesphere.cliargs import PLATFORMS_ENV
 from kinesphere.configfile import load_toml
 from kinesphere.errors import KinesphereError
 from kinesphere.eurdf import Eurdf, load_eurdf
@@ -102,23 +110,50 @@ class Platform:
     def vsam_path(self) -> Path:
         return self.folder / "vsam.toml"
 
+    @property
+    def shipped(self) -> bool:
+        """Part of this package (its databank is package data too)."""
+        return self.folder.parent == PLATFORMS_DIR
+
+
+def search_path() -> list[Path]:
+    """The folders searched for platform folders after the shipped ones, in order."""
+    return [Path(p).expanduser() for p in os.environ.get(PLATFORMS_ENV, "").split(os.pathsep) if p]
+
+
+def platform_folders() -> dict[str, Path]:
+    """Every platform known by name: shipped, then on the search path (a search-path folder
+    may itself be one platform folder); the first of a name wins."""
+    found: dict[str, Path] = {}
+    for root in (PLATFORMS_DIR, *search_path()):
+        if (root / "platform.toml").is_file():
+            found.setdefault(root.resolve().name, root.resolve())
+        elif root.is_dir():
+            for p in sorted(root.iterdir()):
+                if (p / "platform.toml").is_file():
+                    found.setdefault(p.name, p.resolve())
+    return found
+
 
 def platform_names() -> list[str]:
-    """Names of the shipped platforms, sorted."""
-    return sorted(p.name for p in PLATFORMS_DIR.iterdir() if (p / "platform.toml").is_file())
+    """Names of every known platform (shipped and on the search path), sorted."""
+    return sorted(platform_folders())
 
 
 def load_platform(name: str) -> Platform:
-    """Load a shipped platform by name, or a platform folder by path."""
-    folder = Path(name)
-    if not (folder / "platform.toml").is_file():
-        if name not in platform_names():
-            raise KinesphereError(
-                "unknown_platform",
-                f"unknown platform {name!r}; valid platforms: {', '.join(platform_names())}",
-            )
-        folder = PLATFORMS_DIR / name
-    return _load(folder.resolve())
+    """Load a platform by name (shipped or on the search path), or a platform folder by path."""
+    folder = Path(name).expanduser()
+    if (folder / "platform.toml").is_file():
+        return _load(folder.resolve())
+    known = platform_folders()
+    if name not in known:
+        raise KinesphereError(
+            "unknown_platform",
+            f"unknown platform {name!r}; valid platforms: {', '.join(sorted(known))} "
+            f"(a platform folder is found by path, or by name in a --platforms DIR / "
+            f"${PLATFORMS_ENV} folder)",
+        )
+    return _load(known[name])
 
 
 @functools.cache

@@ -24,7 +24,7 @@ import zenoh
 
 from kinesphere.errors import KinesphereError
 from kinesphere.keyexpr import Keys
-from kinesphere.robots.platform import load_platform, platform_names
+from kinesphere.robots.platform import load_platform, platform_folders, platform_names
 from kinesphere.services.databank.service import DatabankService
 from kinesphere.services.ecl.ecl import Ecl
 from kinesphere.services.ecl.store import DATA_DIR
@@ -35,8 +35,11 @@ log = logging.getLogger("kinesphere.databank")
 
 
 def shipped_platforms() -> list[str]:
-    """Platforms with a shipped databank, sorted."""
-    return sorted(p.stem for p in DATA_DIR.glob("*.sqlite"))
+    """Platforms with a databank of their own, sorted: shipped ones (package data) and those
+    on the platform search path whose folder holds ``NAME.sqlite``."""
+    shipped = {p.stem for p in DATA_DIR.glob("*.sqlite")}
+    brought = {n for n, f in platform_folders().items() if (f / f"{n}.sqlite").is_file()}
+    return sorted(shipped | brought)
 
 
 def open_ecls(platforms: Sequence[str] = (), dbs: Sequence[str] = ()) -> dict[str, Ecl]:

@@ -39,6 +39,11 @@ def register_build(ecl_sub: Any, top_sub: Any) -> None:
     b.add_argument("--db", type=Path, metavar="PATH", help=_DB_HELP)
     b.add_argument("--all", action="store_true", help="build every shipped platform")
     b.add_argument("--reasons", action="store_true", help="say why each direction was dropped")
+    b.add_argument(
+        "--limb", action="append", metavar="LIMB",
+        help="generate only this limb's VSAM entries (label or alias; repeatable): a quick "
+        "first look at a brought robot. The databank then holds only those limbs",
+    )
     b.set_defaults(func=_build)
 
     r = ecl_sub.add_parser(
@@ -117,15 +122,21 @@ def _build(args: argparse.Namespace) -> int:
         raise KinesphereError("malformed", "give a PLATFORM or --all (not both)")
     if args.all and args.db is not None:
         raise KinesphereError("malformed", "--db names one file; it cannot be used with --all")
+    if args.all and args.limb:
+        raise KinesphereError("malformed", "--limb picks limbs of one platform, not --all")
     names = platform_names() if args.all else [args.platform]
     console = _console()
     for name in names:
-        build_one(name, args.db, console, args.reasons)
+        build_one(name, args.db, console, args.reasons, tuple(args.limb or ()))
     return 0
 
 
-def build_one(name: str, db: Path | None, console: Console, reasons: bool = False) -> Path:
-    """Generate and store one platform's databank; print what was dropped."""
+def build_one(
+    name: str, db: Path | None, console: Console, reasons: bool = False,
+    limbs: tuple[str, ...] = (),
+) -> Path:
+    """Generate and store one platform's databank (only ``limbs``' entries when given);
+    print what was dropped."""
     from kinesphere.robots.platform import load_platform
     from kinesphere.services.ecl.generate import GENERATOR_VERSION, generate
     from kinesphere.services.ecl.store import default_db_path, write_databank
@@ -133,7 +144,7 @@ def build_one(name: str, db: Path | None, console: Console, reasons: bool = Fals
 
     platform = load_platform(name)
     vsam = load_vsam(platform)
-    path = db if db is not None else default_db_path(platform.name)
+    path = db if db is not None else default_db_path(platform)
     start = time.perf_counter()
     with Progress(
         TextColumn(f"[bold]{platform.name}[/]"), BarColumn(), MofNCompleteColumn(),
@@ -145,7 +156,19 @@ def build_one(name: str, db: Path | None, console: Console, reasons: bool = Fals
         def progress(label: str, done: int, total: int) -> None:
             bar.update(task, completed=done, total=total, description=label)
 
-        rows, report = generate(name, progress)
+        if limbs:
+            wanted = {platform.eurdf.limb(x).name for x in limbs}
+            pairs = [(e.limb, e.origin) for e in vsam.entries if e.limb in wanted]
+            if not pairs:
+                raise KinesphereError("unknown_limb", f"{platform.name}: no VSAM entry for "
+                                      f"{', '.join(limbs)} in {platform.vsam_path}")
+            rows, report = generate(name, progress, only=pairs[0])
+            for pair in pairs[1:]:
+                more, part = generate(name, progress, only=pair)
+                rows += more
+                report.entries += part.entries
+        else:
+            rows, report = generate(name, progress)
     write_databank(path, platform, vsam, rows, GENERATOR_VERSION)
     seconds = time.perf_counter() - start
     kept = sum(len(e.kept) for e in report.entries)

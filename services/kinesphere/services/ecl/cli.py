@@ -252,7 +252,7 @@ def _import(args: argparse.Namespace) -> int:
     from kinesphere.services.ecl.store import default_db_path
 
     plat = load_platform(args.platform)
-    db = args.db if args.db is not None else default_db_path(plat.name)
+    db = args.db if args.db is not None else default_db_path(plat)
     ecl = Ecl.from_json(plat, args.file, db)
     Console(stderr=True).print(f"imported {args.file} into {ecl.db_path} (version {ecl.version})")
     return 0

@@ -64,7 +64,7 @@ class Ecl:
                 tables = read_tables(p)
                 return cls(load_platform(tables.meta["platform"]), p.resolve(), tables)
             plat = load_platform(str(platform))
-        path = Path(db) if db is not None else default_db_path(plat.name)
+        path = Path(db) if db is not None else default_db_path(plat)
         return cls(plat, path.resolve(), read_tables(path))
 
     @classmethod

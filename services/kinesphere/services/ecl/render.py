@@ -28,7 +28,7 @@ from PIL import Image, ImageDraw, ImageFont  # noqa: E402
 from kinesphere.errors import KinesphereError
 from kinesphere.laban import Direction, Horizontal, Level
 from kinesphere.protocol import Pose
-from kinesphere.robots.mjcf import PlatformModel, platform_model  # noqa: E402
+from kinesphere.robots.mjcf import PlatformModel, model_of, platform_model  # noqa: E402
 from kinesphere.services.ecl.ecl import Ecl
 from kinesphere.sizes import size_name
 
@@ -220,7 +220,7 @@ def pose_image(ecl: Ecl, limb: str, origin: str, direction: str, size: object,
                width: int = 640, height: int = 480) -> Image.Image:
     """One pose, titled with the command."""
     pose = ecl.query(limb, origin, direction, size)
-    pm = platform_model(ecl.platform.name)
+    pm = model_of(ecl.platform)
     q = pose_qpos(pm, pose)
     with Camera(pm, width, height, frame(pm, [q])) as cam:
         picture = cam.shoot(q)
@@ -231,7 +231,7 @@ def pose_image(ecl: Ecl, limb: str, origin: str, direction: str, size: object,
 
 def contact_sheet(ecl: Ecl, limb: str, origin: str, size: object = 3) -> Image.Image:
     """The 27 directions of one (limb, origin) pair at one size, as a 3x9 grid."""
-    pm = platform_model(ecl.platform.name)
+    pm = model_of(ecl.platform)
     poses: dict[Direction, Pose | None] = {}
     for level in LEVELS:
         for h in COLUMNS:

@@ -41,9 +41,13 @@ class PoseRow:
     margin: float | None = None
 
 
-def default_db_path(platform_name: str) -> Path:
-    """The shipped databank of a platform (package data)."""
-    return DATA_DIR / f"{platform_name}.sqlite"
+def default_db_path(platform: Platform | str) -> Path:
+    """A platform's own databank: package data for a shipped platform (or a bare name),
+    ``FOLDER/NAME.sqlite`` for one brought in its own folder."""
+    if isinstance(platform, str) or platform.shipped:
+        name = platform if isinstance(platform, str) else platform.name
+        return DATA_DIR / f"{name}.sqlite"
+    return platform.folder / f"{platform.name}.sqlite"
 
 
 def check_joints(
