@@ -8,13 +8,14 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import sys
 from collections.abc import Callable, Sequence
 from importlib.metadata import entry_points, version
 from pathlib import Path
 from typing import Any
 
-from kinesphere.cliargs import add_platforms_argument, use_platform_dirs
+from kinesphere.cliargs import PLATFORMS_ENV, add_platforms_argument, use_platform_dirs
 from kinesphere.errors import KinesphereError
 
 
@@ -91,11 +92,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         level=logging.DEBUG if args.verbose else logging.INFO,
         format="%(asctime)s %(name)s %(levelname)s %(message)s",
     )
-    use_platform_dirs(getattr(args, "platform_dirs", None) or ())
     func = getattr(args, "func", None)
     if func is None:
         parser.print_help()
         return 2
+    saved = os.environ.get(PLATFORMS_ENV)
+    use_platform_dirs(getattr(args, "platform_dirs", None) or ())
     try:
         return int(func(args) or 0)
     except KinesphereError as exc:
@@ -103,6 +105,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     except KeyboardInterrupt:
         return 130
+    finally:  # main() called in-process (tests, embedding) leaves the environment as it was
+        if saved is None:
+            os.environ.pop(PLATFORMS_ENV, None)
+        else:
+            os.environ[PLATFORMS_ENV] = saved
 
 
 if __name__ == "__main__":

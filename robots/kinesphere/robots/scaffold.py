@@ -26,6 +26,7 @@ from kinesphere.robots.meshes import import_meshes
 from kinesphere.robots.platform import BaseSpec, Platform, platform_names
 
 _NAME = re.compile(r"^[a-z][a-z0-9_-]{0,31}$")
+NEUTRAL_MARGIN = 0.05  # rad (or m) between the neutral pose and any joint limit
 CLEARANCE = 0.0005  # metres between the lowest geometry at neutral and the floor
 MOBILE_DEFAULTS = {  # documented starting points for a wheeled or floating base: edit them
     "max_speed": 0.5, "max_yaw_rate": 1.0, "max_acceleration": 1.0, "max_jerk": 5.0,
@@ -69,6 +70,7 @@ def new_platform(
     copied, hulls, missing = import_meshes(robot, urdf.resolve().parent, folder)
     for plugin in robot.findall("gazebo") + robot.findall("transmission"):
         robot.remove(plugin)  # simulator and controller plumbing: not part of the body
+    _drop_world_link(robot)
     ET.indent(robot)
     eurdf_path = folder / f"{name}.eurdf"
     eurdf_path.write_text(
@@ -91,6 +93,23 @@ def new_platform(
     return Scaffold(folder, eurdf, kind, height, copied, hulls, missing, limbs, proposal.hands)
 
 
+def _drop_world_link(robot: ET.Element) -> None:
+    """A root link named ``world`` welded to the robot is ROS's way of fixing a base; MuJoCo
+    has its own world (and reserves the name), so the weld goes and its child is the root."""
+    welds = [j for j in robot.findall("joint") if j.find("parent") is not None
+             and j.find("parent").get("link") == "world"]  # type: ignore[union-attr]
+    if len(welds) != 1 or welds[0].get("type") != "fixed":
+        return
+    robot.remove(welds[0])
+    for el in robot.findall("link"):
+        if el.get("name") == "world":
+            robot.remove(el)
+    for part in robot.findall("body_part"):
+        for el in part.findall("link"):
+            if el.get("name") == "world":
+                part.remove(el)
+
+
 def _base_kind(robot: ET.Element, eurdf: Eurdf) -> str:
     """fixed, unless the URDF has a floating or planar joint or drive wheels in its core."""
     types = {el.get("type") for el in robot.findall("joint")}
@@ -105,15 +124,15 @@ def _base_kind(robot: ET.Element, eurdf: Eurdf) -> str:
 
 
 def _neutral(eurdf: Eurdf) -> dict[str, float]:
-    """Zero, clamped into each joint's limits (a joint whose range excludes zero sits at the
-    nearer limit, a hair inside)."""
+    """Zero, kept NEUTRAL_MARGIN inside each joint's limits: a pose at a limit leaves the
+    ECL's IK (which keeps its own margin) no feasible first step, and a robot no room."""
     out: dict[str, float] = {}
     for name, lim in eurdf.limits.items():
-        if math.isfinite(lim.lower) and lim.lower > 0.0 or math.isfinite(lim.upper) and (
-            lim.upper < 0.0
-        ):
-            margin = min(0.01, (lim.upper - lim.lower) / 4)
-            out[name] = round(lim.clamp(0.0, margin), 6)
+        if not (math.isfinite(lim.lower) and math.isfinite(lim.upper)):
+            continue
+        value = lim.clamp(0.0, min(NEUTRAL_MARGIN, (lim.upper - lim.lower) / 4))
+        if value != 0.0:
+            out[name] = round(value, 6)
     return out
 
 
