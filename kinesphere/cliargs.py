@@ -64,22 +64,20 @@ class ZenohDefaults:
         return f"{text}.{' ' + self.note if self.note else ''}"
 
 
-AGENT = ZenohDefaults(
-    listen=(LOOPBACK_ANY_PORT,), note="'kinesphere databank serve' listens there."
-)
-"""Robots join the databank's endpoint and accept peers on loopback only."""
-OPERATOR = ZenohDefaults(note="'kinesphere databank serve' listens there.")
-"""Operator commands join the databank's endpoint."""
-SERVICE = ZenohDefaults(
-    connect=(),
-    listen=(DEFAULT_ENDPOINT,),
-    fallback=ZenohDefaults(listen=(LOOPBACK_ANY_PORT,)),
-)
-"""A databank holds the well-known endpoint, or joins the replica already holding it."""
-QUERY = ZenohDefaults(mode="client")
-"""A one-shot question joins the databank's endpoint as a client."""
-WATCHER = ZenohDefaults(listen=())
-"""A short-lived observer (``status``) joins the databank's endpoint and opens no port."""
+HUB = "'kinesphere router' listens there (the hub, which serves nothing else)."
+"""Every process joins the router at the well-known endpoint, never a service: a databank or
+an agent killed -9 takes nothing down with it."""
+AGENT = ZenohDefaults(listen=(LOOPBACK_ANY_PORT,), note=HUB)
+"""Robots join the router and accept peers on loopback only."""
+OPERATOR = ZenohDefaults(listen=(LOOPBACK_ANY_PORT,), note=HUB)
+"""Operator commands join the router."""
+SERVICE = ZenohDefaults(listen=(LOOPBACK_ANY_PORT,), note=HUB)
+"""A databank joins the router like everyone else (it is no hub: killed, nothing else stops)."""
+QUERY = ZenohDefaults(mode="client", note=HUB)
+"""A one-shot question joins the router as a client."""
+WATCHER = ZenohDefaults(mode="client", note=HUB)
+"""A short-lived observer (``status``) joins the router as a client: the router answers for
+everyone at once, where a peer would first have to discover the others."""
 
 
 def add_zenoh_arguments(

@@ -50,14 +50,15 @@ def plan(defaults: ZenohDefaults, argv: list[str], listen: bool = True) -> list[
         (AGENT, ["--connect", OTHER, "--mode", "client"], True, [("client", [OTHER], [])]),
         (AGENT, ["--listen", OTHER], True, [("peer", [], [OTHER])]),
         (OPERATOR, [], True, [("peer", [DEFAULT], [ANY])]),
+        (OPERATOR, ["--connect", OTHER], True, [("peer", [OTHER], [ANY])]),
         (OPERATOR, ["--mode", "client"], True, [("client", [DEFAULT], [])]),
         (QUERY, [], True, [("client", [DEFAULT], [])]),
         (QUERY, ["--mode", "peer", "--connect", OTHER], True, [("peer", [OTHER], [ANY])]),
-        (WATCHER, [], False, [("peer", [DEFAULT], [])]),
-        (WATCHER, ["--connect", OTHER], False, [("peer", [OTHER], [])]),
-        (SERVICE, [], True, [("peer", [], [DEFAULT]), ("peer", [DEFAULT], [ANY])]),
-        (SERVICE, ["--mode", "client"], True,
-         [("client", [], []), ("client", [DEFAULT], [])]),
+        (WATCHER, [], False, [("client", [DEFAULT], [])]),
+        (WATCHER, ["--connect", OTHER], False, [("client", [OTHER], [])]),
+        (WATCHER, ["--mode", "peer"], False, [("peer", [DEFAULT], [ANY])]),
+        (SERVICE, [], True, [("peer", [DEFAULT], [ANY])]),
+        (SERVICE, ["--mode", "client"], True, [("client", [DEFAULT], [])]),
         (SERVICE, ["--connect", OTHER], True, [("peer", [OTHER], [ANY])]),
         (SERVICE, ["--listen", OTHER], True, [("peer", [], [OTHER])]),
     ],
@@ -147,12 +148,14 @@ def test_every_command_with_zenoh_options_uses_the_shared_group() -> None:
 
 
 def test_describe_names_every_default() -> None:
+    hub = "'kinesphere router' listens there (the hub, which serves nothing else)."
     assert SERVICE.describe() == (
-        f"listen on {DEFAULT}, or connect to {DEFAULT} and listen on loopback, any port if "
-        "that fails."
+        f"connect to {DEFAULT} and listen on loopback, any port. {hub}"
     )
-    assert QUERY.describe() == f"connect to {DEFAULT} (as a Zenoh client)."
-    assert WATCHER.describe() == f"connect to {DEFAULT} and listen nowhere."
+    assert QUERY.describe() == f"connect to {DEFAULT} (as a Zenoh client). {hub}"
+    assert WATCHER.describe() == f"connect to {DEFAULT} (as a Zenoh client). {hub}"
+    fallback = ZenohDefaults(connect=(), listen=(DEFAULT,), fallback=ZenohDefaults())
+    assert fallback.describe() == f"listen on {DEFAULT}, or connect to {DEFAULT} if that fails."
 
 
 def test_zenoh_sessions_close_as_context_managers() -> None:

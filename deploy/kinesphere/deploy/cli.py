@@ -22,10 +22,12 @@ def register(sub: Any) -> None:
     up = sub.add_parser(
         "up",
         help="start a whole local system (databank + robots), play a demo, stop it all",
-        description="Start a databank and one robot agent per robot as separate processes on "
-        "loopback (peer mode, no router), wait until each is alive, play the demo phrases, "
-        "show a live status table, write pictures of the final poses and joint trajectories to "
-        "--out, then stop every process (also on Ctrl-C). Exit 0 after the demo.",
+        description="Start a router (the hub, serving nothing else), a databank and one robot "
+        "agent per robot as separate processes on loopback, all Zenoh clients of the router "
+        "(any of them can be killed and the rest keep talking), wait until each is alive, "
+        "play the demo phrases, show a live status table, write pictures of the final poses "
+        "and joint trajectories to --out, then stop every process (also on Ctrl-C). Exit 0 "
+        "after the demo.",
     )
     up.add_argument(
         "--robots", default=",".join(DEFAULT_ROBOTS), metavar="LIST",
@@ -54,8 +56,10 @@ def register(sub: Any) -> None:
     st = sub.add_parser(
         "status",
         help="list live databanks and robots and each robot's last state",
-        description="Ask the network who is alive (liveliness) and listen briefly to every "
-        "robot's state. Exit 0 when something answered, 1 when nothing did.",
+        description="Listen to who is alive (liveliness, with history) and to every robot's "
+        "state until discovery settles: every live robot has reported and nothing new turned "
+        "up for 0.3 s (a peer waits at least 1 s for its gossip links), or --timeout. Exit 0 "
+        "when something answered, 1 when nothing did.",
     )
     st.add_argument("--timeout", type=float, default=2.0, metavar="S",
                     help="seconds to wait for answers (default 2)")
@@ -104,12 +108,13 @@ def _up(args: argparse.Namespace) -> int:
 
 
 def _status(args: argparse.Namespace) -> int:
-    from kinesphere.deploy.status import collect, print_status
+    from kinesphere.deploy.status import collect, discovery_time, print_status
     from kinesphere.keyexpr import Keys
-    from kinesphere.zconfig import session_from_args
+    from kinesphere.zconfig import configs_from_args, session_from_args
 
+    discovery = discovery_time(configs_from_args(args)[-1])
     with session_from_args(args) as session:
-        info = collect(session, Keys(args.prefix), args.timeout)
+        info = collect(session, Keys(args.prefix), args.timeout, discovery)
     return print_status(info, args.json)
 
 

@@ -1,9 +1,11 @@
 """``kinesphere up``: a whole local system from one command, the demo operators see first.
 
-The supervisor's own Zenoh session is the hub on a free loopback port; the databank and one
-agent per robot start as separate processes joined to it (peer mode, multicast scouting off,
-listening on loopback only), then phrases are played by ``kinesphere play`` processes. Every
-wait has a deadline and names what did not happen; every exit path stops the children.
+A ``kinesphere router`` child on a free loopback port is the hub and serves nothing else
+(:mod:`kinesphere.deploy.hub`); the databank, one agent per robot, the ``kinesphere play``
+processes and the supervisor's own session join it as Zenoh clients (multicast scouting off,
+nobody else listens). So any of them can be killed -9 and the others keep talking: with the
+databank dead, commands and e-stops still reach every robot. Every wait has a deadline and
+names what did not happen; every exit path stops the children.
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ import numpy as np
 from rich.console import Console
 from rich.live import Live
 
+from kinesphere.deploy.hub import client_args, start_hub
 from kinesphere.deploy.plan import Phrase, UpOptions
 from kinesphere.deploy.procs import ChildFailed, Supervisor
 from kinesphere.deploy.table import robot_table, state_dict, wide_console
@@ -30,7 +33,7 @@ from kinesphere.errors import KinesphereError
 from kinesphere.keyexpr import DEFAULT_PREFIX, Keys
 from kinesphere.protocol import RobotState
 from kinesphere.signals import handle_signals
-from kinesphere.zconfig import LOOPBACK_ANY_PORT, close_session, open_hub, undeclare
+from kinesphere.zconfig import close_session, undeclare
 
 log = logging.getLogger(__name__)
 
@@ -113,12 +116,13 @@ class Demo:
     def start(self) -> None:
         o = self.opts
         shutil.rmtree(self.sup.log_dir, ignore_errors=True)
-        session, self.endpoint = open_hub("peer")
+        self.endpoint, session = start_hub(self.sup, o.start_timeout)
         self._session = session
         self.recorder.start(session)
         self.alive, self._subs = watch_alive(session, self.keys)
-        self.console.log(f"hub {self.endpoint}; logs in {self.sup.log_dir}")
-        zargs = ["--connect", self.endpoint, "--listen", LOOPBACK_ANY_PORT]
+        self.console.log(f"hub {self.endpoint} (kinesphere router, serving nothing else); "
+                         f"logs in {self.sup.log_dir}")
+        zargs = client_args(self.endpoint)
         prefix = [] if o.prefix == DEFAULT_PREFIX else ["--prefix", o.prefix]
         dbs = [a for spec in o.databanks for a in ("--db", spec)]
         self.sup.spawn("databank",
@@ -159,7 +163,7 @@ class Demo:
     def play(self, phrase: Phrase, index: int) -> None:
         name = f"play-{index}-{phrase.path.stem}"
         args = ["play", str(phrase.path), "--target", phrase.target,
-                "--connect", self.endpoint, "--listen", LOOPBACK_ANY_PORT]
+                *client_args(self.endpoint)]
         if self.opts.prefix != DEFAULT_PREFIX:
             args += ["--prefix", self.opts.prefix]
         child = self.sup.spawn(name, args, expect_exit=True)
