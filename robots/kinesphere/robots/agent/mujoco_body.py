@@ -5,6 +5,11 @@ whose servos track a target pose this body integrates from the commanded body-fr
 with the mid-step heading (so a plan's own integration lands on the same pose). One
 :meth:`MujocoBody.step` is ``dt`` of physics, in as many ``mj_step`` substeps as the model's
 timestep needs.
+
+Joint limits are hard stops, as on the real robot. MuJoCo's limit constraint is soft: when the
+two arms of a Baxter press into each other, contact forces pushed joints up to 26 mrad past
+their limits. So after every step a joint past its range is put back on the limit and its
+velocity there is stopped, which is what a mechanical stop does.
 """
 
 from __future__ import annotations
@@ -47,6 +52,9 @@ class MujocoBody(Body):
         self._dadr = np.array([pm.dof_index[j] for j in names], dtype=int)
         self._act = np.array([pm.actuator_index[j] for j in names], dtype=int)
         self._act_slice = _as_slice(self._act)
+        limits = [self.platform.eurdf.limits[j] for j in names]
+        self._lower = np.array([lim.lower for lim in limits])
+        self._upper = np.array([lim.upper for lim in limits])
         self._mobile = self.platform.base.mobile
         if self._mobile:
             self._base_q = np.array([pm.qpos_index[j] for j in BASE_JOINTS], dtype=int)
@@ -78,8 +86,14 @@ class MujocoBody(Body):
             ctrl[self._base_slice] = target
 
     def step(self) -> None:
+        data = self.data
         for _ in range(self.substeps):
-            mujoco.mj_step(self.model, self.data)
+            mujoco.mj_step(self.model, data)
+        q = data.qpos[self._qadr]
+        past = (q < self._lower) | (q > self._upper)
+        if past.any():  # the hard stops (module text)
+            data.qpos[self._qadr[past]] = np.clip(q[past], self._lower[past], self._upper[past])
+            data.qvel[self._dadr[past]] = 0.0
 
     def halt(self) -> None:
         data = self.data
