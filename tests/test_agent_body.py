@@ -151,7 +151,7 @@ def test_the_agent_reports_an_unplannable_target_and_keeps_publishing(
         try:
             assert agent.controller.base is not None
             agent.controller.base.translate([2.5e9, 0.0, 0.0])
-            agent._set("moving", "test")
+            agent.conduct.set("moving", "test")
             for _ in range(1000):
                 agent.tick()
             state = watch.wait(lambda st: st.seq >= 10 and st.status == "error",

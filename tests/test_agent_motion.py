@@ -233,7 +233,7 @@ def test_a_body_caught_on_itself_is_reported_not_called_at_target() -> None:
     with zconfig.session(listen=[zconfig.LOOPBACK_ANY_PORT], connect=[]) as s:
         agent = Agent("baxter", "blocked", s)
         agent.controller.joints.retarget(BEHIND_THE_LEFT_ARM)
-        agent._set("moving", "test")
+        agent.conduct.set("moving", "test")
         while agent.controller.moving:
             agent.tick()
         for _ in range(round(SETTLE_S / agent.controller.dt) + 1):

@@ -26,9 +26,11 @@ import zenoh
 from kinesphere import zconfig
 from kinesphere.keyexpr import Keys
 from kinesphere.protocol import (
+    Ack,
     Catalogue,
     Command,
     Drive,
+    LeaseAction,
     Pose,
     RobotState,
     SpatialCommand,
@@ -224,26 +226,30 @@ def running_agent(
 
 
 class Operator:
-    """A client putting Commands, as the gamepad client would."""
+    """A client putting Commands, as the gamepad client would (``session`` "" is a version-1
+    client's)."""
 
     def __init__(self, session: zenoh.Session, robot_id: str = "*", sender: str = "test",
-                 key: str | None = None) -> None:
+                 key: str | None = None, client_session: str = "") -> None:
         self.pub = session.declare_publisher(key or KEYS.command(robot_id))
         self.sender = sender
+        self.session = client_session
         self.seq = 0
         zconfig.wait_matching(self.pub)
 
     def send(self, *parts: tuple[str, str, str, float],
              drive: tuple[str, float] | Drive | None = None,
              deadman: bool = True, ttl_ms: int = 0, estop: bool = False,
-             stop: bool = False, release: bool = False) -> int:
-        self.seq += 1
+             stop: bool = False, release: bool = False, lease: str = "",
+             seq: int | None = None, sent_ns: int | None = None) -> int:
+        self.seq = self.seq + 1 if seq is None else seq
         if isinstance(drive, tuple):
             drive = Drive(*drive)
         self.pub.put(encode(Command(
-            seq=self.seq, sent_ns=time.time_ns(), parts=[SpatialCommand(*p) for p in parts],
-            drive=drive, deadman=deadman, ttl_ms=ttl_ms,
-            estop=estop, stop=stop, release=release, sender=self.sender)))
+            seq=self.seq, sent_ns=time.time_ns() if sent_ns is None else sent_ns,
+            parts=[SpatialCommand(*p) for p in parts], drive=drive, deadman=deadman,
+            ttl_ms=ttl_ms, estop=estop, stop=stop, release=release, sender=self.sender,
+            session=self.session, lease=LeaseAction(lease))))
         return self.seq
 
     def raw(self, payload: bytes) -> None:
@@ -251,6 +257,44 @@ class Operator:
 
     def close(self) -> None:
         zconfig.undeclare(self.pub)
+
+
+class AckWatch:
+    """The Acks of one robot (``*``: all), with waits on predicates."""
+
+    def __init__(self, session: zenoh.Session, robot_id: str = "*") -> None:
+        self.acks: list[Ack] = []
+        self._cond = threading.Condition()
+        self._sub = session.declare_subscriber(KEYS.ack(robot_id), self._on)
+
+    def _on(self, sample: zenoh.Sample) -> None:
+        ack = decode(sample.payload, Ack)
+        with self._cond:
+            self.acks.append(ack)
+            self._cond.notify_all()
+
+    def wait(self, pred: Callable[[Ack], bool], what: str, timeout: float = WAIT_S) -> Ack:
+        """The first ack so far (or from now on) satisfying ``pred``."""
+        deadline = time.monotonic() + timeout
+        with self._cond:
+            while True:
+                for a in self.acks:
+                    if pred(a):
+                        return a
+                left = deadline - time.monotonic()
+                if left <= 0 or not self._cond.wait(left):
+                    raise AssertionError(f"timed out waiting for {what}; acks {self.acks[-5:]}")
+
+    def of(self, sender: str, seq: int, stage: str, what: str = "") -> Ack:
+        return self.wait(lambda a: a.sender == sender and a.seq == seq and a.stage == stage,
+                         what or f"{stage} for {sender} #{seq}")
+
+    def stages(self, sender: str, seq: int) -> list[str]:
+        with self._cond:
+            return [a.stage for a in self.acks if a.sender == sender and a.seq == seq]
+
+    def close(self) -> None:
+        zconfig.undeclare(self._sub)
 
 
 def joints_close(state: RobotState, joints: Mapping[str, float], tol: float) -> bool:

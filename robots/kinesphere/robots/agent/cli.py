@@ -43,6 +43,9 @@ def register(sub: Any) -> None:
     p.add_argument("--speed", type=float, default=d.speed,
                    help=f"robot seconds per wall second; 0 = as fast as possible "
                    f"(default {d.speed:g})")
+    p.add_argument("--max-translation", type=float, default=d.max_translation_m, metavar="M",
+                   help="metres of base translation one command may ask for; more is refused "
+                   f"(default {d.max_translation_m:g})")
     p.add_argument("--group", action="append", default=[], metavar="NAME",
                    help="also obey {prefix}/group/NAME/command (repeatable)")
     p.add_argument("--viewer", action="store_true", help="open a MuJoCo viewer window")
@@ -99,7 +102,7 @@ def _agent(args: argparse.Namespace) -> int:
     )
     options = AgentOptions(rate=args.rate, state_rate=args.state_rate, speed=args.speed,
                            prefix=args.prefix, groups=tuple(args.group), body=args.body,
-                           ros2=ros2)
+                           ros2=ros2, max_translation_m=args.max_translation)
     stop = threading.Event()
 
     def on_signal(signum: int, frame: FrameType | None) -> None:

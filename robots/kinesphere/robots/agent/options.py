@@ -44,13 +44,20 @@ class Ros2BodyOptions:
                 raise KinesphereError("malformed", f"ROS 2 {what} must be > 0, got {v}")
 
 
+MAX_TRANSLATION_M = 10.0
+"""Metres of base translation one command may ask for: as far as the ECL answers in one
+pose, so the robot and its databank agree (``docs/protocol.md``, "Bounds")."""
+
+
 @dataclass(frozen=True)
 class AgentOptions:
     """How an agent runs; the single source of its defaults (``kinesphere agent`` reads them).
 
     Control ``rate`` and ``state_rate`` in Hz, ``speed`` (robot seconds per wall second, 0 =
     unpaced), key ``prefix``, ``groups`` it obeys, databank query timeout, joint-limit clamp
-    ``margin``, and the ``body`` it drives (a name in ``body.BODIES``; ``ros2`` reads ``ros2``).
+    ``margin``, the ``body`` it drives (a name in ``body.BODIES``; ``ros2`` reads ``ros2``), and
+    the largest base translation one command may ask for (``max_translation_m``; a pose asking
+    for more is refused with ``size_out_of_range`` and nothing moves).
     """
 
     rate: float = 500.0
@@ -62,6 +69,7 @@ class AgentOptions:
     margin: float = DEFAULT_MARGIN
     body: str = DEFAULT_BODY
     ros2: Ros2BodyOptions = Ros2BodyOptions()
+    max_translation_m: float = MAX_TRANSLATION_M
 
     def __post_init__(self) -> None:
         checks = (
@@ -72,6 +80,8 @@ class AgentOptions:
              f"speed must be >= 0 (0 = unpaced), got {self.speed}"),
             (self.query_timeout_s > 0, f"query timeout must be > 0, got {self.query_timeout_s}"),
             (self.margin >= 0, f"margin must be >= 0, got {self.margin}"),
+            (math.isfinite(self.max_translation_m) and self.max_translation_m >= 0,
+             f"max translation must be a distance >= 0 m, got {self.max_translation_m}"),
             (self.body in BODIES,
              f"unknown body {self.body!r}; valid: {', '.join(sorted(BODIES))}"),
         )

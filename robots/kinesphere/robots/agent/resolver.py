@@ -8,6 +8,9 @@ whenever a reply fails, and a new version empties the cache. While the databank 
 unreachable cached poses keep working (they are the best knowledge there is). The databank
 also puts on ``{p}/ecl/{platform}/changed`` after every record, which triggers a re-read.
 
+The cache is bounded in bytes (:data:`CACHE_BYTES`, each answer charged its encoded size and
+its key), least recently used first out: fractional sizes make the keys unbounded in number.
+
 Why a worker thread: a Zenoh ``get`` blocks and must never run in the control loop or in a
 Zenoh callback. Requests are coalesced (only the newest pending one matters: an operator who
 moved on does not want the old pose), and the answer is handed back with its ticket so the
@@ -23,6 +26,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from collections import OrderedDict
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, TypeVar
@@ -46,18 +50,28 @@ from kinesphere.zconfig import undeclare, wait_matching
 log = logging.getLogger(__name__)
 T = TypeVar("T")
 
-PartsKey = tuple[tuple[str, str, str, float], ...]
+PartsKey = tuple[tuple[str, str, str, float, bool], ...]
 Answer = Pose | KinesphereError
 Callback = Callable[[int, Answer], None]
+CACHE_BYTES = 4 * 1024 * 1024
+"""Budget of the pose cache (a pose of a 26-joint NAO is ~1 KB encoded: thousands fit)."""
+ENTRY_BYTES = 128
+"""Charged per cached pose on top of its encoded size and key (dict slot, objects)."""
 
 
 def parts_key(parts: Sequence[SpatialCommand]) -> PartsKey:
-    """Canonical cache key: directions by slug, sizes as floats; raises on invalid parts."""
+    """Canonical cache key: directions by slug, sizes as floats, exact flags; raises on
+    invalid parts."""
     key = []
     for p in parts:
         check_spatial(p)
-        key.append((p.limb, p.origin, Direction.parse(p.direction).slug, float(p.size)))
+        key.append((p.limb, p.origin, Direction.parse(p.direction).slug, float(p.size), p.exact))
     return tuple(key)
+
+
+def _charge(key: PartsKey, pose: Pose) -> int:
+    return ENTRY_BYTES + len(encode(pose)) + sum(len(a) + len(b) + len(c) + 16
+                                                 for a, b, c, _, _ in key)
 
 
 @dataclass
@@ -79,6 +93,7 @@ class Resolver:
         refresh_s: float = 2.0,
         probe_s: float = 0.25,
         ready_s: float = 2.0,
+        cache_bytes: int = CACHE_BYTES,
     ) -> None:
         self.session = session
         self.platform = platform
@@ -92,7 +107,10 @@ class Resolver:
         self.reachable: bool | None = None  # None until the first answer or failure
         self.last_error = ""
         self.queries = 0  # round trips made for poses (cache misses), for tests and benches
-        self._cache: dict[PartsKey, Pose] = {}
+        self.cache_bytes = cache_bytes
+        self.cached_bytes = 0
+        """Bytes charged by the poses cached now."""
+        self._cache: OrderedDict[PartsKey, tuple[Pose, int]] = OrderedDict()
         self._lock = threading.Lock()
         self._wake = threading.Condition(self._lock)
         self._pending: _Request | None = None
@@ -125,7 +143,7 @@ class Resolver:
         """A record happened: forget now (a command right behind must miss the cache), and let
         the worker re-read the catalogue for the new version."""
         with self._wake:
-            self._cache = {}
+            self._forget()
             self.version = None
             self._stale = True
             self._wake.notify()
@@ -143,7 +161,33 @@ class Resolver:
 
     def cached(self, key: PartsKey) -> Pose | None:
         """The answer for ``key`` if this databank version already gave it."""
-        return self._cache.get(key)
+        with self._lock:
+            hit = self._cache.get(key)
+            if hit is None:
+                return None
+            self._cache.move_to_end(key)
+            return hit[0]
+
+    def __len__(self) -> int:
+        return len(self._cache)
+
+    def _forget(self) -> None:
+        """Empty the cache (the caller holds the lock)."""
+        self._cache = OrderedDict()
+        self.cached_bytes = 0
+
+    def _keep(self, key: PartsKey, pose: Pose) -> None:
+        """Cache ``pose`` (the caller holds the lock), evicting the least recently used."""
+        cost = _charge(key, pose)
+        if cost > self.cache_bytes:
+            return
+        old = self._cache.pop(key, None)
+        if old is not None:
+            self.cached_bytes -= old[1]
+        while self._cache and self.cached_bytes + cost > self.cache_bytes:
+            self.cached_bytes -= self._cache.popitem(last=False)[1][1]
+        self._cache[key] = (pose, cost)
+        self.cached_bytes += cost
 
     def submit(self, ticket: int, key: PartsKey, callback: Callback) -> None:
         """Resolve ``key`` in the worker; ``callback(ticket, pose or error)`` runs there.
@@ -196,7 +240,7 @@ class Resolver:
                 log.info("databank %s changed version %s -> %s; cache cleared",
                          self.platform, self.version, cat.version)
             with self._lock:
-                self._cache = {}
+                self._forget()
             self.version = cat.version
         self.catalogue = cat
         self._reached()
@@ -204,7 +248,7 @@ class Resolver:
 
     def resolve(self, key: PartsKey) -> Answer:
         """Blocking resolution of ``key`` (cache first); errors are returned, not raised."""
-        hit = self._cache.get(key)
+        hit = self.cached(key)
         return hit if hit is not None else self._resolve(key)
 
     def _resolve(self, key: PartsKey) -> Answer:
@@ -212,8 +256,8 @@ class Resolver:
             self.refresh()  # learn the version first, so the answer is cached under it
         version = self.version
         try:
-            if len(key) == 1:
-                limb, origin, direction, size = key[0]
+            if len(key) == 1 and not key[0][4]:  # a pose key cannot say "exact only"
+                limb, origin, direction, size, _ = key[0]
                 pose = self._query(
                     self.keys.pose(self.platform, limb, origin, direction, size), None, Pose
                 )
@@ -232,7 +276,7 @@ class Resolver:
         self.queries += 1
         if version is not None and version == self.version:
             with self._lock:
-                self._cache[key] = pose
+                self._keep(key, pose)
         return pose
 
     def _query(self, key: str, payload: bytes | None, type_: type[T],

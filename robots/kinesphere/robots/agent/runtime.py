@@ -1,18 +1,19 @@
-"""The robot agent: commands in, RobotState out, a real-time control loop in between.
+"""The robot agent: commands in, acks and RobotState out, a real-time control loop in between.
 
-Threads: Zenoh callbacks only decode and append to an inbox (a deque: lock-free, never
-blocks the network); the resolver's worker does the blocking databank queries; the control
-loop alone touches the Controller and its :class:`~kinesphere.robots.agent.body.Body`, drains
-the inbox at the start of each step and publishes state every ``1/state_rate`` s of robot time.
-Commands whose poses are cached are applied in the very step that drains them. Whatever fails
-in a step (a command, a trajectory, the body) is reported in the state; the loop never stops
-stepping and publishing.
+Threads: Zenoh callbacks only decode and put into the inbox (``inbox.py``: bounded, e-stops in
+a lane of their own, never blocking the network); the resolver's worker does the blocking
+databank queries; the control loop alone touches the Controller and its
+:class:`~kinesphere.robots.agent.body.Body`. Each step it handles every e-stop first, then the
+other commands in arrival order, runs the watchdog, steps, and publishes state every
+``1/state_rate`` s of robot time. Commands whose poses are cached are applied in the very step
+that drains them. Whatever fails in a step (a command, a trajectory, the body) is reported in
+the state; the loop never stops stepping and publishing.
 
-Clock: the loop's own simulated time drives the trajectories and the watchdog. ``speed`` sets
-how it is paced (``pacing.py``): 1 = real time (wall clock), k = k times faster, 0 = as fast
-as possible (tests and benchmarks).
+Clocks: robot time (the loop's own, paced by ``speed``: 1 = real time, k = k times faster, 0 =
+as fast as possible) drives the trajectories. The watchdog, the lease and command expiry use
+the monotonic wall clock, so they fire even when steps fail or the process was frozen.
 
-Ordering rules are in ``ordering.py``, safety rules in ``safety.py``.
+What the robot does with each command is ``conduct.py``.
 """
 
 from __future__ import annotations
@@ -22,7 +23,6 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -30,43 +30,33 @@ import zenoh
 
 from kinesphere.errors import KinesphereError
 from kinesphere.keyexpr import Keys
-from kinesphere.protocol import Command, Payload, Pose, RobotState, Status, decode, encode
-from kinesphere.robots.agent.base import drive_base
+from kinesphere.protocol import (
+    AckStage,
+    Command,
+    Payload,
+    RobotState,
+    Status,
+    decode,
+    encode,
+)
+from kinesphere.ratelog import RateLog
 from kinesphere.robots.agent.body import Body, make_body
+from kinesphere.robots.agent.conduct import SETTLE_S as SETTLE_S
+from kinesphere.robots.agent.conduct import Conduct
 from kinesphere.robots.agent.controller import BLOCKED_TOL as BLOCKED_TOL
 from kinesphere.robots.agent.controller import Controller
+from kinesphere.robots.agent.inbox import Inbox, clocks, received
 from kinesphere.robots.agent.options import AgentOptions as AgentOptions
-from kinesphere.robots.agent.ordering import Ordering
-from kinesphere.robots.agent.pacing import WARN_EVERY_S, LoopStats, run_paced
-from kinesphere.robots.agent.resolver import Answer, Resolver, parts_key
-from kinesphere.robots.agent.safety import Safety, Verdict
-from kinesphere.robots.agent.status import reported_status
+from kinesphere.robots.agent.pacing import LoopStats, run_paced
+from kinesphere.robots.agent.resolver import Resolver
 from kinesphere.zconfig import undeclare
 
 log = logging.getLogger(__name__)
 
-SETTLE_S = 0.2
-"""Robot time the servos get after a trajectory ends before the body is held to it."""
-
-
-@dataclass
-class _Received:
-    cmd: Command
-
-
-@dataclass
-class _Bad:
-    error: KinesphereError
-
-
-@dataclass
-class _Resolved:
-    ticket: int
-    answer: Answer
 
 
 class Agent:
-    """One robot: a body and its Controller, safety rules, databank resolver, Zenoh face.
+    """One robot: a body and its Controller, safety rules, lease, databank resolver, Zenoh face.
 
     ``body`` defaults to ``options.body`` made for ``platform`` (``body.py``'s registry).
     """
@@ -86,21 +76,14 @@ class Agent:
         self.controller = Controller(body, self.options.margin)
         self.platform = self.controller.platform.name
         self.resolver = Resolver(session, self.platform, self.keys, self.options.query_timeout_s)
-        self.safety = Safety()
+        self.inbox = Inbox()
+        self.conduct = Conduct(robot_id, self.controller, self.resolver,
+                               self.inbox.put_resolved, self.options.max_translation_m)
         self.stats = LoopStats()
-        self.latencies: deque[tuple[int, int, int]] = deque(maxlen=10_000)
-        """(seq, sent_ns, first moving step ns) per pose command applied."""
         self.last_state: RobotState | None = None
-        self._inbox: deque[_Received | _Bad | _Resolved] = deque()
-        self.ordering = Ordering()
-        self._status: str = Status.IDLE
-        self._detail = "no command yet"
-        self._fault = ""
-        self._failed_at = -1e9
-        self._body_fault = False
+        self._ratelog = RateLog(log)
         self._ticks = 0
         self._state_seq = 0
-        self._moved_at = 0.0
         self._publish_every = max(1, round(self.options.rate / self.options.state_rate))
         self._entities: list[Any] = []
         self._publisher: Any = None
@@ -110,15 +93,17 @@ class Agent:
     # --- lifetime ------------------------------------------------------------------------------
 
     def declare(self) -> None:
-        """Subscribe to commands, declare the state publisher and liveliness token."""
+        """Subscribe to commands, declare the state and ack publishers and liveliness token."""
         s = self.session
         keys = [self.keys.command(self.robot_id)]
         keys += [self.keys.group_command(g) for g in self.options.groups]
         self._entities = [s.declare_subscriber(k, self._on_sample) for k in keys]
-        self._publisher = s.declare_publisher(
-            self.keys.state(self.robot_id), congestion_control=zenoh.CongestionControl.DROP
-        )
-        self._entities.append(self._publisher)
+        drop = zenoh.CongestionControl.DROP
+        self._publisher = s.declare_publisher(self.keys.state(self.robot_id),
+                                              congestion_control=drop)
+        acks = s.declare_publisher(self.keys.ack(self.robot_id), congestion_control=drop)
+        self.conduct.acks.publish = acks.put
+        self._entities += [self._publisher, acks]
         self._entities.append(s.liveliness().declare_token(self.keys.alive_robot(self.robot_id)))
         self.resolver.start()
         log.info("agent %s (%s) up: %s", self.robot_id, self.platform, keys[0])
@@ -140,6 +125,7 @@ class Agent:
         self.resolver.close()
         undeclare(*reversed(self._entities))
         self._entities = []
+        self._publisher = self.conduct.acks.publish = None
         self.controller.body.close()
         log.info("agent %s down after %d steps (%d slips)", self.robot_id, self.stats.steps,
                  self.stats.slips)
@@ -153,17 +139,20 @@ class Agent:
     # --- network callbacks (Zenoh threads) -----------------------------------------------------
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
-        self.receive(sample.payload)
+        try:
+            self.receive(sample.payload)
+        except Exception as exc:  # never a traceback in Zenoh's callback thread
+            self._ratelog("receive", "agent %s: command not queued: %r", self.robot_id, exc)
 
     def receive(self, payload: Payload) -> None:
         """Queue an encoded Command for the next control step (any thread; never blocks)."""
         try:
-            self._inbox.append(_Received(decode(payload, Command)))
+            cmd = decode(payload, Command)
         except KinesphereError as exc:
-            self._inbox.append(_Bad(exc))
-
-    def _on_resolved(self, ticket: int, answer: Answer) -> None:
-        self._inbox.append(_Resolved(ticket, answer))
+            self._ratelog(exc.code, "agent %s: command refused: %s", self.robot_id, exc)
+            self.inbox.put_bad(exc)
+            return
+        self.inbox.put(received(cmd, self._ticks))
 
     # --- the loop ------------------------------------------------------------------------------
 
@@ -181,212 +170,63 @@ class Agent:
             return self._stop.is_set() or (stop is not None and stop.is_set())
 
         def failed(exc: Exception) -> None:
-            self._set(Status.ERROR, f"internal: control step failed: {exc!r}")
+            self.conduct.set(Status.ERROR, f"internal: control step failed: {exc!r}")
 
         run_paced(step, period, stopped, self.stats, f"agent {self.robot_id}", failed)
 
     def tick(self) -> None:
-        """One control cycle: commands, watchdog, one step, and state when due.
+        """One control cycle: e-stops, commands, watchdog and lease, one step, state when due.
 
         Each part is guarded on its own: a failing step still lets the watchdog, the state
         and the next commands through, and leaves the body held where it is.
         """
-        inbox = self._inbox
-        while inbox:
-            self._handle(inbox.popleft())
-        ctrl = self.controller
-        if self.safety.expired(ctrl.time) and ctrl.moving:
-            self._halt(Status.HOLDING, "no new command within ttl_ms: holding")
+        conduct = self.conduct
+        self._ticks = conduct.ticks = self._ticks + 1
+        now_ns = clocks()[0]
+        drained = self.inbox.drain()
+        for item in drained.estops:
+            conduct.handle(item, now_ns)
+        for item in drained.superseded:
+            conduct.acks.send(item.cmd, AckStage.SUPERSEDED, "a newer command arrived before "
+                              "this one was acted on")
+        for any_item in drained.items:
+            conduct.handle(any_item, now_ns)
+        conduct.watch(now_ns / 1e9)
         try:
-            ctrl.step()
+            self.controller.step()
         except Exception as exc:
-            self._step_failed(exc)
+            conduct.step_failed(exc)
         else:
-            if self._body_fault:  # e.g. joint states arrive again: say so, keep holding
-                self._body_fault = False
-                self._set(Status.HOLDING, "body working again; holding until a new command")
-        self._ticks += 1
+            conduct.step_worked()
         self.stats.steps += 1
-        self._after_step()
+        conduct.after_step()
         if self._ticks % self._publish_every == 0:
             self.publish()
 
-    def _after_step(self) -> None:
-        ctrl = self.controller
-        if ctrl.moving:
-            self._moved_at = ctrl.time
-        fault = ctrl.fault()
-        if fault != self._fault:
-            self._fault = fault
-            if fault:
-                self._set(Status.ERROR, f"{fault} and holding")
-        moved = self.ordering.stepped()
-        if moved is not None:
-            self.latencies.append((moved.seq, moved.sent_ns, time.time_ns()))
-
-    def _step_failed(self, exc: Exception) -> None:
-        """A step raised (a bug, or a body that failed): hold the body and say so."""
-        now = time.monotonic()
-        if isinstance(exc, KinesphereError):  # the body says what is wrong with it
-            detail = f"body: {exc.message}; holding"
-            self._body_fault = True
-        else:
-            detail = f"internal: control step failed: {exc!r}; holding"
-        if now - self._failed_at > WARN_EVERY_S:
-            self._failed_at = now
-            if isinstance(exc, KinesphereError):
-                log.warning("agent %s: %s", self.robot_id, detail)
-            else:
-                log.exception("agent %s: control step failed", self.robot_id)
-        self.ordering.overtake()
-        self._set(Status.ERROR, detail)
-        try:
-            self.controller.fail_safe()
-        except Exception:
-            log.debug("fail-safe hold failed too", exc_info=True)
-
-    # --- commands (control thread) ------------------------------------------------------------
-
-    def _handle(self, item: _Received | _Bad | _Resolved) -> None:
-        """Act on one inbox item; whatever goes wrong is reported, never raised into the loop."""
-        cmd: Command | None = None
-        try:
-            if isinstance(item, _Resolved):
-                waiting = self.ordering.answer(item.ticket)
-                if waiting is None:
-                    return  # overtaken by a newer command, a stop or an e-stop
-                cmd = waiting.cmd
-                self.ordering.acted(cmd.seq)
-                if isinstance(item.answer, KinesphereError):
-                    raise item.answer
-                self._apply_pose(item.answer, waiting.yaw, cmd)
-            elif isinstance(item, _Bad):
-                raise item.error
-            else:
-                cmd = item.cmd
-                self._command(cmd)
-        except KinesphereError as exc:
-            self._rejected(exc, cmd)
-        except Exception as exc:  # a bug must not take the robot's control loop down
-            log.exception("agent %s: %s failed", self.robot_id, self._what(cmd))
-            self._rejected(KinesphereError("internal", repr(exc)), cmd)
-
-    @staticmethod
-    def _what(cmd: Command | None) -> str:
-        return "command" if cmd is None else f"command {cmd.seq}"
-
-    def _rejected(self, exc: KinesphereError, cmd: Command | None) -> None:
-        if cmd is not None:
-            self.ordering.acted(cmd.seq)
-        self._error(exc, self._what(cmd))
-
-    def _command(self, cmd: Command) -> None:
-        if self.ordering.stale(cmd):
-            log.debug("stale command %s from %r dropped", cmd.seq, cmd.sender)
-            return
-        ctrl = self.controller
-        verdict = self.safety.on_command(cmd, ctrl.time)
-        if verdict is not Verdict.MOVE or not cmd.parts:
-            self.ordering.acted(cmd.seq)  # acted on now; poses count once resolved
-        if verdict is Verdict.ESTOP:
-            self._halt(Status.ESTOP, f"e-stop from {cmd.sender or 'a client'}; release with "
-                       "a command with release=true (kinesphere estop --release)")
-            log.warning("agent %s: e-stop (seq %d)", self.robot_id, cmd.seq)
-        elif verdict is Verdict.LATCHED:
-            self._set(Status.ESTOP, "e-stop latched; ignoring commands until one with "
-                      "release=true (kinesphere estop --release)")
-        elif verdict is Verdict.RELEASE:
-            self._set(Status.IDLE, "e-stop released; send a command to move")
-            log.warning("agent %s: e-stop released (seq %d)", self.robot_id, cmd.seq)
-        elif verdict is Verdict.STOP:
-            self._halt(Status.STOPPED, "stop command")
-        elif verdict is Verdict.DEADMAN:
-            self._halt(Status.HOLDING, "deadman released: holding")
-        else:
-            self._move(cmd)
-
-    def _move(self, cmd: Command) -> None:
-        ctrl = self.controller
-        base = ctrl.base
-        if cmd.drive is not None:
-            self._set(Status.MOVING, drive_base(base, cmd.drive, self.platform))
-        elif base is not None and base.driving:
-            base.stop()
-        if not cmd.parts:
-            return
-        key = parts_key(cmd.parts)
-        hit = self.resolver.cached(key)
-        yaw = ctrl.commanded_base_yaw()
-        if hit is not None:
-            self.ordering.overtake()
-            self.ordering.acted(cmd.seq)
-            self._apply_pose(hit, yaw, cmd)
-        else:
-            ticket, _ = self.ordering.wait(cmd, yaw)
-            self.resolver.submit(ticket, key, self._on_resolved)
-
-    def _apply_pose(self, pose: Pose, yaw: float | None, cmd: Command) -> None:
-        ctrl = self.controller
-        if pose.platform != self.platform:
-            raise KinesphereError("internal", f"databank answered for {pose.platform!r}")
-        try:
-            clamps = ctrl.joints.retarget(pose.joints)
-        except (KeyError, ValueError) as exc:
-            self._error(KinesphereError(
-                "internal", f"databank pose has joints {self.platform} cannot take: {exc}"),
-                f"command {cmd.seq}")
-            return
-        if pose.translation is not None and ctrl.base is not None and not ctrl.base.driving:
-            ctrl.base.translate(pose.translation, yaw)
-        beyond = [c for c in clamps if c.beyond]
-        if beyond:
-            detail = "clamped " + ", ".join(f"{c.joint} {c.requested:+.4f}->{c.target:+.4f}"
-                                             for c in beyond)
-            log.info("agent %s: %s", self.robot_id, detail)
-        else:
-            detail = f"to {pose.limb}/{pose.origin}/{pose.direction}/{pose.size:g}"
-        self._set(Status.MOVING, detail)
-        self.ordering.applied(cmd)
-
-    def _halt(self, status: str, detail: str) -> None:
-        self.ordering.overtake()  # a pose still waiting for the databank no longer applies
-        self.controller.halt()
-        self._set(status, detail)
-
-    def _set(self, status: str, detail: str) -> None:
-        self._status, self._detail = status, detail
-
-    def _error(self, exc: KinesphereError, what: str) -> None:
-        log.warning("agent %s: %s rejected: %s", self.robot_id, what, exc)
-        if exc.code == "unavailable":
-            self._set(Status.DATABANK_UNREACHABLE, f"{what}: {exc.message}; holding last pose")
-        else:
-            self._set(Status.ERROR, f"{what}: {exc.code}: {exc.message}")
-
     # --- state -----------------------------------------------------------------------------------
 
+    @property
+    def latencies(self) -> deque[tuple[int, int, int]]:
+        """(seq, sent_ns, first moving step ns) per pose command applied."""
+        return self.conduct.latencies
+
     def status(self) -> tuple[str, str]:
-        """The status and detail to publish now (precedence: :func:`reported_status`)."""
-        ctrl = self.controller
-        reported: tuple[str, str] = reported_status(
-            self._status, self._detail, estopped=self.safety.estopped,
-            reachable=self.resolver.reachable, last_error=self.resolver.last_error,
-            moving=ctrl.moving, clamped=bool(ctrl.joints.clamped),
-            settled=ctrl.time - self._moved_at >= SETTLE_S,
-            blocked=lambda: ctrl.blocked(BLOCKED_TOL),
-        )
-        return reported
+        """The status and detail to publish now."""
+        status: tuple[str, str] = self.conduct.status()
+        return status
 
     def publish(self) -> RobotState:
-        ctrl = self.controller
+        ctrl, conduct = self.controller, self.conduct
         status, detail = self.status()
         self._state_seq += 1
         state = RobotState(
             robot_id=self.robot_id, platform=self.platform, seq=self._state_seq,
             stamp_ns=time.time_ns(), joint_names=list(ctrl.joint_names), q=ctrl.q(),
             qd=ctrl.qd(), base_pose=ctrl.base_pose(), status=status,
-            last_command_seq=self.ordering.last_seq, detail=detail,
-            clamped=sorted(ctrl.joints.clamped),
+            last_command_seq=conduct.ordering.last_seq, detail=detail,
+            clamped=sorted(ctrl.joints.clamped), groups=list(self.options.groups),
+            lease_holder=conduct.lease.holder, estop_by=conduct.safety.estop_by,
+            substitutions=conduct.acks.substitutions, dropped=conduct.ordering.dropped,
         )
         self.last_state = state
         if self._publisher is not None:

@@ -1,7 +1,8 @@
 """What a command is allowed to do: e-stop latch, stop, deadman and the command watchdog.
 
-Pure logic on the robot's own clock (the control loop's simulated time), so it behaves the
-same paced to the wall clock or accelerated in a test, and can be tested without a robot.
+Pure logic on a clock the caller passes: the agent passes its **monotonic wall clock**, so
+the watchdog fires on time even when the control loop falls behind, its steps fail, or the
+process was frozen (robot time would have stopped with it).
 
 The rules (also in ``docs/protocol.md`` terms):
 
@@ -16,10 +17,10 @@ The rules (also in ``docs/protocol.md`` terms):
 * ``deadman=False`` means the operator let go: everything brakes to rest and holds; the
   command's parts and drive are ignored.
 * Watchdog: after a moving command, if no newer command arrives within ``ttl_ms`` (measured
-  from receipt), everything brakes to rest and holds. ``ttl_ms=0`` disables it for poses, but
-  a Drive always has one (:data:`DRIVE_TTL_S` when the command gives none): the base moves
-  only for as long as fresh commands keep arriving. Zenoh's liveliness lease is seconds long,
-  so this watchdog, not liveliness, is what stops a robot whose client died.
+  from receipt on the wall clock), everything brakes to rest and holds. ``ttl_ms=0`` disables
+  it for poses, but a Drive always has one (:data:`DRIVE_TTL_S` when the command gives none):
+  the base moves only for as long as fresh commands keep arriving. Zenoh's liveliness lease is
+  seconds long, so this watchdog, not liveliness, is what stops a robot whose client died.
 """
 
 from __future__ import annotations
@@ -28,6 +29,9 @@ import enum
 from dataclasses import dataclass
 
 from kinesphere.protocol import Command
+
+ANONYMOUS = "anonymous"
+"""Who a command without ``sender`` is, in ``estop_by`` and ``lease_holder``."""
 
 DRIVE_TTL_S = 0.5
 """Watchdog for a Drive sent with ``ttl_ms=0``: a base never drives on a single message."""
@@ -46,20 +50,24 @@ class Verdict(enum.Enum):
 
 @dataclass
 class Safety:
-    """E-stop latch and command watchdog; times are seconds on the control loop's clock."""
+    """E-stop latch (and who latched it) and command watchdog; times are seconds."""
 
     estopped: bool = False
     deadline: float | None = None
+    estop_by: str = ""
+    """The sender whose e-stop is latched ("" when not latched)."""
 
     def on_command(self, cmd: Command, now: float) -> Verdict:
         """Classify ``cmd`` received at ``now`` and arm or disarm the watchdog."""
         if cmd.estop:
             self.estopped = True
+            self.estop_by = cmd.sender or ANONYMOUS
             self.deadline = None
             return Verdict.ESTOP
         if self.estopped:
             if cmd.release:
                 self.estopped = False
+                self.estop_by = ""
                 return Verdict.RELEASE
             return Verdict.LATCHED
         if cmd.stop:

@@ -1,0 +1,160 @@
+"""What the robot tells each sender about its commands (``{p}/robot/{id}/ack``), at a bounded rate.
+
+Two small parts:
+
+* :class:`Acks` tracks the command whose target the robot is following, so it can say
+  ``moving`` once its first step ran and, when the motion ends, ``reached``, ``clamped`` or
+  ``blocked``; a different target (or sender) replacing it is ``superseded``. A stream of
+  commands for one target from one ``(sender, session)`` is one motion: each gets
+  ``accepted``, the motion a single ``moving`` and the last command the final stage.
+* :class:`AckLimiter` bounds the publication rate with token buckets, per sender and in all, so
+  a flooding sender cannot make the robot flood the network (or starve others' acks). Acks of
+  e-stops and releases are never held back. Held-back acks are counted, not queued.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections import Counter, OrderedDict
+from collections.abc import Callable, Hashable, Sequence
+from dataclasses import dataclass, field
+
+from kinesphere.protocol import Ack, AckStage, Command, Substitution, encode
+
+log = logging.getLogger(__name__)
+
+SENDER_RATE = 100.0
+"""Acks per second to one sender (a gamepad streams 30 commands a second)."""
+SENDER_BURST = 50.0
+TOTAL_RATE = 1000.0
+"""Acks per second from one robot in all."""
+TOTAL_BURST = 200.0
+MAX_BUCKETS = 256
+"""Senders whose buckets are remembered (least recently acknowledged forgotten first)."""
+URGENT = frozenset({AckStage.ESTOPPED, AckStage.RELEASED})
+"""Acks never held back by the rate limit."""
+
+
+class AckLimiter:
+    """Token buckets: one per sender (bounded table) and one for the robot."""
+
+    def __init__(self, clock: Callable[[], float] = time.monotonic) -> None:
+        self._clock = clock
+        self._buckets: OrderedDict[Hashable, list[float]] = OrderedDict()
+        self._total = [TOTAL_BURST, clock()]
+        self.held = 0
+        """Acks not published because a bucket was empty."""
+
+    def __len__(self) -> int:
+        return len(self._buckets)
+
+    @staticmethod
+    def _take(bucket: list[float], now: float, rate: float, burst: float) -> bool:
+        bucket[0] = min(burst, bucket[0] + (now - bucket[1]) * rate)
+        bucket[1] = now
+        if bucket[0] < 1.0:
+            return False
+        bucket[0] -= 1.0
+        return True
+
+    def allow(self, sender: Hashable) -> bool:
+        now = self._clock()
+        bucket = self._buckets.get(sender)
+        if bucket is None:
+            bucket = self._buckets[sender] = [SENDER_BURST, now]
+            while len(self._buckets) > MAX_BUCKETS:
+                self._buckets.popitem(last=False)
+        self._buckets.move_to_end(sender)
+        ok = self._take(bucket, now, SENDER_RATE, SENDER_BURST) and self._take(
+            self._total, now, TOTAL_RATE, TOTAL_BURST)
+        if not ok:
+            self.held += 1
+        return ok
+
+
+@dataclass
+class Motion:
+    """The command being followed and what the robot said about it."""
+
+    cmd: Command
+    target: Hashable
+    substitutions: list[Substitution] = field(default_factory=list)
+    moved: bool = False
+
+
+class Acks:
+    """One robot's acknowledgements: the followed motion, the rate limit, the publisher.
+
+    ``publish`` puts encoded bytes (None until the agent declared its publisher: nothing is
+    sent); ``lease_holder`` says who holds the robot's lease, for every ack.
+    """
+
+    def __init__(self, robot_id: str, lease_holder: Callable[[], str]) -> None:
+        self.robot_id = robot_id
+        self.lease_holder = lease_holder
+        self.publish: Callable[[bytes], None] | None = None
+        self.limiter = AckLimiter()
+        self.motion: Motion | None = None
+        self.sent = 0
+        self.refused: Counter[str] = Counter()
+        """Commands rejected, by error code (whether or not the ack was held back)."""
+
+    def send(self, cmd: Command, stage: AckStage, detail: str = "", *, code: str = "",
+             substitutions: Sequence[Substitution] = ()) -> None:
+        """Tell ``cmd``'s sender ``stage``, within the rate limit (e-stops: always)."""
+        if stage is AckStage.REJECTED:
+            self.refused[code] += 1
+        if self.publish is None or not (stage in URGENT or self.limiter.allow(cmd.sender)):
+            return
+        try:
+            self.publish(make_ack(self.robot_id, cmd, stage, code=code, detail=detail,
+                                  substitutions=substitutions, lease_holder=self.lease_holder()))
+            self.sent += 1
+        except Exception as exc:  # session closing or congested: the loop goes on
+            log.debug("ack not published: %s", exc)
+
+    @property
+    def substitutions(self) -> list[Substitution]:
+        """Those of the followed motion (``RobotState.substitutions``)."""
+        return self.motion.substitutions if self.motion is not None else []
+
+    def follow(self, cmd: Command, target: Hashable,
+               substitutions: Sequence[Substitution] = ()) -> None:
+        """``cmd`` is now followed; another motion it replaced is ``superseded``."""
+        old = self.motion
+        if old is not None and old.target == target and (
+                old.cmd.sender, old.cmd.session) == (cmd.sender, cmd.session):
+            old.cmd = cmd  # the same stream: the last command gets the final stage
+            old.substitutions = list(substitutions)
+            return
+        self.motion = Motion(cmd, target, list(substitutions))
+        if old is not None:
+            self.send(old.cmd, AckStage.SUPERSEDED,
+                      f"command {cmd.seq} from {cmd.sender or '?'} replaced it")
+
+    def stepped(self) -> Command | None:
+        """The followed command, the first time a step toward it ran (acknowledged
+        ``moving``)."""
+        m = self.motion
+        if m is None or m.moved:
+            return None
+        m.moved = True
+        self.send(m.cmd, AckStage.MOVING)
+        return m.cmd
+
+    def end(self, stage: AckStage, detail: str = "") -> None:
+        """The followed motion is over (reached, halted, replaced): its last command gets
+        ``stage``."""
+        m, self.motion = self.motion, None
+        if m is not None:
+            self.send(m.cmd, stage, detail, substitutions=m.substitutions)
+
+
+def make_ack(robot_id: str, cmd: Command, stage: AckStage, *, code: str = "", detail: str = "",
+             substitutions: Sequence[Substitution] = (), lease_holder: str = "") -> bytes:
+    """The encoded Ack for ``cmd`` (detail cut to the protocol's 1024 characters)."""
+    return encode(Ack(
+        robot_id=robot_id, sender=cmd.sender, session=cmd.session, seq=cmd.seq, stage=stage,
+        code=code, detail=detail[:1024], stamp_ns=time.time_ns(),
+        substitutions=list(substitutions), lease_holder=lease_holder))

@@ -1,0 +1,313 @@
+"""What the robot does with each command: admit it, check the lease and the safety rules, move
+or halt, and tell the sender (``Ack``) at every stage.
+
+The control loop (``runtime.py``) hands over every inbox item and calls :meth:`Conduct.after_step`
+after each step; nothing here runs in another thread. The rules themselves live with their
+logic: ordering and expiry in ``ordering.py``, safety in ``safety.py``, the control lease in
+``lease.py``, acknowledgements in ``acks.py``. Order of the checks for a command: dropped if
+stale or expired (acked ``stale``/``expired``), refused if another sender holds the lease
+(``lease_held``), then the safety verdict (e-stop, latched, release, stop, deadman), then a
+lease-only command is answered ``leased`` and anything else moves.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from collections import deque
+from collections.abc import Callable
+
+from kinesphere.errors import KinesphereError
+from kinesphere.protocol import AckStage, Command, LeaseAction, Pose, Status
+from kinesphere.ratelog import RateLog
+from kinesphere.robots.agent.acks import Acks
+from kinesphere.robots.agent.base import drive_base
+from kinesphere.robots.agent.controller import BLOCKED_TOL, Controller
+from kinesphere.robots.agent.inbox import Resolved
+from kinesphere.robots.agent.lease import Lease, holder_name
+from kinesphere.robots.agent.ordering import Ordering, Received
+from kinesphere.robots.agent.pacing import WARN_EVERY_S
+from kinesphere.robots.agent.resolver import Answer, Resolver, parts_key
+from kinesphere.robots.agent.safety import Safety, Verdict
+from kinesphere.robots.agent.status import reported_status
+
+log = logging.getLogger(__name__)
+
+SETTLE_S = 0.2
+"""Robot time the servos get after a trajectory ends before the body is held to it."""
+_DRIVE = ("drive",)
+"""The target of a motion that only drives the base."""
+
+
+class Conduct:
+    """One robot's response to commands, and the status it reports (module text)."""
+
+    def __init__(
+        self, robot_id: str, controller: Controller, resolver: Resolver,
+        on_resolved: Callable[[int, Answer], None], max_translation_m: float,
+    ) -> None:
+        self.robot_id = robot_id
+        self.controller = controller
+        self.platform = controller.platform.name
+        self.resolver = resolver
+        self.max_translation_m = max_translation_m
+        self._on_resolved = on_resolved
+        self.safety = Safety()
+        self.lease = Lease()
+        self.ordering = Ordering()
+        self.acks = Acks(robot_id, lambda: self.lease.holder)
+        self.latencies: deque[tuple[int, int, int]] = deque(maxlen=10_000)
+        """(seq, sent_ns, first moving step ns) per pose command applied."""
+        self.estop_lag: deque[int] = deque(maxlen=1000)
+        """Per e-stop: control steps begun from its receipt to its handling (1: the next)."""
+        self.ticks = 0
+        """The control loop's step count (set by the loop)."""
+        self._holders: dict[str, Command] = {}  # the lease holder's last command
+        self._status: str = Status.IDLE
+        self._detail = "no command yet"
+        self._fault = ""
+        self._failed_at = -1e9
+        self._body_fault = False
+        self._ratelog = RateLog(log)
+        self._moved_at = 0.0
+
+    def watch(self, now: float) -> None:
+        """The wall-clock timers: an expired lease frees, an expired watchdog holds."""
+        self.lease.expire(now)
+        if self.safety.expired(now) and self.controller.moving:
+            self.halt(Status.HOLDING, "no new command within ttl_ms: holding", AckStage.HOLDING)
+
+    def after_step(self) -> None:
+        """After each step: faults, the first step of a motion, the end of one."""
+        ctrl = self.controller
+        if ctrl.moving:
+            self._moved_at = ctrl.time
+        fault = ctrl.fault()
+        if fault != self._fault:
+            self._fault = fault
+            if fault:
+                self.acks.end(AckStage.BLOCKED, fault)
+                self.set(Status.ERROR, f"{fault} and holding")
+        first = self.acks.stepped()
+        if first is not None:
+            self.latencies.append((first.seq, first.sent_ns, time.time_ns()))
+        motion = self.acks.motion
+        if (motion is not None and motion.moved and motion.target != _DRIVE
+                and not ctrl.moving and ctrl.time - self._moved_at >= SETTLE_S):
+            why = ctrl.blocked(BLOCKED_TOL)
+            if why:
+                self.acks.end(AckStage.BLOCKED, why)
+            elif ctrl.joints.clamped:
+                self.acks.end(AckStage.CLAMPED,
+                              "clamped " + ", ".join(sorted(ctrl.joints.clamped)))
+            else:
+                self.acks.end(AckStage.REACHED)
+
+    def step_failed(self, exc: Exception) -> None:
+        """A step raised (a bug, or a body that failed): hold the body and say so."""
+        now = time.monotonic()
+        if isinstance(exc, KinesphereError):  # the body says what is wrong with it
+            detail = f"body: {exc.message}; holding"
+            self._body_fault = True
+        else:
+            detail = f"internal: control step failed: {exc!r}; holding"
+        if now - self._failed_at > WARN_EVERY_S:
+            self._failed_at = now
+            if isinstance(exc, KinesphereError):
+                log.warning("agent %s: %s", self.robot_id, detail)
+            else:
+                log.exception("agent %s: control step failed", self.robot_id)
+        self._overtake()
+        self.acks.end(AckStage.BLOCKED, detail)
+        self.set(Status.ERROR, detail)
+        try:
+            self.controller.fail_safe()
+        except Exception:
+            log.debug("fail-safe hold failed too", exc_info=True)
+
+    def step_worked(self) -> None:
+        """A step after failed ones went through (e.g. joint states arrive again): say so,
+        and keep holding until a new command."""
+        if self._body_fault:
+            self._body_fault = False
+            self.set(Status.HOLDING, "body working again; holding until a new command")
+
+    def handle(self, item: Received | KinesphereError | Resolved, now_ns: int) -> None:
+        """Act on one inbox item; whatever goes wrong is reported, never raised into the loop."""
+        cmd: Command | None = None
+        try:
+            if isinstance(item, Resolved):
+                waiting = self.ordering.answer(item.ticket)
+                if waiting is None:
+                    return  # overtaken by a newer command, a stop or an e-stop
+                cmd = waiting.cmd
+                self.ordering.acted(cmd.seq)
+                if isinstance(item.answer, KinesphereError):
+                    raise item.answer
+                self._apply_pose(item.answer, waiting.yaw, cmd)
+            elif isinstance(item, KinesphereError):
+                raise item
+            else:
+                cmd = item.cmd
+                self._command(item, now_ns)
+        except KinesphereError as exc:
+            self._rejected(exc, cmd)
+        except Exception as exc:  # a bug must not take the robot's control loop down
+            log.exception("agent %s: %s failed", self.robot_id, self._what(cmd))
+            self._rejected(KinesphereError("internal", repr(exc)), cmd)
+
+    @staticmethod
+    def _what(cmd: Command | None) -> str:
+        return "command" if cmd is None else f"command {cmd.seq} from {cmd.sender or '?'}"
+
+    def _rejected(self, exc: KinesphereError, cmd: Command | None) -> None:
+        """A command the robot could not act on: the sender is told, the status says why."""
+        if cmd is not None:
+            self.ordering.acted(cmd.seq)
+            self.acks.send(cmd, AckStage.REJECTED, exc.message, code=exc.code)
+        self._ratelog(exc.code, "agent %s: %s rejected: %s", self.robot_id, self._what(cmd),
+                      exc)
+        if exc.code == "unavailable":
+            self.set(Status.DATABANK_UNREACHABLE,
+                      f"{self._what(cmd)}: {exc.message}; holding last pose")
+        else:
+            self.set(Status.ERROR, f"{self._what(cmd)}: {exc.code}: {exc.message}")
+
+    def _command(self, item: Received, now_ns: int) -> None:
+        cmd = item.cmd
+        dropped = self.ordering.admit(item, now_ns)
+        if dropped is not None:
+            if dropped.code != "malformed":  # stale or expired: counted, told, not an error
+                log.debug("%s dropped: %s", self._what(cmd), dropped)
+                self.acks.send(cmd, AckStage.REJECTED, dropped.message, code=dropped.code)
+                return
+            raise dropped
+        lease = self.lease.check(cmd, now_ns / 1e9)
+        if not lease.allowed:
+            self.acks.send(cmd, AckStage.REJECTED, f"{lease.holder} holds this robot's lease",
+                      code="lease_held")
+            return
+        if lease.holder == holder_name(cmd):
+            self._taken(lease.taken_from, cmd)
+        verdict = self.safety.on_command(cmd, item.mono_ns / 1e9)
+        if verdict is not Verdict.MOVE or not cmd.parts:
+            self.ordering.acted(cmd.seq)  # acted on now; poses count once resolved
+        if verdict is Verdict.ESTOP:
+            self.estop_lag.append(self.ticks - item.tick)
+            self.halt(Status.ESTOP, f"e-stop from {self.safety.estop_by}; release with a "
+                       "command with release=true (kinesphere estop --release)",
+                       AckStage.SUPERSEDED)
+            log.warning("agent %s: e-stop by %s (seq %d)", self.robot_id, self.safety.estop_by,
+                        cmd.seq)
+            self.acks.send(cmd, AckStage.ESTOPPED)
+        elif verdict is Verdict.LATCHED:
+            self.acks.send(cmd, AckStage.REJECTED, f"e-stop latched by {self.safety.estop_by}; "
+                           "only a release is obeyed", code="estopped")
+        elif verdict is Verdict.RELEASE:
+            self.set(Status.IDLE, "e-stop released; send a command to move")
+            log.warning("agent %s: e-stop released by %s (seq %d)", self.robot_id,
+                        cmd.sender or "?", cmd.seq)
+            self.acks.send(cmd, AckStage.RELEASED)
+        elif verdict is Verdict.STOP:
+            self.halt(Status.STOPPED, "stop command", AckStage.SUPERSEDED)
+            self.acks.send(cmd, AckStage.STOPPED)
+        elif verdict is Verdict.DEADMAN:
+            self.halt(Status.HOLDING, "deadman released: holding", AckStage.HOLDING)
+            self.acks.send(cmd, AckStage.HOLDING, "deadman released")
+        elif cmd.lease is not LeaseAction.NONE and not cmd.parts and cmd.drive is None:
+            self.acks.send(cmd, AckStage.LEASED, f"lease {cmd.lease}: "
+                      + (f"held by {lease.holder}" if lease.holder else "free"))
+        else:
+            self._move(cmd)
+
+    def _taken(self, previous: str, cmd: Command) -> None:
+        """Remember the holder's last command; tell a holder whose lease was taken over."""
+        if previous:
+            last = self._holders.pop(previous, None)
+            if last is not None:
+                self.acks.send(last, AckStage.REJECTED, f"lease taken over by {cmd.sender or '?'}",
+                          code="lease_held")
+        self._holders = {self.lease.holder: cmd}
+
+    def _move(self, cmd: Command) -> None:
+        ctrl = self.controller
+        base = ctrl.base
+        if cmd.drive is not None:
+            self.set(Status.MOVING, drive_base(base, cmd.drive, self.platform))
+        elif base is not None and base.driving:
+            base.stop()
+            if self.acks.motion is not None and self.acks.motion.target == _DRIVE:
+                self.acks.end(AckStage.SUPERSEDED, "the drive ended")
+        if not cmd.parts:
+            if cmd.drive is not None:
+                self.acks.follow(cmd, _DRIVE)
+            self.acks.send(cmd, AckStage.ACCEPTED)
+            return
+        key = parts_key(cmd.parts)
+        hit = self.resolver.cached(key)
+        yaw = ctrl.commanded_base_yaw()
+        if hit is not None:
+            self._overtake()
+            self.ordering.acted(cmd.seq)
+            self._apply_pose(hit, yaw, cmd)
+        else:
+            ticket, overtaken = self.ordering.wait(cmd, yaw)
+            if overtaken is not None:
+                self.acks.send(overtaken.cmd, AckStage.SUPERSEDED, "a newer command arrived first")
+            self.resolver.submit(ticket, key, self._on_resolved)
+
+    def _apply_pose(self, pose: Pose, yaw: float | None, cmd: Command) -> None:
+        ctrl = self.controller
+        if pose.platform != self.platform:
+            raise KinesphereError("internal", f"databank answered for {pose.platform!r}")
+        if pose.translation is not None:
+            far = math.hypot(*pose.translation[:2])
+            if not far <= self.max_translation_m:
+                raise KinesphereError(
+                    "size_out_of_range", f"the pose translates the base {far:.4g} m; this "
+                    f"robot moves at most {self.max_translation_m:g} m per command")
+        try:
+            clamps = ctrl.joints.retarget(pose.joints)
+        except (KeyError, ValueError) as exc:
+            raise KinesphereError(
+                "internal", f"databank pose has joints {self.platform} cannot take: {exc}"
+            ) from None
+        if pose.translation is not None and ctrl.base is not None and not ctrl.base.driving:
+            ctrl.base.translate(pose.translation, yaw)
+        beyond = [c for c in clamps if c.beyond]
+        if beyond:
+            detail = "clamped " + ", ".join(f"{c.joint} {c.requested:+.4f}->{c.target:+.4f}"
+                                             for c in beyond)
+            log.info("agent %s: %s", self.robot_id, detail)
+        else:
+            detail = f"to {pose.limb}/{pose.origin}/{pose.direction}/{pose.size:g}"
+        self.set(Status.MOVING, detail)
+        self.acks.follow(cmd, parts_key(cmd.parts), pose.substitutions)
+        self.acks.send(cmd, AckStage.ACCEPTED, detail, substitutions=pose.substitutions)
+
+    def _overtake(self) -> None:
+        overtaken = self.ordering.overtake()
+        if overtaken is not None:
+            self.acks.send(overtaken.cmd, AckStage.SUPERSEDED, "a newer command arrived first")
+
+    def halt(self, status: str, detail: str, stage: AckStage) -> None:
+        self._overtake()  # a pose still waiting for the databank no longer applies
+        self.acks.end(stage, detail)
+        self.controller.halt()
+        self.set(status, detail)
+
+    def set(self, status: str, detail: str) -> None:
+        self._status, self._detail = status, detail
+
+    def status(self) -> tuple[str, str]:
+        """The status and detail to publish now (precedence: :func:`reported_status`)."""
+        ctrl = self.controller
+        reported: tuple[str, str] = reported_status(
+            self._status, self._detail, estopped=self.safety.estopped,
+            reachable=self.resolver.reachable, last_error=self.resolver.last_error,
+            moving=ctrl.moving, clamped=bool(ctrl.joints.clamped),
+            settled=ctrl.time - self._moved_at >= SETTLE_S,
+            blocked=lambda: ctrl.blocked(BLOCKED_TOL),
+        )
+        return reported

@@ -1,0 +1,148 @@
+"""What arrived for the control loop since its last step, bounded, e-stops first.
+
+Zenoh callbacks (any thread) put decoded commands, undecodable payloads and databank answers
+here; the control loop drains it once per step. Why not a plain queue:
+
+* **E-stops go ahead of everything**, in a lane of their own, so a flood of commands from one
+  sender cannot delay another's e-stop: the loop handles every e-stop of a step before any
+  other command.
+* **Bounded**: the robot acts on the newest command of each sender, so a motion command
+  replaces the one still waiting from the same ``(sender, session)`` (the replaced one is
+  acknowledged ``superseded``). Commands that change more than the target (stop, e-stop
+  release, lease actions, deadman release) are kept in order, at most :data:`PER_SENDER` per
+  pair; at most :data:`MAX_PENDING` pairs wait at once (the least recently heard goes first),
+  and of undecodable payloads only the last is kept. Every bound is a count of messages the
+  protocol itself bounds in bytes (64 KiB each).
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections import OrderedDict, deque
+from dataclasses import dataclass
+
+from kinesphere.errors import KinesphereError
+from kinesphere.protocol import Command, LeaseAction
+from kinesphere.robots.agent.ordering import Received
+from kinesphere.robots.agent.resolver import Answer
+
+MAX_ESTOPS = 64
+"""E-stops kept per step (one is enough to latch; the rest only wait for their acks)."""
+MAX_PENDING = 64
+"""``(sender, session)`` pairs with commands waiting for the next step."""
+PER_SENDER = 8
+"""Commands one pair may have waiting."""
+
+_MONO0 = time.monotonic_ns()
+_WALL0 = time.time_ns()
+
+
+def clocks() -> tuple[int, int]:
+    """The robot's clocks now in ns: monotonic, and the wall clock derived from it."""
+    mono = time.monotonic_ns()
+    return mono, _WALL0 + (mono - _MONO0)
+
+
+def received(cmd: Command, tick: int = 0) -> Received:
+    """``cmd`` stamped with the robot's clocks now and the agent's step count ``tick``."""
+    mono, wall = clocks()
+    return Received(cmd, mono, wall, tick)
+
+
+@dataclass(frozen=True)
+class Resolved:
+    """The databank's answer for a ticket."""
+
+    ticket: int
+    answer: Answer
+
+
+@dataclass(frozen=True)
+class Drained:
+    """One step's worth: e-stops, then everything else in arrival order, then the commands
+    replaced while they waited (to be acknowledged ``superseded``)."""
+
+    estops: list[Received]
+    items: list[Received | KinesphereError | Resolved]
+    superseded: list[Received]
+
+
+def replaceable(cmd: Command) -> bool:
+    """A plain motion command: only its target matters once a newer one arrived."""
+    return (cmd.deadman and not (cmd.estop or cmd.stop or cmd.release)
+            and cmd.lease is LeaseAction.NONE)
+
+
+class Inbox:
+    """Thread-safe intake; :meth:`drain` empties it."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._arrivals = 0
+        self._estops: deque[Received] = deque(maxlen=MAX_ESTOPS)
+        self._pairs: OrderedDict[tuple[str, str], deque[tuple[int, Received]]] = OrderedDict()
+        self._other: deque[tuple[int, KinesphereError | Resolved]] = deque(maxlen=16)
+        self._bad: tuple[int, KinesphereError] | None = None
+        self._superseded: deque[Received] = deque(maxlen=MAX_PENDING * PER_SENDER)
+
+    def put(self, item: Received) -> None:
+        cmd = item.cmd
+        with self._lock:
+            if cmd.estop:
+                self._estops.append(item)
+                return
+            self._arrivals += 1
+            key = (cmd.sender, cmd.session)
+            queue = self._pairs.get(key)
+            if queue is None:
+                queue = self._pairs[key] = deque()
+                while len(self._pairs) > MAX_PENDING:
+                    _, evicted = self._pairs.popitem(last=False)
+                    self._superseded.extend(r for _, r in evicted)
+            self._pairs.move_to_end(key)
+            if queue and replaceable(cmd) and replaceable(queue[-1][1].cmd) \
+                    and cmd.seq > queue[-1][1].cmd.seq:
+                self._superseded.append(queue.pop()[1])
+            elif len(queue) >= PER_SENDER:
+                self._superseded.append(queue.popleft()[1])
+            queue.append((self._arrivals, item))
+
+    def put_bad(self, error: KinesphereError) -> None:
+        """A payload that did not decode: only the last one waits (it names no sender)."""
+        with self._lock:
+            self._arrivals += 1
+            self._bad = (self._arrivals, error)
+
+    def put_resolved(self, ticket: int, answer: Answer) -> None:
+        with self._lock:
+            self._arrivals += 1
+            self._other.append((self._arrivals, Resolved(ticket, answer)))
+
+    def __len__(self) -> int:
+        with self._lock:
+            return (len(self._estops) + sum(len(q) for q in self._pairs.values())
+                    + len(self._other) + (self._bad is not None))
+
+    def drain(self) -> Drained:
+        with self._lock:
+            if not (self._estops or self._pairs or self._other or self._bad
+                    or self._superseded):
+                return _EMPTY
+            estops = list(self._estops)
+            self._estops.clear()
+            queued: list[tuple[int, Received | KinesphereError | Resolved]] = [
+                entry for queue in self._pairs.values() for entry in queue]
+            queued.extend(self._other)
+            if self._bad is not None:
+                queued.append(self._bad)
+            self._pairs.clear()
+            self._other.clear()
+            self._bad = None
+            superseded = list(self._superseded)
+            self._superseded.clear()
+        queued.sort(key=lambda entry: entry[0])
+        return Drained(estops, [item for _, item in queued], superseded)
+
+
+_EMPTY = Drained([], [], [])

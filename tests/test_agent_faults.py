@@ -1,0 +1,189 @@
+"""An agent under abuse and faults: frozen and thawed, flooded, fed garbage, told to forget
+a sender. It must drop what is too old, keep e-stops first, stay bounded, and say so.
+
+Real Zenoh on loopback, the real databank, a real agent process for the freeze (SIGSTOP and
+SIGCONT), in-process agents where the test reads the agent's own counters.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+
+import msgspec
+import numpy as np
+import psutil
+import pytest
+import zenoh
+from test_agent_support import (
+    KEYS,
+    ROOT,
+    WAIT_S,
+    AckWatch,
+    Databank,
+    Operator,
+    StateWatch,
+    databank,
+    hub,
+    joints_close,
+    running_agent,
+)
+
+from kinesphere import zconfig
+from kinesphere.protocol import MAX_INT, Catalogue, Command, SpatialCommand, encode
+from kinesphere.robots.agent import acks as ack_rules
+from kinesphere.robots.agent.inbox import MAX_PENDING, PER_SENDER
+from kinesphere.robots.agent.ordering import MAX_SENDERS
+
+__all__ = ["databank", "hub"]  # fixtures
+
+
+def far(cat: Catalogue, k: int) -> tuple[str, str, str, float]:
+    entry = cat.limbs[0]
+    pulls = [d for d in entry.directions if d != "place-middle"]
+    return (entry.limb, entry.origin, pulls[k], float(max(entry.sizes)))
+
+
+def test_commands_queued_while_the_agent_was_frozen_never_run(
+    hub: tuple[zenoh.Session, str], databank: Databank
+) -> None:
+    """SIGSTOP a real agent while an operator streams at 30 Hz (ttl 300 ms), switch to another
+    target while it is frozen, stop streaming, SIGCONT: nothing moves, the commands are
+    dropped as expired and counted."""
+    session, endpoint = hub
+    cat = databank.catalogue("baxter")
+    here, there = far(cat, 0), far(cat, -1)
+    pose = databank.query("baxter", SpatialCommand(*here))
+    watch = StateWatch(session, "frozen")
+    acks = AckWatch(session, "frozen")
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "kinesphere.cli", "agent", "baxter", "--id", "frozen",
+         "--connect", endpoint, "--listen", zconfig.LOOPBACK_ANY_PORT],
+        cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    op = Operator(session, "frozen", sender="ann", client_session="a")
+    try:
+        watch.wait(lambda s: True, "the agent is up")
+        while True:  # stream the first target until the robot is there
+            seq = op.send(here, ttl_ms=300)
+            state = watch.after(seq, lambda s: True, "a state")
+            if "reached" in acks.stages("ann", seq):
+                break
+        assert joints_close(state, pose.joints, 0.02)
+        before = np.array(state.q)
+        goal = databank.query("baxter", SpatialCommand(*there)).joints
+        index = [state.joint_names.index(j) for j in goal]
+        gap = np.abs(before[index] - np.array(list(goal.values()))).max()
+        assert gap > 0.3, "the second target is a real motion away"
+        proc.send_signal(signal.SIGSTOP)
+        frozen = [op.send(there, ttl_ms=300) for _ in range(30) if not time.sleep(1 / 30)]
+        time.sleep(1.0)  # the operator stopped: a freeze that outlasts the ttl
+        seen = len(watch.states)
+        proc.send_signal(signal.SIGCONT)
+        for seq in frozen[-3:]:
+            ack = acks.wait(lambda a, seq=seq: a.seq == seq and a.stage in (
+                "rejected", "superseded", "accepted"), "a verdict on a frozen command")
+            assert ack.stage != "accepted", ack
+        assert any(a.code == "expired" for a in acks.acks if a.seq in frozen)
+        after = watch.wait(lambda s: len(watch.states) > seen + 75, "1.5 s of states after")
+        moved = max(float(np.abs(np.array(s.q) - before).max())
+                    for s in watch.states[seen:])
+        assert moved < 5e-3, f"the robot moved {moved:.4f} rad after SIGCONT (of {gap:.2f})"
+        assert after.dropped >= 1 and after.last_command_seq < frozen[0]
+    finally:
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGCONT)
+            proc.send_signal(signal.SIGTERM)
+            try:
+                proc.wait(timeout=WAIT_S)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+        op.close()
+        watch.close()
+        acks.close()
+
+
+def test_a_flood_cannot_delay_an_estop_and_every_table_stays_bounded(
+    hub: tuple[zenoh.Session, str], databank: Databank
+) -> None:
+    session, endpoint = hub
+    cat = databank.catalogue("youbot")
+    parts = [far(cat, k) for k in range(4)]
+    acks = AckWatch(session, "flooded")
+    with running_agent(endpoint, "youbot", robot_id="flooded", speed=1.0) as (agent, watch):
+        agent.resolver.cache_bytes = 50_000
+        rss = psutil.Process(os.getpid()).memory_info().rss
+        flood = session.declare_publisher(KEYS.command("flooded"))
+        zconfig.wait_matching(flood)
+        estop = Operator(session, "flooded", sender="panic", client_session="p")
+        n = 20_000
+        done = threading.Event()
+
+        def flooding() -> None:
+            for i in range(n):  # 3 000 senders with names at the protocol's cap, distinct keys
+                flood.put(encode(Command(
+                    seq=i + 1, sent_ns=time.time_ns(), deadman=True, ttl_ms=1000,
+                    parts=[SpatialCommand(*parts[i % 4][:3], 1.0 + (i % 997) / 1000)],
+                    sender=f"{i % 3000:064d}", session="s" * 64)))
+            done.set()
+
+        thread = threading.Thread(target=flooding)
+        thread.start()
+        acks.wait(lambda a: a.sender.startswith("0"), "the flood reaches the robot")
+        seq = estop.send(estop=True)
+        acks.of("panic", seq, "estopped")
+        watch.wait(lambda s: s.status == "estop" and s.estop_by == "panic", "latched")
+        thread.join()
+        done.wait(WAIT_S)
+        watch.wait(lambda s: len(agent.inbox) == 0, "the flood drained")
+        seq = estop.send(release=True)
+        acks.of("panic", seq, "released")
+        grown = psutil.Process(os.getpid()).memory_info().rss - rss
+        conduct = agent.conduct
+        assert list(conduct.estop_lag) and max(conduct.estop_lag) <= 1, conduct.estop_lag
+        assert conduct.acks.refused["estopped"] > 0, "the e-stop landed mid-flood"
+        assert len(conduct.ordering) <= MAX_SENDERS
+        assert len(conduct.acks.limiter) <= ack_rules.MAX_BUCKETS
+        assert len(agent.inbox) <= MAX_PENDING * PER_SENDER
+        assert agent.resolver.cached_bytes <= 50_000 and len(agent.resolver) > 0
+        assert grown < 64 * 2**20, f"RSS grew {grown / 2**20:.0f} MiB"
+        flooded_acks = [a for a in acks.acks if a.sender.startswith("0")]
+        stamps = [a.stamp_ns for a in flooded_acks]
+        span = (max(stamps) - min(stamps)) / 1e9  # robot's clock, first to last flood ack
+        assert len(flooded_acks) <= ack_rules.TOTAL_BURST + ack_rules.TOTAL_RATE * span + 1
+        assert len(flooded_acks) < n / 4, "acks are bounded in rate, not one per command"
+        estop.close()
+        zconfig.undeclare(flood)
+    acks.close()
+
+
+def test_garbage_is_malformed_in_one_log_line_and_a_forged_clock_silences_nobody(
+    hub: tuple[zenoh.Session, str], databank: Databank, caplog: pytest.LogCaptureFixture,
+    capfd: pytest.CaptureFixture[str],
+) -> None:
+    session, endpoint = hub
+    cat = databank.catalogue("youbot")
+    acks = AckWatch(session, "garbage")
+    deep = b"\x91" * 100_000 + b"\xc0"
+    oversized = msgspec.msgpack.encode({"type": "command", "pad": "x" * 70_000})
+    with caplog.at_level(logging.WARNING, logger="kinesphere.robots.agent"), \
+            running_agent(endpoint, "youbot", robot_id="garbage", speed=2.0) as (agent, watch):
+        op = Operator(session, "garbage", sender="victim")
+        for _ in range(100):
+            for payload in (deep, oversized, b"\x93not a command"):
+                op.raw(payload)
+        watch.wait(lambda s: s.status == "error" and "malformed" in s.detail, "reported")
+        forged = op.send(far(cat, 0), seq=MAX_INT, sent_ns=MAX_INT)
+        assert acks.of("victim", forged, "rejected").code == "malformed"
+        seq = op.send(far(cat, 1), seq=1)
+        acks.of("victim", seq, "accepted", "the victim's next command is obeyed")
+        op.close()
+    acks.close()
+    refusals = [r for r in caplog.records if "command refused" in r.getMessage()]
+    assert 1 <= len(refusals) <= 3, [r.getMessage() for r in refusals]
+    assert "Traceback" not in capfd.readouterr().err
