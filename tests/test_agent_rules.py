@@ -115,6 +115,11 @@ def test_lease_rules() -> None:
     assert lease.expire(0.8 + LEASE_TIMEOUT_S + 0.01) == "a" and lease.holder == ""
     assert lease.check(cmd(7, **b), 5.0).holder == "b"
     assert lease.check(cmd(9, sender="", session=""), 5.1).holder == "b", "anonymous waits"
+    assert lease.expire(5.0 + LEASE_TIMEOUT_S + 0.01) == "b"
+    old_client = lease.check(cmd(10, sender="v1", session=""), 9.0)
+    assert old_client.allowed and lease.holder == "", "a client without session takes no lease"
+    assert lease.check(cmd(11, sender="v1", session="", lease=LeaseAction.ACQUIRE), 9.1).holder \
+        == "v1", "unless it asks"
 
 
 def test_inbox_puts_estops_first_coalesces_motion_and_stays_bounded() -> None:

@@ -5,8 +5,9 @@ The control loop (``runtime.py``) hands over every inbox item and calls :meth:`C
 after each step; nothing here runs in another thread. The rules themselves live with their
 logic: ordering and expiry in ``ordering.py``, safety in ``safety.py``, the control lease in
 ``lease.py``, acknowledgements in ``acks.py``. Order of the checks for a command: dropped if
-stale or expired (acked ``stale``/``expired``), refused if another sender holds the lease
-(``lease_held``), then the safety verdict (e-stop, latched, release, stop, deadman), then a
+stale or expired (acked ``stale``/``expired``); while an e-stop is latched, refused as
+``estopped`` (only an e-stop or a release goes further); refused if another sender holds the
+lease (``lease_held``); then the safety verdict (e-stop, release, stop, deadman); then a
 lease-only command is answered ``leased`` and anything else moves.
 """
 
@@ -183,13 +184,16 @@ class Conduct:
                 self.acks.send(cmd, AckStage.REJECTED, dropped.message, code=dropped.code)
                 return
             raise dropped
-        lease = self.lease.check(cmd, now_ns / 1e9)
-        if not lease.allowed:
-            self.acks.send(cmd, AckStage.REJECTED, f"{lease.holder} holds this robot's lease",
-                      code="lease_held")
-            return
-        if lease.holder == holder_name(cmd):
-            self._taken(lease.taken_from, cmd)
+        if self.safety.estopped and not (cmd.estop or cmd.release):
+            self.lease.touch(cmd, now_ns / 1e9)  # latched: refused as such, whoever holds it
+        else:
+            lease = self.lease.check(cmd, now_ns / 1e9)
+            if not lease.allowed:
+                self.acks.send(cmd, AckStage.REJECTED, f"{lease.holder} holds this robot's "
+                               "lease", code="lease_held")
+                return
+            if lease.holder == holder_name(cmd):
+                self._taken(lease.taken_from, cmd)
         verdict = self.safety.on_command(cmd, item.mono_ns / 1e9)
         if verdict is not Verdict.MOVE or not cmd.parts:
             self.ordering.acted(cmd.seq)  # acted on now; poses count once resolved
@@ -216,8 +220,9 @@ class Conduct:
             self.halt(Status.HOLDING, "deadman released: holding", AckStage.HOLDING)
             self.acks.send(cmd, AckStage.HOLDING, "deadman released")
         elif cmd.lease is not LeaseAction.NONE and not cmd.parts and cmd.drive is None:
-            self.acks.send(cmd, AckStage.LEASED, f"lease {cmd.lease}: "
-                      + (f"held by {lease.holder}" if lease.holder else "free"))
+            holder = self.lease.holder
+            self.acks.send(cmd, AckStage.LEASED,
+                           f"lease {cmd.lease}: " + (f"held by {holder}" if holder else "free"))
         else:
             self._move(cmd)
 

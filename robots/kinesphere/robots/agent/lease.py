@@ -7,7 +7,9 @@ Pure logic on the robot's monotonic clock. The rules (``docs/protocol.md``, "Con
   from the holder keeps the lease; while the lease is free it acquires it; from anyone else it
   is refused with ``lease_held`` naming the holder. A deadman release (``deadman=false``)
   needs the lease too, but never acquires it: an idle operator's pad cannot hold someone
-  else's robot.
+  else's robot. A command without ``session`` (a client older than leases) never acquires it
+  implicitly either: it is obeyed while the lease is free and refused while another holds it,
+  so clients that cannot release a lease do not lock each other out.
 * ``lease: "acquire"`` asks for it (refused while another holds it), ``"take"`` takes it over
   (logged; the previous holder is told), ``"release"`` gives it back.
 * Any command from the holder keeps it alive; silent for :data:`LEASE_TIMEOUT_S`, it expires.
@@ -63,6 +65,11 @@ class Lease:
             return gone
         return ""
 
+    def touch(self, cmd: Command, now: float) -> None:
+        """``cmd`` was heard (and refused for another reason): it keeps its sender's lease."""
+        if self.holder and self.holder == holder_name(cmd):
+            self._heard = now
+
     def check(self, cmd: Command, now: float) -> LeaseVerdict:
         """Apply the rules above to ``cmd`` received at ``now``."""
         self.expire(now)
@@ -82,7 +89,7 @@ class Lease:
             if previous:
                 log.warning("lease taken over by %r from %r", who, previous)
             return LeaseVerdict(True, who, previous)
-        if not self.holder and (cmd.deadman or action is LeaseAction.ACQUIRE):
+        if not self.holder and ((cmd.deadman and cmd.session) or action is LeaseAction.ACQUIRE):
             self.holder, self._heard = who, now
             return LeaseVerdict(True, who)
         return LeaseVerdict(mine or not self.holder, self.holder)
