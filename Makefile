@@ -13,7 +13,7 @@ export SDL_VIDEODRIVER ?= dummy
 export SDL_AUDIODRIVER ?= dummy
 export PYTHONDONTWRITEBYTECODE := 1
 
-.PHONY: install demo test lint typecheck layers bench lock clean
+.PHONY: install demo test lint typecheck layers bench soak lock clean
 
 $(STAMP): pyproject.toml robots/pyproject.toml services/pyproject.toml clients/pyproject.toml deploy/pyproject.toml constraints.txt
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -40,6 +40,13 @@ layers: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/python -m bench
+
+# The fuzz and flood tests at full size: KINESPHERE_SOAK_SCALE times what `make test` sends,
+# each printing one "SOAK ..." line (sent, named errors, RSS before/after, motion after stop).
+SOAK_SCALE ?= 20
+SOAK_TESTS := $(wildcard tests/test_*_fuzz.py tests/test_*_flood.py tests/test_system_soak.py)
+soak: $(STAMP)
+	KINESPHERE_SOAK_SCALE=$(SOAK_SCALE) $(BIN)/python -m pytest -q -s $(SOAK_TESTS)
 
 # Re-pin what CI tests with: resolve the newest allowed versions in a scratch venv, freeze them.
 lock:

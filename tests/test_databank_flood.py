@@ -1,4 +1,5 @@
-"""A databank process under a flood of invented keys and padded requests stays bounded in memory.
+"""A databank process under a flood of invented keys and padded requests stays bounded in
+memory, and under fuzzed requests answers every one with a named error.
 
 Before: each error answer was cached under its key (3,000 unknown-platform keys of 30 KB added
 179 MB), compound answers were cached under their whole padded payloads (2,000 added 135 MB),
@@ -21,6 +22,7 @@ from test_databank_support import Tokens, peer, serve_process
 from test_soak_support import MIB, SCALE, Tally, mib, rss
 
 from kinesphere import protocol as pr
+from kinesphere.errors import ERROR_CODES
 from kinesphere.keyexpr import Keys
 from kinesphere.services.databank.replies import DEFAULT_BUDGET
 from kinesphere.zconfig import LOOPBACK_ANY_PORT, close_session, loopback_hub
@@ -52,6 +54,7 @@ class Flood:
         self._pending: list[zenoh.Handler[zenoh.Reply]] = []
 
     def get(self, key: str, payload: bytes | None = None) -> None:
+        self.tally.sent += 1
         self._pending.append(self.session.get(key, payload=payload, timeout=10.0))
         if len(self._pending) >= BATCH:
             self.drain()
@@ -149,3 +152,79 @@ def test_flood_of_invented_keys_and_padded_requests_is_bounded(
     assert set(tally.codes) == {"malformed", "unknown_platform", "ok"}
     assert after - before < growth_bound(), tally.report()
     assert after - mid < PLATEAU, tally.report()
+
+
+def fuzz_request(rng: random.Random, valid: list[tuple[str, bytes | None]]
+                 ) -> tuple[str, bytes | None]:
+    """A valid request (key, payload) with its key or its payload mutated."""
+    key, payload = rng.choice(valid)
+    if payload is None or rng.random() < 0.3:
+        head, _, tail = key.rpartition("/")
+        segs = key.split("/")
+        i = rng.randrange(2, len(segs))
+        choices = ["", "x" * rng.randint(60, 200), segs[i] * 3, "**", "*", "$*", "@x",
+                   "-1", "1e308", "nan", "3.5", "far", "Left High", "\u00e9t\u00e9",
+                   tail[::-1], head[:3]]
+        segs[i] = rng.choice(choices)
+        return "/".join(s for s in segs if s != "" or rng.random() < 0.5), payload
+    b = bytearray(payload)
+    for _ in range(rng.randint(1, 6)):
+        op = rng.randrange(3)
+        i = rng.randrange(len(b))
+        if op == 0:
+            b[i] = rng.randrange(256)
+        elif op == 1:
+            del b[i:i + rng.randint(1, 8)]
+        else:
+            b[i:i] = rng.choice([b"\x91" * 3000 + b"\xc0", b"\xcf" + b"\xff" * 8,
+                                 b"\xdd\xff\xff\xff\xff", rng.randbytes(rng.randint(1, 32))])
+    return key, bytes(b)
+
+
+def test_fuzzed_requests_get_named_errors_and_valid_ones_stay_exact(
+    served: tuple[zenoh.Session, int],
+) -> None:
+    """Mutated keys and payloads of real requests: every reply is an answer or an Error with a
+    known code, the databank neither dies nor logs a traceback, and valid answers never
+    change (checked byte for byte every 500 requests)."""
+    client, pid = served
+    rng = random.Random(7)
+    part = {"limb": "limb_11", "origin": "distal_11", "direction": "left-high", "size": 2}
+    record = pr.RecordRequest(limb="limb_11", origin="distal_11", direction="left-high",
+                              size=2, joints={"right_s0": 0.1})
+    valid: list[tuple[str, bytes | None]] = [
+        (KEYS.pose("baxter", *ARM, 2), None),
+        (KEYS.pose("youbot", "limb_11", "distal_11", "forward-middle", 4.5), None),
+        (KEYS.catalogue("nao"), None),
+        (KEYS.compound("baxter"), msgspec.msgpack.encode(
+            {"type": "compound_request", "parts": [part]})),
+        (KEYS.record("baxter"), pr.encode(record)),  # writes are off: forbidden
+    ]
+    good = reference(client)
+    tally = Tally("databank fuzz")
+    flood = Flood(client, tally)
+    for _ in range(50):  # warm up: caches, Zenoh buffers, the allocator
+        for key, payload in valid:
+            flood.get(key, payload)
+        flood.get(KEYS.compound("baxter"), compound(rng.randrange(10**6), 1000))
+    flood.drain()
+    tally.sent, tally.codes = 0, type(tally.codes)()
+    before = rss(pid)
+    n = 5000 * SCALE
+    for i in range(n):
+        key, payload = fuzz_request(rng, valid)
+        try:
+            flood.get(key, payload)
+        except zenoh.ZError:  # a key Zenoh itself refuses never leaves the client
+            tally.add("not a key expression")
+        if i % 500 == 0:
+            flood.drain()
+            assert reference(client) == good
+    flood.drain()
+    after = rss(pid)
+    tally.extra = {"RSS before": mib(before), "after": mib(after)}
+    tally.report()
+    known = {"ok", "no answer", "not a key expression", *ERROR_CODES} - {"internal"}
+    assert set(tally.codes) <= known, tally.codes
+    assert tally.codes["malformed"] > n // 4
+    assert after - before < growth_bound()

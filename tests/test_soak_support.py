@@ -33,13 +33,14 @@ class Tally:
         self.extra: dict[str, object] = {}
 
     def add(self, code: str) -> None:
-        self.sent += 1
+        """One outcome (a reply's code, ``ok``, ``no answer``); ``sent`` counts requests."""
         self.codes[code] += 1
 
     def report(self) -> str:
         codes = ", ".join(f"{c} {n}" for c, n in sorted(self.codes.items()))
         extra = "".join(f"; {k} {v}" for k, v in self.extra.items())
-        line = f"SOAK {self.name} (scale {SCALE}): sent {self.sent}; {codes}{extra}"
+        line = f"SOAK {self.name} (scale {SCALE}): sent {self.sent}"
+        line += f"; {codes}{extra}" if codes else extra
         print(line, file=sys.stderr if SCALE == 1 else sys.stdout, flush=True)
         return line
 
