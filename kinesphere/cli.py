@@ -10,13 +10,22 @@ import argparse
 import logging
 import os
 import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from importlib.metadata import entry_points, version
 from pathlib import Path
 from typing import Any
 
 from kinesphere.cliargs import PLATFORMS_ENV, add_platforms_argument, use_platform_dirs
 from kinesphere.errors import KinesphereError
+
+ROLE_COMMANDS: dict[str, tuple[str, ...]] = {
+    "kinesphere-robots": ("agent", "describe", "platform", "platforms"),
+    "kinesphere-services": ("databank", "ecl", "pose", "query"),
+    "kinesphere-clients": ("estop", "gamepad", "play", "ros2", "send"),
+    "kinesphere-deploy": ("router", "status", "up"),
+}
+"""Which distribution brings which command, so a host without it can say what to install
+(names only: the core imports no role). A test keeps it equal to the registered commands."""
 
 
 def _register_core(sub: Any) -> None:
@@ -85,9 +94,49 @@ def _platforms_everywhere(parser: argparse.ArgumentParser) -> None:
                 _platforms_everywhere(child)
 
 
+def commands(parser: argparse.ArgumentParser) -> dict[str, argparse.ArgumentParser]:
+    """The sub-commands ``parser`` offers on this host."""
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            return dict(action.choices)
+    return {}
+
+
+def missing_role(command: str, offered: Iterable[str]) -> str | None:
+    """The message for a command whose distribution is not installed here, else None."""
+    if command in offered:
+        return None
+    dist = next((d for d, names in ROLE_COMMANDS.items() if command in names), None)
+    if dist is None:
+        return None
+    return (f"'kinesphere {command}' comes with {dist}, which is not installed on this host "
+            f"(pip install {dist}); this host runs: {', '.join(sorted(offered))}")
+
+
+
+
+def _command_word(parser: argparse.ArgumentParser, words: Sequence[str]) -> str | None:
+    """The sub-command in ``words``: the first word that is no option nor an option's value."""
+    valued = {o for a in parser._actions if a.option_strings and a.nargs != 0
+              for o in a.option_strings}
+    rest = iter(words)
+    for word in rest:
+        if word in valued:
+            next(rest, None)
+        elif not word.startswith("-"):
+            return word
+    return None
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    words = list(sys.argv[1:] if argv is None else argv)
+    command = _command_word(parser, words)
+    message = None if command is None else missing_role(command, commands(parser))
+    if message is not None:
+        print(f"error: {message} [unavailable]", file=sys.stderr)
+        return 2
+    args = parser.parse_args(words)
     logging.basicConfig(
         level=logging.DEBUG if args.verbose else logging.INFO,
         format="%(asctime)s %(name)s %(levelname)s %(message)s",

@@ -1,0 +1,191 @@
+"""Each host installs only its role: a fresh venv per host, built from this checkout's wheels
+with ``-c constraints.txt``, runs its commands, lacks the others' (with a clear message), and
+holds none of the packages that host must not carry."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+from collections.abc import Iterator
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+from kinesphere.cli import ROLE_COMMANDS, _command_word, build_parser, commands, missing_role
+
+ROOT = Path(__file__).resolve().parents[1]
+DISTS = {".": "kinesphere", "robots": "kinesphere-robots", "services": "kinesphere-services",
+         "clients": "kinesphere-clients", "deploy": "kinesphere-deploy"}
+INSTALL_TIMEOUT_S = 600
+
+
+@dataclass(frozen=True)
+class Host:
+    parts: tuple[str, ...]
+    """Folders of this checkout it installs (their distributions, see DISTS)."""
+    smoke: tuple[tuple[tuple[str, ...], str], ...]
+    """(arguments, text the output must contain): each must exit 0."""
+    absent: tuple[str, ...]
+    """Distributions this host must not carry."""
+    lacks: tuple[str, str]
+    """(a command of a role not installed here, the distribution it names)."""
+
+
+HOSTS = {
+    "robot": Host(
+        (".", "robots"),
+        ((("agent", "--help"), "--body"), (("describe", "baxter"), "baxter: 14 DOF"),
+         (("platforms",), "youbot")),
+        ("pygame", "mink", "matplotlib"),
+        ("gamepad", "kinesphere-clients"),
+    ),
+    "operator": Host(
+        (".", "clients"),
+        ((("send", "--help"), "--drive"), (("gamepad", "--help"), "deadman"),
+         (("play", "--help"), "left_high")),
+        ("mujoco", "mink", "ruckig", "matplotlib"),
+        ("agent", "kinesphere-robots"),
+    ),
+    "databank": Host(
+        (".", "robots", "services"),
+        ((("query", "--help"), "--catalogue"),
+         (("ecl", "get", "baxter", "right_arm", "right_shoulder", "left-high", "far"),
+          "right_s0")),
+        ("pygame", "matplotlib"),
+        ("send", "kinesphere-clients"),
+    ),
+    "router": Host(
+        (".", "deploy"),
+        ((("router", "--help"), "--config"), (("status", "--help"), "--timeout")),
+        ("mujoco", "pygame", "mink", "ruckig", "matplotlib"),
+        ("databank", "kinesphere-services"),
+    ),
+}
+
+
+def _clean_env() -> dict[str, str]:
+    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "VIRTUAL_ENV")}
+    env["PIP_DISABLE_PIP_VERSION_CHECK"] = "1"
+    return env
+
+
+def _run(cmd: list[str], cwd: Path, timeout: float = 120) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(cmd, cwd=cwd, env=_clean_env(), capture_output=True, text=True,
+                          timeout=timeout)
+
+
+def _install(name: str, host: Host, wheels: dict[str, Path], base: Path) -> Path:
+    venv = base / name
+    made = _run([sys.executable, "-m", "venv", "--without-pip", str(venv)], base)
+    assert made.returncode == 0, made.stderr
+    pip = [sys.executable, "-m", "pip", "--python", str(venv / "bin" / "python"), "install",
+           "--quiet", "--no-compile", "-c", str(ROOT / "constraints.txt")]
+    done = _run([*pip, *(str(wheels[DISTS[p]]) for p in host.parts)], base, INSTALL_TIMEOUT_S)
+    assert done.returncode == 0, f"{name} host: pip failed:\n{done.stdout}\n{done.stderr}"
+    return venv
+
+
+@pytest.fixture(scope="module")
+def venvs(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, Path]]:
+    """One venv per host, installed concurrently from wheels built once."""
+    base = tmp_path_factory.mktemp("hosts")
+    built = _run([sys.executable, "-m", "pip", "wheel", "--quiet", "--no-deps", "-w",
+                  str(base / "wheels"), *(str(ROOT / p) for p in DISTS)], base, 300)
+    assert built.returncode == 0, built.stderr
+    wheels = {}
+    for dist in DISTS.values():
+        (wheel,) = (base / "wheels").glob(f"{dist.replace('-', '_')}-*.whl")
+        wheels[dist] = wheel
+    with ThreadPoolExecutor(len(HOSTS)) as pool:
+        jobs = {n: pool.submit(_install, n, h, wheels, base) for n, h in HOSTS.items()}
+        yield {n: job.result() for n, job in jobs.items()}
+
+
+def _installed(venv: Path) -> dict[str, int]:
+    """Distribution name -> bytes of its installed files, as the venv sees them."""
+    code = (
+        "import importlib.metadata as m, json, os\n"
+        "out = {}\n"
+        "for d in m.distributions():\n"
+        "    files = [f.locate() for f in d.files or ()]\n"
+        "    out[d.metadata['Name'].lower()] = sum(os.path.getsize(f) for f in files"
+        " if os.path.isfile(f))\n"
+        "print(json.dumps(out))\n"
+    )
+    done = _run([str(venv / "bin" / "python"), "-c", code], venv)
+    assert done.returncode == 0, done.stderr
+    sizes: dict[str, int] = json.loads(done.stdout)
+    return sizes
+
+
+@pytest.mark.parametrize("name", sorted(HOSTS))
+def test_each_host_runs_its_role_and_only_its_role(name: str, venvs: dict[str, Path]) -> None:
+    host, venv = HOSTS[name], venvs[name]
+    kinesphere = str(venv / "bin" / "kinesphere")
+    dists = {DISTS[p] for p in host.parts}
+
+    helped = _run([kinesphere, "--help"], venv)
+    assert helped.returncode == 0, helped.stderr
+    expected = {"label", *(c for d in dists if d in ROLE_COMMANDS for c in ROLE_COMMANDS[d])}
+    listed = {line.split()[0] for line in helped.stdout.split("COMMAND\n", 2)[-1].splitlines()
+              if line.startswith("    ") and not line.startswith("     ")}
+    assert listed == expected, helped.stdout
+
+    for args, shows in host.smoke:
+        done = _run([kinesphere, *args], venv)
+        assert done.returncode == 0, f"kinesphere {' '.join(args)}:\n{done.stderr}"
+        assert shows in done.stdout, f"kinesphere {' '.join(args)}:\n{done.stdout}"
+
+    command, dist = host.lacks
+    refused = _run([kinesphere, command, "--help"], venv)
+    assert refused.returncode == 2
+    assert f"'kinesphere {command}' comes with {dist}" in refused.stderr
+    assert "Traceback" not in refused.stderr
+
+    sizes = _installed(venv)
+    assert dists <= set(sizes)
+    carried = sorted(set(host.absent) & set(sizes))
+    assert not carried, f"the {name} host must not install {carried}"
+    print(f"\n{name} host ({' + '.join(sorted(dists))}): {len(sizes)} distributions, "
+          f"{sum(sizes.values()) / 1e6:.0f} MB (without bytecode)")
+
+
+def test_up_names_what_a_router_host_lacks(venvs: dict[str, Path]) -> None:
+    venv = venvs["router"]
+    done = _run([str(venv / "bin" / "kinesphere"), "up", "--headless"], venv)
+    assert done.returncode == 2 and "Traceback" not in done.stderr
+    for dist in ("kinesphere-robots", "kinesphere-services", "kinesphere-clients", "matplotlib"):
+        assert dist in done.stderr
+    assert "kinesphere-deploy[up]" in done.stderr
+
+
+def test_role_commands_name_every_registered_command_and_its_distribution() -> None:
+    """The core's list of which distribution brings which command matches what the
+    installed roles register (everything is installed here)."""
+    from importlib.metadata import entry_points
+
+    parser = build_parser()
+    offered = commands(parser)
+    registered: dict[str, set[str]] = {}
+    for ep in entry_points(group="kinesphere.commands"):
+        assert ep.dist is not None
+        sub = argparse.ArgumentParser().add_subparsers()
+        ep.load()(sub)
+        registered.setdefault(ep.dist.metadata["Name"], set()).update(sub.choices)
+    assert {d: set(c) for d, c in ROLE_COMMANDS.items()} == registered
+    assert set(offered) == {"label"} | {c for cs in registered.values() for c in cs}
+
+
+def test_a_missing_role_is_named_whatever_options_come_first() -> None:
+    parser = build_parser()
+    assert _command_word(parser, ["--platforms", "/tmp/p", "agent", "--help"]) == "agent"
+    assert _command_word(parser, ["-v", "send", "all"]) == "send"
+    message = missing_role("agent", ["label", "send"])
+    assert message is not None and "kinesphere-robots" in message and "label, send" in message
+    assert missing_role("agent", ["agent"]) is None
+    assert missing_role("no-such-command", ["label"]) is None  # argparse explains that one
