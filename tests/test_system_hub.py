@@ -16,6 +16,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+import zenoh
 from rich.console import Console
 from test_system_support import (
     WAIT_S,
@@ -32,7 +33,7 @@ from kinesphere.deploy.plan import Robot, UpOptions
 from kinesphere.deploy.procs import Supervisor
 from kinesphere.deploy.up import Demo
 from kinesphere.keyexpr import KEYS
-from kinesphere.protocol import Command, SpatialCommand, encode
+from kinesphere.protocol import Ack, Command, SpatialCommand, decode, encode
 from kinesphere.zconfig import free_port, loopback_config
 
 ROBOTS = {"youbot-1": "youbot", "khepera-1": "khepera", "khepera-2": "khepera"}
@@ -50,6 +51,26 @@ def demo(tmp_path: Path) -> Iterator[Demo]:
         yield d
     finally:
         assert d.shutdown() == [], "processes left behind"
+
+
+class Acks:
+    """Every Ack heard, as (robot, sender, stage)."""
+
+    def __init__(self, session: zenoh.Session) -> None:
+        self.seen: list[tuple[str, str, str]] = []
+        self._sub = session.declare_subscriber(KEYS.ack("*"), self._on)
+
+    def _on(self, sample: zenoh.Sample) -> None:
+        ack = decode(sample.payload.to_bytes(), Ack)
+        self.seen.append((ack.robot_id, ack.sender, str(ack.stage)))
+
+    def estopped(self) -> set[str]:
+        """Robots that acked an e-stop of a ``kinesphere estop`` process."""
+        return {r for r, sender, stage in self.seen
+                if stage == "estopped" and sender.startswith("estop-")}
+
+    def close(self) -> None:
+        self._sub.undeclare()  # type: ignore[no-untyped-call]
 
 
 def statuses(demo: Demo) -> dict[str, str]:
@@ -91,12 +112,18 @@ def test_kill_any_service_and_the_rest_keep_talking(
     until(lambda: "khepera-2" not in demo.alive.robots, WAIT_S, "khepera-2's token to go")  # type: ignore[union-attr]
     alive = {r for r in ROBOTS if r != "khepera-2"}
 
-    # a new operator process joins the hub and e-stops every robot still alive
-    estop = sup.spawn("estop", ["estop", "--connect", ep, "--mode", "client"],
-                      expect_exit=True)
-    assert sup.wait("estop", WAIT_S) == 0, estop.tail()
-    until(lambda: all(statuses(demo).get(r) == "estop" for r in alive), WAIT_S,
-          "every live robot to latch the e-stop", explain=lambda: statuses(demo))
+    # a new operator process joins the hub and e-stops every robot still alive; each acks it
+    acks = Acks(demo._session)
+    try:
+        estop = sup.spawn("estop", ["estop", "--connect", ep, "--mode", "client"],
+                          expect_exit=True)
+        assert sup.wait("estop", WAIT_S) == 0, estop.tail()
+        until(lambda: all(statuses(demo).get(r) == "estop" for r in alive), WAIT_S,
+              "every live robot to latch the e-stop", explain=lambda: statuses(demo))
+        until(lambda: acks.estopped() >= alive, WAIT_S, "every live robot to ack the e-stop",
+              explain=lambda: acks.seen)
+    finally:
+        acks.close()
     assert status_lists(ep, "client", capsys) == alive
 
 
@@ -128,10 +155,16 @@ def test_quick_start_topology_peers_around_a_router(
             assert all(r == robots for r in runs), f"{mode}: {runs}"
         sup.kill("databank")
         until(lambda: not obs.alive.databanks, WAIT_S, "the databank's token to go")
-        estop = sup.spawn("estop", ["estop", "--connect", ep], expect_exit=True)
-        assert sup.wait("estop", WAIT_S) == 0, estop.tail()
-        until(lambda: all(getattr(obs.states.last(r), "status", "") == "estop"
-                          for r in robots), WAIT_S, "both robots to latch the e-stop",
-              explain=obs.describe)
+        acks = Acks(obs.session)
+        try:
+            estop = sup.spawn("estop", ["estop", "--connect", ep], expect_exit=True)
+            assert sup.wait("estop", WAIT_S) == 0, estop.tail()
+            until(lambda: all(getattr(obs.states.last(r), "status", "") == "estop"
+                              for r in robots), WAIT_S, "both robots to latch the e-stop",
+                  explain=obs.describe)
+            until(lambda: acks.estopped() >= robots, WAIT_S, "both robots to ack the e-stop",
+                  explain=lambda: acks.seen)
+        finally:
+            acks.close()
     finally:
         obs.close()
