@@ -99,20 +99,34 @@ class Acks:
         self.sent = 0
         self.refused: Counter[str] = Counter()
         """Commands rejected, by error code (whether or not the ack was held back)."""
+        self._pending: list[tuple[Command, AckStage, str, str, tuple[Substitution, ...],
+                                  str]] = []
 
     def send(self, cmd: Command, stage: AckStage, detail: str = "", *, code: str = "",
              substitutions: Sequence[Substitution] = ()) -> None:
-        """Tell ``cmd``'s sender ``stage``, within the rate limit (e-stops: always)."""
+        """Tell ``cmd``'s sender ``stage``, within the rate limit (e-stops: always), at the
+        next :meth:`flush`."""
         if stage is AckStage.REJECTED:
             self.refused[code] += 1
         if self.publish is None or not (stage in URGENT or self.limiter.allow(cmd.sender)):
             return
-        try:
-            self.publish(make_ack(self.robot_id, cmd, stage, code=code, detail=detail,
-                                  substitutions=substitutions, lease_holder=self.lease_holder()))
-            self.sent += 1
-        except Exception as exc:  # session closing or congested: the loop goes on
-            log.debug("ack not published: %s", exc)
+        self._pending.append((cmd, stage, code, detail, tuple(substitutions),
+                              self.lease_holder()))
+
+    def flush(self) -> None:
+        """Publish what :meth:`send` queued. The control loop flushes once the step's
+        setpoints went to the body, so encoding and putting acks never delays a command's
+        first step (the rate limit already bounds how many wait)."""
+        pending, self._pending = self._pending, []
+        for cmd, stage, code, detail, substitutions, holder in pending:
+            if self.publish is None:
+                return
+            try:
+                self.publish(make_ack(self.robot_id, cmd, stage, code=code, detail=detail,
+                                      substitutions=substitutions, lease_holder=holder))
+                self.sent += 1
+            except Exception as exc:  # session closing or congested: the loop goes on
+                log.debug("ack not published: %s", exc)
 
     @property
     def substitutions(self) -> list[Substitution]:
@@ -134,8 +148,8 @@ class Acks:
                       f"command {cmd.seq} from {cmd.sender or '?'} replaced it")
 
     def stepped(self) -> Command | None:
-        """The followed command, the first time a step toward it ran (acknowledged
-        ``moving``)."""
+        """The followed command, the first time a step's setpoint went toward it
+        (acknowledged ``moving``)."""
         m = self.motion
         if m is None or m.moved:
             return None

@@ -187,8 +187,7 @@ class OmniBase(BaseController):
 
     def step(self) -> None:
         if not self._otg.active:
-            if self.body_twist.any():
-                self.body_twist[:] = 0.0
+            self.body_twist[:] = 0.0  # cheaper than asking whether it already is
             return
         if self._follow is not None and self._follow[2]:
             self._aim()  # turning: the body-frame velocity points elsewhere in the world
@@ -275,8 +274,7 @@ class DiffBase(BaseController):
 
     def step(self) -> None:
         if not self._otg.active:
-            if self.body_twist.any():
-                self.body_twist[:] = 0.0
+            self.body_twist[:] = 0.0  # cheaper than asking whether it already is
             return
         s0, yaw0 = self._otg.position.tolist()
         done = self._otg.step()

@@ -63,6 +63,15 @@ class Body(abc.ABC):
     def step(self) -> None:
         """Let one period pass: simulate it, or wait for the hardware's next cycle."""
 
+    def simulate(self) -> None:
+        """The part of :meth:`step` a fleet host may run on a helper thread, beside other
+        bodies' (it must release the GIL to gain anything; MuJoCo does); :meth:`settle` does
+        the rest on the loop's thread. By default all of :meth:`step`."""
+        self.step()
+
+    def settle(self) -> None:  # noqa: B027 - optional: most bodies have nothing left to do
+        """The rest of :meth:`step` after :meth:`simulate`, on the control loop's thread."""
+
     @abc.abstractmethod
     def halt(self) -> None:
         """Hold where the body is now, joints and base (when the trajectories cannot say)."""

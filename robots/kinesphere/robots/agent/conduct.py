@@ -59,7 +59,8 @@ class Conduct:
         self.ordering = Ordering()
         self.acks = Acks(robot_id, lambda: self.lease.holder)
         self.latencies: deque[tuple[int, int, int]] = deque(maxlen=10_000)
-        """(seq, sent_ns, first moving step ns) per pose command applied."""
+        """(seq, sent_ns, ns when the first setpoint toward it went to the body) per pose
+        command applied."""
         self.estop_lag: deque[int] = deque(maxlen=1000)
         """Per e-stop: control steps begun from its receipt to its handling (1: the next)."""
         self.ticks = 0
@@ -79,6 +80,13 @@ class Conduct:
         if self.safety.expired(now) and self.controller.moving:
             self.halt(Status.HOLDING, "no new command within ttl_ms: holding", AckStage.HOLDING)
 
+    def commanded(self) -> None:
+        """The step's setpoints went to the body: the first toward a new target is the moment
+        the robot started moving for that command (``moving``; the latency probe)."""
+        first = self.acks.stepped()
+        if first is not None:
+            self.latencies.append((first.seq, first.sent_ns, time.time_ns()))
+
     def after_step(self) -> None:
         """After each step: faults, the first step of a motion, the end of one."""
         ctrl = self.controller
@@ -90,9 +98,6 @@ class Conduct:
             if fault:
                 self.acks.end(AckStage.BLOCKED, fault)
                 self.set(Status.ERROR, f"{fault} and holding")
-        first = self.acks.stepped()
-        if first is not None:
-            self.latencies.append((first.seq, first.sent_ns, time.time_ns()))
         motion = self.acks.motion
         if (motion is not None and motion.moved and motion.target != _DRIVE
                 and not ctrl.moving and ctrl.time - self._moved_at >= SETTLE_S):

@@ -54,13 +54,22 @@ class Controller:
 
     def step(self) -> None:
         """One control cycle: trajectories forward, body commanded, body stepped."""
+        self.prepare()
+        self.body.step()
+        self.finish()
+
+    def prepare(self) -> None:
+        """The cycle up to the body's step: trajectories forward, body commanded. (A fleet
+        host steps many bodies between :meth:`prepare` and :meth:`finish`.)"""
         self.joints.step()
         twist = _FIXED
         if self.base is not None:
             self.base.step()
             twist = self.base.body_twist
         self.body.command(self.joints.position, twist)
-        self.body.step()
+
+    def finish(self) -> None:
+        """The cycle after the body's step: one period of robot time has passed."""
         self._reading = None
         self.time += self.dt
         self.steps += 1
@@ -85,8 +94,11 @@ class Controller:
 
     def fault(self) -> str:
         """Why a trajectory was braked instead of followed ("" when none was)."""
+        joints = self.joints.fault
         base = self.base.fault if self.base is not None else ""
-        return "; ".join(f for f in (self.joints.fault, base) if f)
+        if not (joints or base):  # every step asks: the usual answer without a join
+            return ""
+        return "; ".join(f for f in (joints, base) if f)
 
     def reading(self) -> Reading:
         """The body's measurement after the last step (read once, when first asked for)."""

@@ -75,9 +75,11 @@ def replaceable(cmd: Command) -> bool:
 
 
 class Inbox:
-    """Thread-safe intake; :meth:`drain` empties it."""
+    """Thread-safe intake; :meth:`drain` empties it. Every put sets ``wake``, the control
+    loop's signal to look now rather than at its next tick (``pacing.py``)."""
 
-    def __init__(self) -> None:
+    def __init__(self, wake: threading.Event | None = None) -> None:
+        self.wake = threading.Event() if wake is None else wake
         self._lock = threading.Lock()
         self._arrivals = 0
         self._estops: deque[Received] = deque(maxlen=MAX_ESTOPS)
@@ -91,6 +93,7 @@ class Inbox:
         with self._lock:
             if cmd.estop:
                 self._estops.append(item)
+                self.wake.set()
                 return
             self._arrivals += 1
             key = (cmd.sender, cmd.session)
@@ -107,17 +110,20 @@ class Inbox:
             elif len(queue) >= PER_SENDER:
                 self._superseded.append(queue.popleft()[1])
             queue.append((self._arrivals, item))
+        self.wake.set()
 
     def put_bad(self, error: KinesphereError) -> None:
         """A payload that did not decode: only the last one waits (it names no sender)."""
         with self._lock:
             self._arrivals += 1
             self._bad = (self._arrivals, error)
+        self.wake.set()
 
     def put_resolved(self, ticket: int, answer: Answer) -> None:
         with self._lock:
             self._arrivals += 1
             self._other.append((self._arrivals, Resolved(ticket, answer)))
+        self.wake.set()
 
     def __len__(self) -> int:
         with self._lock:

@@ -52,6 +52,7 @@ class MujocoBody(Body):
         self._dadr = np.array([pm.dof_index[j] for j in names], dtype=int)
         self._act = np.array([pm.actuator_index[j] for j in names], dtype=int)
         self._act_slice = _as_slice(self._act)
+        self._q_slice = _as_slice(self._qadr)  # a view when contiguous: no copy per step
         limits = [self.platform.eurdf.limits[j] for j in names]
         self._lower = np.array([lim.lower for lim in limits])
         self._upper = np.array([lim.upper for lim in limits])
@@ -61,6 +62,7 @@ class MujocoBody(Body):
             self._base_act = np.array([pm.actuator_index[j] for j in BASE_JOINTS], dtype=int)
             self._base_slice = _as_slice(self._base_act)
             self._base_target = [float(v) for v in self.data.qpos[self._base_q]]
+            self.data.ctrl[self._base_slice] = self._base_target
 
     def read(self) -> Reading:
         data = self.data
@@ -76,20 +78,29 @@ class MujocoBody(Body):
         if self._mobile:
             vx, vy, w = base_twist
             target = self._base_target
-            if vx or vy or w:
+            if vx or vy or w:  # else the servos hold the target already written
                 dt = self.dt
                 dyaw = float(w) * dt
                 dx, dy = rotate(float(vx) * dt, float(vy) * dt, target[2] + 0.5 * dyaw)
                 target[0] += dx
                 target[1] += dy
                 target[2] += dyaw
-            ctrl[self._base_slice] = target
+                ctrl[self._base_slice] = target
 
     def step(self) -> None:
-        data = self.data
+        self.simulate()
+        self.settle()
+
+    def simulate(self) -> None:
+        """The physics (MuJoCo releases the GIL in ``mj_step``: bodies step side by side)."""
+        model, data = self.model, self.data
         for _ in range(self.substeps):
-            mujoco.mj_step(self.model, data)
-        q = data.qpos[self._qadr]
+            mujoco.mj_step(model, data)
+
+    def settle(self) -> None:
+        """The hard stops after the physics."""
+        data = self.data
+        q = data.qpos[self._q_slice]
         past = (q < self._lower) | (q > self._upper)
         if past.any():  # the hard stops (module text)
             data.qpos[self._qadr[past]] = np.clip(q[past], self._lower[past], self._upper[past])

@@ -57,7 +57,7 @@ class AgentOptions:
     unpaced), key ``prefix``, ``groups`` it obeys, databank query timeout, joint-limit clamp
     ``margin``, the ``body`` it drives (a name in ``body.BODIES``; ``ros2`` reads ``ros2``), and
     the largest base translation one command may ask for (``max_translation_m``; a pose asking
-    for more is refused with ``size_out_of_range`` and nothing moves).
+    for more is refused with ``size_out_of_range`` and nothing moves), and ``strict_period``.
     """
 
     rate: float = 500.0
@@ -70,6 +70,9 @@ class AgentOptions:
     body: str = DEFAULT_BODY
     ros2: Ros2BodyOptions = Ros2BodyOptions()
     max_translation_m: float = MAX_TRANSLATION_M
+    strict_period: bool = False
+    """Step only on the fixed schedule, so a command waits for the next tick (by default the
+    loop runs the step that is due next as soon as a command arrives: ``pacing.py``)."""
 
     def __post_init__(self) -> None:
         checks = (

@@ -59,13 +59,29 @@ ENTRY_BYTES = 128
 """Charged per cached pose on top of its encoded size and key (dict slot, objects)."""
 
 
+PartKey = tuple[str, str, str, float, bool]
+_CANONICAL: dict[tuple[str, str, str, float, bool], PartKey] = {}
+CANONICAL_ENTRIES = 4096
+"""Spellings of parts remembered with their canonical key (names are at most 64 characters:
+about 1 MB at most); the table starts over when full."""
+
+
 def parts_key(parts: Sequence[SpatialCommand]) -> PartsKey:
     """Canonical cache key: directions by slug, sizes as floats, exact flags; raises on
-    invalid parts."""
+    invalid parts. A spelling already seen costs a dictionary look-up: a command stream
+    repeats the same few, and this runs before every command's first step."""
     key = []
     for p in parts:
-        check_spatial(p)
-        key.append((p.limb, p.origin, Direction.parse(p.direction).slug, float(p.size), p.exact))
+        spelled = (p.limb, p.origin, p.direction, p.size, p.exact)
+        canonical = _CANONICAL.get(spelled)
+        if canonical is None:
+            check_spatial(p)
+            canonical = (p.limb, p.origin, Direction.parse(p.direction).slug, float(p.size),
+                         p.exact)
+            if len(_CANONICAL) >= CANONICAL_ENTRIES:
+                _CANONICAL.clear()
+            _CANONICAL[spelled] = canonical
+        key.append(canonical)
     return tuple(key)
 
 

@@ -59,11 +59,14 @@ class Agent:
     """One robot: a body and its Controller, safety rules, lease, databank resolver, Zenoh face.
 
     ``body`` defaults to ``options.body`` made for ``platform`` (``body.py``'s registry).
+    ``wake`` is set whenever something arrives for the loop (a fleet host shares one among its
+    robots); ``phase`` shifts the steps that publish state (a fleet host spreads them).
     """
 
     def __init__(
         self, platform: str, robot_id: str, session: zenoh.Session,
         options: AgentOptions | None = None, body: Body | None = None,
+        wake: threading.Event | None = None, phase: int = 0,
     ) -> None:
         self.options = options or AgentOptions()
         self.keys = Keys(self.options.prefix)
@@ -76,7 +79,7 @@ class Agent:
         self.controller = Controller(body, self.options.margin)
         self.platform = self.controller.platform.name
         self.resolver = Resolver(session, self.platform, self.keys, self.options.query_timeout_s)
-        self.inbox = Inbox()
+        self.inbox = Inbox(wake)
         self.conduct = Conduct(robot_id, self.controller, self.resolver,
                                self.inbox.put_resolved, self.options.max_translation_m)
         self.stats = LoopStats()
@@ -85,6 +88,9 @@ class Agent:
         self._ticks = 0
         self._state_seq = 0
         self._publish_every = max(1, round(self.options.rate / self.options.state_rate))
+        self._phase = phase
+        """Offsets the steps that publish state: a fleet host spreads its robots' states
+        over the steps instead of encoding them all in one."""
         self._entities: list[Any] = []
         self._publisher: Any = None
         self._thread: threading.Thread | None = None
@@ -120,9 +126,11 @@ class Agent:
         """Stop the loop, undeclare everything, release the body (the session stays open: the
         caller owns it)."""
         self._stop.set()
+        self.inbox.wake.set()  # a loop waiting for its next slot looks at once
         if self._thread is not None and self._thread is not threading.current_thread():
             self._thread.join(timeout=5.0)
         self.resolver.close()
+        self.conduct.acks.flush()  # what the last step had to say
         undeclare(*reversed(self._entities))
         self._entities = []
         self._publisher = self.conduct.acks.publish = None
@@ -172,7 +180,8 @@ class Agent:
         def failed(exc: Exception) -> None:
             self.conduct.set(Status.ERROR, f"internal: control step failed: {exc!r}")
 
-        run_paced(step, period, stopped, self.stats, f"agent {self.robot_id}", failed)
+        wake = None if self.options.strict_period else self.inbox.wake
+        run_paced(step, period, stopped, self.stats, f"agent {self.robot_id}", failed, wake)
 
     def tick(self) -> None:
         """One control cycle: e-stops, commands, watchdog and lease, one step, state when due.
@@ -180,6 +189,17 @@ class Agent:
         Each part is guarded on its own: a failing step still lets the watchdog, the state
         and the next commands through, and leaves the body held where it is.
         """
+        failure = self.begin_step()
+        if failure is None:
+            try:
+                self.controller.body.step()
+            except Exception as exc:
+                failure = exc
+        self.end_step(failure)
+
+    def begin_step(self) -> Exception | None:
+        """The cycle up to the body's step: e-stops, commands, timers, the trajectories
+        commanded to the body. Returns what failed there (the body must not step then)."""
         conduct = self.conduct
         self._ticks = conduct.ticks = self._ticks + 1
         now_ns = clocks()[0]
@@ -193,14 +213,27 @@ class Agent:
             conduct.handle(any_item, now_ns)
         conduct.watch(now_ns / 1e9)
         try:
-            self.controller.step()
+            self.controller.prepare()
         except Exception as exc:
-            conduct.step_failed(exc)
-        else:
+            conduct.acks.flush()
+            return exc
+        conduct.commanded()
+        conduct.acks.flush()
+        return None
+
+    def end_step(self, failure: Exception | None) -> None:
+        """The cycle after the body's step (``failure``: what :meth:`begin_step` or the body
+        raised): faults, acks, state when due."""
+        conduct = self.conduct
+        if failure is None:
+            self.controller.finish()
             conduct.step_worked()
+        else:
+            conduct.step_failed(failure)
         self.stats.steps += 1
         conduct.after_step()
-        if self._ticks % self._publish_every == 0:
+        conduct.acks.flush()
+        if (self._ticks + self._phase) % self._publish_every == 0:
             self.publish()
 
     # --- state -----------------------------------------------------------------------------------

@@ -78,8 +78,9 @@ class JointTrajectory:
         self.limits = tuple(limits)
         self.index = {name: i for i, name in enumerate(self.names)}
         self.dt = dt
-        self._lo = np.array([lim.lower + clamp_margin(lim, margin) for lim in limits])
-        self._hi = np.array([lim.upper - clamp_margin(lim, margin) for lim in limits])
+        self._lo = [lim.lower + clamp_margin(lim, margin) for lim in limits]
+        self._hi = [lim.upper - clamp_margin(lim, margin) for lim in limits]
+        """Clamp bounds as Python floats: :meth:`clamp` runs before a command's first step."""
         self.max_velocity = np.array(
             [lim.velocity if math.isfinite(lim.velocity) and lim.velocity > 0 else DEFAULT_VELOCITY
              for lim in limits]
@@ -126,11 +127,13 @@ class JointTrajectory:
         """``joints`` inside the limits with margin, and the joints that had to move."""
         out: dict[str, float] = {}
         clamps: list[Clamp] = []
+        index, lows, highs = self.index, self._lo, self._hi
         for name, value in joints.items():
-            i = self.index[name]
+            i = index[name]
             if not math.isfinite(value):
                 raise ValueError(f"{name} = {value}")
-            target = float(min(max(value, self._lo[i]), self._hi[i]))
+            lo, hi = lows[i], highs[i]
+            target = lo if value < lo else hi if value > hi else float(value)
             if abs(target - value) > 1e-9:
                 lim = self.limits[i]
                 beyond = not lim.lower - LIMIT_SLACK <= value <= lim.upper + LIMIT_SLACK
@@ -143,15 +146,16 @@ class JointTrajectory:
 
         Unknown joint names (KeyError) and non-finite values (ValueError) change nothing.
         """
-        unknown = sorted(set(joints) - set(self.index))
-        if unknown:
-            raise KeyError(", ".join(unknown))
+        if not joints.keys() <= self.index.keys():
+            raise KeyError(", ".join(sorted(set(joints) - set(self.index))))
         targets, clamps = self.clamp(joints)
-        goal = self.target.copy()
+        goal = self.target.tolist()
+        index = self.index
         for name, value in targets.items():
-            goal[self.index[name]] = value
-        for name in targets:
-            self.clamped.pop(name, None)
+            goal[index[name]] = value
+        if self.clamped:
+            for name in targets:
+                self.clamped.pop(name, None)
         self.clamped.update({c.joint: c for c in clamps if c.beyond})
         if self.dof:
             self._otg.go_to(goal)
