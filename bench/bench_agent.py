@@ -116,63 +116,88 @@ def step_cost(endpoint: str) -> None:
                   f"{a99:>6.1f}us {b50:>10.1f}us {b99:>6.1f}us {a50 / b50:>8.2f}x")
 
 
+class Floor:
+    """A bare subscriber on ``sub_session`` and a publisher on ``pub_session``: put ->
+    callback of a Command, the floor any command latency stands on. Measured beside a running
+    agent (same process, same sessions), it pays what the agent's own callback pays."""
+
+    def __init__(self, pub_session: zenoh.Session, sub_session: zenoh.Session,
+                 key: str = "bench/floor") -> None:
+        self.values: list[float] = []
+        self._got = threading.Event()
+        self._sub = sub_session.declare_subscriber(key, self._on)
+        self._pub = pub_session.declare_publisher(key)
+        zconfig.wait_matching(self._pub)
+
+    def _on(self, sample: zenoh.Sample) -> None:
+        self.values.append((time.time_ns() - decode(sample.payload, Command).sent_ns) / 1e3)
+        self._got.set()
+
+    def once(self, i: int) -> None:
+        self._got.clear()
+        self._pub.put(command(i, SpatialCommand("l", "o", "d", 1.0)))
+        self._got.wait(1.0)
+
+    def close(self) -> None:
+        zconfig.undeclare(self._sub, self._pub)
+
+
 def put_to_callback(pub_session: zenoh.Session, sub_session: zenoh.Session, n: int,
                     key: str = "bench/floor") -> list[float]:
-    """Microseconds from a put of a Command to the subscriber's callback: the floor."""
-    floor: list[float] = []
-    got = threading.Event()
-
-    def on_floor(sample: zenoh.Sample) -> None:
-        floor.append((time.time_ns() - decode(sample.payload, Command).sent_ns) / 1e3)
-        got.set()
-
-    sub = sub_session.declare_subscriber(key, on_floor)
-    pub = pub_session.declare_publisher(key)
-    zconfig.wait_matching(pub)
+    """Microseconds from a put of a Command to a bare subscriber's callback, ``n`` times."""
+    floor = Floor(pub_session, sub_session, key)
     for i in range(n):
-        got.clear()
-        pub.put(command(i, SpatialCommand("l", "o", "d", 1.0)))
-        got.wait(1.0)
-    zconfig.undeclare(sub, pub)
-    return floor
+        floor.once(i)
+    floor.close()
+    return floor.values
 
 
 def put_to_moving(agent: Agent, pub_session: zenoh.Session, parts: list[SpatialCommand],
-                  n: int, seq0: int = 1) -> list[float]:
-    """Microseconds from a put of a (cached) pose command to the agent's first moving step.
+                  n: int, seq0: int = 1, floor: Floor | None = None) -> list[float]:
+    """Microseconds from a put of a (cached) pose command to the moment the agent hands the
+    body the first setpoint toward it (the ``moving`` ack), ``n`` times; with ``floor``, a
+    floor sample before each command, so both see the same machine.
 
-    The first two commands (one per pose, to fill the cache) are not counted; commands are
-    spaced 4-8 ms at random so they do not phase-lock to the control loop.
+    The first two commands (one per pose, to fill the cache) are not counted; puts are
+    spaced 3-7 ms at random so they do not phase-lock to the control loop.
     """
     cmd = pub_session.declare_publisher(agent.keys.command(agent.robot_id))
     zconfig.wait_matching(cmd)
-    start = len(agent.latencies)
+    latencies = agent.conduct.latencies
+    start = len(latencies)
     for i in range(n + 2):
-        before = len(agent.latencies)
+        if floor is not None and i >= 2:
+            floor.once(i)
+            time.sleep(0.003 + 0.004 * np.random.random())
+        before = len(latencies)
         cmd.put(command(seq0 + i, parts[i % 2]))
         deadline = time.monotonic() + 2.0
-        while len(agent.latencies) == before and time.monotonic() < deadline:
+        while len(latencies) == before and time.monotonic() < deadline:
             time.sleep(0.0005)
-        time.sleep(0.004 + 0.004 * np.random.random())  # do not phase-lock to the loop
+        time.sleep(0.003 + 0.004 * np.random.random())  # do not phase-lock to the loop
     zconfig.undeclare(cmd)
-    return [(moved - sent) / 1e3 for _, sent, moved in list(agent.latencies)[start + 2:]]
+    return [(moved - sent) / 1e3 for _, sent, moved in list(latencies)[start + 2:]]
 
 
 def latency(endpoint: str, hub: zenoh.Session) -> None:
-    print(f"command-to-motion latency, {LATENCY_COMMANDS} commands on loopback, agent at 500 Hz "
-          "real time (put -> first control step moving toward the new target):")
+    print(f"command-to-motion latency, {LATENCY_COMMANDS} commands on loopback, a Baxter agent "
+          "at 500 Hz real time: put -> the first setpoint toward the new target handed to the "
+          "body; floor: a bare put -> callback on the agent's session, interleaved with them "
+          "(target p50 <= 2x, p99 <= 3x):")
     with zconfig.session(config=zconfig.loopback_config(endpoint)) as s:
-        floor = put_to_callback(hub, s, LATENCY_COMMANDS)
-        with Agent("baxter", "bench-latency", s, AgentOptions(speed=1.0)) as agent:
-            lat = put_to_moving(agent, hub, two_parts(agent), LATENCY_COMMANDS)
-            slips = agent.stats.slips
-    f50, f99 = pct(floor, 50), pct(floor, 99)
-    l50, l99 = pct(lat, 50), pct(lat, 99)
-    print(f"  bare zenoh put->callback     p50 {f50:8.1f}us  p99 {f99:8.1f}us")
-    print(f"  agent put->moving step       p50 {l50:8.1f}us  p99 {l99:8.1f}us  "
-          f"(n={len(lat)}, cached poses, {slips} slips)")
-    print(f"  ratio to the floor           p50 {l50 / f50:8.1f}x  p99 {l99 / f99:8.1f}x; "
-          f"control period 2000us, so ~1000us is the expected wait for the next step")
+        for label, strict in (("reacts at once (default)", False),
+                              ("--strict-period (the tick)", True)):
+            options = AgentOptions(speed=1.0, strict_period=strict)
+            with Agent("baxter", f"bench-latency-{int(strict)}", s, options) as agent:
+                floor = Floor(hub, s)
+                lat = put_to_moving(agent, hub, two_parts(agent), LATENCY_COMMANDS, floor=floor)
+                floor.close()
+                early, slips = agent.stats.early, agent.stats.slips
+            f50, f99, l50, l99 = (pct(floor.values, 50), pct(floor.values, 99), pct(lat, 50),
+                                  pct(lat, 99))
+            print(f"  {label:<27} p50 {l50:7.1f}us  p99 {l99:7.1f}us   floor p50 {f50:6.1f}us "
+                  f" p99 {f99:7.1f}us   ratio p50 {l50 / f50:5.2f}x  p99 {l99 / f99:5.2f}x  "
+                  f"({early} early steps, {slips} slips)", flush=True)
 
 
 def realtime_fraction(states: dict[str, list[int]], ids: list[str], window: float) -> float:
@@ -180,7 +205,14 @@ def realtime_fraction(states: dict[str, list[int]], ids: list[str], window: floa
     return min(len(states.get(i, [])) / (50.0 * window) for i in ids)
 
 
-def scale(endpoint: str, hub: zenoh.Session) -> None:
+WHERE = {"process": "one process each", "thread": "all in one process, a thread each",
+         "fleet": "a fleet host: one process, one loop stepping them all"}
+SCALE_COUNTS = (("process", (1, 2, 4, 8, 12, 16, 24)), ("thread", (1, 4, 8, 16, 24, 32, 48)))
+
+
+def scale(endpoint: str, hub: zenoh.Session,
+          counts: tuple[tuple[str, tuple[int, ...]], ...] = SCALE_COUNTS) -> None:
+    """How many agents at 500 Hz keep real time, per way of running them."""
     print(f"scale: agents at 500 Hz, mixed platforms, robots moving; 'keeps up' = worst agent's "
           f"state rate >= 98% of real time over {SCALE_WINDOW_S:.0f} s (n cores: {os.cpu_count()})")
     states: dict[str, list[int]] = {}
@@ -190,10 +222,9 @@ def scale(endpoint: str, hub: zenoh.Session) -> None:
         states.setdefault(st.robot_id, []).append(st.stamp_ns)
 
     sub = hub.declare_subscriber(KEYS.state("*"), on_state)
-    for mode, counts in (("process", (1, 2, 4, 8, 12, 16, 24)),
-                         ("thread", (1, 4, 8, 16, 24, 32, 48))):
+    for mode, ns in counts:
         best = 0
-        for n in counts:
+        for n in ns:
             ids = [f"scale-{mode}-{n}-{i}" for i in range(n)]
             platforms = [PLATFORMS[i % len(PLATFORMS)] for i in range(n)]
             frac = run_fleet(mode, endpoint, hub, ids, platforms, states)
@@ -204,9 +235,8 @@ def scale(endpoint: str, hub: zenoh.Session) -> None:
             if frac < 0.98:
                 break
             best = n
-        more = " (or more: the largest count tried)" if best == counts[-1] else ""
-        where = "one process each" if mode == "process" else "all in one process, a thread each"
-        print(f"  => {best} agents keep real time, {where}{more}")
+        more = " (or more: the largest count tried)" if best == ns[-1] else ""
+        print(f"  => {best} agents keep real time, {WHERE[mode]}{more}")
     zconfig.undeclare(sub)
 
 
@@ -216,12 +246,19 @@ def run_fleet(mode: str, endpoint: str, hub: zenoh.Session, ids: list[str],
     agents: list[Agent] = []
     session = None
     try:
+        zenoh_args = ["--connect", endpoint, "--listen", zconfig.LOOPBACK_ANY_PORT]
         if mode == "process":
             for rid, p in zip(ids, platforms, strict=True):
                 procs.append(subprocess.Popen(
                     [sys.executable, "-m", "kinesphere.cli", "agent", p, "--id", rid,
-                     "--connect", endpoint, "--listen", zconfig.LOOPBACK_ANY_PORT],
-                    cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+                     *zenoh_args], cwd=ROOT, stdout=subprocess.DEVNULL,
+                    stderr=subprocess.DEVNULL))
+        elif mode == "fleet":
+            robots = [a for rid, p in zip(ids, platforms, strict=True)
+                      for a in ("--robot", f"{p}:{rid}")]
+            procs.append(subprocess.Popen(
+                [sys.executable, "-m", "kinesphere.cli", "agent", *robots, *zenoh_args],
+                cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
         else:
             session = zconfig.open_session(config=zconfig.loopback_config(endpoint))
             agents = [Agent(p, rid, session, AgentOptions()).start()
@@ -257,18 +294,25 @@ def run_fleet(mode: str, endpoint: str, hub: zenoh.Session, ids: list[str],
 FLEET_PARTS: dict[str, list[SpatialCommand]] = {}
 
 
-def main() -> None:
-    # the agents' own "falls behind" warnings would bury the table; the table reports it
-    logging.getLogger("kinesphere.robots.agent").setLevel(logging.ERROR)
-    with zconfig.loopback_hub() as (hub, endpoint), databank(endpoint, hub):
-        step_cost(endpoint)
-        latency(endpoint, hub)
+def fleet_parts(endpoint: str) -> dict[str, list[SpatialCommand]]:
+    """:data:`FLEET_PARTS`: two poses of every platform, asked of the databank once."""
+    if not FLEET_PARTS:
         with zconfig.session(config=zconfig.loopback_config(endpoint)) as s:
             for name in PLATFORMS:
                 agent = Agent(name, f"probe-{name}", s)
                 agent.resolver.start()
                 FLEET_PARTS[name] = two_parts(agent)
                 agent.close()
+    return FLEET_PARTS
+
+
+def main() -> None:
+    # the agents' own "falls behind" warnings would bury the table; the table reports it
+    logging.getLogger("kinesphere.robots.agent").setLevel(logging.ERROR)
+    with zconfig.loopback_hub() as (hub, endpoint), databank(endpoint, hub):
+        step_cost(endpoint)
+        latency(endpoint, hub)
+        fleet_parts(endpoint)
         scale(endpoint, hub)
 
 

@@ -1,4 +1,6 @@
-"""``kinesphere agent PLATFORM``: run one robot until SIGINT/SIGTERM, then shut down cleanly."""
+"""``kinesphere agent PLATFORM`` runs one robot, ``kinesphere agent --robot P:ID ...`` and
+``kinesphere fleet FLEET.toml`` many in one process (``fleet.py``); each until SIGINT/SIGTERM,
+then shuts down cleanly."""
 
 from __future__ import annotations
 
@@ -7,11 +9,14 @@ import logging
 import os
 import signal
 import threading
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 from types import FrameType
 from typing import Any
 
 from kinesphere.cliargs import AGENT, add_zenoh_arguments
+from kinesphere.errors import KinesphereError
 from kinesphere.robots.agent.body import BODIES
 from kinesphere.robots.agent.options import ROS2_INTERFACES, AgentOptions, Ros2BodyOptions
 from kinesphere.signals import handle_signals
@@ -31,21 +36,16 @@ def register(sub: Any) -> None:
         "{prefix}/robot/ID/command, resolves commands through the databank, moves along "
         "jerk-limited Ruckig trajectories and publishes {prefix}/robot/ID/state.",
     )
-    p.add_argument("platform", help="platform name (see 'kinesphere platforms') or folder")
+    p.add_argument("platform", nargs="?",
+                   help="platform name (see 'kinesphere platforms') or folder")
     p.add_argument("--id", dest="robot_id", help="robot id (default: the platform name)")
+    p.add_argument("--robot", action="append", default=[], metavar="PLATFORM:ID",
+                   help="run this robot too, all in one process and one loop (repeatable; "
+                   "instead of PLATFORM; see 'kinesphere fleet')")
     d = DEFAULTS
     p.add_argument("--body", choices=sorted(BODIES), default=d.body,
                    help=f"what the agent drives (default {d.body}: the platform's MuJoCo model)")
-    p.add_argument("--rate", type=float, default=d.rate,
-                   help=f"control rate in Hz (default {d.rate:g})")
-    p.add_argument("--state-rate", type=float, default=d.state_rate,
-                   help=f"RobotState rate in Hz (default {d.state_rate:g})")
-    p.add_argument("--speed", type=float, default=d.speed,
-                   help=f"robot seconds per wall second; 0 = as fast as possible "
-                   f"(default {d.speed:g})")
-    p.add_argument("--max-translation", type=float, default=d.max_translation_m, metavar="M",
-                   help="metres of base translation one command may ask for; more is refused "
-                   f"(default {d.max_translation_m:g})")
+    _loop_options(p)
     p.add_argument("--group", action="append", default=[], metavar="NAME",
                    help="also obey {prefix}/group/NAME/command (repeatable)")
     p.add_argument("--viewer", action="store_true", help="open a MuJoCo viewer window")
@@ -72,6 +72,41 @@ def register(sub: Any) -> None:
     add_zenoh_arguments(p, AGENT)
     p.set_defaults(func=_agent)
 
+    f = sub.add_parser(
+        "fleet",
+        help="run many simulated robots in one process (a fleet host)",
+        description="Run every robot of FLEET.toml in this process: one control loop steps "
+        "all their MuJoCo bodies each tick, on one Zenoh session; each robot keeps its own "
+        "keys, liveliness token, state stream, acks, lease, watchdog and e-stop latch. "
+        "FLEET.toml: [robots.ID] tables with platform = NAME and optional groups = [...], "
+        "and an optional prefix.",
+    )
+    f.add_argument("fleet", type=Path, metavar="FLEET.toml", help="the robots to run")
+    _loop_options(f)
+    add_zenoh_arguments(f, AGENT)
+    f.set_defaults(func=_fleet_file)
+
+
+def _loop_options(p: argparse.ArgumentParser) -> None:
+    """How the control loop runs (one robot or a fleet)."""
+    d = DEFAULTS
+    p.add_argument("--rate", type=float, default=d.rate,
+                   help=f"control rate in Hz (default {d.rate:g})")
+    p.add_argument("--state-rate", type=float, default=d.state_rate,
+                   help=f"RobotState rate in Hz (default {d.state_rate:g})")
+    p.add_argument("--speed", type=float, default=d.speed,
+                   help=f"robot seconds per wall second; 0 = as fast as possible "
+                   f"(default {d.speed:g})")
+    p.add_argument("--max-translation", type=float, default=d.max_translation_m, metavar="M",
+                   help="metres of base translation one command may ask for; more is refused "
+                   f"(default {d.max_translation_m:g})")
+    p.add_argument("--strict-period", action="store_true",
+                   help="step only on the fixed schedule: a command waits for the next tick "
+                   "(default: the step due next runs as soon as a command arrives)")
+    p.add_argument("--physics-threads", type=int, default=None, metavar="N",
+                   help="with several robots: threads stepping their physics besides the "
+                   "loop's own (default: one per further core, at most 3)")
+
 
 def _viewer(body: Any) -> Any:
     """A passive MuJoCo viewer, or None (with a warning) where no display or model exists."""
@@ -90,10 +125,28 @@ def _viewer(body: Any) -> Any:
         return None
 
 
+@contextmanager
+def _until_signal() -> Iterator[threading.Event]:
+    """An event set by SIGINT or SIGTERM (handlers restored afterwards)."""
+    stop = threading.Event()
+
+    def on_signal(signum: int, frame: FrameType | None) -> None:
+        log.info("signal %d: shutting down", signum)
+        stop.set()
+
+    with handle_signals(on_signal, (signal.SIGINT, signal.SIGTERM)):
+        yield stop
+
+
 def _agent(args: argparse.Namespace) -> int:
     from kinesphere.robots.agent.runtime import Agent
     from kinesphere.zconfig import close_session, session_from_args
 
+    if args.robot:
+        return _agent_robots(args)
+    if args.platform is None:
+        raise KinesphereError("malformed", "give a PLATFORM, or robots with --robot "
+                              "PLATFORM:ID")
     robot_id = args.robot_id or Path(args.platform).name
     ros2 = Ros2BodyOptions(
         namespace=args.ros2_namespace, domain=args.ros2_domain, interface=args.ros2_interface,
@@ -102,14 +155,9 @@ def _agent(args: argparse.Namespace) -> int:
     )
     options = AgentOptions(rate=args.rate, state_rate=args.state_rate, speed=args.speed,
                            prefix=args.prefix, groups=tuple(args.group), body=args.body,
-                           ros2=ros2, max_translation_m=args.max_translation)
-    stop = threading.Event()
-
-    def on_signal(signum: int, frame: FrameType | None) -> None:
-        log.info("signal %d: shutting down", signum)
-        stop.set()
-
-    with handle_signals(on_signal, (signal.SIGINT, signal.SIGTERM)):
+                           ros2=ros2, max_translation_m=args.max_translation,
+                           strict_period=args.strict_period)
+    with _until_signal() as stop:
         session = session_from_args(args)
         agent: Agent | None = None
         viewer = None
@@ -136,5 +184,55 @@ def _agent(args: argparse.Namespace) -> int:
                 viewer.close()
             if agent is not None:
                 agent.close()
+            close_session(session)
+    return 0
+
+
+def _agent_robots(args: argparse.Namespace) -> int:
+    """``kinesphere agent --robot P:ID ...``: a fleet host from the command line."""
+    from kinesphere.robots.agent.fleet import RobotSpec, parse_robot
+
+    extra = [flag for flag, given in (("PLATFORM", args.platform is not None),
+                                      ("--id", args.robot_id is not None),
+                                      ("--viewer", args.viewer)) if given]
+    if extra:
+        raise KinesphereError("malformed", f"--robot runs a fleet: {', '.join(extra)} "
+                              "cannot be combined with it")
+    groups = tuple(args.group)
+    robots = [RobotSpec(r.platform, r.robot_id, groups) for r in map(parse_robot, args.robot)]
+    return _run_fleet(args, robots, args.body)
+
+
+def _fleet_file(args: argparse.Namespace) -> int:
+    """``kinesphere fleet FLEET.toml``."""
+    from kinesphere.robots.agent.fleet import load_fleet_file
+
+    robots, prefix = load_fleet_file(args.fleet)
+    if prefix is not None and args.prefix != DEFAULTS.prefix and args.prefix != prefix:
+        raise KinesphereError("malformed", f"--prefix {args.prefix!r} but {args.fleet} says "
+                              f"prefix = {prefix!r}")
+    if prefix is not None:
+        args.prefix = prefix
+    return _run_fleet(args, robots, DEFAULTS.body)
+
+
+def _run_fleet(args: argparse.Namespace, robots: Sequence[Any], body: str) -> int:
+    from kinesphere.robots.agent.fleet import Fleet
+    from kinesphere.zconfig import close_session, session_from_args
+
+    options = AgentOptions(rate=args.rate, state_rate=args.state_rate, speed=args.speed,
+                           prefix=args.prefix, body=body,
+                           max_translation_m=args.max_translation,
+                           strict_period=args.strict_period)
+    with _until_signal() as stop:
+        session = session_from_args(args)
+        fleet: Fleet | None = None
+        try:
+            fleet = Fleet(robots, session, options, helpers=args.physics_threads)
+            fleet.declare()
+            fleet.run(stop)
+        finally:
+            if fleet is not None:
+                fleet.close()
             close_session(session)
     return 0

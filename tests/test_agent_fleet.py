@@ -1,0 +1,264 @@
+"""A fleet host: robots of several platforms in one process, one loop, one Zenoh session.
+
+Each robot must stay a robot of its own: obey only its commands, keep its own e-stop latch,
+state stream and acks, and be held alone when its body fails. Real Zenoh, the real databank,
+MuJoCo bodies stepped by the fleet's loop (physics on a helper thread as in deployment).
+"""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+import pytest
+import zenoh
+from test_agent_support import (
+    KEYS,
+    ROOT,
+    WAIT_S,
+    AckWatch,
+    Databank,
+    Operator,
+    StateWatch,
+    databank,
+    hub,
+    joints_close,
+)
+
+from kinesphere import zconfig
+from kinesphere.errors import KinesphereError
+from kinesphere.protocol import Catalogue, SpatialCommand
+from kinesphere.robots.agent.fleet import (
+    Fleet,
+    RobotSpec,
+    check_fleet,
+    load_fleet_file,
+    parse_robot,
+)
+from kinesphere.robots.agent.mujoco_body import MujocoBody
+from kinesphere.robots.agent.runtime import AgentOptions
+from kinesphere.robots.mjcf import platform_model
+
+__all__ = ["databank", "hub"]  # fixtures
+
+ROBOTS = [RobotSpec("baxter", "f-baxter"), RobotSpec("nao", "f-nao"),
+          RobotSpec("youbot", "f-youbot", ("bases",))]
+
+
+def far(cat: Catalogue, k: int) -> tuple[str, str, str, float]:
+    entry = cat.limbs[0]
+    pulls = [d for d in entry.directions if d != "place-middle"]
+    return (entry.limb, entry.origin, pulls[k], float(max(entry.sizes)))
+
+
+@contextmanager
+def running_fleet(endpoint: str, robots: list[RobotSpec], speed: float = 2.0,
+                  ) -> Iterator[tuple[Fleet, dict[str, StateWatch]]]:
+    """A fleet host in this process on its own session, and each robot's state stream."""
+    with zconfig.session(config=zconfig.loopback_config(endpoint)) as s:
+        fleet = Fleet(robots, s, AgentOptions(speed=speed), helpers=1)
+        watches = {r.robot_id: StateWatch(s, r.robot_id) for r in robots}
+        fleet.start()
+        try:
+            for rid, w in watches.items():
+                w.wait(lambda st: True, f"first state of {rid}")
+            yield fleet, watches
+        finally:
+            fleet.close()
+            for w in watches.values():
+                w.close()
+
+
+def test_robots_of_several_platforms_obey_their_own_commands(
+    hub: tuple[zenoh.Session, str], databank: Databank
+) -> None:
+    session, endpoint = hub
+    poses = {r.robot_id: far(databank.catalogue(r.platform), i % 2)
+             for i, r in enumerate(ROBOTS)}
+    targets = {r.robot_id: databank.query(r.platform, SpatialCommand(*poses[r.robot_id])).joints
+               for r in ROBOTS}
+    with running_fleet(endpoint, ROBOTS) as (fleet, watches):
+        assert fleet.stepper.threads == 2
+        start = {rid: w.states[-1] for rid, w in watches.items()}
+        ops = {r.robot_id: Operator(session, r.robot_id, sender=f"op-{r.robot_id}")
+               for r in ROBOTS}
+        # one robot moves; the others, stepped by the same loop, do not
+        first = ROBOTS[0].robot_id
+        seq = ops[first].send(poses[first])
+        watches[first].after(seq, lambda st: joints_close(st, targets[first], 0.02),
+                             f"{first} at its pose")
+        for rid in watches.keys() - {first}:
+            now = watches[rid].wait(lambda st, rid=rid: st.seq > start[rid].seq + 5,
+                                    f"{rid} states")
+            assert (now.last_command_seq, now.status) == (-1, "idle"), (rid, now)
+        # each robot reaches its own pose for its own command
+        for rid, op in ops.items():
+            seq = op.send(poses[rid])
+            watches[rid].after(seq, lambda st, rid=rid: joints_close(st, targets[rid], 0.02),
+                               f"{rid} at its pose")
+        # a group command reaches its member only
+        group = Operator(session, key=KEYS.group_command("bases"), sender="grp")
+        seq = group.send(poses[first], stop=True)
+        watches["f-youbot"].after(seq, lambda st: st.status == "stopped", "youbot stopped")
+        assert watches["f-baxter"].states[-1].status != "stopped"
+        for op in [*ops.values(), group]:
+            op.close()
+
+
+def test_one_robots_estop_does_not_stop_the_others(
+    hub: tuple[zenoh.Session, str], databank: Databank
+) -> None:
+    session, endpoint = hub
+    robots = ROBOTS[:2]
+    cats = {r.robot_id: databank.catalogue(r.platform) for r in robots}
+    acks = AckWatch(session, "*")
+    with running_fleet(endpoint, robots) as (_fleet, watches):
+        stopped, other = (r.robot_id for r in robots)
+        op_s = Operator(session, stopped, sender="op-s")
+        op_o = Operator(session, other, sender="op-o")
+        seq = op_s.send(estop=True)
+        acks.of("op-s", seq, "estopped")
+        watches[stopped].after(seq, lambda st: st.status == "estop" and st.estop_by == "op-s",
+                               "the e-stop latched")
+        pose = far(cats[other], 1)
+        target = databank.query("nao", SpatialCommand(*pose)).joints
+        seq_o = op_o.send(pose)
+        watches[other].after(seq_o, lambda st: joints_close(st, target, 0.02),
+                             "the other robot moving to its pose")
+        acks.of("op-o", seq_o, "reached")
+        refused = op_s.send(far(cats[stopped], 1))
+        ack = acks.of("op-s", refused, "rejected")
+        assert ack.code == "estopped"
+        assert watches[stopped].states[-1].status == "estop"
+        assert watches[other].states[-1].estop_by == ""
+        op_s.close()
+        op_o.close()
+    acks.close()
+
+
+class FailingBody(MujocoBody):
+    """A MuJoCo body whose physics fails after ``ok`` steps (a crashed simulator)."""
+
+    def __init__(self, platform: str, dt: float, ok: int) -> None:
+        super().__init__(platform_model(platform), dt)
+        self.left = ok
+
+    def simulate(self) -> None:
+        self.left -= 1
+        if self.left < 0:
+            raise RuntimeError("simulator crashed")
+        super().simulate()
+
+
+def test_a_failing_body_holds_its_robot_alone(hub: tuple[zenoh.Session, str]) -> None:
+    _session, endpoint = hub
+    robots = [RobotSpec("youbot", "f-fail"), RobotSpec("khepera", "f-fine")]
+    with zconfig.session(config=zconfig.loopback_config(endpoint)) as s:
+        fleet = Fleet(robots, s, AgentOptions(speed=0.0), helpers=1)
+        bad, fine = fleet.agents
+        bad.controller.body = FailingBody("youbot", bad.controller.dt, ok=50)
+        fleet.declare()
+        try:
+            for _ in range(200):
+                fleet.tick()
+            fleet.complete()  # the last tick's physics ran on the helper: finish it
+            status, detail = bad.status()
+            assert status == "error" and "simulator crashed" in detail
+            assert fine.status()[0] != "error"
+            assert fine.controller.steps == 200 and bad.controller.steps == 50
+            assert bad.stats.steps == fine.stats.steps == fleet.stats.steps == 200
+        finally:
+            fleet.close()
+
+
+def test_fleet_file_and_robot_arguments(tmp_path: Path) -> None:
+    good = tmp_path / "fleet.toml"
+    good.write_text('prefix = "lab"\n[robots.b1]\nplatform = "baxter"\ngroups = ["arms"]\n'
+                    '[robots.y1]\nplatform = "youbot"\n')
+    robots, prefix = load_fleet_file(good)
+    assert prefix == "lab"
+    assert robots == [RobotSpec("baxter", "b1", ("arms",)), RobotSpec("youbot", "y1")]
+    assert parse_robot("nao:nao-7") == RobotSpec("nao", "nao-7")
+    assert parse_robot("khepera") == RobotSpec("khepera", "khepera")
+    cases = {
+        '[robots.b1]\nplatform = "baxter"\nspeed = 3\n': "speed",
+        '[robots.b1]\ngroups = ["a"]\n': "platform",
+        "robots = 3\n": "robots",
+        "[robots.b1\n": "fleet file",
+    }
+    for text, named in cases.items():
+        bad = tmp_path / "bad.toml"
+        bad.write_text(text)
+        with pytest.raises(KinesphereError) as info:
+            load_fleet_file(bad)
+        assert info.value.code == "malformed" and named in info.value.message, text
+    with pytest.raises(KinesphereError, match="no such file|No such file"):
+        load_fleet_file(tmp_path / "missing.toml")
+    for robots, named in (([], "at least one"),
+                          ([RobotSpec("nao", "a"), RobotSpec("baxter", "a")], "twice"),
+                          ([RobotSpec("nao", "a/b")], "'/'"),
+                          ([RobotSpec("nao", "x" * 65)], "at most 64"),
+                          ([RobotSpec("nao", "n", ("g*",))], "group")):
+        with pytest.raises(KinesphereError) as info:
+            check_fleet(robots)
+        assert named in info.value.message
+    with pytest.raises(KinesphereError, match="PLATFORM:ID"):
+        parse_robot("nao:")
+
+
+def test_fleet_command_runs_every_robot_and_stops_on_sigterm(
+    tmp_path: Path, hub: tuple[zenoh.Session, str]
+) -> None:
+    session, endpoint = hub
+    fleet = tmp_path / "fleet.toml"
+    fleet.write_text('[robots.cli-y]\nplatform = "youbot"\n[robots.cli-k]\nplatform = "khepera"\n')
+    alive: set[str] = set()
+    changed = threading.Condition()
+
+    def on_token(sample: zenoh.Sample) -> None:
+        with changed:
+            rid = KEYS.robot_id_of(str(sample.key_expr))
+            (alive.add if sample.kind == zenoh.SampleKind.PUT else alive.discard)(rid)
+            changed.notify_all()
+
+    sub = session.liveliness().declare_subscriber(KEYS.alive_robot("*"), on_token, history=True)
+    try:
+        for argv, ids in ((["fleet", str(fleet)], {"cli-y", "cli-k"}),
+                          (["agent", "--robot", "youbot:arg-y", "--robot", "khepera:arg-k"],
+                           {"arg-y", "arg-k"})):
+            proc = subprocess.Popen(
+                [sys.executable, "-m", "kinesphere.cli", *argv, "--connect", endpoint,
+                 "--listen", zconfig.LOOPBACK_ANY_PORT],
+                cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+            try:
+                with changed:
+                    assert changed.wait_for(lambda ids=ids: ids <= alive, WAIT_S), alive
+            finally:
+                proc.send_signal(signal.SIGTERM)
+                _, err = proc.communicate(timeout=WAIT_S)
+            assert proc.returncode == 0, err.decode(errors="replace")[-2000:]
+            with changed:
+                assert changed.wait_for(lambda ids=ids: not ids & alive, WAIT_S), alive
+    finally:
+        zconfig.undeclare(sub)
+
+
+def test_fleet_command_line_errors(tmp_path: Path) -> None:
+    def run(*argv: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run([sys.executable, "-m", "kinesphere.cli", *argv], cwd=ROOT,
+                              capture_output=True, text=True, timeout=WAIT_S)
+
+    dup = tmp_path / "dup.toml"
+    dup.write_text('[robots.a]\nplatform = "nao"\ngroups = ["x/y"]\n')
+    for argv, named in ((["fleet", str(dup)], "may not contain"),
+                        (["fleet", str(tmp_path / "none.toml")], "fleet file"),
+                        (["agent", "nao", "--robot", "youbot:y"], "cannot be combined"),
+                        (["agent", "--robot", "youbot:y", "--body", "ros2"], "simulated"),
+                        (["agent"], "give a PLATFORM")):
+        done = run(*argv)
+        assert done.returncode != 0 and named in done.stderr, (argv, done.stderr)
