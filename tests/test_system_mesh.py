@@ -3,13 +3,13 @@
     operator site (router A) --- headquarters (router B, databank) --- robot site (router C)
 
 Every process is a Zenoh client of its own site's router, so the operator's commands and
-e-stops, and the robots' states and liveliness tokens, cross both inter-router links (three
-routers); the agents' pose queries and the operator's catalogue and pose queries cross one (two
-routers). The site routers start before headquarters: a router keeps retrying a link, so sites
-may come up in any order. Then the middle router is SIGKILLed while an operator streams a drive:
-the robot, cut off from its operator, holds within its command's TTL (its watchdog, not the
-10 s link lease), keeps stepping and reporting at its own site, and obeys again once the middle
-router is back and the links re-form.
+e-stops, and the robots' states, acks and liveliness tokens, cross both inter-router links
+(three routers); the agents' pose queries and the operator's catalogue and pose queries cross
+one (two routers). The site routers start before headquarters: a router keeps retrying a link,
+so sites may come up in any order. Then the middle router is SIGKILLed while an operator
+streams a drive: the robot, cut off from its operator, holds within its command's TTL (its
+watchdog, not the 10 s link lease), keeps stepping and reporting at its own site, and obeys
+again once the middle router is back and the links re-form.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Iterator
-from contextlib import AbstractContextManager
+from contextlib import AbstractContextManager, contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -39,7 +39,7 @@ from test_system_support import (
 
 from kinesphere.deploy.procs import Supervisor
 from kinesphere.keyexpr import KEYS
-from kinesphere.protocol import Command, SpatialCommand, encode
+from kinesphere.protocol import Ack, Command, SpatialCommand, decode, encode
 from kinesphere.zconfig import free_port, session, undeclare, wait_matching
 
 ROBOTS = {"youbot-1": "youbot", "nao-1": "nao"}
@@ -48,6 +48,18 @@ POSE_B = ("limb_11", "distal_11", "right-high", 2)
 TTL_MS = 300
 LATCHED_SEQ = 1000
 AGENT_HZ = "250"  # two real-time agents, three routers and a databank share two cores in CI
+
+
+@contextmanager
+def acks_at(obs: Observer) -> Iterator[list[Ack]]:
+    """Every robot's acks as ``obs``'s site receives them, while the block runs."""
+    got: list[Ack] = []
+    sub = obs.session.declare_subscriber(KEYS.ack("*"),
+                                         lambda s: got.append(decode(s.payload, Ack)))
+    try:
+        yield got
+    finally:
+        undeclare(sub)
 
 
 def start_router(sup: Supervisor, ports: dict[str, int], name: str) -> None:
@@ -140,9 +152,14 @@ def test_commands_states_queries_and_estop_cross_the_mesh(mesh: Mesh) -> None:
           WAIT_S, "every robot to latch the e-stop", explain=ops.describe)
     latched = Command(seq=LATCHED_SEQ, sent_ns=time.time_ns(), parts=[SpatialCommand(*POSE_B)],
                       deadman=True, ttl_ms=0, sender="mesh-test")
-    ops.session.put(KEYS.command("*"), encode(latched))
+    with acks_at(ops) as acks:  # each robot's answer crosses both links back
+        ops.session.put(KEYS.command("*"), encode(latched))
+        until(lambda: {a.robot_id for a in acks if a.sender == "mesh-test"
+                       and a.seq == LATCHED_SEQ and a.code == "estopped"} == set(ROBOTS),
+              WAIT_S, "every robot to refuse the command while latched (acks)",
+              explain=lambda: acks[-5:])
     until(lambda: all(ops.states.last(r).last_command_seq == LATCHED_SEQ for r in ROBOTS),
-          WAIT_S, "every robot to refuse the command while latched", explain=ops.describe)
+          WAIT_S, "every robot to report the refused command", explain=ops.describe)
     assert all(at_pose(ops.states.last(r), a[r]) and ops.states.last(r).status == "estop"
                for r in ROBOTS), f"a latched robot moved:\n{ops.describe()}"
 
