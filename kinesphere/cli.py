@@ -19,7 +19,7 @@ from kinesphere.cliargs import PLATFORMS_ENV, add_platforms_argument, use_platfo
 from kinesphere.errors import KinesphereError
 
 ROLE_COMMANDS: dict[str, tuple[str, ...]] = {
-    "kinesphere-robots": ("agent", "describe", "platform", "platforms"),
+    "kinesphere-robots": ("agent", "describe", "fleet", "platform", "platforms"),
     "kinesphere-services": ("databank", "ecl", "pose", "query"),
     "kinesphere-clients": ("estop", "gamepad", "play", "ros2", "send"),
     "kinesphere-deploy": ("router", "status", "up"),
