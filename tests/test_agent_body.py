@@ -9,6 +9,7 @@ publishing with ``error`` and a reason.
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Sequence
 
 import numpy as np
@@ -26,7 +27,7 @@ from test_agent_support import (
 from kinesphere import zconfig
 from kinesphere.errors import KinesphereError
 from kinesphere.laban import Direction
-from kinesphere.protocol import SpatialCommand
+from kinesphere.protocol import Drive, SpatialCommand
 from kinesphere.robots.agent.base import rotate
 from kinesphere.robots.agent.body import Body, Reading, make_body
 from kinesphere.robots.agent.runtime import Agent, AgentOptions
@@ -82,6 +83,50 @@ class FailingBody(KinematicBody):
         self.steps += 1
         if self.steps > self.after:
             raise RuntimeError("driver lost")
+
+
+class StallingBody(KinematicBody):
+    """Its driver stalls once, for ``stall_s`` of wall time, at step ``stall_at`` (set by the
+    test): robot time stands still meanwhile, as it does for a frozen or starved process."""
+
+    def __init__(self, platform: str, dt: float, stall_s: float) -> None:
+        super().__init__(platform, dt)
+        self.stall_s = stall_s
+        self.stall_at = -1
+        self.steps = 0
+
+    def step(self) -> None:
+        self.steps += 1
+        if self.steps == self.stall_at:
+            time.sleep(self.stall_s)  # the stall itself, not a wait for anything
+
+
+def test_the_watchdog_runs_on_the_wall_clock_through_a_stalled_step(
+    hub: tuple[zenoh.Session, str],
+) -> None:
+    """A drive with a 300 ms TTL, then the body stalls 1 s in one step: the first step after
+    the stall holds (robot time alone would have driven on for most of the TTL)."""
+    session, endpoint = hub
+    body = StallingBody("youbot", 1.0 / 500.0, stall_s=1.0)
+    seen: list[tuple[int, str]] = []
+    with zconfig.session(config=zconfig.loopback_config(endpoint)) as s:
+        agent = Agent("youbot", "stalling", s, AgentOptions(speed=1.0), body=body)
+        agent.controller.on_step = lambda c: seen.append((body.steps, agent.status()[0]))
+        watch = StateWatch(s, "stalling")
+        agent.start()
+        try:
+            op = Operator(session, agent.robot_id, sender="ann", client_session="a")
+            seq = op.send(drive=Drive(forward=0.5), ttl_ms=300)
+            watch.after(seq, lambda st: st.base_pose[0] > 0.001, "driving")
+            body.stall_at = body.steps + 2
+            held = watch.after(seq, lambda st: st.status == "holding", "held by the watchdog")
+            op.close()
+        finally:
+            agent.close()
+            watch.close()
+    assert "ttl" in held.detail
+    after = [status for step, status in seen if step >= body.stall_at]
+    assert "holding" in after[:3], f"held {after.index('holding')} steps after the stall"
 
 
 def test_an_agent_drives_a_kinematic_body_over_the_wire(
