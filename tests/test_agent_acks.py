@@ -14,6 +14,7 @@ from test_agent_support import (
     Databank,
     Operator,
     databank,
+    far,
     hub,
     joints_close,
     running_agent,
@@ -21,15 +22,9 @@ from test_agent_support import (
 
 from kinesphere.errors import KinesphereError
 from kinesphere.laban import Direction
-from kinesphere.protocol import Catalogue, SpatialCommand
+from kinesphere.protocol import SpatialCommand
 
 __all__ = ["databank", "hub"]  # fixtures
-
-
-def far(cat: Catalogue, k: int = 0) -> tuple[str, str, str, float]:
-    entry = cat.limbs[0]
-    pulls = [d for d in entry.directions if d != "place-middle"]
-    return (entry.limb, entry.origin, pulls[k], float(max(entry.sizes)))
 
 
 def test_a_command_is_accepted_moves_and_is_reached_or_superseded(

@@ -29,24 +29,19 @@ from test_agent_support import (
     Operator,
     StateWatch,
     databank,
+    far,
     hub,
     joints_close,
     running_agent,
 )
 
 from kinesphere import zconfig
-from kinesphere.protocol import MAX_INT, Catalogue, Command, SpatialCommand, encode
+from kinesphere.protocol import MAX_INT, Command, SpatialCommand, encode
 from kinesphere.robots.agent import acks as ack_rules
 from kinesphere.robots.agent.inbox import MAX_PENDING, PER_SENDER
 from kinesphere.robots.agent.ordering import MAX_SENDERS
 
 __all__ = ["databank", "hub"]  # fixtures
-
-
-def far(cat: Catalogue, k: int) -> tuple[str, str, str, float]:
-    entry = cat.limbs[0]
-    pulls = [d for d in entry.directions if d != "place-middle"]
-    return (entry.limb, entry.origin, pulls[k], float(max(entry.sizes)))
 
 
 def test_commands_queued_while_the_agent_was_frozen_never_run(

@@ -297,6 +297,13 @@ class AckWatch:
         zconfig.undeclare(self._sub)
 
 
+def far(cat: Catalogue, k: int = 0) -> tuple[str, str, str, float]:
+    """The far reach of the first limb in its ``k``-th real pull (place-middle left out)."""
+    entry = cat.limbs[0]
+    pulls = [d for d in entry.directions if d != "place-middle"]
+    return (entry.limb, entry.origin, pulls[k], float(max(entry.sizes)))
+
+
 def joints_close(state: RobotState, joints: Mapping[str, float], tol: float) -> bool:
     q = dict(zip(state.joint_names, state.q, strict=True))
     return all(abs(q[j] - v) <= tol for j, v in joints.items())
