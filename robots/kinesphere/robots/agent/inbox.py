@@ -131,10 +131,9 @@ class Inbox:
                     + len(self._other) + (self._bad is not None))
 
     def drain(self) -> Drained:
+        if not (self._estops or self._pairs or self._other or self._bad or self._superseded):
+            return _EMPTY  # the common step: nothing new (reading emptiness needs no lock)
         with self._lock:
-            if not (self._estops or self._pairs or self._other or self._bad
-                    or self._superseded):
-                return _EMPTY
             estops = list(self._estops)
             self._estops.clear()
             queued: list[tuple[int, Received | KinesphereError | Resolved]] = [

@@ -56,6 +56,7 @@ class MujocoBody(Body):
         limits = [self.platform.eurdf.limits[j] for j in names]
         self._lower = np.array([lim.lower for lim in limits])
         self._upper = np.array([lim.upper for lim in limits])
+        self._stops = list(zip(self._lower.tolist(), self._upper.tolist(), strict=True))
         self._mobile = self.platform.base.mobile
         if self._mobile:
             self._base_q = np.array([pm.qpos_index[j] for j in BASE_JOINTS], dtype=int)
@@ -99,12 +100,17 @@ class MujocoBody(Body):
 
     def settle(self) -> None:
         """The hard stops after the physics."""
+        q = self.data.qpos[self._q_slice].tolist()  # plain floats: quicker than numpy here
+        if any(v < lo or v > hi for v, (lo, hi) in zip(q, self._stops, strict=True)):
+            self._stop_at_limits()
+
+    def _stop_at_limits(self) -> None:
+        """The hard stops (module text): joints past a limit back on it, stopped there."""
         data = self.data
-        q = data.qpos[self._q_slice]
+        q = data.qpos[self._qadr]
         past = (q < self._lower) | (q > self._upper)
-        if past.any():  # the hard stops (module text)
-            data.qpos[self._qadr[past]] = np.clip(q[past], self._lower[past], self._upper[past])
-            data.qvel[self._dadr[past]] = 0.0
+        data.qpos[self._qadr[past]] = np.clip(q[past], self._lower[past], self._upper[past])
+        data.qvel[self._dadr[past]] = 0.0
 
     def halt(self) -> None:
         data = self.data
