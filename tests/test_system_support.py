@@ -38,7 +38,8 @@ def databank_args(platforms: list[str]) -> list[str]:
     dev = os.environ.get("KINESPHERE_TEST_DBS")
     if dev and all((Path(dev) / f"{p}.sqlite").exists() for p in platforms):
         return [a for p in platforms for a in ("--db", f"{p}={Path(dev) / p}.sqlite")]
-    pytest.skip(f"no {'/'.join(platforms)} databanks in {SHIPPED_DBS} (or $KINESPHERE_TEST_DBS)")
+    pytest.fail(f"no {'/'.join(platforms)} databanks in {SHIPPED_DBS} (or $KINESPHERE_TEST_DBS): "
+                "run `kinesphere ecl build --all` or restore them with git")
 
 
 def until(cond: Callable[[], bool], timeout: float, what: str, every: float = 0.05,

@@ -37,7 +37,14 @@ def _db_args() -> list[str]:
     dev = os.environ.get("KINESPHERE_TEST_DBS")
     if dev and (Path(dev) / "youbot.sqlite").exists():
         return ["--db", f"youbot={Path(dev) / 'youbot.sqlite'}"]
-    pytest.skip(f"no youbot databank in {SHIPPED_DBS} (or $KINESPHERE_TEST_DBS)")
+    pytest.fail(f"no youbot databank in {SHIPPED_DBS} (or $KINESPHERE_TEST_DBS): "
+                "run `kinesphere ecl build --all` or restore it with git")
+
+
+def _ctrl_c_reaches_it() -> None:
+    """Undo an inherited SIG_IGN for SIGINT (any job started with ``&`` by a non-interactive
+    shell has one), so ``up`` starts with Python's Ctrl-C handler as it would in a terminal."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 def _up(tmp_path: Path, *extra: str, seconds: float = 1.5) -> tuple[subprocess.Popen[bytes], Path]:
@@ -51,6 +58,7 @@ def _up(tmp_path: Path, *extra: str, seconds: float = 1.5) -> tuple[subprocess.P
             [sys.executable, "-m", "kinesphere.cli", "up", "--headless", "--robots", "youbot",
              "--phrase", str(phrase), "--out", str(out), *_db_args(), *extra],
             stdout=f, stderr=subprocess.STDOUT, cwd=ROOT, env=env,
+            preexec_fn=_ctrl_c_reaches_it,
         )
     return proc, log
 
