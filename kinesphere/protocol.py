@@ -47,8 +47,12 @@ SignedFraction = Annotated[float, msgspec.Meta(ge=-1.0, le=1.0)]
 NonNegInt = Annotated[int, msgspec.Meta(ge=0, le=MAX_INT)]
 Int = Annotated[int, msgspec.Meta(ge=-MAX_INT, le=MAX_INT)]
 Name = Annotated[str, msgspec.Meta(max_length=MAX_NAME)]
-Text = Annotated[str, msgspec.Meta(max_length=1024)]
+MAX_TEXT: Final = 1024
+"""Longest free text (``detail``) in characters; producers cut theirs to it."""
+Text = Annotated[str, msgspec.Meta(max_length=MAX_TEXT)]
 JointMap = Annotated[dict[Name, float], msgspec.Meta(max_length=MAX_JOINTS)]
+Names = Annotated[list[Name], msgspec.Meta(max_length=MAX_JOINTS)]
+Floats = Annotated[list[float], msgspec.Meta(max_length=MAX_JOINTS)]
 
 
 class Status(StrEnum):
@@ -280,22 +284,22 @@ class RobotState(Message, tag="robot_state", kw_only=True):
     as stale or expired since it started.
     """
 
-    robot_id: str
-    platform: str
+    robot_id: Name
+    platform: Name
     seq: Int
     stamp_ns: Int
-    joint_names: list[str]
-    q: list[float]
-    qd: list[float]
+    joint_names: Names
+    q: Floats
+    qd: Floats
     base_pose: Vec3
-    status: str
+    status: Name
     last_command_seq: Int
-    detail: str = ""
-    clamped: list[str] = []
-    groups: list[str] = []
-    lease_holder: str = ""
-    estop_by: str = ""
-    substitutions: list[Substitution] = []
+    detail: Text = ""
+    clamped: Names = []
+    groups: Annotated[list[Name], msgspec.Meta(max_length=MAX_PARTS)] = []
+    lease_holder: Name = ""
+    estop_by: Name = ""
+    substitutions: Annotated[list[Substitution], msgspec.Meta(max_length=MAX_PARTS)] = []
     dropped: NonNegInt = 0
 
     def __post_init__(self) -> None:
@@ -357,8 +361,8 @@ class Ack(Message, tag="ack", kw_only=True):
     code: str = ""
     detail: Text = ""
     stamp_ns: Int
-    substitutions: list[Substitution] = []
-    lease_holder: str = ""
+    substitutions: Annotated[list[Substitution], msgspec.Meta(max_length=MAX_PARTS)] = []
+    lease_holder: Name = ""
 
 
 class BodyModel(Message, tag="body_model", kw_only=True):
@@ -369,10 +373,10 @@ class BodyModel(Message, tag="body_model", kw_only=True):
     """
 
     platform: Name
-    eurdf: str
-    base_kind: str
-    neutral: dict[str, float]
-    version: str
+    eurdf: Annotated[str, msgspec.Meta(max_length=MAX_LARGE_PAYLOAD)]
+    base_kind: Name
+    neutral: JointMap
+    version: Name
 
 
 AnyMessage = (

@@ -377,3 +377,23 @@ def test_statuses_and_stages_are_plain_strings_on_the_wire() -> None:
                            "databank_unreachable", "error"}
     m = as_map(next(m for m in SAMPLES if isinstance(m, pr.Ack)))
     assert m["stage"] == "rejected" and type(m["stage"]) is str
+
+
+@pytest.mark.parametrize(
+    ("fields", "what"),
+    [
+        ({"robot_id": "r" * (pr.MAX_NAME + 1)}, "robot_id"),
+        ({"joint_names": [f"j{i}" for i in range(pr.MAX_JOINTS + 1)],
+          "q": [0.0] * (pr.MAX_JOINTS + 1), "qd": []}, "joint_names"),
+        ({"detail": "d" * (pr.MAX_TEXT + 1)}, "detail"),
+        ({"groups": [f"g{i}" for i in range(pr.MAX_PARTS + 1)]}, "groups"),
+        ({"lease_holder": "h" * (pr.MAX_NAME + 1)}, "lease_holder"),
+    ],
+)
+def test_robot_state_fields_are_bounded(fields: dict[str, Any], what: str) -> None:
+    """A state from the wire is as bounded as a command: names, joint lists, free text."""
+    ok = {"type": "robot_state", "robot_id": "r", "platform": "p", "seq": 1, "stamp_ns": 1,
+          "joint_names": ["a"], "q": [0.0], "qd": [0.0], "base_pose": [0.0, 0.0, 0.0],
+          "status": "idle", "last_command_seq": -1}
+    assert pr.decode(raw(ok), pr.RobotState).robot_id == "r"
+    assert what in malformed(raw({**ok, **fields}), pr.RobotState)

@@ -20,7 +20,7 @@ from collections import Counter, OrderedDict
 from collections.abc import Callable, Hashable, Sequence
 from dataclasses import dataclass, field
 
-from kinesphere.protocol import Ack, AckStage, Command, Substitution, encode
+from kinesphere.protocol import MAX_TEXT, Ack, AckStage, Command, Substitution, encode
 
 log = logging.getLogger(__name__)
 
@@ -170,5 +170,5 @@ def make_ack(robot_id: str, cmd: Command, stage: AckStage, *, code: str = "", de
     """The encoded Ack for ``cmd`` (detail cut to the protocol's 1024 characters)."""
     return encode(Ack(
         robot_id=robot_id, sender=cmd.sender, session=cmd.session, seq=cmd.seq, stage=stage,
-        code=code, detail=detail[:1024], stamp_ns=time.time_ns(),
+        code=code, detail=detail[:MAX_TEXT], stamp_ns=time.time_ns(),
         substitutions=list(substitutions), lease_holder=lease_holder))

@@ -31,6 +31,7 @@ import zenoh
 from kinesphere.errors import KinesphereError
 from kinesphere.keyexpr import Keys
 from kinesphere.protocol import (
+    MAX_TEXT,
     AckStage,
     Command,
     Payload,
@@ -256,7 +257,7 @@ class Agent:
             robot_id=self.robot_id, platform=self.platform, seq=self._state_seq,
             stamp_ns=time.time_ns(), joint_names=list(ctrl.joint_names), q=ctrl.q(),
             qd=ctrl.qd(), base_pose=ctrl.base_pose(), status=status,
-            last_command_seq=conduct.ordering.last_seq, detail=detail,
+            last_command_seq=conduct.ordering.last_seq, detail=detail[:MAX_TEXT],
             clamped=sorted(ctrl.joints.clamped), groups=list(self.options.groups),
             lease_holder=conduct.lease.holder, estop_by=conduct.safety.estop_by,
             substitutions=conduct.acks.substitutions, dropped=conduct.ordering.dropped,
