@@ -13,7 +13,7 @@ export SDL_VIDEODRIVER ?= dummy
 export SDL_AUDIODRIVER ?= dummy
 export PYTHONDONTWRITEBYTECODE := 1
 
-.PHONY: install demo test lint typecheck layers bench soak lock clean
+.PHONY: install demo test lint typecheck layers browser bench soak lock clean
 
 $(STAMP): pyproject.toml robots/pyproject.toml services/pyproject.toml clients/pyproject.toml deploy/pyproject.toml constraints.txt
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -26,8 +26,18 @@ install: $(STAMP)
 demo: $(STAMP)
 	$(BIN)/kinesphere up --headless
 
-test: lint typecheck layers
+test: lint typecheck layers browser
 	$(BIN)/python -m pytest -q
+
+# The view's test drives Debian's Chromium (Playwright's own browser download is not used).
+CHROMIUM_INSTALL := apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium
+browser:
+	@if ! command -v chromium >/dev/null 2>&1; then \
+	  if [ "$$(id -u)" = 0 ]; then echo "installing Debian's chromium for the view test"; \
+	    $(CHROMIUM_INSTALL) >/dev/null; \
+	  else echo "make test needs Debian's chromium for the view test; install it with:" >&2; \
+	    echo "  sudo sh -c 'apt-get update && apt-get install -y chromium'" >&2; exit 1; fi; \
+	fi
 
 lint: $(STAMP)
 	$(BIN)/ruff check $(SRC)

@@ -48,3 +48,49 @@ def test_unknown_platform_and_bad_key(net: zenoh.Session) -> None:
     assert error_code(answered(net, KEYS.body("nosuchbot"))) == "unknown_platform"
     (ok, data), = raw_get(net, f"{KEYS.prefix}/ecl/baxter/bodies")
     assert not ok and "body" in pr.decode(data, pr.Error).message
+
+
+@pytest.mark.parametrize("name", platform_names())
+def test_drawn_joint_frames_match_yourdfpy(net: zenoh.Session, name: str) -> None:
+    """The view's own joint transforms equal yourdfpy's forward kinematics at random poses,
+    and the neutral body stands on the floor as the MuJoCo model does."""
+    import io
+
+    import numpy as np
+    import yourdfpy
+    from viser import transforms as tf
+
+    from kinesphere.clients.view.body import Body
+
+    model = get_one(net, KEYS.body(name), pr.BodyModel, timeout=10.0)
+    body = Body(model)
+    urdf = yourdfpy.URDF.load(io.StringIO(model.eurdf), build_scene_graph=True,
+                              load_meshes=True)
+    plat = load_platform(name)
+    assert abs(body.lift - plat.base.height) < 1e-3
+    rng = np.random.default_rng(7)
+    for _ in range(5):
+        lim = [plat.eurdf.limits[j] for j in body.joint_names]
+        q = np.array([rng.uniform(max(x.lower, -3.0), min(x.upper, 3.0)) for x in lim])
+        urdf.update_cfg(q)
+        wxyz, xyz = body.transforms(q)
+        for i, joint in enumerate(urdf.joint_map.values()):
+            expected = urdf.get_transform(joint.child, joint.parent)
+            assert np.allclose(tf.SO3(wxyz[i]).as_matrix(), expected[:3, :3], atol=1e-9)
+            assert np.allclose(xyz[i], expected[:3, 3], atol=1e-9)
+
+
+def test_commands_in_words() -> None:
+    from kinesphere.words import command_words, label_names
+
+    names = label_names(load_eurdf(load_platform("baxter").eurdf.path or "").aliases)
+    part = pr.SpatialCommand("limb_11", "distal_11", "left-high", 3)
+    cmd = pr.Command(seq=1, sent_ns=1, parts=[part], deadman=True, ttl_ms=0)
+    assert command_words(cmd, names) == "right_arm ← right_shoulder → left-high, far"
+    drive = pr.Drive(direction="forward-middle", speed=0.5)
+    both = pr.Command(seq=2, sent_ns=1, parts=[part], drive=drive, deadman=True, ttl_ms=0)
+    assert command_words(both).endswith("far + drive forward-middle 0.50")
+    assert command_words(pr.Command(seq=3, sent_ns=1, deadman=False, ttl_ms=0, estop=True,
+                                    stop=True)) == "E-STOP"
+    assert command_words(pr.Command(seq=4, sent_ns=1, deadman=False, ttl_ms=0)) == \
+        "let go: hold"

@@ -1,0 +1,124 @@
+"""Bodies and targets from the databank, fetched off the frame loop.
+
+The view must never wait on the network while it draws: a body (``{p}/ecl/{platform}/body``)
+or a target pose (the pose or compound query a robot itself makes for a command) is asked for
+once on a worker thread, and the frame loop picks the answer up on a later frame. Answers are
+cached per request, in a bounded table; failures are remembered (with the error, for the
+panel) and retried after :data:`RETRY_S`.
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import threading
+import time
+from collections import OrderedDict
+from collections.abc import Callable, Hashable, Sequence
+from typing import Final, Generic, TypeVar
+
+import zenoh
+
+from kinesphere.errors import KinesphereError
+from kinesphere.keyexpr import Keys
+from kinesphere.protocol import BodyModel, CompoundRequest, Pose, SpatialCommand, encode
+from kinesphere.query import get_one
+
+log = logging.getLogger(__name__)
+T = TypeVar("T")
+RETRY_S: Final = 2.0
+MAX_ANSWERS: Final = 512
+TIMEOUT_S: Final = 2.0
+
+
+class Answers(Generic[T]):
+    """``get(request)``: the answer, None while it is being fetched, or the error it gave."""
+
+    def __init__(self, fetch: Callable[[Hashable], T], name: str) -> None:
+        self._fetch = fetch
+        self._done: OrderedDict[Hashable, T | KinesphereError] = OrderedDict()
+        self._failed_at: dict[Hashable, float] = {}
+        self._asked: set[Hashable] = set()
+        self._lock = threading.Lock()
+        self._jobs: queue.SimpleQueue[Hashable | None] = queue.SimpleQueue()
+        self._thread = threading.Thread(target=self._run, name=name, daemon=True)
+        self._thread.start()
+
+    def get(self, request: Hashable) -> T | KinesphereError | None:
+        with self._lock:
+            done = self._done.get(request)
+            if isinstance(done, KinesphereError):
+                if time.monotonic() - self._failed_at.get(request, 0.0) > RETRY_S:
+                    del self._done[request]
+                    self._ask(request)
+                return done
+            if done is None:
+                self._ask(request)
+            return done
+
+    def _ask(self, request: Hashable) -> None:
+        if request not in self._asked:
+            self._asked.add(request)
+            self._jobs.put(request)
+
+    def _run(self) -> None:
+        while (request := self._jobs.get()) is not None:
+            try:
+                answer: T | KinesphereError = self._fetch(request)
+            except KinesphereError as exc:
+                answer = exc
+            except Exception as exc:  # a bug must not end the thread
+                log.exception("fetching %r failed", request)
+                answer = KinesphereError("internal", repr(exc))
+            with self._lock:
+                self._asked.discard(request)
+                self._done[request] = answer
+                self._failed_at[request] = time.monotonic()
+                while len(self._done) > MAX_ANSWERS:
+                    old, _ = self._done.popitem(last=False)
+                    self._failed_at.pop(old, None)
+
+    def close(self) -> None:
+        self._jobs.put(None)
+        self._thread.join(timeout=TIMEOUT_S + 1.0)
+
+
+PartKey = tuple[tuple[str, str, str, float], ...]
+
+
+def part_key(parts: Sequence[SpatialCommand]) -> PartKey:
+    """A hashable stand-in for a command's parts (msgspec Structs are not hashable)."""
+    return tuple((p.limb, p.origin, p.direction, p.size) for p in parts)
+
+
+def pose_request(session: zenoh.Session, keys: Keys, platform: str, parts: Sequence[SpatialCommand]
+                 ) -> Pose:
+    """The pose ``platform``'s databank answers for ``parts`` (as the robot asks it)."""
+    if len(parts) == 1:
+        p = parts[0]
+        key = keys.pose(platform, p.limb, p.origin, p.direction, p.size)
+        return get_one(session, key, Pose, timeout=TIMEOUT_S)
+    payload = encode(CompoundRequest(parts=list(parts)))
+    return get_one(session, keys.compound(platform), Pose, payload, timeout=TIMEOUT_S)
+
+
+class Databank:
+    """Bodies by platform and target poses by ``(platform, parts)``, fetched in the background."""
+
+    def __init__(self, session: zenoh.Session, keys: Keys) -> None:
+        def body(platform: Hashable) -> BodyModel:
+            assert isinstance(platform, str)
+            return get_one(session, keys.body(platform), BodyModel, timeout=TIMEOUT_S,
+                           no_answer=f"no databank sends the body of {platform!r}")
+
+        def pose(request: Hashable) -> Pose:
+            assert isinstance(request, tuple)
+            platform, parts = request
+            return pose_request(session, keys, platform, [SpatialCommand(*p) for p in parts])
+
+        self.bodies: Answers[BodyModel] = Answers(body, "view-bodies")
+        self.poses: Answers[Pose] = Answers(pose, "view-poses")
+
+    def close(self) -> None:
+        self.bodies.close()
+        self.poses.close()
