@@ -11,10 +11,12 @@ import logging
 import signal
 import sys
 import threading
+import time
 from types import FrameType
 from typing import Any
 
 from kinesphere.cliargs import DEFAULT_ENDPOINT, add_zenoh_arguments
+from kinesphere.errors import KinesphereError
 
 log = logging.getLogger(__name__)
 
@@ -47,6 +49,36 @@ def register(sub: Any) -> None:
     v.add_argument("--duration", type=float, metavar="S", help="quit after S seconds")
     _zenoh(v)
     v.set_defaults(func=view)
+
+    r = sub.add_parser(
+        "record",
+        help="record every command, state, ack and recorded pose to an MCAP file",
+        description="Subscribe to {prefix}/robot/*/command, {prefix}/group/*/command, "
+        "{prefix}/robot/*/state, {prefix}/robot/*/ack and {prefix}/ecl/*/changed and write "
+        "every message to an MCAP file (one channel per key, JSON with a JSON Schema per "
+        "message type: Foxglove and 'mcap info' read it). Stops on Ctrl-C, SIGTERM, "
+        "--duration or --max-mb.",
+    )
+    r.add_argument("-o", "--output", required=True, metavar="FILE", help="MCAP file to write")
+    r.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
+    r.add_argument("--max-mb", type=float, default=1024.0,
+                   help="stop when this many MB of messages are written (default 1024)")
+    _zenoh(r)
+    r.set_defaults(func=record)
+
+    p = sub.add_parser(
+        "replay",
+        help="re-publish a recorded session's commands (or states) with the original timing",
+        description="Put the messages of an MCAP recording back on their keys, spaced as "
+        "they were recorded: 'commands' drive running robots again; 'states' replay what "
+        "the robots did, to watch it in 'kinesphere view' with no robot running.",
+    )
+    p.add_argument("recording", metavar="FILE", help="MCAP file written by kinesphere record")
+    p.add_argument("--what", choices=("commands", "states", "all"), default="commands",
+                   help="which messages to put back (default commands)")
+    p.add_argument("--speed", type=float, default=1.0, help="time scale (default 1 = as recorded)")
+    _zenoh(p)
+    p.set_defaults(func=replay)
 
 
 def _session(args: argparse.Namespace) -> Any:
@@ -83,3 +115,39 @@ def view(args: argparse.Namespace) -> int:
         finally:
             app.close()
     return 0
+
+
+def record(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from kinesphere.clients.taps import Recorder, summary
+    from kinesphere.keyexpr import Keys
+
+    if not args.max_mb > 0:
+        raise KinesphereError("malformed", f"--max-mb must be > 0, got {args.max_mb}")
+    stop, signals = _until_signal()
+    with signals, _session(args) as session:
+        rec = Recorder(session, Keys(args.prefix), args.output, int(args.max_mb * 1e6))
+        try:
+            print(f"recording to {args.output}; Ctrl-C to stop", file=sys.stderr, flush=True)
+            deadline = None if args.duration is None else time.monotonic() + args.duration
+            while not stop.is_set() and not rec.full.is_set():
+                if deadline is not None and time.monotonic() >= deadline:
+                    break
+                stop.wait(0.1)
+            if rec.full.is_set():
+                print(f"--max-mb {args.max_mb:g} reached", file=sys.stderr)
+        finally:
+            tally = rec.close()
+    print(summary(tally, Path(args.output)), file=sys.stderr)
+    return 0
+
+
+def replay(args: argparse.Namespace) -> int:
+    from kinesphere.clients.taps import replay as put_back
+
+    stop, signals = _until_signal()
+    with signals, _session(args) as session:
+        sent = put_back(session, args.recording, args.what, args.speed, stop.is_set)
+    print(f"replayed {sent} {args.what} message(s) from {args.recording}", file=sys.stderr)
+    return 130 if stop.is_set() else 0

@@ -41,11 +41,14 @@ class FrameStats:
     frames: int = 0
     frames_sent: int = 0
     """Joint and base frames sent to the scene."""
+    robot_updates: int = 0
+    """Robots re-posed (a robot counts once per frame in which it moved)."""
     costs_s: list[float] = field(default_factory=list)
 
-    def add(self, cost: float, sent: int) -> None:
+    def add(self, cost: float, sent: int, robots: int) -> None:
         self.frames += 1
         self.frames_sent += sent
+        self.robot_updates += robots
         if len(self.costs_s) < 100_000:
             self.costs_s.append(cost)
 
@@ -123,16 +126,18 @@ class View:
         """Draw one frame; returns how many scene frames were sent."""
         t0 = time.perf_counter()
         robots = self.fleet.snapshot()
-        sent = 0
+        sent = moved = 0
         with self.server.atomic():
             for rid in [r for r in self.drawings if r not in robots]:
                 self.drawings.pop(rid).remove()
             for rid, robot in robots.items():
                 drawing = self.drawings.get(rid) or self._draw(robot)
                 if drawing is not None and robot.state is not None:
-                    sent += self._move(drawing, robot)
+                    n = self._move(drawing, robot)
+                    sent += n
+                    moved += n > 0
         self._refresh_panel(robots)
-        self.stats.add(time.perf_counter() - t0, sent)
+        self.stats.add(time.perf_counter() - t0, sent, moved)
         return sent
 
     def _draw(self, robot: Robot) -> Drawing | None:

@@ -1,0 +1,143 @@
+"""``kinesphere record`` and ``kinesphere replay``: a session on Zenoh to MCAP and back.
+
+The recorder subscribes to every kind of message kinesphere puts: commands (robot, all and
+group keys), robot states, acks and the databank's ``changed`` poses. It decodes each (what
+does not decode is counted, not recorded) and writes it on its own key's channel. Writes
+happen under a lock on Zenoh's threads: an MCAP append is a memory copy, and the file is
+bounded by ``max_bytes``.
+
+A replay re-puts recorded messages on their keys with the original spacing (``speed`` scales
+it): commands to drive robots again, or states to watch a session in ``kinesphere view``
+without any robot running.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Final
+
+import zenoh
+
+from kinesphere.clients.mcaplog import McapWriter, read
+from kinesphere.errors import KinesphereError
+from kinesphere.keyexpr import WILDCARD, Keys
+from kinesphere.protocol import Command, Message, RobotState, decode_any, encode
+from kinesphere.zconfig import undeclare
+
+log = logging.getLogger(__name__)
+MAX_BYTES: Final = 1 << 30
+KINDS: Final = ("commands", "states", "all")
+
+
+def tapped_keys(keys: Keys) -> list[str]:
+    """Every key expression the recorder listens on."""
+    return [keys.command(WILDCARD), f"{keys.prefix}/group/*/command", keys.state(WILDCARD),
+            keys.ack(WILDCARD), keys.changed(WILDCARD)]
+
+
+@dataclass
+class Tally:
+    recorded: int = 0
+    undecodable: int = 0
+    by_type: dict[str, int] = field(default_factory=dict)
+
+
+class Recorder:
+    """Records everything under ``keys.prefix`` into ``path`` until :meth:`close`."""
+
+    def __init__(self, session: zenoh.Session, keys: Keys, path: str | Path,
+                 max_bytes: int = MAX_BYTES) -> None:
+        self.writer = McapWriter(path, {"prefix": keys.prefix})
+        self.max_bytes = max_bytes
+        self.tally = Tally()
+        self.full = threading.Event()
+        self._lock = threading.Lock()
+        self._open = True
+        self._subs: list[Any] = [session.declare_subscriber(k, self._on_sample)
+                                 for k in tapped_keys(keys)]
+
+    def _on_sample(self, sample: zenoh.Sample) -> None:
+        now = time.time_ns()
+        try:
+            msg = decode_any(sample.payload)
+        except KinesphereError:
+            with self._lock:
+                self.tally.undecodable += 1
+            return
+        with self._lock:
+            if not self._open or self.full.is_set():
+                return
+            self.writer.write(str(sample.key_expr), msg, now)
+            t = self.tally
+            t.recorded += 1
+            name = type(msg).__name__
+            t.by_type[name] = t.by_type.get(name, 0) + 1
+            if self.writer.bytes >= self.max_bytes:
+                self.full.set()
+
+    def close(self) -> Tally:
+        undeclare(*self._subs)
+        self._subs.clear()
+        with self._lock:
+            if self._open:
+                self._open = False
+                self.writer.close()
+        return self.tally
+
+
+def wanted(kind: str) -> Callable[[Message], bool]:
+    """Which recorded messages a replay of ``kind`` puts back."""
+    if kind == "commands":
+        return lambda m: isinstance(m, Command)
+    if kind == "states":
+        return lambda m: isinstance(m, RobotState)
+    if kind == "all":
+        return lambda m: isinstance(m, (Command, RobotState))
+    raise KinesphereError("malformed", f"replay {kind!r}? choose one of {', '.join(KINDS)}")
+
+
+def replay(session: zenoh.Session, path: str | Path, kind: str = "commands",
+           speed: float = 1.0, should_stop: Callable[[], bool] = lambda: False,
+           on_put: Callable[[str, Message], None] | None = None) -> int:
+    """Put the recording's ``kind`` messages back on their keys with the original timing;
+    returns how many were put."""
+    if not speed > 0:
+        raise KinesphereError("malformed", f"--speed must be > 0, got {speed}")
+    keep = wanted(kind)
+    items = [r for r in read(path) if keep(r.message)]
+    if not items:
+        return 0
+    publishers: dict[str, Any] = {}
+    start, t0 = time.monotonic(), items[0].log_ns
+    sent = 0
+    try:
+        for rec in items:
+            due = start + (rec.log_ns - t0) / 1e9 / speed
+            while (left := due - time.monotonic()) > 0:
+                if should_stop():
+                    return sent
+                time.sleep(min(left, 0.05))
+            pub = publishers.get(rec.key)
+            if pub is None:
+                pub = publishers[rec.key] = session.declare_publisher(
+                    rec.key, congestion_control=zenoh.CongestionControl.BLOCK, express=True)
+            pub.put(encode(rec.message))
+            sent += 1
+            if on_put is not None:
+                on_put(rec.key, rec.message)
+    finally:
+        undeclare(*publishers.values())
+    return sent
+
+
+def summary(tally: Tally, path: Path) -> str:
+    kinds = ", ".join(f"{n} {t}" for t, n in sorted(tally.by_type.items()))
+    bad = f"; {tally.undecodable} undecodable skipped" if tally.undecodable else ""
+    return f"recorded {tally.recorded} messages to {path} ({kinds or 'none'}){bad}"
+
+
