@@ -15,18 +15,10 @@ import time
 from types import FrameType
 from typing import Any
 
-from kinesphere.cliargs import DEFAULT_ENDPOINT, add_zenoh_arguments
+from kinesphere.cliargs import OPERATOR, WATCHER, add_zenoh_arguments
 from kinesphere.errors import KinesphereError
 
 log = logging.getLogger(__name__)
-
-
-def _zenoh(p: argparse.ArgumentParser) -> None:
-    add_zenoh_arguments(
-        p,
-        default_help=f"Without --connect, --listen or --zenoh-config: connect to "
-        f"{DEFAULT_ENDPOINT} (a router, or where 'kinesphere databank serve' listens).",
-    )
 
 
 def register(sub: Any) -> None:
@@ -47,7 +39,7 @@ def register(sub: Any) -> None:
     v.add_argument("--fps", type=float, default=30.0,
                    help="scene updates per second sent to browsers (default 30)")
     v.add_argument("--duration", type=float, metavar="S", help="quit after S seconds")
-    _zenoh(v)
+    add_zenoh_arguments(v, WATCHER)
     v.set_defaults(func=view)
 
     r = sub.add_parser(
@@ -63,7 +55,7 @@ def register(sub: Any) -> None:
     r.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
     r.add_argument("--max-mb", type=float, default=1024.0,
                    help="stop when this many MB of messages are written (default 1024)")
-    _zenoh(r)
+    add_zenoh_arguments(r, WATCHER)
     r.set_defaults(func=record)
 
     p = sub.add_parser(
@@ -77,17 +69,14 @@ def register(sub: Any) -> None:
     p.add_argument("--what", choices=("commands", "states", "all"), default="commands",
                    help="which messages to put back (default commands)")
     p.add_argument("--speed", type=float, default=1.0, help="time scale (default 1 = as recorded)")
-    _zenoh(p)
+    add_zenoh_arguments(p, OPERATOR)
     p.set_defaults(func=replay)
 
 
 def _session(args: argparse.Namespace) -> Any:
-    from kinesphere import zconfig
+    from kinesphere.zconfig import session_from_args
 
-    connect = args.connect
-    if connect is None and args.listen is None and args.zenoh_config is None:
-        connect = [zconfig.DEFAULT_ENDPOINT]
-    return zconfig.session(args.mode, args.listen, connect, args.zenoh_config)
+    return session_from_args(args)
 
 
 def _until_signal() -> Any:

@@ -1,0 +1,37 @@
+"""``kinesphere film``: the paper's Left-High phrase on every body, as MP4 and GIF."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import imageio_ffmpeg
+import numpy as np
+from PIL import Image
+
+from kinesphere.clients.phrases import load_phrase
+from kinesphere.deploy.film import CAPTION_H, PLATFORMS, render
+
+ROOT = Path(__file__).resolve().parents[1]
+PHRASE = ROOT / "clients" / "phrases" / "left_high.toml"
+W, H, FPS = 96, 80, 6.0
+
+
+def test_left_high_film(tmp_path: Path) -> None:
+    mp4, gif = tmp_path / "left_high.mp4", tmp_path / "left_high.gif"
+    n = render(PHRASE, mp4, gif, PLATFORMS, W, H, FPS)
+    expected = math.ceil(load_phrase(PHRASE).duration * FPS)
+    assert n == expected
+    reader = imageio_ffmpeg.read_frames(str(mp4))
+    meta = reader.__next__()
+    assert tuple(meta["size"]) == (W * len(PLATFORMS), H + CAPTION_H)
+    video = [np.frombuffer(f, np.uint8).reshape(H + CAPTION_H, W * len(PLATFORMS), 3)
+             for f in reader]
+    assert len(video) == expected
+    with Image.open(gif) as g:
+        assert g.n_frames == expected
+    first, middle = video[0].astype(int), video[len(video) // 2].astype(int)
+    for j, name in enumerate(PLATFORMS):  # every robot's pixels change: each body moved
+        tile = np.s_[CAPTION_H + 16 : H + CAPTION_H - 20, j * W : (j + 1) * W]
+        changed = (np.abs(middle[tile] - first[tile]).max(axis=2) > 40).sum()
+        assert changed > 30, f"{name} did not move between the first and middle frames"
