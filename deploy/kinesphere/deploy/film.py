@@ -51,6 +51,7 @@ def _font(size: int) -> ImageFont.FreeTypeFont | ImageFont.ImageFont:
 
 def _performers(platforms: Sequence[str], phrase: Any, width: int, height: int
                 ) -> list[Performer]:
+    from kinesphere.robots.agent.body import make_body
     from kinesphere.robots.agent.controller import Controller
     from kinesphere.robots.mjcf import platform_model
     from kinesphere.services.ecl.ecl import Ecl
@@ -67,7 +68,8 @@ def _performers(platforms: Sequence[str], phrase: Any, width: int, height: int
                 targets.append(pose_qpos(pm, _resolve(ecl, step.parts)))
             except KinesphereError:
                 pass
-        out.append(Performer(name, Controller(pm, CONTROL_HZ), ecl,
+        body = make_body("mujoco", name, 1.0 / CONTROL_HZ)  # the agent's default body
+        out.append(Performer(name, Controller(body), ecl,
                              Camera(pm, width, height, frame(pm, targets)),
                              label_names(pm.platform.eurdf.aliases)))
     return out
@@ -118,7 +120,7 @@ def _ascii(text: str) -> str:
 
 
 def _tile(p: Performer, words: str, width: int, height: int) -> Image.Image:
-    img: Image.Image = p.camera.shoot(p.controller.data.qpos)
+    img: Image.Image = p.camera.shoot(p.controller.body.data.qpos)
     draw = ImageDraw.Draw(img)
     draw.text((5, 4), p.name, fill=(0, 0, 0), font=_font(14))
     lines = [words]
