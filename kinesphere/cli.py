@@ -21,8 +21,8 @@ from kinesphere.errors import KinesphereError
 ROLE_COMMANDS: dict[str, tuple[str, ...]] = {
     "kinesphere-robots": ("agent", "describe", "fleet", "platform", "platforms"),
     "kinesphere-services": ("databank", "ecl", "pose", "query"),
-    "kinesphere-clients": ("estop", "gamepad", "play", "ros2", "send"),
-    "kinesphere-deploy": ("router", "status", "up"),
+    "kinesphere-clients": ("estop", "gamepad", "play", "record", "replay", "ros2", "send", "view"),
+    "kinesphere-deploy": ("film", "router", "status", "up"),
 }
 """Which distribution brings which command, so a host without it can say what to install
 (names only: the core imports no role). A test keeps it equal to the registered commands."""

@@ -164,6 +164,15 @@ def test_up_names_what_a_router_host_lacks(venvs: dict[str, Path]) -> None:
     assert "kinesphere-deploy[up]" in done.stderr
 
 
+def test_film_names_what_a_router_host_lacks(venvs: dict[str, Path]) -> None:
+    venv = venvs["router"]
+    done = _run([str(venv / "bin" / "kinesphere"), "film", "left_high"], venv)
+    assert done.returncode == 2 and "Traceback" not in done.stderr
+    for dist in ("kinesphere-robots", "kinesphere-services", "pillow", "imageio-ffmpeg"):
+        assert dist in done.stderr
+    assert "kinesphere-deploy[up]" in done.stderr
+
+
 def test_role_commands_name_every_registered_command_and_its_distribution() -> None:
     """The core's list of which distribution brings which command matches what the
     installed roles register (everything is installed here)."""

@@ -1,4 +1,4 @@
-"""``kinesphere up``, ``status`` and ``router``: the system as operators run it.
+"""``kinesphere up``, ``status``, ``router`` and ``film``: the system as operators run it.
 
 Heavy imports (Zenoh, MuJoCo, rich) happen inside the handlers so ``kinesphere --help`` stays
 quick.
@@ -7,6 +7,7 @@ quick.
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -92,6 +93,24 @@ def register(sub: Any) -> None:
                     help="log access-control denials (default: on when access control is)")
     rt.set_defaults(func=_router)
 
+    fm = sub.add_parser(
+        "film",
+        help="film a movement phrase performed by every body side by side (MP4 and GIF)",
+        description="Render PHRASE (a phrase file or shipped name) on each platform's real "
+        "agent controller with its real ECL, off-screen with MuJoCo, side by side with the "
+        "current command in words, as an MP4 and a GIF.",
+    )
+    fm.add_argument("phrase", metavar="PHRASE", help="phrase file (TOML) or shipped name")
+    fm.add_argument("-o", "--output", metavar="MP4", help="video file (default PHRASE.mp4)")
+    fm.add_argument("--gif", metavar="GIF", help="GIF file (default: the video's name, .gif)")
+    fm.add_argument("--no-gif", action="store_true", help="write only the MP4")
+    fm.add_argument("--platforms", default=",".join(DEFAULT_ROBOTS),
+                    help=f"comma-separated bodies (default {','.join(DEFAULT_ROBOTS)})")
+    fm.add_argument("--width", type=int, default=320, help="tile width in pixels (default 320)")
+    fm.add_argument("--height", type=int, default=240, help="tile height (default 240)")
+    fm.add_argument("--fps", type=float, default=15.0, help="frames per second (default 15)")
+    fm.set_defaults(func=_film)
+
 
 def _up(args: argparse.Namespace) -> int:
     from kinesphere.deploy.plan import check_installed, default_phrases, parse_phrase, parse_robots
@@ -127,3 +146,17 @@ def _router(args: argparse.Namespace) -> int:
         return print_acl(args.robots)
     return run_router(args.config, args.listen, robots=args.robots, links=args.link,
                       log_denials=args.log_denials)
+
+
+def _film(args: argparse.Namespace) -> int:
+    from kinesphere.deploy.plan import FILM_NEEDS, check_installed
+
+    check_installed("kinesphere film runs the robots' controllers and ECLs here", FILM_NEEDS)
+    from kinesphere.deploy.film import render
+
+    out = Path(args.output or f"{Path(args.phrase).stem}.mp4")
+    gif = None if args.no_gif else Path(args.gif or out.with_suffix(".gif"))
+    platforms = [x for x in args.platforms.split(",") if x]
+    n = render(args.phrase, out, gif, platforms, args.width, args.height, args.fps)
+    print(f"wrote {n} frames to {out}" + (f" and {gif}" if gif else ""), file=sys.stderr)
+    return 0

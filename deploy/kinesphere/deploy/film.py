@@ -10,10 +10,8 @@ the current command in words, and written as MP4 (ffmpeg from imageio-ffmpeg) an
 
 from __future__ import annotations
 
-import argparse
 import logging
 import math
-import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -22,10 +20,12 @@ from typing import Any, Final
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
+from kinesphere.deploy.plan import DEFAULT_ROBOTS
 from kinesphere.errors import KinesphereError
 
 log = logging.getLogger(__name__)
-PLATFORMS: Final = ("baxter", "nao", "youbot", "packbot")
+PLATFORMS: Final = DEFAULT_ROBOTS
+"""Every shipped body, as ``kinesphere up`` starts them."""
 CONTROL_HZ: Final = 250.0
 CAPTION_H: Final = 40
 
@@ -185,32 +185,3 @@ def render(phrase_ref: str | Path, out: Path, gif: Path | None, platforms: Seque
         gif_frames[0].save(gif, save_all=True, append_images=gif_frames[1:],
                            duration=round(1000 / fps), loop=0, optimize=False)
     return frames
-
-
-def register(sub: Any) -> None:
-    p = sub.add_parser(
-        "film",
-        help="film a movement phrase performed by every body side by side (MP4 and GIF)",
-        description="Render PHRASE (a phrase file or shipped name) on each platform's real "
-        "agent controller with its real ECL, off-screen with MuJoCo, side by side with the "
-        "current command in words, as an MP4 and a GIF.",
-    )
-    p.add_argument("phrase", metavar="PHRASE", help="phrase file (TOML) or shipped name")
-    p.add_argument("-o", "--output", metavar="MP4", help="video file (default PHRASE.mp4)")
-    p.add_argument("--gif", metavar="GIF", help="GIF file (default: the video's name, .gif)")
-    p.add_argument("--no-gif", action="store_true", help="write only the MP4")
-    p.add_argument("--platforms", default=",".join(PLATFORMS),
-                   help=f"comma-separated bodies (default {','.join(PLATFORMS)})")
-    p.add_argument("--width", type=int, default=320, help="tile width in pixels (default 320)")
-    p.add_argument("--height", type=int, default=240, help="tile height (default 240)")
-    p.add_argument("--fps", type=float, default=15.0, help="frames per second (default 15)")
-    p.set_defaults(func=_film)
-
-
-def _film(args: argparse.Namespace) -> int:
-    out = Path(args.output or f"{Path(args.phrase).stem}.mp4")
-    gif = None if args.no_gif else Path(args.gif or out.with_suffix(".gif"))
-    platforms = [x for x in args.platforms.split(",") if x]
-    n = render(args.phrase, out, gif, platforms, args.width, args.height, args.fps)
-    print(f"wrote {n} frames to {out}" + (f" and {gif}" if gif else ""), file=sys.stderr)
-    return 0

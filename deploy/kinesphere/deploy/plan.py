@@ -113,13 +113,24 @@ UP_NEEDS = {
 }
 """What ``kinesphere up`` imports (module: distribution): it runs every role on one machine."""
 
+FILM_NEEDS = {
+    "kinesphere.robots": "kinesphere-robots",
+    "kinesphere.services": "kinesphere-services",
+    "kinesphere.clients": "kinesphere-clients",
+    "PIL": "pillow",
+    "imageio_ffmpeg": "imageio-ffmpeg",
+}
+"""What ``kinesphere film`` imports: the agent's controller, the ECL, the phrases, the encoders."""
 
-def check_installed() -> None:
-    """Name what ``kinesphere up`` lacks on this host, before anything starts."""
-    missing = [dist for module, dist in UP_NEEDS.items() if find_spec(module) is None]
+
+def check_installed(why: str = "kinesphere up runs every role on this machine",
+                    needs: dict[str, str] | None = None) -> None:
+    """Name what a command of the ``up`` extra lacks on this host, before anything starts."""
+    needs = UP_NEEDS if needs is None else needs
+    missing = [dist for module, dist in needs.items() if find_spec(module) is None]
     if missing:
         raise KinesphereError(
             "unavailable",
-            f"kinesphere up runs every role on this machine; not installed: {', '.join(missing)}"
+            f"{why}; not installed: {', '.join(missing)}"
             " (install them with: pip install 'kinesphere-deploy[up]')",
         )
