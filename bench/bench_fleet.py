@@ -35,7 +35,7 @@ from bench.bench_agent import (
 )
 from kinesphere import zconfig
 from kinesphere.protocol import SpatialCommand
-from kinesphere.robots.agent.body import make_body
+from kinesphere.robots.agent.bodies import make_body
 from kinesphere.robots.agent.fleet import Fleet, RobotSpec
 from kinesphere.robots.agent.mujoco_body import MujocoBody
 from kinesphere.robots.agent.otg import Otg

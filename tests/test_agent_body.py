@@ -29,7 +29,9 @@ from kinesphere.errors import KinesphereError
 from kinesphere.laban import Direction
 from kinesphere.protocol import Drive, SpatialCommand
 from kinesphere.robots.agent.base import rotate
-from kinesphere.robots.agent.body import Body, Reading, make_body
+from kinesphere.robots.agent.bodies import BODIES, make_body
+from kinesphere.robots.agent.body import Body, Reading
+from kinesphere.robots.agent.options import BODY_KINDS
 from kinesphere.robots.agent.runtime import Agent, AgentOptions
 from kinesphere.robots.platform import load_platform
 
@@ -214,3 +216,4 @@ def test_unknown_bodies_are_named() -> None:
     assert err.value.code == "malformed" and "mujoco" in err.value.message
     with pytest.raises(KinesphereError):
         AgentOptions(body="hydraulic")
+    assert list(BODIES) == list(BODY_KINDS)  # every name the options accept has a factory

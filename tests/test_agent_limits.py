@@ -20,7 +20,7 @@ from test_agent_support import WAIT_S, Databank, databank, hub
 from kinesphere import zconfig
 from kinesphere.errors import KinesphereError
 from kinesphere.protocol import SpatialCommand
-from kinesphere.robots.agent.body import make_body
+from kinesphere.robots.agent.bodies import make_body
 from kinesphere.robots.agent.controller import Controller
 from kinesphere.robots.agent.resolver import Resolver, parts_key
 

@@ -15,7 +15,7 @@ from kinesphere.errors import KinesphereError
 from kinesphere.eurdf import JointLimit
 from kinesphere.protocol import Command, Drive
 from kinesphere.robots.agent.base import DiffBase, OmniBase, make_base, wrap_angle
-from kinesphere.robots.agent.body import make_body
+from kinesphere.robots.agent.bodies import make_body
 from kinesphere.robots.agent.controller import Controller
 from kinesphere.robots.agent.otg import Otg
 from kinesphere.robots.agent.runtime import SETTLE_S, Agent, AgentOptions

@@ -45,7 +45,7 @@ from kinesphere.clients.state import ControllerState
 from kinesphere.clients.teleop import Teleop, run
 from kinesphere.errors import KinesphereError
 from kinesphere.protocol import Pose, SpatialCommand
-from kinesphere.robots.agent.body import make_body
+from kinesphere.robots.agent.bodies import make_body
 from kinesphere.robots.agent.options import AgentOptions, Ros2BodyOptions
 from kinesphere.robots.platform import load_platform
 

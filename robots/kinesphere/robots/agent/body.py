@@ -5,17 +5,15 @@ The agent owns the loop, the safety rules, the resolver, the trajectories and it
 joints of P and a body-frame velocity for the base (what a real base's ``cmd_vel`` takes), and
 :meth:`Body.step` either simulates that period (MuJoCo) or syncs with the hardware's cycle.
 Bodies are chosen by name (``kinesphere agent --body mujoco``, the default) from
-:data:`BODIES`; a new kind of body registers a factory there.
+``bodies.BODIES``; a new kind of body registers a factory there.
 """
 
 from __future__ import annotations
 
 import abc
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
-
-from kinesphere.errors import KinesphereError, choices
+from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:  # the CLI reads BODIES for --help: no numpy, no URDF parser at import
     import numpy as np
@@ -82,43 +80,3 @@ class Body(abc.ABC):
 
     def close(self) -> None:  # noqa: B027 - optional: a simulation has nothing to release
         """Release the body."""
-
-
-BodyFactory = Callable[..., Body]
-"""Makes a body for a platform (a shipped name or a folder) stepped every ``dt`` seconds. The
-agent also passes, by keyword, its ``session`` (Zenoh), ``options`` (AgentOptions) and
-``robot_id``: a body that talks to hardware over the network uses them, a simulation not."""
-
-
-def _mujoco(platform: str, dt: float, **_context: object) -> Body:
-    from kinesphere.robots.agent.mujoco_body import MujocoBody  # MuJoCo loads only when chosen
-    from kinesphere.robots.mjcf import platform_model
-
-    return MujocoBody(platform_model(platform), dt)
-
-
-def _ros2(platform: str, dt: float, *, session: Any = None, options: Any = None,
-          robot_id: str = "robot", **_context: object) -> Body:
-    from kinesphere.robots.agent.options import AgentOptions
-    from kinesphere.robots.agent.ros2_body import make_ros2_body  # rmw_zenoh only when chosen
-    from kinesphere.robots.platform import load_platform
-
-    if session is None:
-        raise KinesphereError("malformed", "the ros2 body needs the agent's Zenoh session")
-    ros2 = (options if options is not None else AgentOptions()).ros2
-    return make_ros2_body(load_platform(platform), dt, session, ros2, robot_id)
-
-
-BODIES: dict[str, BodyFactory] = {"mujoco": _mujoco, "ros2": _ros2}
-"""Bodies by the name ``--body`` takes: the platform's MuJoCo model, or a ros2_control robot
-over rmw_zenoh (``ros2_body.py``)."""
-DEFAULT_BODY = "mujoco"
-
-
-def make_body(kind: str, platform: str, dt: float, **context: Any) -> Body:
-    """The body ``kind`` for ``platform``; an unknown kind is ``malformed`` naming the valid.
-    ``context`` (``session``, ``options``, ``robot_id``) goes to the factory."""
-    factory = BODIES.get(kind)
-    if factory is None:
-        raise KinesphereError("malformed", f"unknown body {kind!r}; valid: {choices(BODIES)}")
-    return factory(platform, dt, **context)

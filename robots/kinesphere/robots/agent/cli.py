@@ -17,7 +17,7 @@ from typing import Any
 
 from kinesphere.cliargs import AGENT, add_zenoh_arguments
 from kinesphere.errors import KinesphereError
-from kinesphere.robots.agent.body import BODIES
+from kinesphere.robots.agent.bodies import BODIES
 from kinesphere.robots.agent.options import ROS2_INTERFACES, AgentOptions, Ros2BodyOptions
 from kinesphere.signals import handle_signals
 

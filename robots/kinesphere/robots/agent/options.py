@@ -4,13 +4,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Final
 
 from kinesphere.errors import KinesphereError
 from kinesphere.keyexpr import DEFAULT_PREFIX
-from kinesphere.robots.agent.body import BODIES, DEFAULT_BODY
 from kinesphere.robots.agent.trajectory import DEFAULT_MARGIN
 
 ROS2_INTERFACES = ("trajectory", "forward")
+BODY_KINDS: Final = ("mujoco", "ros2")
+"""The bodies ``--body`` may name, the default first; ``bodies.BODIES`` makes each."""
 
 
 @dataclass(frozen=True)
@@ -55,7 +57,8 @@ class AgentOptions:
 
     Control ``rate`` and ``state_rate`` in Hz, ``speed`` (robot seconds per wall second, 0 =
     unpaced), key ``prefix``, ``groups`` it obeys, databank query timeout, joint-limit clamp
-    ``margin``, the ``body`` it drives (a name in ``body.BODIES``; ``ros2`` reads ``ros2``), and
+    ``margin``, the ``body`` it drives (one of :data:`BODY_KINDS`, each made by
+    ``bodies.BODIES``; ``ros2`` reads ``ros2``), and
     the largest base translation one command may ask for (``max_translation_m``; a pose asking
     for more is refused with ``size_out_of_range`` and nothing moves), and ``strict_period``.
     """
@@ -67,7 +70,7 @@ class AgentOptions:
     groups: tuple[str, ...] = ()
     query_timeout_s: float = 1.0
     margin: float = DEFAULT_MARGIN
-    body: str = DEFAULT_BODY
+    body: str = BODY_KINDS[0]
     ros2: Ros2BodyOptions = Ros2BodyOptions()
     max_translation_m: float = MAX_TRANSLATION_M
     strict_period: bool = False
@@ -85,8 +88,8 @@ class AgentOptions:
             (self.margin >= 0, f"margin must be >= 0, got {self.margin}"),
             (math.isfinite(self.max_translation_m) and self.max_translation_m >= 0,
              f"max translation must be a distance >= 0 m, got {self.max_translation_m}"),
-            (self.body in BODIES,
-             f"unknown body {self.body!r}; valid: {', '.join(sorted(BODIES))}"),
+            (self.body in BODY_KINDS,
+             f"unknown body {self.body!r}; valid: {', '.join(BODY_KINDS)}"),
         )
         for ok, message in checks:
             if not ok:

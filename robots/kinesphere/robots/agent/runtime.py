@@ -41,7 +41,8 @@ from kinesphere.protocol import (
     encode,
 )
 from kinesphere.ratelog import RateLog
-from kinesphere.robots.agent.body import Body, make_body
+from kinesphere.robots.agent.bodies import make_body
+from kinesphere.robots.agent.body import Body
 from kinesphere.robots.agent.conduct import SETTLE_S as SETTLE_S
 from kinesphere.robots.agent.conduct import Conduct
 from kinesphere.robots.agent.controller import BLOCKED_TOL as BLOCKED_TOL
