@@ -149,7 +149,7 @@ def test_a_flood_cannot_delay_an_estop_and_every_table_stays_bounded(
         assert grown < 64 * 2**20, f"RSS grew {grown / 2**20:.0f} MiB"
         flooded_acks = [a for a in acks.acks if a.sender.startswith("0")]
         stamps = [a.stamp_ns for a in flooded_acks]
-        span = (max(stamps) - min(stamps)) / 1e9  # robot's clock, first to last flood ack
+        span = (max(stamps) - min(stamps)) / 1e9  # when the robot decided, first to last
         assert len(flooded_acks) <= ack_rules.TOTAL_BURST + ack_rules.TOTAL_RATE * span + 1
         assert len(flooded_acks) < n / 4, "acks are bounded in rate, not one per command"
         estop.close()

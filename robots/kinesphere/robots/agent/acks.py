@@ -100,30 +100,31 @@ class Acks:
         self.refused: Counter[str] = Counter()
         """Commands rejected, by error code (whether or not the ack was held back)."""
         self._pending: list[tuple[Command, AckStage, str, str, tuple[Substitution, ...],
-                                  str]] = []
+                                  str, int]] = []
 
     def send(self, cmd: Command, stage: AckStage, detail: str = "", *, code: str = "",
              substitutions: Sequence[Substitution] = ()) -> None:
         """Tell ``cmd``'s sender ``stage``, within the rate limit (e-stops: always), at the
-        next :meth:`flush`."""
+        next :meth:`flush`, stamped now (when the robot decided, not when it published)."""
         if stage is AckStage.REJECTED:
             self.refused[code] += 1
         if self.publish is None or not (stage in URGENT or self.limiter.allow(cmd.sender)):
             return
         self._pending.append((cmd, stage, code, detail, tuple(substitutions),
-                              self.lease_holder()))
+                              self.lease_holder(), time.time_ns()))
 
     def flush(self) -> None:
         """Publish what :meth:`send` queued. The control loop flushes once the step's
         setpoints went to the body, so encoding and putting acks never delays a command's
         first step (the rate limit already bounds how many wait)."""
         pending, self._pending = self._pending, []
-        for cmd, stage, code, detail, substitutions, holder in pending:
+        for cmd, stage, code, detail, substitutions, holder, stamp_ns in pending:
             if self.publish is None:
                 return
             try:
                 self.publish(make_ack(self.robot_id, cmd, stage, code=code, detail=detail,
-                                      substitutions=substitutions, lease_holder=holder))
+                                      substitutions=substitutions, lease_holder=holder,
+                                      stamp_ns=stamp_ns))
                 self.sent += 1
             except Exception as exc:  # session closing or congested: the loop goes on
                 log.debug("ack not published: %s", exc)
@@ -166,9 +167,12 @@ class Acks:
 
 
 def make_ack(robot_id: str, cmd: Command, stage: AckStage, *, code: str = "", detail: str = "",
-             substitutions: Sequence[Substitution] = (), lease_holder: str = "") -> bytes:
-    """The encoded Ack for ``cmd`` (detail cut to the protocol's 1024 characters)."""
+             substitutions: Sequence[Substitution] = (), lease_holder: str = "",
+             stamp_ns: int | None = None) -> bytes:
+    """The encoded Ack for ``cmd`` (detail cut to the protocol's 1024 characters), stamped
+    ``stamp_ns`` (default: now)."""
     return encode(Ack(
         robot_id=robot_id, sender=cmd.sender, session=cmd.session, seq=cmd.seq, stage=stage,
-        code=code, detail=detail[:MAX_TEXT], stamp_ns=time.time_ns(),
+        code=code, detail=detail[:MAX_TEXT],
+        stamp_ns=time.time_ns() if stamp_ns is None else stamp_ns,
         substitutions=list(substitutions), lease_holder=lease_holder))
