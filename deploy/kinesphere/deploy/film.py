@@ -51,7 +51,7 @@ def _font(size: int) -> ImageFont.FreeTypeFont | ImageFont.ImageFont:
 
 def _performers(platforms: Sequence[str], phrase: Any, width: int, height: int
                 ) -> list[Performer]:
-    from kinesphere.robots.agent.body import make_body
+    from kinesphere.robots.agent.bodies import make_body
     from kinesphere.robots.agent.controller import Controller
     from kinesphere.robots.mjcf import platform_model
     from kinesphere.services.ecl.ecl import Ecl
