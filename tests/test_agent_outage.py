@@ -20,6 +20,7 @@ from test_agent_support import (
     joints_close,
     running_agent,
 )
+from test_system_support import until
 
 from kinesphere import zconfig
 from kinesphere.protocol import RecordRequest, SpatialCommand, encode
@@ -110,6 +111,9 @@ def test_cache_is_per_databank_version(
             replies = list(session.get(KEYS.record("youbot"), payload=encode(request),
                                        timeout=WAIT_S))
             assert replies and replies[0].ok is not None, "recorded"
+            # the record's reply and its `changed` announcement travel on different links:
+            # the robot forgets its cache when the announcement arrives, not before
+            until(lambda: agent.resolver.version != version, WAIT_S, "the robot told")
             seq = op.send(part)
             watch.after(seq, lambda s: s.status == "idle" and joints_close(s, new, 5e-3),
                         "at the newly recorded pose")
