@@ -1,5 +1,6 @@
-"""The operator commands end to end over real Zenoh: send, play, estop and a headless gamepad
-replay; user mistakes print ``error: ...`` and exit 2."""
+"""The operator commands end to end over real Zenoh against robots that answer as agents do:
+send, play, estop and lease print one line per robot and exit 1 unless every addressed robot
+accepted; a headless gamepad replay; user mistakes print ``error: ...`` and exit 2."""
 
 from __future__ import annotations
 
@@ -7,28 +8,48 @@ import json
 import os
 import subprocess
 import sys
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
 import zenoh
-from test_client_support import KEYS, Inbox, hub
+from test_client_support import KEYS, Inbox, Reply, StandIn, hub, usual
 
 from kinesphere.cli import main
 from kinesphere.clients import record
 from kinesphere.clients.state import Action, ControllerState
+from kinesphere.protocol import AckStage, Command, Substitution
 
 __all__ = ["hub"]  # fixtures
 
 ROBOTS = ("c1", "c2", "c3")
+GROUPS = {"c1": ("pair",), "c2": ("pair",), "c3": ()}
 
 
 @pytest.fixture
-def boxes(hub: tuple[zenoh.Session, str]) -> Iterator[dict[str, Inbox]]:
-    b = {r: Inbox(hub[0], KEYS.command(r)) for r in ROBOTS}
+def boxes(hub: tuple[zenoh.Session, str]) -> Iterator[dict[str, StandIn]]:
+    """Three robots that answer as agents do; c1 and c2 are in group ``pair``."""
+    b = {r: StandIn(hub[0], r, GROUPS[r]) for r in ROBOTS}
     yield b
     for x in b.values():
         x.close()
+
+
+@contextmanager
+def robot(hub: tuple[zenoh.Session, str], robot_id: str,
+          answer: Callable[[Command], list[Reply]] | None) -> Iterator[StandIn]:  # fmt: skip
+    r = StandIn(hub[0], robot_id, answer=answer)
+    try:
+        yield r
+    finally:
+        r.close()
+
+
+def refusing(code: str, detail: str, when: Callable[[Command], bool] = lambda c: True
+             ) -> Callable[[Command], list[Reply]]:  # fmt: skip
+    """A robot that refuses the commands ``when`` selects with ``code``, and else obeys."""
+    return lambda c: [(AckStage.REJECTED, code, detail, [])] if when(c) else usual(c)
 
 
 def cli(endpoint: str, *args: str) -> int:
@@ -39,39 +60,83 @@ def test_help_lists_the_operator_commands(capsys: pytest.CaptureFixture[str]) ->
     with pytest.raises(SystemExit):
         main(["--help"])
     out = capsys.readouterr().out
-    for command in ("gamepad", "send", "play", "estop"):
+    for command in ("gamepad", "send", "play", "estop", "lease"):
         assert command in out
 
 
-def test_send_one_command(hub: tuple[zenoh.Session, str], boxes: dict[str, Inbox]) -> None:
-    code = cli(hub[1], "send", "c1", "limb_11", "distal_11", "Left-High", "3",
-               "right_arm", "right_shoulder", "forward-low", "near")  # fmt: skip
+def test_send_one_command(
+    hub: tuple[zenoh.Session, str], boxes: dict[str, StandIn], capsys: pytest.CaptureFixture[str]
+) -> None:
+    code = cli(hub[1], "send", "c1", "limb_11", "distal_11", "Left-High", "3", "right_arm",
+               "right_shoulder", "forward-low", "near", "--sender", "alice")  # fmt: skip
     assert code == 0
     got = boxes["c1"].wait(lambda g: True, "the command").cmd
     assert [(p.limb, p.direction, p.size) for p in got.parts] == [
         ("limb_11", "left-high", 3.0), ("right_arm", "forward-low", 1.0)]  # fmt: skip
     assert got.deadman and got.ttl_ms == 0 and got.drive is None
+    assert got.sender == "alice" and got.session, "robots order per (sender, session)"
+    out, err = capsys.readouterr()
+    assert out.splitlines() == ["c1: reached"]
+    assert "1 of 1 robot(s) accepted" in err
+
+
+def test_send_to_a_robot_that_rejects_exits_1_with_the_code(
+    hub: tuple[zenoh.Session, str], capsys: pytest.CaptureFixture[str]
+) -> None:
+    why = "(limb_11, distal_11) has no direction left-low"
+    with robot(hub, "c4", refusing("direction_unavailable", why)):
+        assert cli(hub[1], "send", "c4", "limb_11", "distal_11", "left-low", "3") == 1
+    out = capsys.readouterr().out
+    assert out.splitlines() == [f"c4: REJECTED: direction_unavailable: {why}"]
+
+
+def test_send_that_nobody_acknowledges_exits_1(
+    hub: tuple[zenoh.Session, str], capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The robot's subscription is there (the put goes out) but no ack ever comes back."""
+    with robot(hub, "mute", None) as mute:
+        code = cli(hub[1], "send", "mute", "limb_11", "distal_11", "left-low", "3",
+                   "--timeout", "0.5")  # fmt: skip
+        mute.wait(lambda g: True, "the command")
+    assert code == 1
+    out, err = capsys.readouterr()
+    assert out.startswith("mute: NO ACKNOWLEDGEMENT within 0.5 s")
+    assert "0 of 1 robot(s) accepted" in err
+
+
+def test_send_prints_substitutions(
+    hub: tuple[zenoh.Session, str], capsys: pytest.CaptureFixture[str]
+) -> None:
+    sub = Substitution("limb_11", "distal_11", "left-low", "left-forward-low", 35.26)
+
+    def substituting(cmd: Command) -> list[Reply]:
+        if not cmd.parts:
+            return usual(cmd)
+        return [(AckStage.ACCEPTED, "", "", [sub]), (AckStage.REACHED, "", "", [sub])]
+
+    with robot(hub, "pb", substituting):
+        assert cli(hub[1], "send", "pb", "arm", "shoulder", "left-low", "far") == 0
+    assert capsys.readouterr().out.splitlines() == [
+        "pb: reached; substituted left-low -> left-forward-low (35°)"]
 
 
 def test_send_to_a_group_with_a_drive_held(
-    hub: tuple[zenoh.Session, str], boxes: dict[str, Inbox]
+    hub: tuple[zenoh.Session, str], boxes: dict[str, StandIn], capsys: pytest.CaptureFixture[str]
 ) -> None:
-    """One put on the group's key (agents run with --group pair subscribe there)."""
-    pair = Inbox(hub[0], KEYS.group_command("pair"))
-    try:
-        code = cli(hub[1], "send", "group:pair", "arm", "shoulder", "left-low", "far",
-                   "--drive", "forward", "0.4", "--for", "0.2")  # fmt: skip
-        assert code == 0
-        stop = pair.wait(lambda g: g.cmd.stop, "the stop").cmd
-        moves = [c for c in pair.commands() if not c.stop]
-        assert moves and stop.seq == moves[-1].seq + 1
+    """One put on the group's key; the members are learnt from the robots' states."""
+    code = cli(hub[1], "send", "group:pair", "arm", "shoulder", "left-low", "far",
+               "--drive", "forward", "0.4", "--for", "0.2")  # fmt: skip
+    assert code == 0
+    for r in ("c1", "c2"):
+        let_go = boxes[r].wait(lambda g: not g.cmd.deadman, "the deadman let go").cmd
+        moves = [c for c in boxes[r].commands() if c.deadman]
+        assert moves and let_go.seq == moves[-1].seq + 1 and not let_go.stop
         assert moves[0].drive is not None and moves[0].drive.speed == 0.4
         assert moves[0].ttl_ms == 300
-        assert {g.key for g in pair.got} == {KEYS.group_command("pair")}
-    finally:
-        pair.close()
-    for r in ROBOTS:  # (the group's stop came after any stray command)
-        assert boxes[r].commands() == [], "robots outside the group hear nothing"
+        assert {g.key for g in boxes[r].got} == {KEYS.group_command("pair")}
+    assert boxes["c3"].commands() == [], "robots outside the group hear nothing"
+    assert capsys.readouterr().out.splitlines() == [
+        "c1: holding: deadman released", "c2: holding: deadman released"]
 
 
 def test_a_group_named_like_a_robot_is_suggested(
@@ -85,32 +150,85 @@ def test_a_group_named_like_a_robot_is_suggested(
     assert "did you mean --target group:field?" in capsys.readouterr().err
 
 
-def test_estop_reaches_every_robot_and_release_one(
-    hub: tuple[zenoh.Session, str], boxes: dict[str, Inbox]
+def test_estop_reaches_every_robot_and_each_acknowledges(
+    hub: tuple[zenoh.Session, str], boxes: dict[str, StandIn], capsys: pytest.CaptureFixture[str]
 ) -> None:
     assert cli(hub[1], "estop") == 0
     for r in ROBOTS:
         boxes[r].wait(lambda g: g.cmd.estop and g.key == KEYS.command("*"), f"e-stop at {r}")
+    out, err = capsys.readouterr()
+    assert out.splitlines() == [f"{r}: estopped" for r in ROBOTS]
+    assert "3 of 3 robot(s) accepted the E-STOP" in err
     assert cli(hub[1], "estop", "--release") == 2, "whose e-stop: --target is required"
     assert cli(hub[1], "estop", "--release", "--target", "c2") == 0
     release = boxes["c2"].wait(lambda g: not g.cmd.estop, "the release").cmd
     assert release.release and release.deadman and not release.stop and release.parts == []
+    assert capsys.readouterr().out.splitlines()[-1] == "c2: released"
+
+
+def test_estop_with_no_robot_is_a_loud_failure(
+    hub: tuple[zenoh.Session, str], capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert cli(hub[1], "estop", "--timeout", "0.5") == 1
+    assert "E-STOP REACHED NO ROBOT" in capsys.readouterr().err
+
+
+def test_estop_that_a_live_robot_does_not_acknowledge_exits_1(
+    hub: tuple[zenoh.Session, str], boxes: dict[str, StandIn], capsys: pytest.CaptureFixture[str]
+) -> None:
+    with robot(hub, "mute", None) as mute:
+        assert cli(hub[1], "estop", "--timeout", "0.5") == 1
+        assert len([g for g in mute.got if g.cmd.estop]) >= 2, "sent again while unanswered"
+    out = capsys.readouterr().out.splitlines()
+    assert [ln for ln in out if ln.startswith("mute:")][0].startswith("mute: NO ACKNOWLEDGEMENT")
+    assert {f"{r}: estopped" for r in ROBOTS} <= set(out)
 
 
 def test_play_a_phrase_file(
-    hub: tuple[zenoh.Session, str], boxes: dict[str, Inbox], tmp_path: Path
+    hub: tuple[zenoh.Session, str], boxes: dict[str, StandIn], tmp_path: Path
 ) -> None:
     f = tmp_path / "p.toml"
     f.write_text("[[step]]\nduration = 0.2\nparts = ['limb_11 distal_11 left-high 2']\n")
     assert cli(hub[1], "play", str(f), "--target", "c3") == 0
-    stop = boxes["c3"].wait(lambda g: g.cmd.stop, "the final stop")
-    moves = [g for g in boxes["c3"].got if not g.cmd.stop]
+    let_go = boxes["c3"].wait(lambda g: not g.cmd.deadman, "the final let-go")
+    moves = [g for g in boxes["c3"].got if g.cmd.deadman]
     assert moves and all(g.cmd.parts[0].direction == "left-high" for g in moves)
-    assert stop.at >= moves[-1].at
+    assert let_go.at >= moves[-1].at
+
+
+def test_play_reports_a_refusal_once_per_robot_and_code(
+    hub: tuple[zenoh.Session, str], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    f = tmp_path / "p.toml"
+    step = "[[step]]\nduration = 0.3\nparts = ['limb_11 distal_11 {} 2']\n"
+    f.write_text(step.format("left-high") + step.format("left-low"))
+    why = "(limb_11, distal_11) has no direction left-low"
+    lacks = refusing("direction_unavailable", why,
+                     lambda c: any(p.direction == "left-low" for p in c.parts))  # fmt: skip
+    with robot(hub, "yb", lacks) as yb:
+        assert cli(hub[1], "play", str(f), "--target", "yb") == 1
+        sent = [c for c in yb.commands() if c.deadman]
+    refused = sum(any(p.direction == "left-low" for p in c.parts) for c in sent)
+    out = capsys.readouterr().out.splitlines()
+    assert out == [f"yb: holding: deadman released; REJECTED {refused} of {len(sent) + 1}: "
+                   f"direction_unavailable: {why}"]  # fmt: skip
+
+
+def test_lease_acquire_and_a_refusal_naming_the_holder(
+    hub: tuple[zenoh.Session, str], boxes: dict[str, StandIn], capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert cli(hub[1], "lease", "acquire", "c1", "--sender", "alice") == 0
+    cmd = boxes["c1"].wait(lambda g: True, "the lease command").cmd
+    assert (cmd.lease, cmd.sender, cmd.parts, cmd.drive) == ("acquire", "alice", [], None)
+    assert capsys.readouterr().out.splitlines() == ["c1: leased: lease acquire"]
+    held = refusing("lease_held", "alice holds this robot's lease")
+    with robot(hub, "c9", held):
+        assert cli(hub[1], "lease", "acquire", "c9", "--sender", "bob") == 1
+    assert "c9: REJECTED: lease_held: alice holds this robot's lease" in capsys.readouterr().out
 
 
 def test_gamepad_replays_a_recording_headless(
-    hub: tuple[zenoh.Session, str], boxes: dict[str, Inbox], tmp_path: Path
+    hub: tuple[zenoh.Session, str], boxes: dict[str, StandIn], tmp_path: Path
 ) -> None:
     rec = tmp_path / "r.jsonl"
     push = ControllerState(rx=1.0, held=frozenset({Action.DEADMAN})).to_dict()
@@ -125,8 +243,11 @@ def test_gamepad_replays_a_recording_headless(
     header, ticks = record.load(again)
     assert header["target"] == "c2" and header["rate_hz"] == 30.0
     assert any(Action.DEADMAN in cs.held for _, cs in ticks)
-    boxes["c2"].wait(lambda g: g.cmd.stop, "the final stop")
-    moves = [c for c in boxes["c2"].commands() if not c.stop]
+    boxes["c2"].wait(lambda g: g.cmd.lease == "release", "the lease given back at exit")
+    cmds = boxes["c2"].commands()
+    moves = [c for c in cmds if c.parts]
+    assert [c.lease for c in cmds[len(moves):]] == ["", "release"], "let go, then release"
+    assert not cmds[len(moves)].deadman
     assert 1 <= len(moves) <= 11  # a replay keeps to its clock: a busy CPU drops ticks
     assert {c.parts[0].direction for c in moves} == {"right-middle"}
 

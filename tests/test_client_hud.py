@@ -17,14 +17,14 @@ import pytest  # noqa: E402
 from kinesphere.clients import hud  # noqa: E402
 from kinesphere.clients import targets as tg  # noqa: E402
 from kinesphere.clients.drive import Steering  # noqa: E402
-from kinesphere.clients.link import Seen  # noqa: E402
+from kinesphere.clients.link import Answer, Seen  # noqa: E402
 from kinesphere.clients.mapping import Intent, MapperState, map_controls  # noqa: E402
 from kinesphere.clients.state import ControllerState  # noqa: E402
 from kinesphere.clients.sticks import Tuning  # noqa: E402
 from kinesphere.clients.symbols import draw_symbol  # noqa: E402
 from kinesphere.clients.teleop import View  # noqa: E402
 from kinesphere.laban import Direction, Horizontal, Level  # noqa: E402
-from kinesphere.protocol import Drive, RobotState  # noqa: E402
+from kinesphere.protocol import Ack, AckStage, Drive, RobotState, Substitution  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -39,6 +39,12 @@ def state(robot_id: str, platform: str, status: str, **kw: object) -> Seen:
                     joint_names=["a"], q=[0.0], qd=[0.0], base_pose=[0.0, 0.0, 0.0],
                     status=status, last_command_seq=7, **kw)  # type: ignore[arg-type]  # fmt: skip
     return Seen(st, time.monotonic())
+
+
+def answer(robot_id: str, seq: int, stage: AckStage, **kw: object) -> Answer:
+    ack = Ack(robot_id=robot_id, sender="gamepad-me", seq=seq, stage=stage,
+              stamp_ns=time.time_ns(), **kw)  # type: ignore[arg-type]
+    return Answer(ack, time.monotonic())
 
 
 def view(**kw: object) -> View:
@@ -62,6 +68,14 @@ def view(**kw: object) -> View:
                               estop_by="gamepad-me"),
         },
         seq=1234, message="target: group sweepers (packbot-1, packbot-2)", sender="gamepad-me",
+        answers={
+            "packbot-1": answer("packbot-1", 1233, AckStage.MOVING, substitutions=[
+                Substitution("limb_11", "distal_11", "left-low", "left-forward-low", 35.3)]),
+            "packbot-2": answer("packbot-2", 1233, AckStage.REJECTED, code="lease_held",
+                                detail="alice@laptop holds this robot's lease"),
+        },
+        notice="packbot-2 refuses your commands: alice@laptop holds this robot's lease; "
+               "press Back (take) to take over",
     )  # fmt: skip
     base.update(kw)
     return View(**base)  # type: ignore[arg-type]

@@ -107,7 +107,7 @@ def test_play_streams_each_step_for_its_duration(
         assert all(g.cmd.drive is None and g.cmd.parts[0].size == 2.5 for g in second)
         assert len(first) <= 16 and len(second) <= 16  # 0.3 s at 50 Hz (fewer on a busy CPU)
         assert first and second and 0.25 < second[0].at - first[0].at < 0.6
-        assert got[-1].cmd.stop and got[-1] is not second[-1]
+        assert not got[-1].cmd.deadman and got[-1] is not second[-1], "then let go"
         assert [g.cmd.seq for g in got] == list(range(len(got)))
 
 

@@ -81,11 +81,11 @@ def test_a_replay_sends_what_the_recorded_session_sent(
     second = box.commands()[len(first) :]
 
     def content(cmds: list) -> list:  # type: ignore[type-arg]
-        return [(c.parts, c.drive, c.deadman, c.stop) for c in cmds]
+        return [(c.parts, c.drive, c.deadman, c.stop, c.lease) for c in cmds]
 
-    assert len(first) == 12 and first[-1].stop
+    assert len(first) == 13 and not first[-2].deadman and first[-1].lease == "release"
     assert content(second) == content(first)
-    assert {c.parts[0].direction for c in first[:-1]} == {"left-middle", "left-low", "right-low"}
+    assert {c.parts[0].direction for c in first[:-2]} == {"left-middle", "left-low", "right-low"}
 
 
 def test_a_slower_replay_keeps_every_tap() -> None:

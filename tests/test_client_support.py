@@ -31,7 +31,16 @@ from kinesphere.clients import input as pad  # noqa: E402
 from kinesphere.clients.link import RobotLink  # noqa: E402
 from kinesphere.clients.state import ControllerState  # noqa: E402
 from kinesphere.keyexpr import Keys  # noqa: E402
-from kinesphere.protocol import Catalogue, Command, RobotState, decode, encode  # noqa: E402
+from kinesphere.protocol import (  # noqa: E402
+    Ack,
+    AckStage,
+    Catalogue,
+    Command,
+    RobotState,
+    Substitution,
+    decode,
+    encode,
+)
 
 KEYS = Keys("kstest")
 WAIT_S = 20.0
@@ -166,6 +175,80 @@ class Inbox:
         zconfig.undeclare(self._sub)
 
 
+Reply = tuple[AckStage, str, str, list[Substitution]]
+"""An ack a stand-in robot sends: stage, code, detail, substitutions."""
+
+
+def usual(cmd: Command) -> list[Reply]:
+    """What an agent answers when all goes well."""
+    if cmd.estop:
+        return [(AckStage.ESTOPPED, "", "", [])]
+    if cmd.release:
+        return [(AckStage.RELEASED, "", "", [])]
+    if cmd.stop:
+        return [(AckStage.STOPPED, "", "", [])]
+    if not cmd.deadman:
+        return [(AckStage.HOLDING, "", "deadman released", [])]
+    if cmd.lease and not cmd.parts and cmd.drive is None:
+        return [(AckStage.LEASED, "", f"lease {cmd.lease}", [])]
+    return [(AckStage.ACCEPTED, "", "", []), (AckStage.REACHED, "", "", [])]
+
+
+class StandIn(Inbox):
+    """A robot as a client sees it, speaking the protocol over real Zenoh: a liveliness token,
+    a state with its groups, commands on its own and its groups' keys (and the wildcard), and
+    the acks ``answer`` gives for each (none for a robot that has lost its ack publisher)."""
+
+    def __init__(self, session: zenoh.Session, robot_id: str, groups: Sequence[str] = (),
+                 answer: Callable[[Command], list[Reply]] | None = usual) -> None:  # fmt: skip
+        super().__init__(session, KEYS.command(robot_id))
+        self.robot_id = robot_id
+        self.answer = answer
+        self.lease_holder = ""
+        self._subs = [session.declare_subscriber(KEYS.group_command(g), self._on) for g in groups]
+        self._acks = session.declare_publisher(KEYS.ack(robot_id))
+        self._state = FakeRobot(session, robot_id, "fakebot", groups, wait=False)
+        self._token = session.liveliness().declare_token(KEYS.alive_robot(robot_id))
+        self._closing = threading.Event()
+        self._states = threading.Thread(target=self._publish_states, daemon=True)
+        self._states.start()
+
+    def _publish_states(self) -> None:
+        """A state every 20 ms, as an agent does (its stream is how clients learn its groups)."""
+        while not self._closing.wait(0.02):
+            self._state.state(lease_holder=self.lease_holder)
+
+    def _on(self, sample: zenoh.Sample) -> None:
+        super()._on(sample)
+        cmd = decode(sample.payload, Command)
+        if self.answer is None or cmd.sender == SENTINEL:
+            return
+        for stage, code, detail, subs in self.answer(cmd):
+            self._acks.put(encode(Ack(
+                robot_id=self.robot_id, sender=cmd.sender, session=cmd.session, seq=cmd.seq,
+                stage=stage, code=code, detail=detail, stamp_ns=time.time_ns(),
+                substitutions=subs, lease_holder=self.lease_holder)))  # fmt: skip
+
+    def close(self) -> None:
+        self._closing.set()
+        self._states.join()
+        zconfig.undeclare(self._token, self._acks, self._state.pub, *self._subs)
+        super().close()
+
+
+def kind(c: Command) -> str:
+    """A command's role: estop, release, lease <action> (lease-only), stop, let go or move."""
+    if c.estop:
+        return "estop"
+    if c.release:
+        return "release"
+    if c.lease and not c.parts and c.drive is None:
+        return f"lease {c.lease}"
+    if c.stop:
+        return "stop"
+    return "move" if c.deadman else "let go"
+
+
 _marks = itertools.count()
 
 
@@ -188,10 +271,11 @@ def hub() -> Iterator[tuple[zenoh.Session, str]]:
 
 
 @contextmanager
-def client_link(endpoint: str, watch: bool = True) -> Iterator[RobotLink]:
-    """A client's own session joined to the hub, and its RobotLink."""
+def client_link(endpoint: str, watch: bool = True, sender: str | None = None
+                ) -> Iterator[RobotLink]:  # fmt: skip
+    """A client's own session joined to the hub, and its RobotLink (as ``sender``)."""
     with zconfig.session(config=zconfig.loopback_config(endpoint)) as s:
-        link = RobotLink(s, KEYS, watch=watch)
+        link = RobotLink(s, KEYS, watch=watch, sender=sender)
         try:
             yield link
         finally:
@@ -272,13 +356,13 @@ class FakeRobot:
     """
 
     def __init__(self, session: zenoh.Session, robot_id: str, platform: str,
-                 groups: Sequence[str] = ()) -> None:  # fmt: skip
+                 groups: Sequence[str] = (), wait: bool = True) -> None:  # fmt: skip
         self.robot_id = robot_id
         self.platform = platform
         self.groups = list(groups)
         self.seq = 0
         self.pub = session.declare_publisher(KEYS.state(robot_id))
-        assert zconfig.wait_matching(self.pub, WAIT_S), "no state subscriber"
+        assert not wait or zconfig.wait_matching(self.pub, WAIT_S), "no state subscriber"
 
     def state(self, status: str = "idle", **fields: object) -> None:
         """Publish one state; ``fields`` set any other RobotState field (``estop_by``...)."""

@@ -22,6 +22,7 @@ from test_client_support import (
     databank,
     fake_catalogue,
     hub,
+    kind,
     pygame_up,
     sentinel,
 )
@@ -91,7 +92,7 @@ def test_stream_content_rate_ttl_and_final_stop(
     run(op, script, finished=lambda: script.finished)
     settle(link, inboxes)
     got = [g for g in inboxes["r1"].got if g.cmd.sender != "sentinel"]
-    stream, final = got[:-1], got[-1]
+    stream, final = got[:-2], got[-2:]
     assert len(stream) == 30
     for g in stream:
         c = g.cmd
@@ -100,8 +101,9 @@ def test_stream_content_rate_ttl_and_final_stop(
         assert c.drive is not None and (c.drive.direction, c.drive.speed) == ("forward-middle", 0.5)
         assert (c.drive.forward, c.drive.left, c.drive.yaw) == (0.5, 0.0, 0.0)
         assert c.sender == op.seq.sender
-    assert [g.cmd.seq for g in got] == list(range(31))
-    assert final.cmd.stop and not final.cmd.deadman and final.cmd.parts == []
+    assert [g.cmd.seq for g in got] == list(range(32))
+    assert [kind(g.cmd) for g in final] == ["let go", "lease release"], "at exit: lease back"
+    assert final[0].cmd.parts == [] and final[0].cmd.drive is None
     gaps = [b.at - a.at for a, b in zip(stream, stream[1:], strict=False)]
     assert statistics.median(gaps) == pytest.approx(1 / 30, abs=0.006)
     assert stream[-1].at - stream[0].at == pytest.approx(29 / 30, abs=0.1)
@@ -137,7 +139,7 @@ def test_without_a_deadman_a_deflected_stick_streams(
     settle(link, inboxes)
     cmds = inboxes["r1"].commands()
     assert [c.parts[0].direction for c in cmds[:2]] == ["back-middle"] * 2
-    assert cmds[2].stop and len(cmds) == 3
+    assert [kind(c) for c in cmds] == ["move", "move", "let go"]
 
 
 def status_of(link: RobotLink, robot_id: str) -> str | None:
@@ -168,7 +170,7 @@ def test_group_and_all_reach_every_intended_robot_and_no_other(
         sentinel(link, [KEYS.group_command("arms"), *(KEYS.command(r) for r in ROBOTS)],
                  [arms, *inboxes.values()])  # fmt: skip
         cmds = arms.commands()
-        assert len(cmds) == 3 and cmds[-1].stop
+        assert [kind(c) for c in cmds] == ["move", "move", "let go"]
         assert {g.key for g in arms.got} == {KEYS.group_command("arms")}
         for r in ROBOTS:
             assert inboxes[r].commands() == [], "robots hear a group only on the group's key"
@@ -183,7 +185,7 @@ def test_group_and_all_reach_every_intended_robot_and_no_other(
     for r in ROBOTS:
         last = [g for g in inboxes[r].got if g.cmd.sender != "sentinel"][-3:]
         assert [g.key for g in last] == [KEYS.command("*")] * 3
-        assert last[-1].cmd.stop
+        assert [kind(g.cmd) for g in last] == ["move", "move", "let go"]
 
 
 def test_target_button_cycles_robots_then_the_groups_they_report_then_all(
@@ -217,7 +219,8 @@ def test_switching_target_stops_the_old_one(
     assert view.engaged and view.target == tg.ALL
     settle(link, inboxes)
     r3 = inboxes["r3"].commands()
-    assert [c.stop for c in r3] == [False, True, False], "move, stop, then all's move"
+    assert [kind(c) for c in r3] == ["move", "let go", "lease release", "move"], (
+        "let go and give the lease back, then all's move")
     assert len(inboxes["r1"].commands()) == 1
 
 
@@ -255,9 +258,7 @@ def test_estop_goes_to_all_latches_and_start_releases_only_what_it_latched(
     assert op.tick(inp.poll()).engaged
     settle(link, inboxes)
     cmds = sorted(inboxes["r1"].commands(), key=lambda c: c.seq)  # the e-stop may overtake
-    kinds = ["estop" if c.estop else "stop" if c.stop else "move" if c.parts else "release"
-             for c in cmds]  # fmt: skip
-    assert kinds == ["move", "move", "estop", "release", "move"]
+    assert [kind(c) for c in cmds] == ["move", "move", "estop", "release", "move"]
     assert cmds[3].deadman and not cmds[3].parts, "a release moves nothing by itself"
     assert [c.release for c in inboxes["r3"].commands()] == [False, True]
     assert [c.estop for c in inboxes["r2"].commands()] == [True], "not released by us"
@@ -275,14 +276,14 @@ def test_unplugging_sends_a_final_stop_and_replugging_needs_the_deadman_again(
     p.unplug()
     view = op.tick(inp.poll())
     assert not view.connected and not view.engaged
-    inboxes["r1"].wait(lambda g: g.cmd.stop, "the final stop")
+    inboxes["r1"].wait(lambda g: not g.cmd.deadman, "the final let-go")
     p.plug()
     p.right(0.0, -1.0)
     assert not op.tick(inp.poll()).engaged
     p.deadman()
     assert op.tick(inp.poll()).engaged
     settle(link, inboxes)
-    assert [c.stop for c in inboxes["r1"].commands()] == [False, False, True, False]
+    assert [kind(c) for c in inboxes["r1"].commands()] == ["move", "move", "let go", "move"]
 
 
 def test_leaving_the_loop_sends_a_final_stop(
@@ -294,7 +295,7 @@ def test_leaving_the_loop_sends_a_final_stop(
     run(op, script, finished=lambda: script.finished)  # ends with the deadman still held
     settle(link, inboxes)
     cmds = inboxes["r2"].commands()
-    assert len(cmds) == 5 and not any(c.stop for c in cmds[:-1]) and cmds[-1].stop
+    assert [kind(c) for c in cmds] == ["move"] * 4 + ["let go", "lease release"]
 
 
 def test_an_estop_reported_by_a_robot_pauses_the_stream(
@@ -312,7 +313,7 @@ def test_an_estop_reported_by_a_robot_pauses_the_stream(
     view = op.tick(inp.poll())
     assert not view.engaged and view.remote_estop == ["r1"]
     settle(link, inboxes)
-    assert [c.stop for c in inboxes["r1"].commands()] == [False, True]
+    assert [kind(c) for c in inboxes["r1"].commands()] == ["move", "let go"]
 
 
 FAKEBOT = Catalogue(

@@ -1,7 +1,8 @@
-"""The operator's sub-commands: ``gamepad``, ``send``, ``play`` and ``estop``.
+"""The operator's sub-commands: ``gamepad``, ``send``, ``play``, ``estop`` and ``lease``.
 
 Only the parsers live here (registered by the ``kinesphere`` dispatcher through the
-``kinesphere.commands`` entry point); the handlers are in :mod:`kinesphere.clients.commands`.
+``kinesphere.commands`` entry point); the handlers are in :mod:`kinesphere.clients.commands`
+(gamepad) and :mod:`kinesphere.clients.orders` (the commands that wait for acks).
 """
 
 from __future__ import annotations
@@ -10,7 +11,7 @@ import argparse
 from typing import Any
 
 from kinesphere.cliargs import add_zenoh_arguments
-from kinesphere.clients import commands
+from kinesphere.clients import commands, orders
 from kinesphere.clients.options import JOY_LAYOUTS, JoyOptions, TeleopOptions
 
 KEYS_HELP = """keys (keyboard fallback, the HUD window needs focus):
@@ -22,6 +23,7 @@ KEYS_HELP = """keys (keyboard fallback, the HUD window needs focus):
   space       deadman (hold)          B       beyond: reach past far (hold, with 3)
   Tab / L     next limb / origin      T       next target (robot -> group -> all)
   Escape      E-STOP every robot      Enter   release the e-stops you latched
+  K           take control (the lease) of the target from another operator
   F10         quit
 
 gamepad (SDL layout, see clients/mappings/default.toml):
@@ -30,6 +32,7 @@ gamepad (SDL layout, see clients/mappings/default.toml):
   d-pad left/right: turn the base (hold)            L3 (hold)     turbo
   d-pad down/up: next/previous limb    X  next origin              Y  next target
   B           E-STOP every robot       Start        release the e-stops you latched
+  Back        take control (the lease) of the target from another operator
 """
 
 
@@ -55,6 +58,26 @@ def _targeting(
             metavar="S",
             help="wait up to S seconds for the target robots to be reachable (default 5)",
         )
+
+
+def _identity(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--sender",
+        metavar="NAME",
+        help="who you are to the robots (default USER@HOST): they lease control to a sender, "
+        "so your commands from several terminals count as one operator",
+    )
+
+
+def _answers(p: argparse.ArgumentParser, default: float, what: str) -> None:
+    p.add_argument(
+        "--timeout",
+        type=float,
+        default=default,
+        metavar="S",
+        help=f"wait up to S seconds for every addressed robot's answer {what} (default "
+        f"{default:g}); a robot that does not answer makes the exit status 1",
+    )
 
 
 def register(sub: Any) -> None:
@@ -115,7 +138,14 @@ def register(sub: Any) -> None:
                    help=f"no Joy message for S seconds = pad unplugged (default {joy.timeout_s})")
     g.add_argument("--duration", type=float, metavar="S", help="quit after S seconds")
     g.add_argument("--screenshot", metavar="PNG", help="save the HUD to PNG when quitting")
+    g.add_argument(
+        "--take",
+        action="store_true",
+        help="take control (the lease) of the target from another operator on every engage, "
+        "instead of being refused while they hold it",
+    )
     _targeting(g, wait=False)
+    _identity(g)
     add_zenoh_arguments(g)
     g.set_defaults(func=commands.gamepad)
 
@@ -128,7 +158,8 @@ def register(sub: Any) -> None:
         "  kinesphere send all right_arm right_shoulder forward-low far --drive forward 0.3 "
         "--for 2\nLimbs and origins are labels or aliases; sizes are numbers or near/mid/far. "
         "With --for the command is repeated at --rate for that long (a drive needs that), then "
-        "a stop follows.",
+        "the deadman is let go.\nPrints one line per addressed robot (what it did, "
+        "substitutions, refusals) and exits 1 unless every one accepted.",
     )
     s.add_argument("target", help="robot id, group:NAME (agents run with --group) or 'all'")
     s.add_argument(
@@ -155,35 +186,64 @@ def register(sub: Any) -> None:
         help=f"repeat rate with --for (default {STREAM.rate_hz:g})",
     )
     _targeting(s, f"0: the pose is reached whatever happens next; {STREAM.ttl_ms} with --for")
+    _answers(s, 5.0, "(the last command's final stage: reached, clamped, blocked...)")
+    _identity(s)
     add_zenoh_arguments(s)
-    s.set_defaults(func=commands.send)
+    s.set_defaults(func=orders.send)
 
     p = sub.add_parser(
         "play",
         formatter_class=fmt,
         help="play a movement phrase (TOML) on a robot, a group or all",
         description="Play a phrase: steps of spatial commands (and drives) with durations, "
-        "streamed at --rate, then a stop. PHRASE is a file or a shipped phrase name: "
-        "left_high, tour_guide, packbot_sweep, packbot_retreat.",
+        "streamed at --rate, then the deadman is let go. PHRASE is a file or a shipped phrase "
+        "name: left_high, tour_guide, packbot_sweep, packbot_retreat. Prints one line per "
+        "addressed robot and exits 1 unless every one accepted every step.",
     )
     p.add_argument("phrase", metavar="PHRASE", help="phrase file (TOML) or shipped name")
     p.add_argument("--target", default="all", help="robot id, group:NAME or 'all' (default)")
     p.add_argument("--rate", type=float, default=STREAM.rate_hz, metavar="HZ",
                    help=f"default {STREAM.rate_hz:g}")
     _targeting(p, f"the phrase's ttl_ms, else {STREAM.ttl_ms}")
+    _answers(p, 5.0, "after the phrase")
+    _identity(p)
     add_zenoh_arguments(p)
-    p.set_defaults(func=commands.play)
+    p.set_defaults(func=orders.play)
 
     e = sub.add_parser(
         "estop",
         help="emergency-stop every robot (or --release the target's latch)",
         description="Put an e-stop Command on <prefix>/robot/*/command: every robot halts "
-        "in place and latches until released. --release clears the latch of --target.",
+        "in place and latches until released; repeated until every live robot acknowledged "
+        "it. Exits 1 when a robot did not, and loudly when no robot is there at all. "
+        "--release clears the latch of --target (required: say whose).",
     )
     e.add_argument("--release", action="store_true", help="release instead of stopping")
     e.add_argument(
         "--target", help="with --release: whose e-stop to release (ID, group:NAME or all)"
     )
     _targeting(e)
+    _answers(e, 2.0, "(estopped, released)")
+    _identity(e)
     add_zenoh_arguments(e)
-    e.set_defaults(func=commands.estop)
+    e.set_defaults(func=orders.estop)
+
+    ls = sub.add_parser(
+        "lease",
+        formatter_class=fmt,
+        help="acquire, take over or release control of a robot, a group or all",
+        description="A robot obeys one operator (sender) at a time. 'acquire' asks for its "
+        "control lease (refused while another operator holds it), 'take' takes it over (the "
+        "robot logs it and tells the previous holder), 'release' gives it back. A lease lapses "
+        "after 3 s without a command from its holder; --hold keeps it alive that long and "
+        "then releases it. E-stop works whoever holds the lease.",
+    )
+    ls.add_argument("action", choices=("acquire", "take", "release"))
+    ls.add_argument("target", help="robot id, group:NAME or 'all'")
+    ls.add_argument("--hold", type=float, default=0.0, metavar="S",
+                    help="keep the lease alive for S seconds (Ctrl-C ends it), then release")
+    _targeting(ls)
+    _answers(ls, 2.0, "(leased, or refused naming the holder)")
+    _identity(ls)
+    add_zenoh_arguments(ls)
+    ls.set_defaults(func=orders.lease)

@@ -1,8 +1,9 @@
-"""Handlers of the operator commands (``gamepad``, ``send``, ``play``, ``estop``).
+"""The ``gamepad`` handler and the plumbing every operator command shares (the others, which
+wait for acks, are in :mod:`kinesphere.clients.orders`).
 
 Heavy imports (pygame, Zenoh) happen inside the handlers so ``kinesphere --help`` stays quick.
 Every handler closes its Zenoh session before returning, and every command that moved a robot
-ends with a stop, also on Ctrl-C and SIGTERM. Handlers return exit codes; user mistakes raise
+ends by letting go, also on Ctrl-C and SIGTERM. Handlers return exit codes; user mistakes raise
 KinesphereError.
 """
 
@@ -20,32 +21,26 @@ from typing import Any
 from kinesphere.clients.options import TeleopOptions
 from kinesphere.errors import KinesphereError
 
-ESTOP_REPEATS = 3
-ESTOP_SPACING_S = 0.1
-"""``kinesphere estop`` sends at once, then again once a robot is matched, then once more: it
-latches, so copies are harmless, and a robot whose subscription reached this fresh session a
-moment later still gets one."""
-
-
 # --- shared plumbing --------------------------------------------------------------------------
 
 
 @contextmanager
-def _link(args: argparse.Namespace, watch: bool = False) -> Iterator[Any]:
+def link_for(args: argparse.Namespace) -> Iterator[Any]:
+    """A watching RobotLink as ``args.sender`` on a session made from the Zenoh options."""
     from kinesphere.clients.link import RobotLink
     from kinesphere.keyexpr import Keys
     from kinesphere.zconfig import session_from_args
 
     keys = Keys(args.prefix)
     with session_from_args(args) as session:
-        link = RobotLink(session, keys, watch=watch)
+        link = RobotLink(session, keys, sender=args.sender)
         try:
             yield link
         finally:
             link.close()
 
 
-def _reachable(link: Any, target: Any, wait: float) -> list[str]:
+def reachable(link: Any, target: Any, wait: float) -> list[str]:
     """The target's command keys, once a robot listens on each; else unavailable, with a hint
     when a robot id was given for what is a group."""
     from kinesphere.clients import targets
@@ -65,7 +60,7 @@ def _reachable(link: Any, target: Any, wait: float) -> list[str]:
 
 
 @contextmanager
-def _signals(on_stop: Callable[[], None]) -> Iterator[None]:
+def signals(on_stop: Callable[[], None]) -> Iterator[None]:
     """SIGTERM (and SIGINT) end the work through ``on_stop`` so the final stop still goes out."""
 
     from kinesphere.signals import handle_signals
@@ -101,8 +96,8 @@ def gamepad(args: argparse.Namespace) -> int:
             print("no game controller found: waiting for one to be plugged in; nothing moves "
                   "until then (--headless has no keyboard)", file=sys.stderr)
     try:
-        with _link(args, watch=True) as link, ExitStack() as stack:
-            op = teleop.Teleop(link, mapping, target, options)
+        with link_for(args) as link, ExitStack() as stack:
+            op = teleop.Teleop(link, mapping, target, options, take=args.take)
             source: teleop.Source = replay if replay is not None else pad.PygameInput(mapping)
             if joy_topic is not None and replay is None:
                 source = joy = _joy_input(args, link.session, source, joy_topic)
@@ -140,7 +135,7 @@ def gamepad(args: argparse.Namespace) -> int:
                 op.quit = True
 
             try:
-                with _signals(stop):
+                with signals(stop):
                     teleop.run(op, source, draw=draw, record=recorder, finished=finished)
             finally:
                 if recorder is not None:
@@ -174,106 +169,3 @@ def _joy_input(args: argparse.Namespace, session: Any, pad: Any, topic: str) -> 
     print(f"input: sensor_msgs/Joy on {topic} (ROS domain {options.domain}); nothing moves "
           "until it arrives", file=sys.stderr, flush=True)
     return JoyInput(session, pad, topic, options)
-
-
-def _parse_parts(words: list[str]) -> list[Any]:
-    from kinesphere.clients.phrases import parse_part
-
-    if len(words) % 4:
-        raise KinesphereError(
-            "malformed", f"parts come in fours (LIMB ORIGIN DIRECTION SIZE), got {len(words)} words"
-        )
-    return [parse_part(" ".join(words[i : i + 4]), "send") for i in range(0, len(words), 4)]
-
-
-def send(args: argparse.Namespace) -> int:
-    from kinesphere.clients import targets
-    from kinesphere.clients.link import Sequencer, new_sender
-    from kinesphere.clients.phrases import make_drive
-
-    parts = _parse_parts(args.parts)
-    drive = make_drive(args.drive[0], args.drive[1], "--drive") if args.drive else None
-    if not parts and drive is None:
-        raise KinesphereError("malformed", "nothing to send: give L O D S parts and/or --drive")
-    target = targets.parse_target(args.target)
-    hold = args.hold
-    ttl = args.ttl_ms if args.ttl_ms is not None else (TeleopOptions.ttl_ms if hold else 0)
-    seq = Sequencer(new_sender("send"), ttl)
-    stopping = False
-
-    def stop() -> None:
-        nonlocal stopping
-        stopping = True
-
-    with _link(args) as link:
-        keys = _reachable(link, target, args.wait)
-        with _signals(stop):
-            link.put(keys, seq.command(parts, drive))
-            if hold:
-                end = time.monotonic() + hold
-                while time.monotonic() < end and not stopping:
-                    time.sleep(min(1.0 / args.rate, max(0.0, end - time.monotonic())))
-                    link.put(keys, seq.command(parts, drive))
-                link.put(keys, seq.stop())
-    print(f"sent {seq.seq} command(s) to {target.label}", file=sys.stderr)
-    return 0
-
-
-def play(args: argparse.Namespace) -> int:
-    from kinesphere.clients import phrases, targets
-    from kinesphere.clients.link import Sequencer, new_sender
-
-    phrase = phrases.load_phrase(args.phrase)
-    target = targets.parse_target(args.target)
-    ttl = args.ttl_ms if args.ttl_ms is not None else (phrase.ttl_ms or TeleopOptions.ttl_ms)
-    seq = Sequencer(new_sender("play"), ttl)
-    stopping = False
-
-    def stop() -> None:
-        nonlocal stopping
-        stopping = True
-
-    def on_step(i: int, step: phrases.Step) -> None:
-        note = f": {step.note}" if step.note else ""
-        print(f"step {i + 1}/{len(phrase.steps)} ({step.duration:g} s){note}", file=sys.stderr)
-
-    with _link(args) as link:
-        keys = _reachable(link, target, args.wait)
-        print(f"playing {phrase.name} ({phrase.duration:g} s) on {target.label}", file=sys.stderr)
-        with _signals(stop):
-            phrases.play(
-                link,
-                phrase,
-                keys,
-                seq,
-                rate_hz=args.rate,
-                on_step=on_step,
-                should_stop=lambda: stopping,
-            )
-    return 130 if stopping else 0
-
-
-def estop(args: argparse.Namespace) -> int:
-    from kinesphere.clients import targets
-    from kinesphere.clients.link import Sequencer, new_sender
-
-    seq = Sequencer(new_sender("estop"), 0)
-    with _link(args) as link:
-        if args.release:
-            if args.target is None:
-                raise KinesphereError(
-                    "malformed", "--release needs --target ID, group:NAME or all: say whose "
-                    "e-stop to release")
-            target = targets.parse_target(args.target)
-            keys = _reachable(link, target, args.wait)
-            link.put(keys, seq.release())
-            print(f"released the e-stop of {target.label}", file=sys.stderr)
-        else:
-            link.estop_all(seq)  # at once: an e-stop never waits for discovery
-            missing = link.wait_subscribers([link.keys.command("*")], args.wait)
-            for _ in range(ESTOP_REPEATS - 1):  # robots discovered a moment later get a copy
-                link.estop_all(seq)
-                time.sleep(ESTOP_SPACING_S)
-            note = " (no robot was listening)" if missing else ""
-            print(f"E-STOP sent to every robot{note}", file=sys.stderr)
-    return 0

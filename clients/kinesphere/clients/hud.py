@@ -43,6 +43,9 @@ LEVELS = (Level.HIGH, Level.MIDDLE, Level.LOW)
 """The blocks, left to right."""
 CHART = (70, 150)
 """Top-left corner of the first block's first cell."""
+MESSAGES_Y = 346
+"""Where the notice and the last message go, under the chart."""
+ROBOTS_Y = 400
 CELL = 46
 BLOCK_STEP = 3 * CELL + 24
 
@@ -233,7 +236,10 @@ def _robots(surf: pygame.Surface, fonts: dict[str, pygame.font.Font], view: View
     entries: list[tuple[str, list[Line], bool]] = []
     for rid, seen in sorted(view.robots.items()):
         st = seen.state
-        lines = robot_lines(st, now - seen.at, view.sender)
+        answer = view.answers.get(rid)
+        lines = robot_lines(st, now - seen.at, view.sender,
+                            answer=answer.ack if answer else None,
+                            answer_age_s=now - answer.at if answer else 0.0)  # fmt: skip
         entries.append((f"{rid}  ({st.platform})", lines, view.target.includes(rid, st.groups)))
     columns = 1 if len(entries) <= 3 else 2
     col_w = width // columns - 12
@@ -302,15 +308,18 @@ def render(surf: pygame.Surface, view: View, fonts: dict[str, pygame.font.Font])
     src = view.source if view.connected else "DISCONNECTED: plug a controller in"
     y = _text(surf, fonts["small"], f"input: {src}   you: {view.sender}   seq {view.seq}",
               (16, y), FG if view.connected else BAD)  # fmt: skip
-    if view.message:
-        y = _paragraph(surf, fonts["small"], view.message, 16, y, width, LIT)
-    for p, msg in view.catalogue_errors.items():
-        y = _paragraph(surf, fonts["small"], f"catalogue of {p}: {msg}", 16, y, width, BAD)
     _banners(surf, fonts, view)
+    y = MESSAGES_Y
+    if view.notice:
+        y = _paragraph(surf, fonts["small"], view.notice, 16, y, 1060, BAD)
+    if view.message:
+        y = _paragraph(surf, fonts["small"], view.message, 16, y, 1060, LIT)
+    for p, msg in list(view.catalogue_errors.items())[:1]:
+        y = _paragraph(surf, fonts["small"], f"catalogue of {p}: {msg}", 16, y, 1060, BAD)
     _chart(surf, fonts, view)
     _rings(surf, fonts, view, 640, 230)
     _drive(surf, fonts, view, 900, 230)
-    _robots(surf, fonts, view, 410)
+    _robots(surf, fonts, view, max(y + 6, ROBOTS_Y))
 
 
 def load_fonts() -> dict[str, pygame.font.Font]:

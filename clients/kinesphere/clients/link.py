@@ -1,9 +1,14 @@
-"""The client's Zenoh side: put commands, watch robots, read catalogues.
+"""The client's Zenoh side: put commands, watch robots and their acks, read catalogues.
 
 One :class:`RobotLink` per client process. Commands go through publishers cached per key (a
 stream at 30 Hz should not re-resolve its key every tick) with express delivery and blocking
-congestion control: a stop or an e-stop must never be dropped to make room. Robot states and
-liveliness arrive on Zenoh's threads and are kept behind a lock for the loop and the HUD.
+congestion control: a stop or an e-stop must never be dropped to make room. Robot states,
+liveliness and the acks robots send for this client's commands arrive on Zenoh's threads and
+are kept behind a lock, bounded, for the loop and the HUD.
+
+Who the client is: ``sender`` names the operator (``user@host`` unless given: robots lease
+control to a sender, so every process of one operator shares it) and ``session`` this process
+(robots order commands per ``(sender, session)``, so a restarted client starts afresh).
 
 Zenoh's link lease is 10 s, so liveliness only tells who exists; safety comes from each
 command's ``ttl_ms``, which the robot enforces itself.
@@ -11,10 +16,14 @@ command's ``ttl_ms``, which the robot enforces itself.
 
 from __future__ import annotations
 
+import getpass
 import logging
+import re
+import socket
 import threading
 import time
 import uuid
+from collections import OrderedDict, deque
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
@@ -24,9 +33,12 @@ from kinesphere import zconfig
 from kinesphere.errors import KinesphereError
 from kinesphere.keyexpr import Keys
 from kinesphere.protocol import (
+    MAX_NAME,
+    Ack,
     Catalogue,
     Command,
     Drive,
+    LeaseAction,
     RobotState,
     SpatialCommand,
     decode,
@@ -38,16 +50,44 @@ log = logging.getLogger(__name__)
 URGENT = zenoh.Priority.REAL_TIME
 
 
+ACKS_PER_ROBOT = 256
+"""Acks kept per robot (a 30 Hz stream's last ~4 s with an accepted and a final stage each)."""
+MAX_ROBOTS = 1024
+"""Robots whose states and acks are kept; the least recently heard are forgotten first."""
+
+
+def _segment(text: str) -> str:
+    """``text`` made a valid key segment and name: no ``/ * $ ? #`` or spaces, no leading
+    ``@``, at most :data:`MAX_NAME` characters."""
+    clean = re.sub(r"[/*$?#\s]+", "_", text).lstrip("@")
+    return clean[:MAX_NAME] or "operator"
+
+
+def operator_id() -> str:
+    """This operator's default sender: ``user@host``."""
+    try:
+        user = getpass.getuser()
+    except (KeyError, OSError):  # no passwd entry (containers)
+        user = "operator"
+    return _segment(f"{user}@{socket.gethostname().split('.')[0]}")
+
+
 def new_sender(kind: str) -> str:
-    """A sender id unique to this process: robots order commands per sender by ``seq``."""
+    """A sender id unique to this process (tests and tools that must not share a lease)."""
     return f"{kind}-{uuid.uuid4().hex[:8]}"
 
 
-class Sequencer:
-    """Builds Commands with a growing ``seq`` and this sender's id."""
+def new_session() -> str:
+    """A fresh session id: robots order commands per ``(sender, session)``."""
+    return uuid.uuid4().hex[:12]
 
-    def __init__(self, sender: str, ttl_ms: int) -> None:
+
+class Sequencer:
+    """Builds Commands with a growing ``seq``, this sender's id and this process's session."""
+
+    def __init__(self, sender: str, ttl_ms: int, session: str = "") -> None:
         self.sender = sender
+        self.session = session
         self.ttl_ms = ttl_ms
         self.seq = 0
 
@@ -60,6 +100,7 @@ class Sequencer:
         estop: bool = False,
         stop: bool = False,
         release: bool = False,
+        lease: LeaseAction = LeaseAction.NONE,
     ) -> Command:
         cmd = Command(
             seq=self.seq,
@@ -72,12 +113,20 @@ class Sequencer:
             stop=stop,
             release=release,
             sender=self.sender,
+            session=self.session,
+            lease=lease,
         )
         self.seq += 1
         return cmd
 
+    def let_go(self) -> Command:
+        """The operator let go (``deadman=false``): the robot brakes to rest and holds. Like
+        any motion command it is obeyed only from the lease holder, so letting go of a robot
+        someone else controls does not stop their motion."""
+        return self.command(deadman=False)
+
     def stop(self) -> Command:
-        """Controlled stop: everything brakes to rest and holds (operator let go)."""
+        """Controlled stop of all motion, obeyed from anyone (lease or not)."""
         return self.command(deadman=False, stop=True)
 
     def estop(self) -> Command:
@@ -87,6 +136,20 @@ class Sequencer:
     def release(self) -> Command:
         """Clears a robot's e-stop latch; robots move again only on the next command."""
         return self.command(deadman=True, release=True)
+
+    def lease(self, action: LeaseAction) -> Command:
+        """A lease-only command (``acquire``, ``take``, ``release``): moves nothing; robots
+        answer ``leased`` or refuse with ``lease_held``. ``deadman`` is true: a deadman
+        release would make the robot hold instead."""
+        return self.command(deadman=True, lease=action)
+
+
+@dataclass(frozen=True)
+class Answer:
+    """An ack for one of this client's commands and when it arrived (monotonic seconds)."""
+
+    ack: Ack
+    at: float
 
 
 @dataclass(frozen=True)
@@ -100,12 +163,18 @@ class Seen:
 class RobotLink:
     """Puts commands and watches robots on one Zenoh session (which the caller closes)."""
 
-    def __init__(self, session: zenoh.Session, keys: Keys, *, watch: bool = True) -> None:
+    def __init__(
+        self, session: zenoh.Session, keys: Keys, *, watch: bool = True, sender: str | None = None
+    ) -> None:
         self.session = session
         self.keys = keys
+        self.sender = sender or operator_id()
+        self.session_id = new_session()
+        self._sequencer: Sequencer | None = None
         self._lock = threading.RLock()  # wait_for predicates read states under it
         self._publishers: dict[tuple[str, bool], zenoh.Publisher] = {}
-        self._states: dict[str, Seen] = {}
+        self._states: OrderedDict[str, Seen] = OrderedDict()
+        self._answers: OrderedDict[str, deque[Answer]] = OrderedDict()
         self._alive: set[str] = set()
         self._catalogues: dict[str, Catalogue] = {}
         self.catalogue_epoch = 0
@@ -120,6 +189,15 @@ class RobotLink:
                 )
             )
             self._subs.append(session.declare_subscriber(keys.changed("*"), self._on_changed))
+            self._subs.append(session.declare_subscriber(keys.ack("*"), self._on_ack))
+
+    def sequencer(self, ttl_ms: int) -> Sequencer:
+        """The one Sequencer of this link's sender and session, with ``ttl_ms`` from now on (a
+        second one would restart ``seq``, and robots would drop its commands as stale)."""
+        if self._sequencer is None:
+            self._sequencer = Sequencer(self.sender, ttl_ms, self.session_id)
+        self._sequencer.ttl_ms = ttl_ms
+        return self._sequencer
 
     # --- watching -----------------------------------------------------------------------
 
@@ -131,7 +209,40 @@ class RobotLink:
             return
         with self.changed:
             self._states[st.robot_id] = Seen(st, time.monotonic())
+            self._states.move_to_end(st.robot_id)
+            while len(self._states) > MAX_ROBOTS:
+                self._states.popitem(last=False)
             self.changed.notify_all()
+
+    def _on_ack(self, sample: zenoh.Sample) -> None:
+        try:
+            ack = decode(sample.payload, Ack)
+        except KinesphereError as exc:
+            log.debug("ignoring ack on %s: %s", sample.key_expr, exc)
+            return
+        if ack.sender != self.sender or ack.session != self.session_id:
+            return  # another client's
+        with self.changed:
+            box = self._answers.get(ack.robot_id)
+            if box is None:
+                box = self._answers[ack.robot_id] = deque(maxlen=ACKS_PER_ROBOT)
+                while len(self._answers) > MAX_ROBOTS:
+                    self._answers.popitem(last=False)
+            self._answers.move_to_end(ack.robot_id)
+            box.append(Answer(ack, time.monotonic()))
+            self.changed.notify_all()
+
+    def answers(self, seq_from: int = 0) -> dict[str, list[Answer]]:
+        """Acks each robot sent for this client's commands with ``seq >= seq_from``."""
+        with self._lock:
+            out = {rid: [a for a in box if a.ack.seq >= seq_from]
+                   for rid, box in self._answers.items()}  # fmt: skip
+        return {rid: found for rid, found in out.items() if found}
+
+    def last_answers(self) -> dict[str, Answer]:
+        """The newest ack of each robot for this client's commands."""
+        with self._lock:
+            return {rid: box[-1] for rid, box in self._answers.items() if box}
 
     def _on_alive(self, sample: zenoh.Sample) -> None:
         try:
@@ -169,7 +280,8 @@ class RobotLink:
             return out
 
     def wait_for(self, predicate: Callable[[RobotLink], bool], timeout: float) -> bool:
-        """Wait until ``predicate(link)`` is true (re-checked on every state or liveliness)."""
+        """Wait until ``predicate(link)`` is true (re-checked on every state, liveliness
+        change or ack)."""
         deadline = time.monotonic() + timeout
         with self.changed:
             while not predicate(self):
@@ -233,6 +345,22 @@ class RobotLink:
         payload = encode(cmd)
         for key in keys:
             self.publisher(key, urgent=cmd.estop).put(payload)
+
+    def alive_robots(self, timeout: float = 2.0) -> list[str]:
+        """Every robot whose liveliness token exists now, by a liveliness query (complete
+        when it returns, unlike a subscriber's history, which trickles in)."""
+        found = set()
+        replies = self.session.liveliness().get(self.keys.alive_robot("*"), timeout=timeout)
+        for reply in replies:
+            if reply.ok is not None:
+                try:
+                    found.add(self.keys.robot_id_of(str(reply.ok.key_expr)))
+                except KinesphereError:
+                    continue
+        with self.changed:
+            self._alive |= found
+            self.changed.notify_all()
+        return sorted(found)
 
     def estop_all(self, seq: Sequencer) -> Command:
         """E-stop every robot under the prefix, whatever the current target."""

@@ -212,5 +212,5 @@ def play(
                 break
             t = end
     finally:
-        link.put(keys, seq.stop())
+        link.put(keys, seq.let_go())
     return sent + 1

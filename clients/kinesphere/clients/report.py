@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from kinesphere.protocol import RobotState, Status
+from kinesphere.protocol import Ack, AckStage, RobotState, Status
 
 STALE_S = 0.5
 """A robot whose last state is older than this is shown as silent (states come at >= 50 Hz)."""
@@ -77,9 +77,21 @@ def lease_words(st: RobotState, me: str) -> str:
     return "control: you" if holder == me else f"control: {holder} (others are refused)"
 
 
-def robot_lines(st: RobotState, age_s: float, me: str = "", start_releases: bool = True
-                ) -> list[Line]:
-    """Every line the HUD shows for one robot: status, odometry and link, lease, ack."""
+def answer_words(ack: Ack, age_s: float) -> Line:
+    """The robot's newest answer to this operator: ``#123 moving (0.1 s ago)``."""
+    when = f"{age_s:.1f} s ago"
+    if ack.stage == AckStage.REJECTED:
+        return Line(f"refused your #{ack.seq} ({when}): {ack.code}: {ack.detail}", "bad")
+    subs = ", ".join(f"{s.requested} -> {s.served}" for s in ack.substitutions)
+    extra = f", served {subs}" if subs else ""
+    tone = "warn" if ack.stage == AckStage.BLOCKED else "dim"
+    return Line(f"your #{ack.seq}: {ack.stage}{extra} ({when})", tone)
+
+
+def robot_lines(st: RobotState, age_s: float, me: str = "", start_releases: bool = True,
+                answer: Ack | None = None, answer_age_s: float = 0.0) -> list[Line]:
+    """Every line the HUD shows for one robot: status, odometry and link, lease and the last
+    command it acted on, and its newest answer to this operator."""
     if age_s > STALE_S:
         head = Line(f"silent for {age_s:.1f} s: no state heard (link down or robot gone)", "bad")
     else:
@@ -94,4 +106,6 @@ def robot_lines(st: RobotState, age_s: float, me: str = "", start_releases: bool
             f"{s.requested} -> {s.served} ({s.angle:.0f}°)" for s in st.substitutions))
     if extra:
         lines.append(Line("; ".join(extra), "dim"))
+    if answer is not None:
+        lines.append(answer_words(answer, answer_age_s))
     return lines

@@ -28,7 +28,8 @@ class Action(StrEnum):
     ORIGIN_PREV = "origin_prev"
     TARGET_NEXT = "target_next"
     ESTOP = "estop"  # halts every robot, latches
-    RELEASE = "release"  # clears the e-stop latch of the targeted robots
+    RELEASE = "release"  # releases the robots this operator's e-stop latched
+    TAKE = "take"  # takes the control lease of the target's robots over from another operator
     QUIT = "quit"
 
 

@@ -30,6 +30,7 @@ from typing import Protocol
 
 from kinesphere.clients import targets as tg
 from kinesphere.clients.drive import Steering, base_kind, steering_for
+from kinesphere.clients.lease import LeaseKeeper
 from kinesphere.clients.limbs import (
     CatalogueCache,
     Selection,
@@ -38,7 +39,7 @@ from kinesphere.clients.limbs import (
     pairs_of,
     served,
 )
-from kinesphere.clients.link import RobotLink, Seen, Sequencer, new_sender
+from kinesphere.clients.link import Answer, RobotLink, Seen
 from kinesphere.clients.mapfile import MapFile
 from kinesphere.clients.mapping import (
     NEUTRAL_INTENT,
@@ -87,6 +88,10 @@ class View:
     """The robots heard from that the target reaches."""
     sender: str = ""
     """This operator's sender id (robots name it as their lease holder or e-stop latcher)."""
+    answers: dict[str, Answer] = field(default_factory=dict)
+    """Each robot's newest ack to this operator's commands, and when it came."""
+    notice: str = ""
+    """A standing problem the operator must see (robots refusing us for another's lease)."""
     available: frozenset[Direction] | None = None
     """Directions the limb has poses for (None: no catalogue yet)."""
     asked: Direction | None = None
@@ -102,13 +107,14 @@ class Teleop:
         mapfile: MapFile,
         target: tg.Target,
         options: TeleopOptions | None = None,
-        sender: str | None = None,
+        take: bool = False,
     ) -> None:
         self.link = link
         self.map = mapfile
         self.target = target
         self.options = options or TeleopOptions()
-        self.seq = Sequencer(sender or new_sender("gamepad"), self.options.ttl_ms)
+        self.seq = link.sequencer(self.options.ttl_ms)
+        self.lease = LeaseKeeper(link, self.seq, take)
         self.selection = Selection()
         self.catalogues = CatalogueCache(link)
         self.mstate = MapperState()
@@ -170,9 +176,14 @@ class Teleop:
         self.message = said
 
     def _stop_stream(self) -> None:
+        """The operator let go: one deadman release (obeyed only where we hold the lease)."""
         if self.streaming:
-            self.link.put(self.target.keys(self.link.keys), self.seq.stop())
+            self.link.put(self.target.keys(self.link.keys), self.seq.let_go())
             self.streaming = False
+
+    def _leave_target(self) -> None:
+        self._stop_stream()
+        self.lease.release(self.target, self._targeted())
 
     def _presses(self, cs: ControllerState) -> None:
         if cs.was_pressed(Action.ESTOP):
@@ -182,8 +193,11 @@ class Teleop:
             self.message = "E-STOP sent to all robots"
         if cs.was_pressed(Action.RELEASE) and not cs.was_pressed(Action.ESTOP):
             self._release()
+        if cs.was_pressed(Action.TAKE):
+            self.lease.take_over(self.target)
+            self.message = f"taking control of {self.target.label}"
         if cs.was_pressed(Action.TARGET_NEXT):
-            self._stop_stream()
+            self._leave_target()
             robots = self.link.robot_groups()
             self.target = tg.cycle(self.target, robots)
             reached = tg.members(self.target, robots)
@@ -240,14 +254,17 @@ class Teleop:
                 direction=self.intent.direction.slug,
                 size=self.intent.size,
             )
-            cmd = self.seq.command([part], self.intent.drive, deadman=True)
+            lease = self.lease.action_for_command(self.target)
+            cmd = self.seq.command([part], self.intent.drive, deadman=True, lease=lease)
             self.link.put(self.target.keys(self.link.keys), cmd)
             self.streaming = True
         else:
             self._stop_stream()
+            self.lease.idle(self.target, self._targeted(), now)
         return self.view(cs, engaged, remote)
 
     def view(self, cs: ControllerState, engaged: bool, remote: list[str]) -> View:
+        targeted = self._targeted()
         return View(
             target=self.target,
             limb=self.selection.limb,
@@ -267,13 +284,24 @@ class Teleop:
             catalogue_errors=self.catalogues.errors(),
             available=self._available,
             asked=self._asked,
-            members=sorted(self._targeted()),
+            members=sorted(targeted),
             sender=self.seq.sender,
+            answers=self.link.last_answers(),
+            notice=self._notice(targeted),
         )
 
+    def _notice(self, targeted: dict[str, Seen]) -> str:
+        """What the operator must know now: robots that refuse us for another's lease."""
+        refused = self.lease.refused(targeted)
+        if not refused:
+            return ""
+        rid, why = next(iter(sorted(refused.items())))
+        more = f" (and {len(refused) - 1} more)" if len(refused) > 1 else ""
+        return f"{rid} refuses your commands{more}: {why}; press Back (take) to take over"
+
     def shutdown(self) -> None:
-        """Final stop if a stream is still running (exit, Ctrl-C, SIGTERM)."""
-        self._stop_stream()
+        """On exit (Ctrl-C, SIGTERM too): let go if still streaming, then give the lease back."""
+        self._leave_target()
 
 
 def run(

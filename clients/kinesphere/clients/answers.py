@@ -1,0 +1,170 @@
+"""What became of the commands a command-line client sent: per robot, from the robots' acks.
+
+``send``, ``play``, ``estop`` and ``lease`` know whom they addressed (:func:`addressed`: the
+robot named, or the live robots a group or ``all`` reaches, by liveliness and the groups in
+their states), wait for those robots' acks (:func:`wait`), print one line per robot
+(:func:`report`) and exit non-zero unless every addressed robot accepted (:func:`exit_code`).
+A robot that never answers is reported as "no acknowledgement": the command may not have
+arrived at all (no route, the router's access control, a dead robot). Rejections are counted
+per code, so a phrase that a robot refuses 300 times is one line, not 300.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from collections import Counter
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+from typing import TextIO
+
+from kinesphere.clients import targets as tg
+from kinesphere.clients.link import Answer, RobotLink
+from kinesphere.protocol import Ack, AckStage, Substitution
+
+FINAL = frozenset({
+    AckStage.REACHED, AckStage.CLAMPED, AckStage.BLOCKED, AckStage.SUPERSEDED, AckStage.HOLDING,
+    AckStage.STOPPED, AckStage.ESTOPPED, AckStage.RELEASED, AckStage.LEASED, AckStage.REJECTED,
+})  # fmt: skip
+"""Stages after which a robot says nothing more about a command."""
+FAILED = frozenset({AckStage.REJECTED, AckStage.BLOCKED})
+"""Stages that make a command-line client exit non-zero."""
+DISCOVERY_S = 1.0
+"""How long to wait for the states (and so the groups) of the robots alive now."""
+
+
+def addressed(link: RobotLink, target: tg.Target, timeout: float = DISCOVERY_S) -> list[str]:
+    """The robots ``target`` reaches now: the robot named, or every live robot (liveliness)
+    that ``all`` or the group reaches (groups from the robots' states)."""
+    if target.kind == "robot":
+        return [target.name]
+    alive = link.alive_robots(timeout)
+    link.wait_for(lambda lk: set(alive) <= set(lk.states()), timeout)
+    groups = link.robot_groups()
+    return tg.members(target, {rid: groups.get(rid, []) for rid in alive})
+
+
+def substitution_text(subs: Iterable[Substitution]) -> str:
+    return ", ".join(f"{s.requested} -> {s.served} ({s.angle:.0f}°)" for s in subs)
+
+
+@dataclass
+class Outcome:
+    """One robot's answers to a run of commands."""
+
+    robot: str
+    acks: list[Ack] = field(default_factory=list)
+
+    @property
+    def last(self) -> Ack | None:
+        return self.acks[-1] if self.acks else None
+
+    @property
+    def refused(self) -> Counter[tuple[str, str]]:
+        """Rejections by (code, the first detail given for that code)."""
+        first: dict[str, str] = {}
+        out: Counter[tuple[str, str]] = Counter()
+        for a in self.acks:
+            if a.stage == AckStage.REJECTED:
+                out[(a.code, first.setdefault(a.code, a.detail))] += 1
+        return out
+
+    @property
+    def substitutions(self) -> list[Substitution]:
+        seen: dict[tuple[str, str, str, str], Substitution] = {}
+        for a in self.acks:
+            for s in a.substitutions:
+                seen.setdefault((s.limb, s.origin, s.requested, s.served), s)
+        return list(seen.values())
+
+    def final_for(self, seq: int) -> bool:
+        """Whether the robot said its last word about command ``seq``."""
+        return any(a.seq == seq and a.stage in FINAL for a in self.acks)
+
+    @property
+    def ok(self) -> bool:
+        return bool(self.acks) and not any(a.stage in FAILED for a in self.acks)
+
+
+def outcomes(answers: dict[str, list[Answer]], robots: Iterable[str]) -> dict[str, Outcome]:
+    """An Outcome for every addressed robot and every robot that answered anyway."""
+    out = {rid: Outcome(rid) for rid in robots}
+    for rid, found in answers.items():
+        out.setdefault(rid, Outcome(rid)).acks.extend(a.ack for a in found)
+    return dict(sorted(out.items()))
+
+
+def wait(
+    link: RobotLink,
+    first_seq: int,
+    robots: Iterable[str],
+    timeout: float,
+    done: Callable[[Outcome], bool],
+) -> dict[str, Outcome]:
+    """Wait until ``done`` holds for every addressed robot's answers to commands numbered
+    ``first_seq`` on, or ``timeout`` seconds; the outcomes either way."""
+    wanted = list(robots)
+
+    def settled(lk: RobotLink) -> bool:
+        now = outcomes(lk.answers(first_seq), wanted)
+        return all(done(now[r]) for r in wanted)
+
+    if wanted:
+        link.wait_for(settled, timeout)
+    return outcomes(link.answers(first_seq), wanted)
+
+
+def line(o: Outcome, timeout: float, sent: int = 1) -> str:
+    """One robot's line: what it said, substitutions, refusals; or that it said nothing."""
+    last = o.last
+    if last is None:
+        return (f"{o.robot}: NO ACKNOWLEDGEMENT within {timeout:g} s (the command may not have "
+                "arrived: no route, access control, or the robot is down)")  # fmt: skip
+    words: list[str] = []
+    refused = o.refused
+    for (code, detail), n in refused.items():
+        count = f" {n} of {sent}" if sent > 1 else ""
+        words.append(f"REJECTED{count}: {code}: {detail}")
+    if not refused or last.stage != AckStage.REJECTED:
+        stage = str(last.stage)
+        if stage == AckStage.BLOCKED:
+            stage = "BLOCKED"
+        if stage in (AckStage.ACCEPTED, AckStage.MOVING):
+            stage += f" (no final answer within {timeout:g} s)"
+        words.insert(0, f"{stage}{': ' + last.detail if last.detail else ''}")
+    subs = o.substitutions
+    if subs:
+        words.append(f"substituted {substitution_text(subs)}")
+    if last.lease_holder:
+        words.append(f"control: {last.lease_holder}")
+    return f"{o.robot}: " + "; ".join(words)
+
+
+def report(found: dict[str, Outcome], timeout: float, sent: int = 1,
+           out: TextIO | None = None) -> None:  # fmt: skip
+    """One line per robot on ``out`` (stdout)."""
+    out = out or sys.stdout
+    for o in found.values():
+        print(line(o, timeout, sent), file=out)
+
+
+def exit_code(found: dict[str, Outcome]) -> int:
+    """0 when every robot accepted (and none refused or was blocked), else 1; also 1 when
+    there was nobody to answer."""
+    if not found or not all(o.ok for o in found.values()):
+        return 1
+    return 0
+
+
+def summary(found: dict[str, Outcome], what: str) -> str:
+    """``"2 of 3 robots accepted the command"``, or why nobody did."""
+    if not found:
+        return f"no robot is addressed by {what}: nobody is listening"
+    good = sum(o.ok for o in found.values())
+    return f"{good} of {len(found)} robot(s) accepted {what}"
+
+
+def deadline(timeout: float) -> Callable[[], float]:
+    """Seconds left until ``timeout`` from now, never below 0."""
+    end = time.monotonic() + timeout
+    return lambda: max(0.0, end - time.monotonic())

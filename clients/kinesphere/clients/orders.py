@@ -1,0 +1,184 @@
+"""``send``, ``play``, ``estop`` and ``lease``: commands that wait for the robots' answers.
+
+Each finds whom it addresses (:func:`answers.addressed`), sends, waits up to ``--timeout`` for
+every addressed robot's acks, prints one line per robot on stdout (what it did, substitutions,
+refusals with their code, or "NO ACKNOWLEDGEMENT") and a summary on stderr, and exits 0 only
+when every addressed robot accepted: 1 when any refused, was blocked or did not answer, or
+when nobody was there to answer. An e-stop that reaches nobody is a loud failure.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from typing import Any
+
+from kinesphere.clients.commands import link_for, reachable, signals
+from kinesphere.clients.options import TeleopOptions
+from kinesphere.errors import KinesphereError
+
+ESTOP_RESEND_S = 0.1
+"""``kinesphere estop`` puts its e-stop at once, then again every 0.1 s to the robots that have
+not acknowledged it yet (it latches, so copies are harmless), until all did or the timeout."""
+KEEPALIVE_S = 1.0
+"""``lease --hold`` renews the lease this often (robots free a lease after 3 s of silence)."""
+
+
+def _finish(found: dict[str, Any], timeout: float, what: str, sent: int = 1) -> int:
+    from kinesphere.clients import answers
+
+    answers.report(found, timeout, sent)
+    print(answers.summary(found, what), file=sys.stderr)
+    return answers.exit_code(found)
+
+
+def _parse_parts(words: list[str]) -> list[Any]:
+    from kinesphere.clients.phrases import parse_part
+
+    if len(words) % 4:
+        raise KinesphereError(
+            "malformed", f"parts come in fours (LIMB ORIGIN DIRECTION SIZE), got {len(words)} words"
+        )
+    return [parse_part(" ".join(words[i : i + 4]), "send") for i in range(0, len(words), 4)]
+
+
+def send(args: argparse.Namespace) -> int:
+    from kinesphere.clients import answers, targets
+    from kinesphere.clients.phrases import make_drive
+
+    parts = _parse_parts(args.parts)
+    drive = make_drive(args.drive[0], args.drive[1], "--drive") if args.drive else None
+    if not parts and drive is None:
+        raise KinesphereError("malformed", "nothing to send: give L O D S parts and/or --drive")
+    target = targets.parse_target(args.target)
+    hold = args.hold
+    ttl = args.ttl_ms if args.ttl_ms is not None else (TeleopOptions.ttl_ms if hold else 0)
+    stopping = False
+
+    def stop() -> None:
+        nonlocal stopping
+        stopping = True
+
+    with link_for(args) as link:
+        keys = reachable(link, target, args.wait)
+        robots = answers.addressed(link, target)
+        seq = link.sequencer(ttl)
+        first = seq.seq
+        with signals(stop):
+            link.put(keys, seq.command(parts, drive))
+            if hold:
+                end = time.monotonic() + hold
+                while time.monotonic() < end and not stopping:
+                    time.sleep(min(1.0 / args.rate, max(0.0, end - time.monotonic())))
+                    link.put(keys, seq.command(parts, drive))
+                link.put(keys, seq.let_go())
+        last = seq.seq - 1
+        found = answers.wait(link, first, robots, args.timeout, lambda o: o.final_for(last))
+    return _finish(found, args.timeout, f"the command ({seq.seq - first} sent)", seq.seq - first)
+
+
+def play(args: argparse.Namespace) -> int:
+    from kinesphere.clients import answers, phrases, targets
+
+    phrase = phrases.load_phrase(args.phrase)
+    target = targets.parse_target(args.target)
+    ttl = args.ttl_ms if args.ttl_ms is not None else (phrase.ttl_ms or TeleopOptions.ttl_ms)
+    stopping = False
+
+    def stop() -> None:
+        nonlocal stopping
+        stopping = True
+
+    def on_step(i: int, step: phrases.Step) -> None:
+        note = f": {step.note}" if step.note else ""
+        print(f"step {i + 1}/{len(phrase.steps)} ({step.duration:g} s){note}", file=sys.stderr)
+
+    with link_for(args) as link:
+        keys = reachable(link, target, args.wait)
+        robots = answers.addressed(link, target)
+        seq = link.sequencer(ttl)
+        first = seq.seq
+        print(f"playing {phrase.name} ({phrase.duration:g} s) on {target.label}", file=sys.stderr)
+        with signals(stop):
+            phrases.play(link, phrase, keys, seq, rate_hz=args.rate, on_step=on_step,
+                         should_stop=lambda: stopping)  # fmt: skip
+        last = seq.seq - 1
+        found = answers.wait(link, first, robots, args.timeout, lambda o: o.final_for(last))
+    code = _finish(found, args.timeout, f"the phrase ({seq.seq - first} commands)",
+                   seq.seq - first)  # fmt: skip
+    return 130 if stopping else code
+
+
+def estop(args: argparse.Namespace) -> int:
+    from kinesphere.clients import answers, targets
+    from kinesphere.protocol import AckStage
+
+    with link_for(args) as link:
+        seq = link.sequencer(0)
+        first = seq.seq
+        if args.release:
+            if args.target is None:
+                raise KinesphereError(
+                    "malformed", "--release needs --target ID, group:NAME or all: say whose "
+                    "e-stop to release")  # fmt: skip
+            target = targets.parse_target(args.target)
+            keys = reachable(link, target, args.wait)
+            robots = answers.addressed(link, target)
+            link.put(keys, seq.release())
+            found = answers.wait(link, first, robots, args.timeout,
+                                 lambda o: o.final_for(first))  # fmt: skip
+            return _finish(found, args.timeout, "the release")
+        link.estop_all(seq)  # at once: an e-stop never waits for discovery
+        left = answers.deadline(args.timeout)
+        alive = set(link.alive_robots(min(1.0, args.timeout)))
+
+        def everyone(lk: Any) -> bool:
+            now = answers.outcomes(lk.answers(first), alive)
+            return bool(now) and all(
+                any(a.stage == AckStage.ESTOPPED for a in o.acks) for o in now.values())
+
+        while not link.wait_for(everyone, min(ESTOP_RESEND_S, left())) and left() > 0:
+            link.estop_all(seq)  # robots discovered a moment later get a copy
+            alive |= set(link.robots())
+        found = answers.outcomes(link.answers(first), alive)
+    if not found:
+        print(f"E-STOP REACHED NO ROBOT: nobody acknowledged it within {args.timeout:g} s and "
+              f"no robot is alive under {args.prefix!r}", file=sys.stderr)  # fmt: skip
+        return 1
+    return _finish(found, args.timeout, "the E-STOP")
+
+
+def lease(args: argparse.Namespace) -> int:
+    from kinesphere.clients import answers, targets
+    from kinesphere.protocol import LeaseAction
+
+    action = LeaseAction(args.action)
+    target = targets.parse_target(args.target)
+    stopping = False
+
+    def stop() -> None:
+        nonlocal stopping
+        stopping = True
+
+    with link_for(args) as link:
+        keys = reachable(link, target, args.wait)
+        robots = answers.addressed(link, target)
+        seq = link.sequencer(0)
+        first = seq.seq
+        link.put(keys, seq.lease(action))
+        found = answers.wait(link, first, robots, args.timeout, lambda o: o.final_for(first))
+        code = _finish(found, args.timeout, f"lease {action}")
+        if code or action is LeaseAction.RELEASE or not args.hold:
+            return code
+        print(f"holding the lease for {args.hold:g} s (Ctrl-C releases it)", file=sys.stderr)
+        end = time.monotonic() + args.hold
+        with signals(stop):
+            while not stopping and time.monotonic() < end:
+                link.wait_for(lambda lk: stopping, min(KEEPALIVE_S, end - time.monotonic()))
+                if not stopping and time.monotonic() < end:
+                    link.put(keys, seq.lease(LeaseAction.ACQUIRE))
+        last = seq.seq
+        link.put(keys, seq.lease(LeaseAction.RELEASE))
+        found = answers.wait(link, last, robots, args.timeout, lambda o: o.final_for(last))
+    return _finish(found, args.timeout, "lease release")
