@@ -71,6 +71,9 @@ def start_router(sup: Supervisor, ports: dict[str, int], name: str) -> None:
     until(lambda: sup.check() or port_open(ports[name]), WAIT_S, f"router {name} to listen")
 
 
+SENDER = "mesh-test"
+
+
 @dataclass
 class Mesh:
     sup: Supervisor
@@ -83,17 +86,19 @@ class Mesh:
     tmp: Path
 
     def send(self, name: str, *args: str) -> None:
-        """``kinesphere send all ...`` from the operator site; it must exit 0."""
+        """``kinesphere send all ...`` from the operator site; it must exit 0. The commands
+        of the test's own session are the same operator's (``SENDER``): robots lease control
+        to a sender."""
         child = self.sup.spawn(name, ["send", "all", *args, "--zenoh-config",
-                                      str(self.configs["ops"]), "--wait", "20"],
-                               expect_exit=True)
+                                      str(self.configs["ops"]), "--wait", "20",
+                                      "--sender", SENDER], expect_exit=True)
         code = self.sup.wait(name, WAIT_S)
         assert code == 0, f"{name} exited {code}:\n{child.tail()}"
 
     def estop(self, name: str, *args: str) -> None:
         child = self.sup.spawn(name, ["estop", *args, "--zenoh-config",
-                                      str(self.configs["ops"]), "--wait", "20"],
-                               expect_exit=True)
+                                      str(self.configs["ops"]), "--wait", "20",
+                                      "--sender", SENDER], expect_exit=True)
         code = self.sup.wait(name, WAIT_S)
         assert code == 0, f"{name} exited {code}:\n{child.tail()}"
 
@@ -151,10 +156,10 @@ def test_commands_states_queries_and_estop_cross_the_mesh(mesh: Mesh) -> None:
     until(lambda: all(ops.states.last(r).status == "estop" for r in ROBOTS),
           WAIT_S, "every robot to latch the e-stop", explain=ops.describe)
     latched = Command(seq=LATCHED_SEQ, sent_ns=time.time_ns(), parts=[SpatialCommand(*POSE_B)],
-                      deadman=True, ttl_ms=0, sender="mesh-test")
+                      deadman=True, ttl_ms=0, sender=SENDER)
     with acks_at(ops) as acks:  # each robot's answer crosses both links back
         ops.session.put(KEYS.command("*"), encode(latched))
-        until(lambda: {a.robot_id for a in acks if a.sender == "mesh-test"
+        until(lambda: {a.robot_id for a in acks if a.sender == SENDER
                        and a.seq == LATCHED_SEQ and a.code == "estopped"} == set(ROBOTS),
               WAIT_S, "every robot to refuse the command while latched (acks)",
               explain=lambda: acks[-5:])

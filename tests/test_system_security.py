@@ -148,24 +148,27 @@ def test_only_the_router_listens(secured: Secured) -> None:
     assert found["databank"] == [] and found["agent"] == [], found
 
 
-def _send(s: Secured, role: str, pose: tuple[str, str, str, int]) -> None:
-    """``kinesphere send`` with a role's deploy config, as an operator would run it."""
+def _send(s: Secured, role: str, pose: tuple[str, str, str, int]) -> tuple[int, str]:
+    """``kinesphere send`` with a role's deploy config, as an operator would run it: its exit
+    status and output."""
     name = f"send-{role}-{pose[2]}"
     child = s.sup.spawn(name, ["send", ROBOT, *map(str, pose), "--zenoh-config",
                                str(s.configs[role]), "--wait", "20"], expect_exit=True)
-    assert s.sup.wait(name, WAIT_S) == 0, child.tail()
+    return s.sup.wait(name, WAIT_S), child.tail()
 
 
 def test_only_the_operator_moves_robots(secured: Secured) -> None:
     s, obs = secured, secured.obs
     a = query_pose(obs.session, "youbot", *POSE_A).joints
     b = query_pose(obs.session, "youbot", *POSE_B).joints
-    _send(s, "operator", POSE_A)
+    code, out = _send(s, "operator", POSE_A)
+    assert code == 0 and f"{ROBOT}: reached" in out, out
     until(lambda: at_pose(obs.states.last(ROBOT), a), WAIT_S, "the operator's pose")
     before = obs.states.last(ROBOT)
     assert before is not None
 
-    _send(s, "superuser", POSE_B)
+    code, out = _send(s, "superuser", POSE_B)  # the router drops it: the client must say so
+    assert code == 1 and f"{ROBOT}: NO ACKNOWLEDGEMENT" in out, out
     for role, config in (("robot", s.robot_config(ROBOT)),
                          ("databank", session_config(config_file=s.configs["databank"]))):
         cmd = Command(seq=0, sent_ns=time.time_ns(), parts=[SpatialCommand(*POSE_B)],

@@ -34,14 +34,19 @@ DISCOVERY_S = 1.0
 
 
 def addressed(link: RobotLink, target: tg.Target, timeout: float = DISCOVERY_S) -> list[str]:
-    """The robots ``target`` reaches now: the robot named, or every live robot (liveliness)
-    that ``all`` or the group reaches (groups from the robots' states)."""
+    """The robots ``target`` reaches now: the robot named, or every live robot that ``all``
+    or the group reaches. Live robots come from a liveliness query and the link's liveliness
+    subscriber and state stream (whichever knows first); groups from their states."""
     if target.kind == "robot":
         return [target.name]
-    alive = link.alive_robots(timeout)
-    link.wait_for(lambda lk: set(alive) <= set(lk.states()), timeout)
-    groups = link.robot_groups()
-    return tg.members(target, {rid: groups.get(rid, []) for rid in alive})
+    alive = set(link.alive_robots(timeout))
+
+    def known(lk: RobotLink) -> bool:
+        states = set(lk.states())
+        return bool(states) and (alive | set(lk.robots())) <= states
+
+    link.wait_for(known, timeout)
+    return tg.members(target, link.robot_groups())
 
 
 def substitution_text(subs: Iterable[Substitution]) -> str:
@@ -81,6 +86,11 @@ class Outcome:
         """Whether the robot said its last word about command ``seq``."""
         return any(a.seq == seq and a.stage in FINAL for a in self.acks)
 
+    def answered(self, seq: int) -> bool:
+        """Whether the robot said anything about command ``seq`` (a release of a robot that is
+        not latched is simply ``accepted``)."""
+        return any(a.seq == seq for a in self.acks)
+
     @property
     def ok(self) -> bool:
         return bool(self.acks) and not any(a.stage in FAILED for a in self.acks)
@@ -102,15 +112,15 @@ def wait(
     done: Callable[[Outcome], bool],
 ) -> dict[str, Outcome]:
     """Wait until ``done`` holds for every addressed robot's answers to commands numbered
-    ``first_seq`` on, or ``timeout`` seconds; the outcomes either way."""
+    ``first_seq`` on (and every robot that answered unaddressed), or ``timeout`` seconds; the
+    outcomes either way."""
     wanted = list(robots)
 
     def settled(lk: RobotLink) -> bool:
         now = outcomes(lk.answers(first_seq), wanted)
-        return all(done(now[r]) for r in wanted)
+        return bool(now) and all(done(o) for o in now.values())
 
-    if wanted:
-        link.wait_for(settled, timeout)
+    link.wait_for(settled, timeout)  # nobody known to address: whoever answers in time
     return outcomes(link.answers(first_seq), wanted)
 
 

@@ -127,7 +127,7 @@ def estop(args: argparse.Namespace) -> int:
             robots = answers.addressed(link, target)
             link.put(keys, seq.release())
             found = answers.wait(link, first, robots, args.timeout,
-                                 lambda o: o.final_for(first))  # fmt: skip
+                                 lambda o: o.answered(first))  # fmt: skip
             return _finish(found, args.timeout, "the release")
         link.estop_all(seq)  # at once: an e-stop never waits for discovery
         left = answers.deadline(args.timeout)

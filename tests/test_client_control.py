@@ -1,0 +1,187 @@
+"""Who controls a robot, and what the operator is told, against real agents and a real databank:
+acks reach the command line (a refusal exits 1 with its code, an e-stop is acknowledged by
+every robot), two operators on one robot (only the lease holder moves it, the other is told
+``lease_held``), a killed holder's lease lapses on time and the other operator gets it, and an
+e-stop from the operator without the lease stops the robot at once."""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from contextlib import ExitStack
+from pathlib import Path
+
+import pytest
+from test_client_fleet_support import PB, PLATFORMS, ROOT, WAIT_S, Fleet, Heard, fleet, operator
+from test_client_support import pygame_up
+
+from kinesphere import zconfig
+from kinesphere.cli import main
+from kinesphere.clients import targets as tg
+from kinesphere.clients.lease import LEASE_TIMEOUT_S
+from kinesphere.clients.state import Action, ControllerState
+from kinesphere.clients.teleop import Teleop, View
+from kinesphere.protocol import AckStage
+
+__all__ = ["fleet", "pygame_up"]  # fixtures
+
+PERIOD = 1 / 30
+HELD = frozenset({Action.DEADMAN})
+LEFT_LOW = ControllerState(rx=-1.0, lt=1.0, held=HELD)  # served left-forward-low: turret +
+RIGHT_LOW = ControllerState(rx=1.0, lt=1.0, held=HELD)  # served right-forward-low: turret -
+LET_GO = ControllerState()
+
+
+def turret(h: Heard) -> float:
+    return h.state.q[h.state.joint_names.index("turret")]
+
+
+def tick_together(ops: list[tuple[Teleop, ControllerState]], seconds: float) -> list[View]:
+    """Tick every operator at 30 Hz for ``seconds``; the last operator's views."""
+    views: list[View] = []
+    end = time.monotonic() + seconds
+    next_t = time.monotonic()
+    while time.monotonic() < end:
+        for op, cs in ops:
+            views.append(op.tick(cs))
+        next_t += PERIOD
+        time.sleep(max(0.0, next_t - time.monotonic()))
+    return views[len(ops) - 1 :: len(ops)]
+
+
+def lease_of(fleet: Fleet, after: float) -> str:
+    return fleet.track.wait(PB, lambda h: True, "a state", after=after).state.lease_holder
+
+
+@pytest.fixture
+def free(fleet: Fleet) -> Iterator[Fleet]:
+    """The fleet with no lease held and no e-stop latched before and after the test."""
+    assert main(["estop", "--release", "--target", "all", "--connect", fleet.endpoint]) == 0
+    fleet.track.wait(PB, lambda h: not h.state.lease_holder and h.state.status != "estop",
+                     "the lease free", after=time.monotonic())  # fmt: skip
+    yield fleet
+    assert main(["estop", "--release", "--target", "all", "--connect", fleet.endpoint]) == 0
+
+
+def test_send_to_a_robot_that_rejects_exits_1_with_the_code(
+    free: Fleet, capsys: pytest.CaptureFixture[str]
+) -> None:
+    code = main(["send", PB, "limb_99", "distal_99", "left-high", "3",
+                 "--connect", free.endpoint])  # fmt: skip
+    assert code == 1
+    out, err = capsys.readouterr()
+    assert out.startswith(f"{PB}: REJECTED: unknown_limb: ")
+    assert "0 of 1 robot(s) accepted" in err
+
+
+def test_estop_is_acknowledged_by_every_robot_and_released_by_target(
+    free: Fleet, capsys: pytest.CaptureFixture[str]
+) -> None:
+    start = time.monotonic()
+    assert main(["estop", "--connect", free.endpoint, "--sender", "carol"]) == 0
+    assert capsys.readouterr().out.splitlines() == [f"{r}: estopped" for r in sorted(PLATFORMS)]
+    for rid in PLATFORMS:
+        h = free.track.wait(rid, lambda h: h.state.status == "estop", "the e-stop", after=start)
+        assert h.state.estop_by == "carol", "the state says who latched it"
+    assert main(["estop", "--release", "--target", "all", "--connect", free.endpoint]) == 0
+    assert capsys.readouterr().out.splitlines() == [f"{r}: released" for r in sorted(PLATFORMS)]
+
+
+def test_two_operators_only_the_lease_holder_moves_the_robot(
+    free: Fleet, pygame_up: None
+) -> None:
+    with ExitStack() as stack:
+        alice, _ = stack.enter_context(operator(free, tg.robot(PB), sender="alice"))
+        bob, _ = stack.enter_context(operator(free, tg.robot(PB), sender="bob"))
+        t0 = time.monotonic()
+        tick_together([(alice, LEFT_LOW)], 0.2)  # alice engages first: the lease is hers
+        views = tick_together([(alice, LEFT_LOW), (bob, RIGHT_LOW)], 2.0)
+        assert lease_of(free, time.monotonic()) == "alice"
+        refusal = bob.link.last_answers()[PB].ack
+        assert (refusal.stage, refusal.code, refusal.lease_holder) == (
+            AckStage.REJECTED, "lease_held", "alice")  # fmt: skip
+        assert "alice" in views[-1].notice and "take over" in views[-1].notice
+        mine = alice.link.last_answers()[PB].ack
+        assert mine.stage != AckStage.REJECTED, mine
+        tick_together([(alice, LET_GO), (bob, LET_GO)], 0.2)
+        alice.shutdown()
+        bob.shutdown()
+    hs = free.track.since(PB, t0)
+    assert max(map(turret, hs)) > 0.3, "alice's left-forward-low moved the arm"
+    assert min(map(turret, hs)) > -0.05, "bob's right-forward-low never did"
+
+
+def test_a_killed_holders_lease_lapses_on_time_and_the_other_operator_gets_it(
+    free: Fleet, pygame_up: None, tmp_path: Path
+) -> None:
+    rec = tmp_path / "alice.jsonl"
+    lines = [{"kinesphere": "gamepad-recording", "version": 1}]
+    lines += [{"t": k / 10, "state": LEFT_LOW.to_dict()} for k in range(600)]  # a minute
+    rec.write_text("\n".join(json.dumps(x) for x in lines) + "\n")
+    start = time.monotonic()
+    alice = subprocess.Popen(
+        [sys.executable, "-m", "kinesphere.cli", "gamepad", "--replay", str(rec), "--headless",
+         "--target", PB, "--sender", "alice", "--connect", free.endpoint,
+         "--listen", zconfig.LOOPBACK_ANY_PORT],
+        cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+    )  # fmt: skip
+    try:
+        free.track.wait(PB, lambda h: h.state.lease_holder == "alice" and h.state.status
+                        == "moving", "alice in control", after=start)  # fmt: skip
+        with operator(free, tg.robot(PB), sender="bob") as (bob, _):
+            tick_together([(bob, RIGHT_LOW)], 0.5)
+            assert bob.link.last_answers()[PB].ack.code == "lease_held"
+            alice.send_signal(signal.SIGKILL)
+            killed = time.monotonic()
+            alice.wait()
+            got = None
+            while got is None and time.monotonic() - killed < LEASE_TIMEOUT_S + WAIT_S:
+                tick_together([(bob, RIGHT_LOW)], PERIOD)
+                last = bob.link.last_answers()[PB]
+                if last.ack.stage != AckStage.REJECTED:
+                    got = last.at
+            bob.tick(LET_GO)
+            bob.shutdown()
+    finally:
+        if alice.poll() is None:
+            alice.kill()
+            alice.wait()
+    assert got is not None, "bob never got the lease"
+    lapse = got - killed
+    assert LEASE_TIMEOUT_S - 0.4 < lapse < LEASE_TIMEOUT_S + 1.0, lapse
+    assert free.track.wait(PB, lambda h: h.state.lease_holder == "bob", "bob's lease",
+                           after=killed)  # fmt: skip
+
+
+def test_an_estop_from_the_operator_without_the_lease_stops_the_robot_at_once(
+    free: Fleet, pygame_up: None
+) -> None:
+    with ExitStack() as stack:
+        alice, _ = stack.enter_context(operator(free, tg.robot(PB), sender="alice"))
+        bob, _ = stack.enter_context(operator(free, tg.robot(PB), sender="bob"))
+        start = time.monotonic()
+        tick_together([(alice, LEFT_LOW)], 1.0)
+        assert lease_of(free, time.monotonic()) == "alice"
+        free.track.wait(PB, lambda h: h.state.status == "moving", "alice moving it", after=start)
+        pressed = time.monotonic()
+        view = bob.tick(ControllerState(pressed=frozenset({Action.ESTOP})))
+        assert view.estopped
+        halted = free.track.wait(PB, lambda h: h.state.status == "estop", "the e-stop",
+                                 after=pressed)  # fmt: skip
+        assert halted.at - pressed < 0.3
+        assert halted.state.estop_by == "bob"
+        tick_together([(alice, LEFT_LOW)], 0.3)  # alice streams on: refused, latched
+        refusal = alice.link.last_answers()[PB].ack
+        assert (refusal.stage, refusal.code) == (AckStage.REJECTED, "estopped")
+        assert bob.latched_by_me() == sorted(PLATFORMS), "bob's e-stop stopped every robot"
+        view = bob.tick(ControllerState(pressed=frozenset({Action.RELEASE})))
+        assert view.message == f"released the e-stop of {', '.join(sorted(PLATFORMS))}"
+        free.track.wait(PB, lambda h: h.state.status != "estop", "released",
+                        after=time.monotonic())  # fmt: skip
+        alice.tick(LET_GO)
+        alice.shutdown()
+        bob.shutdown()

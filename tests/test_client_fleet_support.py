@@ -1,0 +1,197 @@
+"""Shared by the client tests against real robots: the databank and two agents (a PackBot and
+a youBot) run as processes on loopback; states are tracked with arrival times; a gamepad
+operator runs in this process on its own session.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+
+import pygame
+import pytest
+import zenoh
+
+from kinesphere import zconfig
+from kinesphere.clients import input as pad
+from kinesphere.clients import mapfile
+from kinesphere.clients import targets as tg
+from kinesphere.clients.link import RobotLink
+from kinesphere.clients.options import TeleopOptions
+from kinesphere.clients.teleop import Teleop
+from kinesphere.keyexpr import Keys
+from kinesphere.protocol import RobotState, decode
+
+ROOT = Path(__file__).resolve().parent.parent
+KEYS = Keys()
+WAIT_S = 60.0
+"""Upper bound for start-up and events on a loaded 2-core machine; tests finish far sooner."""
+TTL_MS = 300
+PB, YB = "pb-1", "yb-1"
+PLATFORMS = {PB: "packbot", YB: "youbot"}
+
+
+def databank_args() -> list[str]:
+    """The shipped databanks of the platforms under test."""
+    return [a for p in PLATFORMS.values() for a in ("--platform", p)]
+
+
+class Child:
+    """A kinesphere process joined to the hub; ready once its liveliness token appears."""
+
+    def __init__(self, hub: zenoh.Session, endpoint: str, args: list[str], token: str,
+                 log: Path) -> None:  # fmt: skip
+        up = threading.Event()
+
+        def on_token(sample: zenoh.Sample) -> None:
+            if sample.kind == zenoh.SampleKind.PUT:
+                up.set()
+
+        sub = hub.liveliness().declare_subscriber(token, on_token, history=True)
+        self.log = log.open("wb")
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "kinesphere.cli", *args,
+             "--connect", endpoint, "--listen", zconfig.LOOPBACK_ANY_PORT],
+            cwd=ROOT, env={**os.environ, "PYTHONUNBUFFERED": "1"},
+            stdout=self.log, stderr=subprocess.STDOUT,
+        )  # fmt: skip
+        try:
+            if not up.wait(WAIT_S):
+                self.stop()
+                raise RuntimeError(f"{args[:2]} did not come up; see {log}")
+        finally:
+            zconfig.undeclare(sub)
+
+    def stop(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGTERM)
+            try:
+                self.proc.wait(timeout=15)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        self.log.close()
+
+
+@dataclass(frozen=True)
+class Heard:
+    at: float
+    state: RobotState
+
+
+class Track:
+    """Every RobotState of every robot, with arrival times and waits on predicates."""
+
+    def __init__(self, session: zenoh.Session) -> None:
+        self.heard: dict[str, list[Heard]] = {}
+        self._cond = threading.Condition()
+        self._sub = session.declare_subscriber(KEYS.state("*"), self._on)
+
+    def _on(self, sample: zenoh.Sample) -> None:
+        st = decode(sample.payload, RobotState)
+        with self._cond:
+            self.heard.setdefault(st.robot_id, []).append(Heard(time.monotonic(), st))
+            self._cond.notify_all()
+
+    def wait(self, robot: str, pred: Callable[[Heard], bool], what: str,
+             after: float = 0.0) -> Heard:  # fmt: skip
+        """The first state of ``robot`` heard after ``after`` that satisfies ``pred``."""
+        deadline = time.monotonic() + WAIT_S
+        with self._cond:
+            while True:
+                for h in self.heard.get(robot, []):
+                    if h.at > after and pred(h):
+                        return h
+                left = deadline - time.monotonic()
+                if left <= 0 or not self._cond.wait(left):
+                    last = self.heard.get(robot, [None])[-1]
+                    raise AssertionError(f"{robot}: timed out waiting for {what}; last {last}")
+
+    def since(self, robot: str, t: float) -> list[Heard]:
+        with self._cond:
+            return [h for h in self.heard.get(robot, []) if h.at >= t]
+
+    def close(self) -> None:
+        zconfig.undeclare(self._sub)
+
+
+def speeds(hs: list[Heard]) -> list[tuple[float, float]]:
+    """(robot time s, base speed m/s) between consecutive states."""
+    out = []
+    for a, b in zip(hs, hs[1:], strict=False):
+        dt = (b.state.stamp_ns - a.state.stamp_ns) / 1e9
+        if dt > 0:
+            dx = b.state.base_pose[0] - a.state.base_pose[0]
+            dy = b.state.base_pose[1] - a.state.base_pose[1]
+            out.append((b.state.stamp_ns / 1e9, (dx * dx + dy * dy) ** 0.5 / dt))
+    return out
+
+
+def at_rest(robot: str, track: Track, after: float) -> Heard:
+    """The first state after ``after`` where the base has not moved since the previous one."""
+    prev: list[Heard] = []
+
+    def still(h: Heard) -> bool:
+        v = speeds([prev[-1], h]) if prev else []
+        prev.append(h)
+        return bool(v) and v[0][1] < 1e-3 and max(map(abs, h.state.qd)) < 1e-3
+
+    return track.wait(robot, still, "the robot at rest", after)
+
+
+@dataclass
+class Fleet:
+    hub: zenoh.Session
+    endpoint: str
+    track: Track
+
+
+@pytest.fixture(scope="module")
+def fleet(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Fleet]:
+    args = databank_args()
+    logs = tmp_path_factory.mktemp("logs")
+    with zconfig.loopback_hub() as (hub, endpoint):
+        track = Track(hub)
+        children: list[Child] = []
+        try:
+            children.append(Child(hub, endpoint, ["databank", "serve", *args],
+                                  KEYS.alive_databank_all(), logs / "databank.log"))  # fmt: skip
+            for rid, platform in PLATFORMS.items():
+                groups = ["--group", "sweepers"] if rid == PB else []
+                children.append(Child(hub, endpoint, ["agent", platform, "--id", rid, *groups],
+                                      KEYS.alive_robot(rid), logs / f"{rid}.log"))  # fmt: skip
+            for rid in PLATFORMS:
+                track.wait(rid, lambda h: True, "a first state")
+            yield Fleet(hub, endpoint, track)
+        finally:
+            for c in reversed(children):
+                c.stop()
+            track.close()
+
+
+@contextmanager
+def operator(fleet: Fleet, target: tg.Target, sender: str | None = None, take: bool = False
+             ) -> Iterator[tuple[Teleop, pad.PygameInput]]:  # fmt: skip
+    """A gamepad client on its own session (as ``sender``), with its catalogues loaded."""
+    pygame.event.clear()
+    inp = pad.PygameInput(mapfile.load())
+    with zconfig.session(config=zconfig.loopback_config(fleet.endpoint)) as s:
+        link = RobotLink(s, KEYS, sender=sender)
+        try:
+            assert link.wait_subscribers(target.keys(KEYS), WAIT_S) == []
+            assert link.wait_for(lambda lk: set(lk.states()) >= set(PLATFORMS), WAIT_S)
+            op = Teleop(link, mapfile.load(), target, TeleopOptions(rate_hz=30.0, ttl_ms=TTL_MS),
+                        take=take)
+            if op.tick(inp.poll()).members:  # (agents without RobotState.groups: none known)
+                assert op.catalogues.arrived.wait(WAIT_S)
+            yield op, inp
+        finally:
+            link.close()
