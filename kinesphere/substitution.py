@@ -27,9 +27,11 @@ from typing import Final, NamedTuple
 
 from kinesphere.laban import Direction
 
-MAX_ANGLE_DEG: Final = 75.0
-"""Largest angle between a request and its replacement (cos 75 deg = 0.26); adjacent
-diagonals (70.5 deg) still qualify, orthogonal and opposite directions never do."""
+MAX_ANGLE_DEG: Final = 45.0
+"""Largest angle between a request and its replacement, for the gamepad and the ECL alike. 45
+degrees reaches every neighbour on Laban's cube but the corner-to-axis ones (54.7): left-low
+may be served by left-forward-low (35.3), place-high by forward-high (45), never
+forward-middle by left-middle (90)."""
 _ORDER = {d: i for i, d in enumerate(Direction)}
 
 
