@@ -26,6 +26,7 @@ import uuid
 from collections import OrderedDict, deque
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
+from typing import TypeVar
 
 import zenoh
 
@@ -47,6 +48,7 @@ from kinesphere.protocol import (
 from kinesphere.query import get_one
 
 log = logging.getLogger(__name__)
+T = TypeVar("T")
 URGENT = zenoh.Priority.REAL_TIME
 
 
@@ -201,11 +203,18 @@ class RobotLink:
 
     # --- watching -----------------------------------------------------------------------
 
-    def _on_state(self, sample: zenoh.Sample) -> None:
+    @staticmethod
+    def _decoded(sample: zenoh.Sample, type_: type[T]) -> T | None:
+        """The sample's message, or None (logged) when a peer sent something else."""
         try:
-            st = decode(sample.payload, RobotState)
+            return decode(sample.payload, type_)
         except KinesphereError as exc:
-            log.debug("ignoring state on %s: %s", sample.key_expr, exc)
+            log.debug("ignoring %s: %s", sample.key_expr, exc)
+            return None
+
+    def _on_state(self, sample: zenoh.Sample) -> None:
+        st = self._decoded(sample, RobotState)
+        if st is None:
             return
         with self.changed:
             self._states[st.robot_id] = Seen(st, time.monotonic())
@@ -215,13 +224,9 @@ class RobotLink:
             self.changed.notify_all()
 
     def _on_ack(self, sample: zenoh.Sample) -> None:
-        try:
-            ack = decode(sample.payload, Ack)
-        except KinesphereError as exc:
-            log.debug("ignoring ack on %s: %s", sample.key_expr, exc)
-            return
-        if ack.sender != self.sender or ack.session != self.session_id:
-            return  # another client's
+        ack = self._decoded(sample, Ack)
+        if ack is None or ack.sender != self.sender or ack.session != self.session_id:
+            return  # undecodable, or another client's
         with self.changed:
             box = self._answers.get(ack.robot_id)
             if box is None:

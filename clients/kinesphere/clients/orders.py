@@ -12,6 +12,8 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from typing import Any
 
 from kinesphere.clients.commands import link_for, reachable, signals
@@ -23,6 +25,27 @@ ESTOP_RESEND_S = 0.1
 not acknowledged it yet (it latches, so copies are harmless), until all did or the timeout."""
 KEEPALIVE_S = 1.0
 """``lease --hold`` renews the lease this often (robots free a lease after 3 s of silence)."""
+
+
+class _Interrupt:
+    """Set by SIGINT or SIGTERM: the stream ends early and the robots are let go."""
+
+    def __init__(self) -> None:
+        self.set = False
+
+    def __call__(self) -> None:
+        self.set = True
+
+
+@contextmanager
+def _addressing(args: argparse.Namespace, target: Any, ttl_ms: int) -> Iterator[Any]:
+    """``(link, keys, robots, seq)``: the link, the target's keys once someone listens, the
+    robots it addresses, and the link's Sequencer."""
+    from kinesphere.clients import answers
+
+    with link_for(args) as link:
+        keys = reachable(link, target, args.wait)
+        yield link, keys, answers.addressed(link, target), link.sequencer(ttl_ms)
 
 
 def _finish(found: dict[str, Any], timeout: float, what: str, sent: int = 1) -> int:
@@ -54,22 +77,14 @@ def send(args: argparse.Namespace) -> int:
     target = targets.parse_target(args.target)
     hold = args.hold
     ttl = args.ttl_ms if args.ttl_ms is not None else (TeleopOptions.ttl_ms if hold else 0)
-    stopping = False
-
-    def stop() -> None:
-        nonlocal stopping
-        stopping = True
-
-    with link_for(args) as link:
-        keys = reachable(link, target, args.wait)
-        robots = answers.addressed(link, target)
-        seq = link.sequencer(ttl)
+    stop = _Interrupt()
+    with _addressing(args, target, ttl) as (link, keys, robots, seq):
         first = seq.seq
         with signals(stop):
             link.put(keys, seq.command(parts, drive))
             if hold:
                 end = time.monotonic() + hold
-                while time.monotonic() < end and not stopping:
+                while time.monotonic() < end and not stop.set:
                     time.sleep(min(1.0 / args.rate, max(0.0, end - time.monotonic())))
                     link.put(keys, seq.command(parts, drive))
                 link.put(keys, seq.let_go())
@@ -84,51 +99,43 @@ def play(args: argparse.Namespace) -> int:
     phrase = phrases.load_phrase(args.phrase)
     target = targets.parse_target(args.target)
     ttl = args.ttl_ms if args.ttl_ms is not None else (phrase.ttl_ms or TeleopOptions.ttl_ms)
-    stopping = False
-
-    def stop() -> None:
-        nonlocal stopping
-        stopping = True
+    stop = _Interrupt()
 
     def on_step(i: int, step: phrases.Step) -> None:
         note = f": {step.note}" if step.note else ""
         print(f"step {i + 1}/{len(phrase.steps)} ({step.duration:g} s){note}", file=sys.stderr)
 
-    with link_for(args) as link:
-        keys = reachable(link, target, args.wait)
-        robots = answers.addressed(link, target)
-        seq = link.sequencer(ttl)
+    with _addressing(args, target, ttl) as (link, keys, robots, seq):
         first = seq.seq
         print(f"playing {phrase.name} ({phrase.duration:g} s) on {target.label}", file=sys.stderr)
         with signals(stop):
             phrases.play(link, phrase, keys, seq, rate_hz=args.rate, on_step=on_step,
-                         should_stop=lambda: stopping)  # fmt: skip
+                         should_stop=lambda: stop.set)  # fmt: skip
         last = seq.seq - 1
         found = answers.wait(link, first, robots, args.timeout, lambda o: o.final_for(last))
     code = _finish(found, args.timeout, f"the phrase ({seq.seq - first} commands)",
                    seq.seq - first)  # fmt: skip
-    return 130 if stopping else code
+    return 130 if stop.set else code
 
 
 def estop(args: argparse.Namespace) -> int:
     from kinesphere.clients import answers, targets
     from kinesphere.protocol import AckStage
 
-    with link_for(args) as link:
-        seq = link.sequencer(0)
-        first = seq.seq
-        if args.release:
-            if args.target is None:
-                raise KinesphereError(
-                    "malformed", "--release needs --target ID, group:NAME or all: say whose "
-                    "e-stop to release")  # fmt: skip
-            target = targets.parse_target(args.target)
-            keys = reachable(link, target, args.wait)
-            robots = answers.addressed(link, target)
+    if args.release:
+        if args.target is None:
+            raise KinesphereError(
+                "malformed", "--release needs --target ID, group:NAME or all: say whose "
+                "e-stop to release")  # fmt: skip
+        with _addressing(args, targets.parse_target(args.target), 0) as (link, keys, robots, seq):
+            first = seq.seq
             link.put(keys, seq.release())
             found = answers.wait(link, first, robots, args.timeout,
                                  lambda o: o.answered(first))  # fmt: skip
-            return _finish(found, args.timeout, "the release")
+        return _finish(found, args.timeout, "the release")
+    with link_for(args) as link:
+        seq = link.sequencer(0)
+        first = seq.seq
         link.estop_all(seq)  # at once: an e-stop never waits for discovery
         left = answers.deadline(args.timeout)
         alive = set(link.alive_robots(min(1.0, args.timeout)))
@@ -155,16 +162,8 @@ def lease(args: argparse.Namespace) -> int:
 
     action = LeaseAction(args.action)
     target = targets.parse_target(args.target)
-    stopping = False
-
-    def stop() -> None:
-        nonlocal stopping
-        stopping = True
-
-    with link_for(args) as link:
-        keys = reachable(link, target, args.wait)
-        robots = answers.addressed(link, target)
-        seq = link.sequencer(0)
+    stop = _Interrupt()
+    with _addressing(args, target, 0) as (link, keys, robots, seq):
         first = seq.seq
         link.put(keys, seq.lease(action))
         found = answers.wait(link, first, robots, args.timeout, lambda o: o.final_for(first))
@@ -174,9 +173,9 @@ def lease(args: argparse.Namespace) -> int:
         print(f"holding the lease for {args.hold:g} s (Ctrl-C releases it)", file=sys.stderr)
         end = time.monotonic() + args.hold
         with signals(stop):
-            while not stopping and time.monotonic() < end:
-                link.wait_for(lambda lk: stopping, min(KEEPALIVE_S, end - time.monotonic()))
-                if not stopping and time.monotonic() < end:
+            while not stop.set and time.monotonic() < end:
+                link.wait_for(lambda lk: stop.set, min(KEEPALIVE_S, end - time.monotonic()))
+                if not stop.set and time.monotonic() < end:
                     link.put(keys, seq.lease(LeaseAction.ACQUIRE))
         last = seq.seq
         link.put(keys, seq.lease(LeaseAction.RELEASE))
