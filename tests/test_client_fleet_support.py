@@ -136,13 +136,16 @@ def speeds(hs: list[Heard]) -> list[tuple[float, float]]:
 
 
 def at_rest(robot: str, track: Track, after: float) -> Heard:
-    """The first state after ``after`` where the base has not moved since the previous one."""
+    """The first state after ``after`` where the base has neither moved nor turned since the
+    previous one and no joint moves."""
     prev: list[Heard] = []
 
     def still(h: Heard) -> bool:
         v = speeds([prev[-1], h]) if prev else []
+        turned = abs(h.state.base_pose[2] - prev[-1].state.base_pose[2]) if prev else 1.0
         prev.append(h)
-        return bool(v) and v[0][1] < 1e-3 and max(map(abs, h.state.qd)) < 1e-3
+        return (bool(v) and v[0][1] < 1e-3 and turned < 1e-4
+                and max(map(abs, h.state.qd)) < 1e-3)  # fmt: skip
 
     return track.wait(robot, still, "the robot at rest", after)
 
