@@ -260,6 +260,7 @@ def test_groups_reach_their_members_only_and_estop_halts_all(fleet: Fleet, pygam
     fleet.track.wait(YB, lambda h: True, "a youbot state")
     before = fleet.track.since(YB, 0.0)[-1].state.last_command_seq  # the latest, not the first
     with operator(fleet, tg.parse_target("group:sweepers")) as (op, inp):
+        assert op.tick(inp.poll()).members == [PB], "members from the agents' own states"
         p.deadman()
         p.left(0.0, -0.5)
         for _ in range(3):

@@ -193,8 +193,8 @@ def operator(fleet: Fleet, target: tg.Target, sender: str | None = None, take: b
             assert link.wait_for(lambda lk: set(lk.states()) >= set(PLATFORMS), WAIT_S)
             op = Teleop(link, mapfile.load(), target, TeleopOptions(rate_hz=30.0, ttl_ms=TTL_MS),
                         take=take)
-            if op.tick(inp.poll()).members:  # (agents without RobotState.groups: none known)
-                assert op.catalogues.arrived.wait(WAIT_S)
+            assert op.tick(inp.poll()).members, "the target reaches a robot we hear"
+            assert op.catalogues.arrived.wait(WAIT_S)
             yield op, inp
         finally:
             link.close()
