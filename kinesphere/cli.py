@@ -21,7 +21,8 @@ from kinesphere.errors import KinesphereError
 ROLE_COMMANDS: dict[str, tuple[str, ...]] = {
     "kinesphere-robots": ("agent", "describe", "fleet", "platform", "platforms"),
     "kinesphere-services": ("databank", "ecl", "pose", "query"),
-    "kinesphere-clients": ("estop", "gamepad", "play", "record", "replay", "ros2", "send", "view"),
+    "kinesphere-clients": ("estop", "gamepad", "lease", "play", "record", "replay", "ros2", "send",
+                           "view"),
     "kinesphere-deploy": ("film", "router", "status", "up"),
 }
 """Which distribution brings which command, so a host without it can say what to install

@@ -53,6 +53,10 @@ def demo(tmp_path: Path) -> Iterator[Demo]:
         assert d.shutdown() == [], "processes left behind"
 
 
+ESTOP_SENDER = "hub-operator"
+"""Who the ``kinesphere estop`` processes of these tests are to the robots."""
+
+
 class Acks:
     """Every Ack heard, as (robot, sender, stage)."""
 
@@ -65,9 +69,9 @@ class Acks:
         self.seen.append((ack.robot_id, ack.sender, str(ack.stage)))
 
     def estopped(self) -> set[str]:
-        """Robots that acked an e-stop of a ``kinesphere estop`` process."""
+        """Robots that acked an e-stop of the ``kinesphere estop`` process (``--sender``)."""
         return {r for r, sender, stage in self.seen
-                if stage == "estopped" and sender.startswith("estop-")}
+                if stage == "estopped" and sender == ESTOP_SENDER}
 
     def close(self) -> None:
         self._sub.undeclare()  # type: ignore[no-untyped-call]
@@ -115,8 +119,8 @@ def test_kill_any_service_and_the_rest_keep_talking(
     # a new operator process joins the hub and e-stops every robot still alive; each acks it
     acks = Acks(demo._session)
     try:
-        estop = sup.spawn("estop", ["estop", "--connect", ep, "--mode", "client"],
-                          expect_exit=True)
+        estop = sup.spawn("estop", ["estop", "--connect", ep, "--mode", "client",
+                                    "--sender", ESTOP_SENDER], expect_exit=True)
         assert sup.wait("estop", WAIT_S) == 0, estop.tail()
         until(lambda: all(statuses(demo).get(r) == "estop" for r in alive), WAIT_S,
               "every live robot to latch the e-stop", explain=lambda: statuses(demo))
@@ -157,7 +161,8 @@ def test_quick_start_topology_peers_around_a_router(
         until(lambda: not obs.alive.databanks, WAIT_S, "the databank's token to go")
         acks = Acks(obs.session)
         try:
-            estop = sup.spawn("estop", ["estop", "--connect", ep], expect_exit=True)
+            estop = sup.spawn("estop", ["estop", "--connect", ep, "--sender", ESTOP_SENDER],
+                              expect_exit=True)
             assert sup.wait("estop", WAIT_S) == 0, estop.tail()
             until(lambda: all(getattr(obs.states.last(r), "status", "") == "estop"
                               for r in robots), WAIT_S, "both robots to latch the e-stop",
