@@ -155,6 +155,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     except KeyboardInterrupt:
         return 130
+    except BrokenPipeError:  # `kinesphere describe --json | head`: the reader had enough
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no error at exit
+        return 141  # as a process killed by SIGPIPE
     finally:  # main() called in-process (tests, embedding) leaves the environment as it was
         if saved is None:
             os.environ.pop(PLATFORMS_ENV, None)

@@ -11,7 +11,7 @@ import math
 import re
 from enum import Enum
 
-from kinesphere.errors import KinesphereError
+from kinesphere.errors import KinesphereError, did_you_mean
 
 
 class Level(Enum):
@@ -142,9 +142,11 @@ class Direction(Enum):
         key = _normalise(text)
         found = _BY_NAME.get(key)
         if found is None:
-            valid = ", ".join(d.slug for d in cls)
+            slugs = [d.slug for d in cls]
             raise KinesphereError(
-                "unknown_direction", f"unknown direction {text!r}; valid directions: {valid}"
+                "unknown_direction",
+                f"unknown direction {text!r}{did_you_mean(key, slugs)}; valid directions: "
+                f"{', '.join(slugs)}",
             )
         return found
 

@@ -114,6 +114,13 @@ def test_query_cli_and_clean_sigterm(
         assert main(["query", "baxter", "limb_11", "distal_11", "left-high", "2",
                      *zargs[:-1], "0.3"]) == 2
         assert "[unavailable]" in capsys.readouterr().err
+        # platform names are any case ('BAXTER' asks for baxter: unavailable, not unknown)...
+        assert main(["query", "BAXTER", "limb_11", "distal_11", "left-high", "2",
+                     *zargs[:-1], "0.3"]) == 2
+        assert "[unavailable]" in capsys.readouterr().err
+        # ... and a misspelt one is answered with the nearest known name
+        assert main(["query", "packbto", "limb_11", "distal_11", "left-high", "2", *zargs]) == 2
+        assert "no platform 'packbto' (did you mean 'packbot'?)" in capsys.readouterr().err
         proc.send_signal(signal.SIGTERM)
         _, err = proc.communicate(timeout=20)
         assert proc.returncode == 0, err

@@ -89,6 +89,17 @@ def test_unknown_direction_lists_valid_names(bad: object) -> None:
         assert "left-forward-high" in err.value.message
 
 
+@pytest.mark.parametrize(("bad", "near"), [
+    ("left-hihg", "left-high"), ("Rigth Forward Low", "right-forward-low"), ("frwd", None),
+    ("left-high" * 20, None)])  # fmt: skip
+def test_a_misspelt_direction_is_answered_with_the_nearest(bad: str, near: str | None) -> None:
+    """Nearest by spelling, any case; none for garbage or a name far longer than any valid."""
+    with pytest.raises(KinesphereError) as err:
+        Direction.parse(bad)
+    hint = f"(did you mean {near!r}?)"
+    assert (hint in err.value.message) if near else ("did you mean" not in err.value.message)
+
+
 @pytest.mark.parametrize(
     ("text", "value"), [("near", 1.0), ("mid", 2.0), ("far", 3.0), ("2.5", 2.5), (4, 4.0), (0, 0.0)]
 )

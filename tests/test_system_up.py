@@ -129,6 +129,9 @@ def test_robot_and_phrase_options() -> None:
     for bad in ("", "baxter:x,nao:x", "baxter:a/b", "nosuch"):
         with pytest.raises(KinesphereError):
             parse_robots(bad)
+    assert [(r.platform, r.robot_id) for r in parse_robots("PackBot")] == [("packbot", "packbot")]
+    with pytest.raises(KinesphereError, match=r"'packbto' \(did you mean 'packbot'\?\)"):
+        parse_robots("packbto")
     shipped = shipped_phrases_dir()
     phrases = default_phrases(parse_robots("baxter,packbot"), shipped)
     assert [(p.path.name, p.target) for p in phrases] == [

@@ -11,7 +11,7 @@ from importlib import resources
 from importlib.util import find_spec
 from pathlib import Path
 
-from kinesphere.errors import KinesphereError
+from kinesphere.errors import KinesphereError, did_you_mean
 from kinesphere.keyexpr import DEFAULT_PREFIX, Keys
 
 DEFAULT_ROBOTS = ("baxter", "nao", "youbot", "packbot")
@@ -47,12 +47,15 @@ class UpOptions:
 
 def parse_robots(text: str) -> list[Robot]:
     """``baxter,nao`` or ``baxter:left,baxter:right``: ids default to the platform name."""
+    from kinesphere.robots.platform import platform_names, platform_spelling
+
     robots: list[Robot] = []
     seen: dict[str, int] = {}
     for item in (s.strip() for s in text.split(",")):
         if not item:
             continue
         platform, _, rid = item.partition(":")
+        platform = platform_spelling(platform)  # 'PackBot' is packbot
         if not rid:
             seen[platform] = seen.get(platform, 0) + 1
             rid = platform if seen[platform] == 1 else f"{platform}-{seen[platform]}"
@@ -60,14 +63,13 @@ def parse_robots(text: str) -> list[Robot]:
     ids = [r.robot_id for r in robots]
     if not robots or len(set(ids)) != len(ids):
         raise KinesphereError("malformed", f"--robots needs distinct robots, got {text!r}")
-    from kinesphere.robots.platform import platform_names
-
     known = platform_names()
     for r in robots:
         Keys().command(r.robot_id)  # a valid key segment
         if r.platform not in known and not Path(r.platform).is_dir():
             raise KinesphereError(
-                "unknown_platform", f"unknown platform {r.platform!r}; valid: {', '.join(known)}")
+                "unknown_platform", f"unknown platform {r.platform!r}"
+                f"{did_you_mean(r.platform, known)}; valid: {', '.join(known)}")
     return robots
 
 

@@ -43,7 +43,8 @@ def register(sub: Any) -> None:
         "the DOF count and P (joint limits). PLATFORM is a shipped name or an .eurdf file.",
     )
     d.add_argument(
-        "platform", help="platform name (see 'kinesphere platforms'), 'all', or an eURDF path"
+        "platform", help="platform name, any case (see 'kinesphere platforms'), 'all' (with "
+        "--json: one list), or an eURDF path"
     )
     d.add_argument("--json", action="store_true", help="machine-readable output")
     d.set_defaults(func=_describe)
@@ -136,6 +137,10 @@ def _describe(args: argparse.Namespace) -> int:
     from kinesphere.eurdf import load_eurdf
     from kinesphere.robots.platform import load_platform, platform_names
 
+    if args.platform == "all" and args.json:  # one JSON document: a list, one per platform
+        every = [describe_dict(p.eurdf, p.base.kind) for p in map(load_platform, platform_names())]
+        print(json.dumps(every, indent=2))
+        return 0
     if args.platform == "all":
         for name in platform_names():
             args.platform = name

@@ -25,7 +25,7 @@ import numpy as np
 
 from kinesphere.cliargs import PLATFORMS_ENV
 from kinesphere.configfile import load_toml
-from kinesphere.errors import KinesphereError
+from kinesphere.errors import KinesphereError, did_you_mean
 from kinesphere.eurdf import Eurdf, load_eurdf
 
 PLATFORMS_DIR = Path(__file__).resolve().parent / "platforms"
@@ -146,14 +146,31 @@ def load_platform(name: str) -> Platform:
     if (folder / "platform.toml").is_file():
         return _load(folder.resolve())
     known = platform_folders()
-    if name not in known:
+    found = known.get(name) or _any_case(name, known)
+    if found is None:
         raise KinesphereError(
             "unknown_platform",
-            f"unknown platform {name!r}; valid platforms: {', '.join(sorted(known))} "
-            f"(a platform folder is found by path, or by name in a --platforms DIR / "
-            f"${PLATFORMS_ENV} folder)",
+            f"unknown platform {name!r}{did_you_mean(name, known)}; valid platforms: "
+            f"{', '.join(sorted(known))} (a platform folder is found by path, or by name in a "
+            f"--platforms DIR / ${PLATFORMS_ENV} folder)",
         )
-    return _load(known[name])
+    return _load(found)
+
+
+def platform_spelling(name: str) -> str:
+    """A known platform's own spelling of ``name`` (any case), else ``name`` unchanged; for
+    commands that pass the name on, to a databank, rather than load it."""
+    known = platform_folders()
+    if name in known:
+        return name
+    found = _any_case(name, known)
+    return found.name if found is not None else name
+
+
+def _any_case(name: str, known: dict[str, Path]) -> Path | None:
+    """The one platform whose name equals ``name`` ignoring case (``PackBot``), if one does."""
+    same = [folder for n, folder in known.items() if n.casefold() == name.strip().casefold()]
+    return same[0] if len(same) == 1 else None
 
 
 @functools.cache

@@ -140,6 +140,7 @@ def _until_signal() -> Iterator[threading.Event]:
 
 def _agent(args: argparse.Namespace) -> int:
     from kinesphere.robots.agent.runtime import Agent
+    from kinesphere.robots.platform import platform_spelling
     from kinesphere.zconfig import close_session, session_from_args
 
     if args.robot:
@@ -147,7 +148,7 @@ def _agent(args: argparse.Namespace) -> int:
     if args.platform is None:
         raise KinesphereError("malformed", "give a PLATFORM, or robots with --robot "
                               "PLATFORM:ID")
-    robot_id = args.robot_id or Path(args.platform).name
+    robot_id = args.robot_id or platform_spelling(Path(args.platform).name)  # PackBot: packbot
     ros2 = Ros2BodyOptions(
         namespace=args.ros2_namespace, domain=args.ros2_domain, interface=args.ros2_interface,
         controller=args.ros2_controller, timeout_s=args.ros2_timeout,

@@ -98,10 +98,12 @@ def _query(args: argparse.Namespace) -> int:
     if args.catalogue and args.params:
         raise KinesphereError("malformed", "--catalogue takes no LIMB ORIGIN DIRECTION SIZE")
     from kinesphere.keyexpr import Keys
+    from kinesphere.robots.platform import platform_spelling
     from kinesphere.services.databank import client
     from kinesphere.zconfig import session_from_args
 
     keys = Keys(args.prefix)
+    args.platform = platform_spelling(args.platform)  # 'PackBot' asks for packbot
     with session_from_args(args) as s:
         if args.catalogue:
             msg: Any = client.query_catalogue(s, args.platform, keys=keys, timeout=args.timeout)

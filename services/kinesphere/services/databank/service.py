@@ -30,7 +30,7 @@ from typing import Any
 
 import zenoh
 
-from kinesphere.errors import KinesphereError, choices
+from kinesphere.errors import KinesphereError, choices, did_you_mean
 from kinesphere.keyexpr import KEYS, Keys, check_segment
 from kinesphere.protocol import CompoundRequest, check_spatial, decode
 from kinesphere.ratelog import RateLog
@@ -282,7 +282,8 @@ class DatabankService:
         except KinesphereError as exc:  # too long, say: the name is not echoed whole
             return error(exc.code, exc.message)
         return error(
-            "unknown_platform", f"no platform {platform!r}; known platforms: {choices(self.known)}"
+            "unknown_platform", f"no platform {platform!r}{did_you_mean(platform, self.known)}; "
+            f"known platforms: {choices(self.known)}",
         )
 
     # -- the catch-all, when this replica serves only some known platforms --------------------

@@ -16,7 +16,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from kinesphere.errors import KinesphereError
+from kinesphere.errors import KinesphereError, did_you_mean
 from kinesphere.laban import Direction
 from kinesphere.protocol import (
     NO_ID,
@@ -228,8 +228,8 @@ class Ecl:
             )
         what = repr(limb) if isinstance(limb, str) else f"of type {type(limb).__name__}"
         raise KinesphereError(
-            "unknown_limb", f"{self.platform.name} has no limb {what} in its ECL; "
-            f"valid: {self._valid_limbs()}",
+            "unknown_limb", f"{self.platform.name} has no limb {what} in its ECL"
+            f"{did_you_mean(limb, self._limbs)}; valid: {self._valid_limbs()}",
         )
 
     def _bad_origin(self, origin: object, limb: str) -> str:
@@ -238,10 +238,12 @@ class Ecl:
         raise self._unpaired(limb, origin)
 
     def _unpaired(self, limb: str, origin: object) -> KinesphereError:
-        valid = ", ".join(self._limb_origins.get(limb, [])) or "none"
+        paired = self._limb_origins.get(limb, [])
+        names = [n for n, label in self._origins.items() if label in paired]
         what = repr(origin) if isinstance(origin, str) else f"of type {type(origin).__name__}"
         return KinesphereError(
-            "unknown_origin", f"origin {what} is not paired with {limb}; its origins: {valid}"
+            "unknown_origin", f"origin {what} is not paired with {limb}"
+            f"{did_you_mean(origin, names)}; its origins: {', '.join(paired) or 'none'}",
         )
 
     # -- catalogue, rows ---------------------------------------------------------------------
