@@ -154,6 +154,16 @@ def test_the_commanded_cell_is_lit(window: hud.Hud, tmp_path: Path) -> None:
         window.screenshot(keep)
 
 
+def test_status_lines_wrap_and_are_never_cut_off(window: hud.Hud) -> None:
+    """Every word of a long status comes out, each piece within the column."""
+    font, width = window.fonts["small"], 300
+    text = ("E-STOP latched by a-very-long-operator-name@laboratory-workstation-17: release with "
+            "kinesphere estop --release --target packbot-field-unit-0042-with-a-long-id")
+    pieces = hud.wrap(font, text, width)
+    assert len(pieces) > 2 and all(font.size(p)[0] <= width for p in pieces)
+    assert "".join(pieces).replace(" ", "") == text.replace(" ", "")
+
+
 def test_level_shading_follows_laban(window: hud.Hud) -> None:
     """Low filled, middle a dot, high striped: count ink inside each symbol."""
     surf = pygame.Surface((60, 80))
