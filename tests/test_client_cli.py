@@ -150,6 +150,14 @@ def test_a_group_named_like_a_robot_is_suggested(
     assert "did you mean --target group:field?" in capsys.readouterr().err
 
 
+def test_a_misspelt_robot_id_is_answered_with_the_nearest_live_one(
+    hub: tuple[zenoh.Session, str], boxes: dict[str, StandIn], capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert cli(hub[1], "send", "c11", "a", "b", "left", "1", "--wait", "0.5") == 2
+    err = capsys.readouterr().err
+    assert f"no robot listens on {KEYS.command('c11')} (waited 0.5 s) (did you mean 'c1'?)" in err
+
+
 def test_estop_reaches_every_robot_and_each_acknowledges(
     hub: tuple[zenoh.Session, str], boxes: dict[str, StandIn], capsys: pytest.CaptureFixture[str]
 ) -> None:

@@ -42,8 +42,9 @@ def link_for(args: argparse.Namespace) -> Iterator[Any]:
 
 def reachable(link: Any, target: Any, wait: float) -> list[str]:
     """The target's command keys, once a robot listens on each; else unavailable, with a hint
-    when a robot id was given for what is a group."""
+    when a robot id was given for what is a group, or is near a live robot's id."""
     from kinesphere.clients import targets
+    from kinesphere.errors import did_you_mean
 
     keys: list[str] = target.keys(link.keys)
     missing = link.wait_subscribers(keys, wait)
@@ -53,6 +54,8 @@ def reachable(link: Any, target: Any, wait: float) -> list[str]:
             as_group = targets.group(target.name)
             if not link.wait_subscribers(as_group.keys(link.keys), 0.5):
                 hint = f"; did you mean --target {as_group.spelling}?"
+            else:
+                hint = did_you_mean(target.name, link.alive_robots())
         raise KinesphereError(
             "unavailable", f"no robot listens on {', '.join(missing)} (waited {wait:g} s){hint}"
         )
