@@ -19,7 +19,7 @@ from pathlib import Path
 
 import zenoh
 
-from bench.bench_agent import pct, put_to_callback, put_to_moving, two_parts
+from bench.bench_agent import Floor, pct, put_to_moving, two_parts
 from bench.bench_databank import (
     FLOOR_PREFIX,
     KEYS,
@@ -110,16 +110,18 @@ def _queries(clients: list[zenoh.Session], key: str, floor_key: str, size: int) 
 
 def _commands(clients: list[zenoh.Session], home: zenoh.Session, agent: Agent) -> None:
     parts = two_parts(agent)
-    print(f"  command latency, {COMMANDS} commands per hop count: agent put -> first moving "
-          "step (cached poses, 500 Hz) against a bare put -> callback on the agent's session:")
+    print(f"  command latency, {COMMANDS} commands per hop count: agent put -> first setpoint "
+          "toward the target (cached poses, 500 Hz) against a bare put -> callback on the "
+          "agent's session, interleaved:")
     print(f"    {'links':<5} {'agent p50':>13} {'p99':>9} {'floor p50':>10} {'p99':>9} "
           f"{'ratio p50':>9} {'p99':>6}")
     seq = 1
     for hops, c in zip(HOPS, clients, strict=True):
-        floor = put_to_callback(c, home, COMMANDS, key=f"bench/floor/{hops}")
-        lat = put_to_moving(agent, c, parts, COMMANDS, seq0=seq)
+        floor = Floor(c, home, key=f"bench/floor/{hops}")
+        lat = put_to_moving(agent, c, parts, COMMANDS, seq0=seq, floor=floor)
+        floor.close()
         seq += COMMANDS + 2
-        _row(hops, lat, floor)
+        _row(hops, lat, floor.values)
     print(f"    ({agent.stats.slips} control-loop slips)")
 
 

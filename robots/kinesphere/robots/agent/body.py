@@ -62,13 +62,10 @@ class Body(abc.ABC):
         """Let one period pass: simulate it, or wait for the hardware's next cycle."""
 
     def simulate(self) -> None:
-        """The part of :meth:`step` a fleet host may run on a helper thread, beside other
-        bodies' (it must release the GIL to gain anything; MuJoCo does); :meth:`settle` does
-        the rest on the loop's thread. By default all of :meth:`step`."""
+        """:meth:`step` as a fleet host calls it: on a helper thread, beside other bodies'
+        and while the loop waits for its next tick, so it may touch nothing but this body
+        (and gains most when it releases the GIL, as MuJoCo does). By default :meth:`step`."""
         self.step()
-
-    def settle(self) -> None:  # noqa: B027 - optional: most bodies have nothing left to do
-        """The rest of :meth:`step` after :meth:`simulate`, on the control loop's thread."""
 
     @abc.abstractmethod
     def halt(self) -> None:

@@ -5,14 +5,15 @@ it also pays an interpreter, a Zenoh session and a scheduler wake-up every 2 ms;
 that kept 16 robots in real time. A fleet host runs one :class:`Agent` per robot on one Zenoh
 session, and each robot keeps everything that makes it a robot: its keys, liveliness token,
 state stream, acks, lease, watchdog, e-stop latch and databank resolver. Per tick the loop
-does every robot's commands and trajectories and hands the setpoints to the bodies; their
-physics then runs on helper threads (``stepper.py``: MuJoCo releases the GIL) while the loop
-waits for its next tick, and that tick begins with every robot's hard stops, faults, acks and
-state. So the Python of all robots and the physics of all bodies overlap instead of adding up:
-on two cores the loop's thread has the whole period for the robots' Python. Robots publish
-state on different ticks (``phase``), so no tick encodes them all. Whatever arrives for
-any robot wakes the loop at once (``pacing.py``); a robot whose step fails is held and
-reported alone.
+does every robot's commands and trajectories and hands the setpoints to the bodies; then the
+bodies' physics (with their hard stops) is split between the loop's thread and helper threads
+(``stepper.py``: MuJoCo releases the GIL, so the shares step side by side). The loop returns
+once its own share is done; the helpers' shares finish while it waits for its next tick, which
+begins with every robot's faults, acks and state. So physics overlaps physics and the loop's
+idle time, and a helper that starts late under load costs the loop nothing unless it is still
+busy a whole period later. Robots publish state on different ticks (``phase``), so no tick
+encodes them all. Whatever arrives for any robot wakes the loop at once (``pacing.py``); a
+robot whose step fails is held and reported alone.
 
 Robots come from ``kinesphere fleet FLEET.toml`` (:func:`load_fleet_file`) or repeated
 ``kinesphere agent --robot PLATFORM:ID`` (:func:`parse_robot`).
@@ -164,27 +165,27 @@ class Fleet:
         run_paced(self.tick, period, stopped, self.stats, "fleet host", failed, wake)
 
     def tick(self) -> None:
-        """One control cycle of every robot (module text): the end of the last tick's step
-        (its physics ran meanwhile), then this tick's commands and trajectories; the physics
-        is launched on the helper threads and runs while the loop waits for its next tick."""
+        """One control cycle of every robot (module text): the end of the last tick's step,
+        then this tick's commands and trajectories, then the physics: this thread's share now,
+        the helpers' finishing while the loop waits for its next tick."""
         self.complete()
         failures = [_guarded(a.begin_step) for a in self.agents]
         self._failures = failures
         bodies = [a.controller.body for a, f in zip(self.agents, failures, strict=True)
                   if f is None]
-        self.stepper.launch(bodies)
+        self.stepper.launch(bodies, share=True)
         self.stats.steps += 1
 
     def complete(self) -> None:
-        """Finish the step in flight: wait for its physics, then every robot's hard stops,
-        faults, acks and state (a no-op when none is)."""
+        """Finish the step in flight: wait for its physics, then every robot's faults, acks
+        and state (a no-op when none is)."""
         failures, self._failures = self._failures, None
         if failures is None:
             return
         errors = iter(self.stepper.wait())
         for agent, failure in zip(self.agents, failures, strict=True):
             if failure is None:
-                failure = next(errors) or _guarded(agent.controller.body.settle)
+                failure = next(errors)
             try:
                 agent.end_step(failure)
             except Exception:  # one robot's bug must not hold up the others

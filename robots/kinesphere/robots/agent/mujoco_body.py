@@ -89,18 +89,12 @@ class MujocoBody(Body):
                 ctrl[self._base_slice] = target
 
     def step(self) -> None:
-        self.simulate()
-        self.settle()
-
-    def simulate(self) -> None:
-        """The physics (MuJoCo releases the GIL in ``mj_step``: bodies step side by side)."""
+        """The physics (MuJoCo releases the GIL in ``mj_step``: bodies step side by side),
+        then the hard stops."""
         model, data = self.model, self.data
         for _ in range(self.substeps):
             mujoco.mj_step(model, data)
-
-    def settle(self) -> None:
-        """The hard stops after the physics."""
-        q = self.data.qpos[self._q_slice].tolist()  # plain floats: quicker than numpy here
+        q = data.qpos[self._q_slice].tolist()  # plain floats: quicker than numpy here
         if any(v < lo or v > hi for v, (lo, hi) in zip(q, self._stops, strict=True)):
             self._stop_at_limits()
 
