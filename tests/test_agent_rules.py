@@ -142,6 +142,27 @@ def test_inbox_puts_estops_first_coalesces_motion_and_stays_bounded() -> None:
     assert len(box) <= MAX_PENDING * PER_SENDER
 
 
+def test_a_flood_from_many_senders_cannot_push_out_a_stop_or_a_release() -> None:
+    """The pair evicted to make room is one with motion commands only: a waiting stop and
+    e-stop release survive any number of flooding senders (their motion is superseded)."""
+    box = Inbox()
+    seq = itertools.count(1)
+    box.put(at(cmd(next(seq), sender="panic", release=True), 1))
+    box.put(at(cmd(next(seq), sender="calm", stop=True), 1))
+    for i in range(4 * MAX_PENDING):
+        box.put(at(cmd(next(seq), sender=f"flood{i}"), 1))
+    d = box.drain()
+    kept = [r.cmd.sender for r in d.items]
+    assert kept[:2] == ["panic", "calm"] and len(kept) == MAX_PENDING
+    assert len(d.superseded) == 4 * MAX_PENDING - (MAX_PENDING - 2)
+    assert all(r.cmd.sender.startswith("flood") for r in d.superseded)
+    for i in range(2 * MAX_PENDING):  # every pair holds a stop: the least recently heard goes
+        box.put(at(cmd(next(seq), sender=f"stop{i}", stop=True), 1))
+    d = box.drain()
+    assert [r.cmd.sender for r in d.items] == [f"stop{i}" for i in range(MAX_PENDING,
+                                                                         2 * MAX_PENDING)]
+
+
 def test_ack_rate_is_bounded_per_sender_and_in_all() -> None:
     now = [0.0]
     limiter = AckLimiter(clock=lambda: now[0])

@@ -10,9 +10,10 @@ here; the control loop drains it once per step. Why not a plain queue:
   replaces the one still waiting from the same ``(sender, session)`` (the replaced one is
   acknowledged ``superseded``). Commands that change more than the target (stop, e-stop
   release, lease actions, deadman release) are kept in order, at most :data:`PER_SENDER` per
-  pair; at most :data:`MAX_PENDING` pairs wait at once (the least recently heard goes first),
-  and of undecodable payloads only the last is kept. Every bound is a count of messages the
-  protocol itself bounds in bytes (64 KiB each).
+  pair; at most :data:`MAX_PENDING` pairs wait at once (the least recently heard pair with
+  only motion commands waiting goes first, so a flood from many senders cannot push out
+  another's stop or release), and of undecodable payloads only the last is kept. Every bound
+  is a count of messages the protocol itself bounds in bytes (64 KiB each).
 """
 
 from __future__ import annotations
@@ -101,8 +102,7 @@ class Inbox:
             if queue is None:
                 queue = self._pairs[key] = deque()
                 while len(self._pairs) > MAX_PENDING:
-                    _, evicted = self._pairs.popitem(last=False)
-                    self._superseded.extend(r for _, r in evicted)
+                    self._superseded.extend(r for _, r in self._evict(key))
             self._pairs.move_to_end(key)
             if queue and replaceable(cmd) and replaceable(queue[-1][1].cmd) \
                     and cmd.seq > queue[-1][1].cmd.seq:
@@ -111,6 +111,17 @@ class Inbox:
                 self._superseded.append(queue.popleft()[1])
             queue.append((self._arrivals, item))
         self.wake.set()
+
+    def _evict(self, keep: tuple[str, str]) -> deque[tuple[int, Received]]:
+        """Make room: the least recently heard pair waiting with motion commands only (they
+        would be replaced by the next anyway), or, when every pair holds a stop, release or
+        lease action, the least recently heard of all; never ``keep``, the pair arriving. So
+        a flood from many senders cannot push out another's stop or e-stop release."""
+        for key, queue in self._pairs.items():
+            if key != keep and all(replaceable(r.cmd) for _, r in queue):
+                return self._pairs.pop(key)
+        key = next(k for k in self._pairs if k != keep)
+        return self._pairs.pop(key)
 
     def put_bad(self, error: KinesphereError) -> None:
         """A payload that did not decode: only the last one waits (it names no sender)."""
