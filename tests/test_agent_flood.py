@@ -11,6 +11,7 @@ valid command afterwards.
 from __future__ import annotations
 
 import random
+import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -27,6 +28,7 @@ from kinesphere.keyexpr import KEYS
 from kinesphere.zconfig import loopback_config, loopback_hub
 
 ROBOT = "flood-k"
+MARK_SENDER = "flood-mark"
 GROWTH_BOUND = 32 * MIB
 """What a flood of refused commands may add to an agent: Zenoh's receive buffers and the
 allocator's arenas (measured: ~21 MiB, the same after 5,000 or 20,000); nothing it sends is
@@ -35,6 +37,9 @@ PLATEAU = 8 * MIB
 """What the second half of the flood may add to the first: bounded means it stops growing."""
 MAX_GAP_S = 0.5
 """Longest silence allowed in the 50 Hz state stream while the agent is flooded."""
+BATCH = 1000
+"""Malformed commands put between two marks (the flood never runs ahead of the agent by more:
+RSS is read once the agent has read what was sent, however loaded the machine)."""
 
 
 def drive(seq: int, stop: bool = False) -> pr.Command:
@@ -64,6 +69,38 @@ def malformed(rng: random.Random, base: bytes) -> bytes:
             pr.decode(bytes(b), pr.Command)
         except KinesphereError:
             return bytes(b)
+
+
+class Marks:
+    """A stop from another sender after each batch: the agent reads one subscriber's samples
+    in order, so its ack says it has read (and refused) every malformed command put before."""
+
+    def __init__(self, session: zenoh.Session, pub: zenoh.Publisher) -> None:
+        self.pub = pub
+        self.seq = 0
+        self.acked = 0
+        self._cond = threading.Condition()
+        self._sub = session.declare_subscriber(KEYS.ack(ROBOT), self._on)
+
+    def _on(self, sample: zenoh.Sample) -> None:
+        ack = pr.decode(sample.payload.to_bytes(), pr.Ack)
+        if ack.sender == MARK_SENDER:
+            with self._cond:
+                self.acked = max(self.acked, ack.seq)
+                self._cond.notify_all()
+
+    def read_up_to(self) -> None:
+        """Put a mark and wait for the agent to ack it."""
+        self.seq += 1
+        self.pub.put(pr.encode(pr.Command(seq=self.seq, sent_ns=time.time_ns(), deadman=False,
+                                          stop=True, ttl_ms=0, sender=MARK_SENDER,
+                                          session="marks")))
+        with self._cond:
+            assert self._cond.wait_for(lambda: self.acked >= self.seq, WAIT_S), (
+                f"the agent did not ack mark {self.seq}")
+
+    def close(self) -> None:
+        self._sub.undeclare()  # type: ignore[no-untyped-call]
 
 
 class Stream:
@@ -123,18 +160,20 @@ def test_a_flood_of_malformed_commands_moves_nothing(sup: Supervisor) -> None:
             base = pr.encode(drive(seq + 1))
             payloads = [malformed(rng, base) for _ in range(500)]
             tally = Tally("agent flood")
+            marks = Marks(obs.session, pub)
             before, start = rss(agent.pid), time.monotonic()
             n = 5000 * SCALE
             mid = before
             for i in range(n):
-                if i == n // 2:  # once the first half has been received and refused
-                    assert obs.states.wait_fresh([ROBOT], time.time_ns() + 300_000_000, WAIT_S)
+                if i == n // 2:  # once the first half has been read and refused
+                    marks.read_up_to()
                     mid = rss(agent.pid)
                 pub.put(payloads[i % len(payloads)])
                 tally.sent += 1
-                if i % 1000 == 999:  # not faster than a fast network would carry it
-                    obs.states.wait_for(lambda _s: False, 0.01)
-            assert obs.states.wait_fresh([ROBOT], time.time_ns() + 500_000_000, WAIT_S)
+                if i % BATCH == BATCH - 1:  # not faster than the agent reads them
+                    marks.read_up_to()
+            marks.read_up_to()
+            assert obs.states.wait_fresh([ROBOT], time.time_ns() + 300_000_000, WAIT_S)
             after, moved = rss(agent.pid), max(
                 abs(a - b) for a, b in zip(pose(obs), rest, strict=True))
             gap = stream.max_gap(start)
@@ -154,6 +193,7 @@ def test_a_flood_of_malformed_commands_moves_nothing(sup: Supervisor) -> None:
             x1 = pose(obs)[0]
             until(lambda: pub.put(pr.encode(drive(seq + 10**6))) or pose(obs)[0] > x1 + 0.02,
                   WAIT_S, "the robot to drive again after the flood")
+            marks.close()
         finally:
             pub.undeclare()  # type: ignore[no-untyped-call]
             stream.close()
