@@ -4,9 +4,11 @@ twice, e-stops in between (issue 11's soak; bounded, loopback).
 ``kinesphere up``'s topology (a router child serving nothing else, everything its clients).
 Operator A streams to robots 1 and 2, operator B to robots 3 and 4 (arm poses through the
 databank on the youBot and the PackBot, drives on the Kheperas), each now and then trying a
-robot the other holds. Counted: commands sent, acked (any stage), lost (no ack at all);
-refusals by code; e-stops and releases sent and acked by every robot; state samples of a
-robot moving without a lease holder (must be 0). ``make soak`` runs it SCALE times longer.
+robot the other holds. Twice a third operator who holds no lease runs ``kinesphere estop``
+(which waits for every robot's ack and exits 0 only when each latched) and then ``kinesphere
+estop --release --target all``. Counted: commands sent, acked (any stage), lost (no ack at
+all); refusals by code; e-stops and releases sent and acked by every robot; state samples of
+a robot moving without a lease holder (must be 0). ``make soak`` runs it SCALE times longer.
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ from test_soak_support import SCALE, Tally
 from test_system_support import WAIT_S, databank_args, supervisor, until
 
 from kinesphere import protocol as pr
+from kinesphere.cli import main
 from kinesphere.deploy.hub import client_args, start_hub
 from kinesphere.deploy.procs import Supervisor
 from kinesphere.deploy.watch import StateRecorder, watch_alive
@@ -39,12 +42,15 @@ RATE_HZ = 10.0
 TTL_MS = 600
 ACK_WAIT_S = 10.0
 """After the run: how long a command may still be waiting for its ack before it is lost."""
+OFFICER = "soak-officer"
+"""The third operator, who holds no lease and e-stops everyone with ``kinesphere estop``."""
 
 
 class Acks:
-    """(sender, session, seq) -> robot -> stages heard."""
+    """(sender, session, seq) -> robot -> stages heard; and every ack, in order."""
 
     def __init__(self, session: zenoh.Session) -> None:
+        self.heard: list[pr.Ack] = []
         self.by_cmd: dict[tuple[str, str, int], dict[str, list[pr.Ack]]] = defaultdict(
             lambda: defaultdict(list))
         self.lock = threading.Lock()
@@ -54,12 +60,23 @@ class Acks:
     def _on(self, sample: zenoh.Sample) -> None:
         ack = pr.decode(sample.payload.to_bytes(), pr.Ack)
         with self.changed:
+            self.heard.append(ack)
             self.by_cmd[(ack.sender, ack.session, ack.seq)][ack.robot_id].append(ack)
             self.changed.notify_all()
 
     def of(self, sender: str, session: str, seq: int) -> dict[str, list[pr.Ack]]:
         with self.lock:
             return {r: list(a) for r, a in self.by_cmd.get((sender, session, seq), {}).items()}
+
+    def robots_since(self, mark: int, sender: str, stage: pr.AckStage) -> set[str]:
+        """Robots that acked ``stage`` to ``sender`` after the first ``mark`` acks heard."""
+        with self.lock:
+            return {a.robot_id for a in self.heard[mark:]
+                    if a.sender == sender and a.stage == stage}
+
+    def mark(self) -> int:
+        with self.lock:
+            return len(self.heard)
 
     def close(self) -> None:
         self._sub.undeclare()  # type: ignore[no-untyped-call]
@@ -103,7 +120,39 @@ def sup(tmp_path: Path) -> Iterator[Supervisor]:
     yield from supervisor(tmp_path / "logs")
 
 
-def test_two_operators_four_robots_and_a_restarting_databank(sup: Supervisor) -> None:
+def run_cli(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str]:
+    """A client command run in-process (as an operator types it): exit code and stdout."""
+    capsys.readouterr()
+    code = main(list(argv))
+    return code, capsys.readouterr().out
+
+
+def estop_round(capsys: pytest.CaptureFixture[str], acks: Acks, endpoint: str) -> int:
+    """The officer's ``kinesphere estop`` then ``estop --release --target all``; both must
+    exit 0 with one line per robot, and every robot must ack each. Robots that acked both."""
+    common = ("--connect", endpoint, "--mode", "client", "--sender", OFFICER,
+              "--timeout", str(WAIT_S))
+    mark = acks.mark()
+    code, out = run_cli(capsys, "estop", *common)
+    assert code == 0, out
+    lines = dict(line.split(": ", 1) for line in out.splitlines())
+    assert set(lines) == set(ROBOTS) and all(v.startswith("estopped") for v in lines.values()), out
+    until(lambda: acks.robots_since(mark, OFFICER, pr.AckStage.ESTOPPED) >= set(ROBOTS),
+          WAIT_S, "every robot's e-stop ack to reach the test too")
+    stopped = acks.robots_since(mark, OFFICER, pr.AckStage.ESTOPPED)
+    mark = acks.mark()
+    code, out = run_cli(capsys, "estop", "--release", "--target", "all", *common)
+    assert code == 0, out
+    lines = dict(line.split(": ", 1) for line in out.splitlines())
+    assert set(lines) == set(ROBOTS) and all(v.startswith("released") for v in lines.values()), out
+    until(lambda: acks.robots_since(mark, OFFICER, pr.AckStage.RELEASED) >= set(ROBOTS),
+          WAIT_S, "every robot's release ack to reach the test too")
+    return len(stopped & acks.robots_since(mark, OFFICER, pr.AckStage.RELEASED))
+
+
+def test_two_operators_four_robots_and_a_restarting_databank(
+    sup: Supervisor, capsys: pytest.CaptureFixture[str]
+) -> None:
     endpoint, z = start_hub(sup, WAIT_S)
     dbs = databank_args(sorted(set(ROBOTS.values())))
     recorder = StateRecorder(KEYS, history=False)
@@ -140,7 +189,7 @@ def test_two_operators_four_robots_and_a_restarting_databank(sup: Supervisor) ->
         restarts = [DURATION_S / 3, 2 * DURATION_S / 3]
         estops = [DURATION_S / 4, 3 * DURATION_S / 4]
         events: Counter[str] = Counter()
-        estop_cmds: list[tuple[Operator, int, int]] = []  # (operator, estop seq, release seq)
+        estopped: list[int] = []  # per e-stop round: robots that acked the e-stop and release
         start = time.monotonic()
         tick = 0
         while (now := time.monotonic() - start) < DURATION_S:
@@ -153,14 +202,7 @@ def test_two_operators_four_robots_and_a_restarting_databank(sup: Supervisor) ->
                 events["databank restarts"] += 1
             if estops and now >= estops[0]:
                 estops.pop(0)
-                b = ops["B"]
-                e = b.put(tuple(ROBOTS), "estop", deadman=False, estop=True, stop=True)
-                until(lambda b=b, e=e: set(acks.of(b.sender, b.session_id, e)) >= set(ROBOTS),
-                      WAIT_S, "every robot to ack the e-stop")
-                r = b.put(tuple(ROBOTS), "release", deadman=False, release=True)
-                until(lambda b=b, r=r: set(acks.of(b.sender, b.session_id, r)) >= set(ROBOTS),
-                      WAIT_S, "every robot to ack the release")
-                estop_cmds.append((b, e, r))
+                estopped.append(estop_round(capsys, acks, endpoint))
             for name, op in ops.items():
                 held = HOLDS[name]
                 robot = held[tick % 2]
@@ -206,15 +248,14 @@ def test_two_operators_four_robots_and_a_restarting_databank(sup: Supervisor) ->
                         stages[a.code or str(a.stage)] += 1
         tally.extra = {
             "acks by stage or code": dict(sorted(stages.items())),
-            "e-stops sent": len(estop_cmds),
-            "e-stop acks": sum(len(acks.of(b.sender, b.session_id, e)) for b, e, _ in estop_cmds),
-            "releases acked": sum(len(acks.of(b.sender, b.session_id, r))
-                                  for b, _, r in estop_cmds),
+            "e-stops sent (kinesphere estop)": len(estopped),
+            "robots that acked the e-stop and its release": sum(estopped),
             "robots moved without a lease": sum(unleased.values()),
             **events,
         }
-        tally.report()
-        assert events["databank restarts"] == 2 and len(estop_cmds) == 2
+        with capsys.disabled():
+            tally.report()
+        assert events["databank restarts"] == 2 and estopped == [len(ROBOTS)] * 2
         assert not lost, f"{len(lost)} commands never acked, e.g. {lost[:5]}"
         assert sum(unleased.values()) == 0, unleased
         assert stages["lease_held"] > 0 and stages["accepted"] > 0, stages
