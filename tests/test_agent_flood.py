@@ -90,14 +90,19 @@ class Marks:
                 self._cond.notify_all()
 
     def read_up_to(self) -> None:
-        """Put a mark and wait for the agent to ack it."""
-        self.seq += 1
-        self.pub.put(pr.encode(pr.Command(seq=self.seq, sent_ns=time.time_ns(), deadman=False,
-                                          stop=True, ttl_ms=0, sender=MARK_SENDER,
-                                          session="marks")))
-        with self._cond:
-            assert self._cond.wait_for(lambda: self.acked >= self.seq, WAIT_S), (
-                f"the agent did not ack mark {self.seq}")
+        """Put a mark and wait for the agent to ack it; again with a new mark every 0.5 s
+        (Zenoh drops puts when its queues are full, and a flood fills them: a mark or its
+        ack may be one of those; any later mark acked says the same)."""
+        deadline = time.monotonic() + WAIT_S
+        while True:
+            self.seq += 1
+            self.pub.put(pr.encode(pr.Command(seq=self.seq, sent_ns=time.time_ns(),
+                                              deadman=False, stop=True, ttl_ms=0,
+                                              sender=MARK_SENDER, session="marks")))
+            with self._cond:
+                if self._cond.wait_for(lambda: self.acked >= self.seq, 0.5):
+                    return
+            assert time.monotonic() < deadline, f"the agent acked no mark up to {self.seq}"
 
     def close(self) -> None:
         self._sub.undeclare()  # type: ignore[no-untyped-call]
