@@ -150,11 +150,15 @@ class Supervisor:
         return self.children[name].proc.wait(timeout)
 
     def kill(self, name: str, sig: int = signal.SIGKILL) -> None:
-        """Signal a child's whole group (tests use SIGKILL to simulate a crash)."""
+        """Signal a child's whole group (tests use SIGKILL to simulate a crash). After SIGKILL
+        the child is reaped before this returns, so its name can be spawned again at once
+        (its sockets close, and its peers see it gone, a moment before it can be waited for)."""
         child = self.children[name]
         self.expected_exit.add(name)
         with contextlib.suppress(ProcessLookupError):
             os.killpg(child.pid, sig)
+        if sig == signal.SIGKILL:
+            child.proc.wait(GRACE_S)
 
     def stop(self, name: str, grace: float = GRACE_S) -> int | None:
         """SIGTERM the child's group, SIGKILL it after ``grace`` s; returns the exit code."""
