@@ -43,6 +43,23 @@ class JointLimit:
 
 
 @dataclass(frozen=True)
+class Mimic:
+    """A joint driven by another (URDF ``<mimic>``): ``value = multiplier * leader + offset``.
+
+    A mimic joint is no axis of P (one motor drives both, like NAO's hip yaw-pitch), so it is
+    never commanded or stored; its value follows from its leader's.
+    """
+
+    joint: str
+    leader: str
+    multiplier: float
+    offset: float
+
+    def value(self, leader_value: float) -> float:
+        return self.multiplier * leader_value + self.offset
+
+
+@dataclass(frozen=True)
 class Eurdf:
     """A loaded, validated eURDF: the platform's (C, J, L, P) plus the URDF it annotates."""
 
@@ -54,6 +71,8 @@ class Eurdf:
     limits: dict[str, JointLimit]
     sha256: str
     path: Path | None = None
+    mimics: dict[str, Mimic] = field(default_factory=dict)
+    """Mimic joint -> how it follows its leader (a joint of P)."""
     _children: dict[str, list[tuple[str, str]]] = field(default_factory=dict, repr=False)
 
     @property
@@ -138,6 +157,18 @@ class Eurdf:
             stack.extend(c for _, c in reversed(self._children.get(cur, [])))
         return out
 
+    def followers(self, joint: str) -> tuple[str, ...]:
+        """The mimic joints that ``joint`` drives (empty for most joints)."""
+        return tuple(m.joint for m in self.mimics.values() if m.leader == joint)
+
+    def with_mimics(self, joints: dict[str, float]) -> dict[str, float]:
+        """``joints`` plus the value of every mimic joint whose leader is among them."""
+        out = dict(joints)
+        for m in self.mimics.values():
+            if m.leader in joints:
+                out[m.joint] = m.value(joints[m.leader])
+        return out
+
     def labels_of_link(self, link: str) -> tuple[str, ...]:
         """Every label that covers a link (several for links deep in a limb)."""
         return tuple(p.name for p in (*self.core, *self.limbs) if link in p.links)
@@ -180,6 +211,7 @@ def load_eurdf(source: str | Path) -> Eurdf:
         limits=limits,
         sha256=hashlib.sha256(text.encode("utf-8")).hexdigest(),
         path=path,
+        mimics=_mimics(urdf, limits),
         _children=children,
     )
 
@@ -246,6 +278,19 @@ def _limits(urdf: yourdfpy.URDF) -> dict[str, JointLimit]:
         else:
             lower, upper = float(lim.lower), float(lim.upper)
         out[j.name] = JointLimit(j.name, j.type, lower, upper, velocity)
+    return out
+
+
+def _mimics(urdf: yourdfpy.URDF, limits: dict[str, JointLimit]) -> dict[str, Mimic]:
+    out: dict[str, Mimic] = {}
+    for j in urdf.robot.joints:
+        if j.mimic is None or j.type not in ACTUATED_TYPES:
+            continue
+        if j.mimic.joint not in limits:
+            continue  # a broken reference (seen in the wild): it follows nothing, as in yourdfpy
+        multiplier = 1.0 if j.mimic.multiplier is None else float(j.mimic.multiplier)
+        offset = 0.0 if j.mimic.offset is None else float(j.mimic.offset)
+        out[j.name] = Mimic(j.name, j.mimic.joint, multiplier, offset)
     return out
 
 

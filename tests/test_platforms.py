@@ -47,7 +47,7 @@ def test_label_sets_reproduce_the_paper(name: str) -> None:
     assert (set(e.C), set(e.J), set(e.L)) == (c, j, lb)
 
 
-@pytest.mark.parametrize(("name", "dof"), [("baxter", 14), ("nao", 26), ("youbot", 5)])
+@pytest.mark.parametrize(("name", "dof"), [("baxter", 14), ("nao", 25), ("youbot", 5)])
 def test_dof_counts(name: str, dof: int) -> None:
     assert len(load_platform(name).eurdf.P) == dof
 

@@ -5,8 +5,9 @@ joint of P with gains matched to each joint's inertia, gravity compensation (rea
 it, and it keeps position tracking honest), a driveable planar base (x, y, yaw) for mobile
 platforms, and self-collision exclusions derived from the neutral pose. A brought robot's
 meshes (STL, OBJ, found beside its eURDF) become mesh geoms, and its mimic joints follow their
-leader through an equality constraint, as the URDF says. Body, joint and
-actuator names are the URDF's, so every role can address them by the eURDF's names.
+leader through an equality constraint, as the URDF says, without an actuator of their own
+(NAO's RHipYawPitch follows LHipYawPitch: one motor). Body, joint and actuator names are the
+URDF's, so every role can address them by the eURDF's names.
 """
 
 from __future__ import annotations
@@ -43,8 +44,13 @@ class PlatformModel:
     excluded_pairs: tuple[tuple[str, str], ...]
 
     def neutral_qpos(self) -> np.ndarray:
+        return self.qpos({})
+
+    def qpos(self, joints: dict[str, float]) -> np.ndarray:
+        """A full qpos: neutral, then ``joints`` (P names), mimic joints following leaders."""
+        values = {**self.platform.neutral, **joints}
         q: np.ndarray = self.model.qpos0.copy()
-        for joint, value in self.platform.neutral.items():
+        for joint, value in self.platform.eurdf.with_mimics(values).items():
             q[self.qpos_index[joint]] = value
         return q
 
@@ -207,6 +213,7 @@ def build_spec(platform: Platform) -> mujoco.MjSpec:
         eq = spec.add_equality(type=mujoco.mjtEq.mjEQ_JOINT, objtype=mujoco.mjtObj.mjOBJ_JOINT,
                                name1=joint.name, name2=joint.mimic.joint)
         eq.data[:5] = [joint.mimic.offset or 0.0, joint.mimic.multiplier or 1.0, 0.0, 0.0, 0.0]
+        eq.solref = [LIMIT_TIMECONST, 1.0]  # as stiff as the joint limits: one motor, one angle
     for name in (*BASE_JOINTS[: 3 if platform.base.mobile else 0], *platform.joint_names):
         act = spec.add_actuator(name=name, target=name, trntype=mujoco.mjtTrn.mjTRN_JOINT)
         act.set_to_position(kp=1.0, kv=0.1)
@@ -268,7 +275,7 @@ def platform_model(name: str) -> PlatformModel:
     model = spec.compile()
     qpos_index = {model.joint(i).name: int(model.jnt_qposadr[i]) for i in range(model.njnt)}
     neutral = model.qpos0.copy()
-    for joint, value in platform.neutral.items():
+    for joint, value in platform.eurdf.with_mimics(dict(platform.neutral)).items():
         neutral[qpos_index[joint]] = value
     excluded: list[tuple[str, str]] = []
     for _ in range(5):  # exclusions can only remove contacts; converge in a few passes
