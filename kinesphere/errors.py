@@ -44,6 +44,10 @@ class KinesphereError(Exception):
         self.code = code
         self.message = message
 
+    def __reduce__(self) -> tuple[type[KinesphereError], tuple[str, str]]:
+        """Pickle by code and message, so the error crosses process boundaries intact."""
+        return (type(self), (self.code, self.message))
+
 
 def choices(values: Iterable[object]) -> str:
     """Format valid alternatives for an error message, sorted and comma separated."""

@@ -13,6 +13,10 @@ from kinesphere.errors import KinesphereError
 
 NAMED_SIZES: dict[str, int] = {"near": 1, "mid": 2, "middle": 2, "far": 3}
 DEFAULT_SIZES: tuple[int, ...] = (1, 2, 3)
+MAX_TRANSLATION = 10.0
+"""Metres: the largest base translation one answer (or compound) may carry, whatever the size."""
+DEFAULT_BEYOND = 20
+"""Size units past the largest stored size a mobile platform answers unless its VSAM says."""
 
 
 def parse_size(value: object) -> float:

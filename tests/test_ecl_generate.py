@@ -13,10 +13,11 @@ import pytest
 
 from kinesphere.cli import main
 from kinesphere.laban import Direction
+from kinesphere.robots.frames import pivot
 from kinesphere.robots.mjcf import PlatformModel, platform_model
 from kinesphere.robots.platform import load_platform, platform_names
 from kinesphere.services.ecl.constraints import tip_point
-from kinesphere.services.ecl.db import read_tables
+from kinesphere.services.ecl.db import content_digest, read_tables
 from kinesphere.services.ecl.ecl import Ecl
 from kinesphere.services.ecl.generate import COS_FAR, COS_SIZE, GENERATOR_VERSION, generate
 from kinesphere.services.ecl.store import default_db_path
@@ -44,11 +45,14 @@ def tip_world(pm: PlatformModel, data: mujoco.MjData, limb: str) -> np.ndarray:
 
 def configure(pm: PlatformModel, joints: dict[str, float]) -> mujoco.MjData:
     data = mujoco.MjData(pm.model)
-    data.qpos[:] = pm.neutral_qpos()
-    for name, value in joints.items():
-        data.qpos[pm.qpos_index[name]] = value
+    data.qpos[:] = pm.qpos(joints)  # neutral elsewhere, mimic joints following their leaders
     mujoco.mj_kinematics(pm.model, data)
     return data
+
+
+def origin_of(pm: PlatformModel, neutral: mujoco.MjData, origin: str) -> np.ndarray:
+    """The pivot of a joint location at neutral: where its directions are measured from."""
+    return pivot(pm.model, neutral, pm.platform.eurdf.origin(origin).joints)
 
 
 def test_generation_is_deterministic() -> None:
@@ -133,7 +137,7 @@ def test_shipped_poses_touch_nothing_and_grow_with_size(name: str) -> None:
         for g in robot:
             if data.geom_xpos[g, 2] < m.geom_rbound[g]:
                 assert mujoco.mj_geomDistance(m, data, floor, g, 0.1, fromto) > -1e-3, r
-        origin = neutral.xanchor[m.joint(e.origin_joint(r["origin"])).id]
+        origin = origin_of(pm, neutral, r["origin"])
         offset = rot.T @ (tip_world(pm, data, r["limb"]) - origin)
         d = np.array(Direction.parse(r["direction"]).vector)
         projections.setdefault((r["limb"], r["origin"], r["direction"]), []).append(offset @ d)
@@ -152,7 +156,7 @@ def test_paper_example_raises_the_right_arm_up_and_to_the_left(name: str) -> Non
     assert pose.p_id == 3 and set(pose.joints) == set(e.limb_joints("limb_11"))
     neutral, moved = configure(pm, {}), configure(pm, pose.joints)
     rot = neutral.xmat[pm.model.body(e.root_link).id].reshape(3, 3)
-    origin = neutral.xanchor[pm.model.joint(e.origin_joint("distal_11")).id]
+    origin = origin_of(pm, neutral, "distal_11")
     rest = rot.T @ (tip_world(pm, neutral, "limb_11") - origin)
     tip = rot.T @ (tip_world(pm, moved, "limb_11") - origin)
     left_high = np.array(Direction.LEFT_HIGH.vector)
@@ -175,3 +179,18 @@ def test_build_and_report_commands(tmp_path: Path, capsys: pytest.CaptureFixture
     assert "medians" in out and "limb_11" in out and "all" in out
     assert main(["ecl", "build", "--all", "--db", str(db)]) == 2
     assert "cannot be used with --all" in capsys.readouterr().err
+
+
+def test_parallel_build_gives_the_serial_rows(tmp_path: Path,
+                                              capsys: pytest.CaptureFixture[str]) -> None:
+    """Two worker processes, one (limb, origin) pair each: the same rows, quality figures and
+    generation report as one process (the content digest covers all but the build time)."""
+    one, two = tmp_path / "one.sqlite", tmp_path / "two.sqlite"
+    assert main(["ecl", "build", str(TOY), "--db", str(one), "--jobs", "1"]) == 0
+    assert main(["ecl", "build", str(TOY), "--db", str(two), "--jobs", "2"]) == 0
+    out = capsys.readouterr().out
+    assert "wall time with 1 process " in out and "wall time with 2 processes" in out
+    assert content_digest(one) == content_digest(two)
+    assert read_tables(one).pose and read_tables(one).meta["dropped"] == read_tables(two).meta[
+        "dropped"]
+    assert main(["ecl", "build", str(TOY), "--db", str(one), "--jobs", "0"]) == 2

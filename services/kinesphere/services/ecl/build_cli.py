@@ -33,7 +33,9 @@ def register_build(ecl_sub: Any, top_sub: Any) -> None:
         help="generate a platform's ECL with IK (the paper's Algorithm 1) and store it",
         description="Run Algorithm 1 with mink IK in the platform's MuJoCo model: every VSAM "
         "(limb, origin) pair is pulled toward each direction at each size; directions the limb "
-        "cannot honestly reach are dropped and listed. The databank is replaced atomically.",
+        "cannot honestly reach, or only by toppling, are dropped and listed. Pairs are "
+        "generated in parallel (one process per core); the output is the same as a serial "
+        "run's. The databank is replaced atomically; the wall time is printed.",
     )
     b.add_argument("platform", nargs="?", help="platform name or folder (omit with --all)")
     b.add_argument("--db", type=Path, metavar="PATH", help=_DB_HELP)
@@ -44,19 +46,34 @@ def register_build(ecl_sub: Any, top_sub: Any) -> None:
         help="generate only this limb's VSAM entries (label or alias; repeatable): a quick "
         "first look at a brought robot. The databank then holds only those limbs",
     )
+    b.add_argument("--jobs", type=int, metavar="N",
+                   help="worker processes, one (limb, origin) pair each (default: one per core)")
     b.set_defaults(func=_build)
 
     r = ecl_sub.add_parser(
         "report",
-        help="quality of a databank: medians of cosine, reach fraction and joint margin",
-        description="Summarise the generator's quality figures per limb and overall: cosine "
-        "between the direction and the tip's offset from the origin, reach as a fraction of "
-        "the limb's farthest reach, and the smallest distance to a joint limit (rad).",
+        help="quality of a databank: pulls kept, medians of cosine, reach, joint margin",
+        description="Summarise the generator's quality figures per limb and overall: pulls "
+        "kept of Laban's 26, cosine between the direction and the tip's offset from the "
+        "origin, reach as a fraction of the limb's farthest reach, the smallest distance to a "
+        "joint limit (rad), and the directions dropped for stability (the whole-body centre "
+        "of mass would leave the support polygon).",
     )
     r.add_argument("platform", help="platform name or folder")
     r.add_argument("--db", type=Path, metavar="PATH", help=_DB_HELP)
-    r.add_argument("--rows", action="store_true", help="also print every row's figures")
+    r.add_argument("--rows", action="store_true",
+                   help="also print every row's figures and why each unstable pull toppled")
     r.set_defaults(func=_report)
+
+    v = ecl_sub.add_parser(
+        "coverage",
+        help="pulls each body keeps and the directions every body shares (markdown)",
+        description="Count, from the shipped databanks, the pulls of Laban's 26 each (limb, "
+        "origin) pair keeps, and list the directions every platform with limb_11, limb_12, "
+        "limb_13 keeps: a fleet command in one of those is exact on every robot.",
+    )
+    v.add_argument("--platforms", help="comma-separated platforms (default: all shipped)")
+    v.set_defaults(func=_coverage)
 
     s = ecl_sub.add_parser(
         "render",
@@ -117,6 +134,7 @@ def _gl() -> None:
 # --- build -------------------------------------------------------------------------------------
 def _build(args: argparse.Namespace) -> int:
     from kinesphere.robots.platform import platform_names
+    from kinesphere.services.ecl.parallel import default_workers, generate_many
 
     if args.all == bool(args.platform):
         raise KinesphereError("malformed", "give a PLATFORM or --all (not both)")
@@ -124,57 +142,51 @@ def _build(args: argparse.Namespace) -> int:
         raise KinesphereError("malformed", "--db names one file; it cannot be used with --all")
     if args.all and args.limb:
         raise KinesphereError("malformed", "--limb picks limbs of one platform, not --all")
+    if args.jobs is not None and args.jobs < 1:
+        raise KinesphereError("malformed", f"--jobs must be at least 1, got {args.jobs}")
     names = platform_names() if args.all else [args.platform]
+    workers = args.jobs or default_workers()
     console = _console()
+    start = time.perf_counter()
+    with Progress(
+        TextColumn("[bold]generating[/]"), BarColumn(), MofNCompleteColumn(),
+        TextColumn("{task.description}"), TimeElapsedColumn(),
+        console=console, transient=True, disable=not console.is_terminal,
+    ) as bar:
+        task = bar.add_task("", total=None)
+
+        def done(platform: str, entry: Any, finished: int, total: int) -> None:
+            bar.update(task, completed=finished, total=total,
+                       description=f"{Path(platform).name} {entry.limb}/{entry.origin}")
+
+        built = generate_many(names, workers, done, tuple(args.limb or ()))
     for name in names:
-        build_one(name, args.db, console, args.reasons, tuple(args.limb or ()))
+        store_built(name, built[name], args.db, console, args.reasons)
+    wall = time.perf_counter() - start
+    work = sum(b.report.seconds for b in built.values())
+    console.print(f"built {len(names)} platform{'s' if len(names) > 1 else ''} in {wall:.1f} s "
+                  f"wall time with {workers} process{'es' if workers > 1 else ''} "
+                  f"({work:.1f} s of generation)", highlight=False)
     return 0
 
 
-def build_one(
-    name: str, db: Path | None, console: Console, reasons: bool = False,
-    limbs: tuple[str, ...] = (),
-) -> Path:
-    """Generate and store one platform's databank (only ``limbs``' entries when given);
-    print what was dropped."""
+def store_built(name: str, built: Any, db: Path | None, console: Console,
+                reasons: bool = False) -> Path:
+    """Store one platform's generated rows atomically; print what was dropped and why."""
     from kinesphere.robots.platform import load_platform
-    from kinesphere.services.ecl.generate import GENERATOR_VERSION, generate
+    from kinesphere.services.ecl.generate import GENERATOR_VERSION, report_meta
     from kinesphere.services.ecl.store import default_db_path, write_databank
     from kinesphere.services.ecl.vsam import load_vsam
 
     platform = load_platform(name)
     vsam = load_vsam(platform)
     path = db if db is not None else default_db_path(platform)
-    start = time.perf_counter()
-    with Progress(
-        TextColumn(f"[bold]{platform.name}[/]"), BarColumn(), MofNCompleteColumn(),
-        TextColumn("{task.description}"), TimeElapsedColumn(),
-        console=console, transient=True, disable=not console.is_terminal,
-    ) as bar:
-        task = bar.add_task("", total=None)
-
-        def progress(label: str, done: int, total: int) -> None:
-            bar.update(task, completed=done, total=total, description=label)
-
-        if limbs:
-            wanted = {platform.eurdf.limb(x).name for x in limbs}
-            pairs = [(e.limb, e.origin) for e in vsam.entries if e.limb in wanted]
-            if not pairs:
-                raise KinesphereError("unknown_limb", f"{platform.name}: no VSAM entry for "
-                                      f"{', '.join(limbs)} in {platform.vsam_path}")
-            rows, report = generate(name, progress, only=pairs[0])
-            for pair in pairs[1:]:
-                more, part = generate(name, progress, only=pair)
-                rows += more
-                report.entries += part.entries
-        else:
-            rows, report = generate(name, progress)
-    write_databank(path, platform, vsam, rows, GENERATOR_VERSION)
-    seconds = time.perf_counter() - start
+    report = built.report
+    write_databank(path, platform, vsam, built.rows, GENERATOR_VERSION, report_meta(report))
     kept = sum(len(e.kept) for e in report.entries)
-    dropped = sum(len(e.dropped) for e in report.entries)
-    console.print(f"{platform.name}: {len(rows)} rows, {kept} directions kept, {dropped} "
-                  f"dropped, {seconds:.1f} s -> {path}", highlight=False)
+    dropped = sum(len(e.dropped) + len(e.unstable) for e in report.entries)
+    console.print(f"{platform.name}: {len(built.rows)} rows, {kept} directions kept, {dropped} "
+                  f"dropped, {report.seconds:.1f} s -> {path}", highlight=False)
     for e in report.entries:
         if e.paths:
             console.print(f"  {e.limb}/{e.origin} kept {len(e.paths)} whose interpolation path "
@@ -183,15 +195,16 @@ def build_one(
             if reasons:
                 for slug, why in e.paths.items():
                     console.print(f"    {slug}: {why}", highlight=False, markup=False)
-        if not e.dropped:
-            continue
-        if reasons:
-            console.print(f"  {e.limb}/{e.origin} dropped:", highlight=False)
-            for slug, why in e.dropped.items():
-                console.print(f"    {slug}: {why}", highlight=False, markup=False)
-        else:
-            console.print(f"  {e.limb}/{e.origin} dropped {len(e.dropped)}: "
-                          f"{', '.join(e.dropped)}", highlight=False, markup=False)
+        for what, items in (("dropped", e.dropped), ("dropped for stability", e.unstable)):
+            if not items:
+                continue
+            if reasons:
+                console.print(f"  {e.limb}/{e.origin} {what}:", highlight=False)
+                for slug, why in items.items():
+                    console.print(f"    {slug}: {why}", highlight=False, markup=False)
+            else:
+                console.print(f"  {e.limb}/{e.origin} {what} {len(items)}: "
+                              f"{', '.join(items)}", highlight=False, markup=False)
     return path
 
 
@@ -202,7 +215,7 @@ def _report(args: argparse.Namespace) -> int:
     ecl = Ecl.open(args.platform, db=args.db)
     rows = [r for r in ecl.rows() if r["joints"] and r["direction"] != "place-middle"]
     console = _console()
-    if not rows:
+    if not rows and not ecl.dropped("unstable"):
         console.print(f"{ecl.platform.name}: no generated rows (only core translations and "
                       "neutral poses)", highlight=False)
         return 0
@@ -216,17 +229,28 @@ def _report(args: argparse.Namespace) -> int:
                           *(_fmt(r[q]) for q in ("cosine", "reach", "margin")))
         console.print(table)
     table = Table(title=f"{ecl.platform.name} ECL quality (version {ecl.version}): medians")
-    for col in ("limb", "alias", "directions", "rows", "cosine", "min cosine", "reach",
-                "margin (rad)"):
+    for col in ("limb", "alias", "pulls of 26", "rows", "cosine", "min cosine", "reach",
+                "margin (rad)", "unstable"):
         table.add_column(col, justify="left" if col in ("limb", "alias") else "right")
     aliases = {p.name: p.alias or "" for p in ecl.platform.eurdf.limbs}
-    groups: dict[str, list[dict[str, Any]]] = {}
+    groups: dict[str, list[dict[str, Any]]] = {e.limb: [] for e in ecl.vsam.entries
+                                               if not e.is_core}
     for r in rows:
         groups.setdefault(r["limb"], []).append(r)
+    unstable = ecl.dropped("unstable")
     for limb, items in groups.items():
-        table.add_row(limb, aliases.get(limb, ""), *_summary(items))
-    table.add_row("all", "", *_summary(rows), end_section=True)
+        toppled = sum(len(v) for k, v in unstable.items() if k.split("/")[0] == limb)
+        table.add_row(limb, aliases.get(limb, ""), *_summary(items), str(toppled))
+    table.add_row("all", "", *_summary(rows), str(sum(len(v) for v in unstable.values())),
+                  end_section=True)
     console.print(table)
+    for pair, lost in unstable.items():
+        if lost:
+            console.print(f"{pair} dropped for stability: {', '.join(lost)}", highlight=False,
+                          markup=False)
+            if args.rows:
+                for slug, why in lost.items():
+                    console.print(f"  {slug}: {why}", highlight=False, markup=False)
     return 0
 
 
@@ -237,12 +261,23 @@ def _summary(rows: list[dict[str, Any]]) -> list[str]:
 
     cos = [r["cosine"] for r in rows if r["cosine"] is not None]
     cells = len({(r["limb"], r["origin"], r["direction"]) for r in rows})
+    if not rows:
+        return ["0", "0", "-", "-", "-", "-"]
     return [str(cells), str(len(rows)), med("cosine"), _fmt(min(cos)) if cos else "-",
             med("reach"), med("margin")]
 
 
 def _fmt(v: float | None) -> str:
     return "-" if v is None else f"{v:.3f}"
+
+
+def _coverage(args: argparse.Namespace) -> int:
+    from kinesphere.robots.platform import platform_names
+    from kinesphere.services.ecl.coverage import markdown
+
+    names = [n.strip() for n in args.platforms.split(",")] if args.platforms else platform_names()
+    sys.stdout.write(markdown(names))
+    return 0
 
 
 # --- pictures ----------------------------------------------------------------------------------

@@ -141,7 +141,7 @@ class FloorLimit(mink.Limit):
     def __init__(self, model: mujoco.MjModel, geoms: list[int]) -> None:
         bodies, points, offsets = [], [], []
         for g in geoms:
-            for p, r in _samples(model, g):
+            for p, r in samples(model, g):
                 bodies.append(int(model.geom_bodyid[g]))
                 points.append(p)
                 offsets.append(r)
@@ -169,7 +169,7 @@ class FloorLimit(mink.Limit):
         return mink.Constraint(G=np.vstack(rows), h=np.array(bounds))
 
 
-def _samples(model: mujoco.MjModel, g: int) -> list[tuple[np.ndarray, float]]:
+def samples(model: mujoco.MjModel, g: int) -> list[tuple[np.ndarray, float]]:
     """Points of a geom in its body frame, each with the radius to subtract from its height."""
     rot = _rotation(model, g)
     pos, size, kind = model.geom_pos[g], model.geom_size[g], model.geom_type[g]

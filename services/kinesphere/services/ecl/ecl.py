@@ -275,6 +275,16 @@ class Ecl:
         )
         return self._catalogue
 
+    def dropped(self, kind: str = "dropped") -> dict[str, dict[str, str]]:
+        """What the generator left out and why: ``{"limb/origin": {direction: reason}}``;
+        ``kind`` "unstable" for the directions dropped for stability (empty for databanks
+        built before this was recorded, or imported without it)."""
+        try:
+            notes = json.loads(self._tables.meta.get(kind, "{}"))
+        except json.JSONDecodeError:
+            return {}
+        return notes if isinstance(notes, dict) else {}
+
     def cells(self) -> list[Cell]:
         """Every stored cell, in k_id order."""
         return sorted((c for cs in self._cells.values() for c in cs.values()),

@@ -19,6 +19,7 @@ import mink
 import mujoco
 import numpy as np
 
+from kinesphere.robots.frames import pivot
 from kinesphere.robots.mjcf import PlatformModel
 from kinesphere.services.ecl.constraints import (
     GAIN,
@@ -79,7 +80,18 @@ class LimbSolver:
         self.qadr = np.array([pm.qpos_index[j] for j in self.joints], dtype=int)
         self.lower = np.array([eurdf.limits[j].lower for j in self.joints])
         self.upper = np.array([eurdf.limits[j].upper for j in self.joints])
-        dofs = [pm.dof_index[j] for j in self.joints]
+        links = set(eurdf.limb(limb).links)
+        # a joint that also drives a mimic joint outside the limb (NAO's hip yaw-pitch turns
+        # both hips) would move another limb: it stays at neutral in this limb's poses
+        self.moving = np.array([
+            all(eurdf.urdf.joint_map[f].child in links for f in eurdf.followers(j))
+            for j in self.joints
+        ], dtype=bool)
+        self._mimics = [
+            (pm.qpos_index[m.joint], self.joints.index(m.leader), m)
+            for m in eurdf.mimics.values() if m.leader in self.joints
+        ]
+        dofs = [pm.dof_index[j] for j, go in zip(self.joints, self.moving, strict=True) if go]
         self._dof_adr = np.array(dofs, dtype=int)
         self.neutral = pm.neutral_qpos()
         self.config = mink.Configuration(model, self.neutral.copy())
@@ -87,8 +99,8 @@ class LimbSolver:
         tip_body = model.body(eurdf.tip_link(limb)).id
         self.tip_task = PointTask(model, tip_body, tip_point(model, tip_body))
         self.body_rot = data.xmat[model.body(eurdf.root_link).id].reshape(3, 3).copy()
-        self.origin = data.xanchor[model.joint(eurdf.origin_joint(origin)).id].copy()
-        self.bodies = frozenset(model.body(name).id for name in eurdf.limb(limb).links)
+        self.origin = pivot(model, data, eurdf.origin(origin).joints)
+        self.bodies = frozenset(model.body(name).id for name in links)
         self._neutral_reach = self.reach(self.neutral)
         self.span = self._span()
         scale = max(self.span, 1e-3)  # a tip on its origin cannot point; generate drops it
@@ -104,9 +116,10 @@ class LimbSolver:
              if model.geom_contype[g] and model.geom_bodyid[g] in self.bodies],
             dtype=int,
         )
+        moving = [j for j, go in zip(self.joints, self.moving, strict=True) if go]
         self.limits: list[mink.Limit] = [
             mink.ConfigurationLimit(model, gain=0.9, min_distance_from_limits=LIMIT_MARGIN),
-            mink.VelocityLimit(model, {j: JOINT_STEP for j in self.joints}),
+            mink.VelocityLimit(model, {j: JOINT_STEP for j in moving}),
             FloorLimit(model, [int(g) for g in self._limb_geoms]),
         ]
         pairs = self._distance_pairs()
@@ -139,9 +152,11 @@ class LimbSolver:
 
     # --- queries ---------------------------------------------------------------------------
     def full_q(self, values: np.ndarray) -> np.ndarray:
-        """Neutral everywhere except the limb's joints."""
+        """Neutral everywhere except the limb's joints (and mimic joints following them)."""
         q: np.ndarray = self.neutral.copy()
         q[self.qadr] = values
+        for adr, leader, mimic in self._mimics:
+            q[adr] = mimic.value(float(values[leader]))
         return q
 
     def reach(self, q: np.ndarray) -> Reach:
@@ -221,11 +236,16 @@ class LimbSolver:
 
     # --- solving ---------------------------------------------------------------------------
     def solve(
-        self, start: np.ndarray, target: np.ndarray, iterations: int, posture: float = POSTURE
+        self, start: np.ndarray, target: np.ndarray, iterations: int, posture: float = POSTURE,
+        toward: np.ndarray | None = None,
     ) -> np.ndarray:
-        """Move the distal end toward ``target`` (world) from ``start``; returns limb values."""
+        """Move the distal end toward ``target`` (world) from ``start``; returns limb values.
+
+        The posture task pulls toward ``toward`` (limb values), or neutral when None.
+        """
         self.tip_task.target = np.asarray(target, dtype=float)
         self.posture.set_cost(self._posture_mask * posture)
+        self.posture.set_target(self.neutral if toward is None else self.full_q(toward))
         q = self.full_q(start)
         self.config.update(q)
         last_tip = self.tip_task.position(self.config)
@@ -240,7 +260,8 @@ class LimbSolver:
                 )
             except mink.NoSolutionFound:
                 break
-            step = v[self._dof_adr]
+            step = np.zeros(len(self.joints))
+            step[self.moving] = v[self._dof_adr]
             if float(np.linalg.norm(step + previous)) < DITHER * float(np.linalg.norm(step)):
                 step = step / 2  # bouncing across the optimum (a saturated, singular stretch):
                 nxt = self._clean_step(q, step)  # settle half-way between the two and stop

@@ -3,7 +3,10 @@
 The VSAM fixes which ``(limb, origin, direction, size)`` cells an ECL may hold. It is checked
 against the platform's labels at load time, so a typo in the file fails with the name and the
 valid alternatives instead of producing an ECL with silently missing rows. Mobile platforms
-get the derived core entries ``(c_1, c_1, d)`` for the 8 middle horizontals.
+get the derived core entries ``(c_1, c_1, d)`` for the 8 middle horizontals. ``max_size`` is
+the largest size the ECL answers: the largest stored size on a fixed base, and on a mobile one
+what the file says (default DEFAULT_BEYOND units past it), never more than MAX_TRANSLATION
+metres of base translation.
 """
 
 from __future__ import annotations
@@ -19,7 +22,7 @@ from kinesphere.configfile import convert, read_toml
 from kinesphere.errors import KinesphereError
 from kinesphere.laban import Direction
 from kinesphere.robots.platform import Platform, load_platform
-from kinesphere.sizes import DEFAULT_SIZES
+from kinesphere.sizes import DEFAULT_BEYOND, DEFAULT_SIZES, MAX_TRANSLATION
 
 LABAN_27: Final = "laban-27"
 LABAN_26: Final = "laban-26"
@@ -35,6 +38,7 @@ _Sizes = Annotated[
 _Step = Annotated[
     float, msgspec.Meta(gt=0, le=100, description="> 0 metres (per size unit past the largest)")
 ]
+_MaxSize = Annotated[float, msgspec.Meta(ge=1, le=1e6, description="the largest size answered")]
 
 
 class _EntryTable(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
@@ -49,6 +53,7 @@ class _VsamFile(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     sizes: _Sizes = msgspec.field(default_factory=lambda: list(DEFAULT_SIZES))
     directions: _DirectionSpec = LABAN_27
     translation_step: _Step | None = None
+    max_size: _MaxSize | None = None
     entry: list[_EntryTable] = []
 
     def __post_init__(self) -> None:
@@ -81,6 +86,8 @@ class Vsam:
     directions: tuple[Direction, ...]
     translation_step: float | None
     entries: tuple[VsamEntry, ...]
+    max_size: float = 0.0
+    """The largest size answered (``size_out_of_range`` past it); see the module."""
 
     @property
     def k_smax(self) -> int:
@@ -107,6 +114,7 @@ class Vsam:
             "sizes": list(self.sizes),
             "directions": [d.slug for d in self.directions],
             "translation_step": self.translation_step,
+            "max_size": self.max_size,
             "entry": [
                 {"limb": e.limb, "origin": e.origin, "directions": [d.slug for d in e.directions]}
                 for e in self.entries
@@ -158,7 +166,27 @@ def _build(f: _VsamFile, plat: Platform) -> Vsam:
             "malformed", f"no [[entry]]: a fixed-base platform needs at least one (limb, origin) "
             f"pair; limbs: {', '.join(plat.eurdf.L) or 'none'}"
         )
-    return Vsam(plat.name, tuple(f.sizes), directions, step, tuple(entries))
+    max_size = _max_size(f.max_size, f.sizes[-1], step)
+    return Vsam(plat.name, tuple(f.sizes), directions, step, tuple(entries), max_size)
+
+
+def _max_size(raw: float | None, k_smax: int, step: float | None) -> float:
+    if step is None:
+        if raw is not None and raw != k_smax:
+            raise KinesphereError(
+                "malformed", f"a fixed base answers sizes up to {k_smax} (far); max_size must be "
+                f"{k_smax} or left out, got {raw!r}",
+            )
+        return float(k_smax)
+    if raw is None:
+        raw = k_smax + min(DEFAULT_BEYOND, MAX_TRANSLATION / step)
+    most = k_smax + MAX_TRANSLATION / step
+    if not k_smax <= raw <= most:
+        raise KinesphereError(
+            "malformed", f"max_size must lie between the largest size {k_smax} and {most:g} "
+            f"({MAX_TRANSLATION:g} m of translation at {step:g} m per size), got {raw!r}",
+        )
+    return float(raw)
 
 
 def _directions(raw: str | list[str], where: str) -> tuple[Direction, ...]:
