@@ -18,6 +18,8 @@ from kinesphere.sizes import parse_size
 
 DEFAULT_PREFIX = "kinesphere"
 WILDCARD = "*"
+EXACT = "?exact=true"
+"""Selector parameters for a pose query that wants the exact direction, no substitution."""
 _FORBIDDEN = frozenset("/*$?#")
 
 

@@ -119,6 +119,8 @@ def test_record_serves_new_values_at_once_and_announces_them(net: Net, tmp_path:
         (b"\x00" * (pr.MAX_PAYLOAD + 1), "malformed"),
         (b"", "malformed"),
         (record_request(size=0), "size_out_of_range"),
+        (record_request(size=4), "size_out_of_range"),  # not a VSAM size (1, 2, 3)
+        (record_request(size=1_000_000), "size_out_of_range"),
         (record_request(size=2**64 - 1), "malformed"),
         (b"\x81\xa1x" + b"\x91" * 60_000 + b"\xc0", "malformed"),
         (record_request(yaw=99.0), "malformed"),
@@ -128,8 +130,8 @@ def test_record_serves_new_values_at_once_and_announces_them(net: Net, tmp_path:
         (pr.encode(pr.RecordRequest(limb="arm", origin="shoulder", direction="place-middle",
                                     size=1, joints={"yaw": 0.1})), "forbidden"),
     ],
-    ids=["garbage", "oversized", "empty", "size-0", "size-uint64", "deep", "out-of-limits",
-         "foreign-joint", "unknown-limb", "place-middle"],
+    ids=["garbage", "oversized", "empty", "size-0", "size-4", "size-1e6", "size-uint64", "deep",
+         "out-of-limits", "foreign-joint", "unknown-limb", "place-middle"],
 )
 def test_bad_records(net: Net, tmp_path: Path, payload: bytes, code: str) -> None:
     db = build_toy(tmp_path / "toy.sqlite")

@@ -62,14 +62,17 @@ def register(sub: Any) -> None:
         help="ask the databank for a pose (or a platform's catalogue)",
         description="Print the joint targets f_SB(L, O, D, S) of PLATFORM, plus the base "
         "translation when S is beyond the largest stored size. L and O are labels or aliases "
-        "(limb_11, right_arm), D a Laban direction (left-high), S a size (1, 2.5, far). "
-        "Exit 2 with the error code when the databank refuses or nobody answers.",
+        "(limb_11, right_arm), D a Laban direction (left-high), S a size (1, 2.5, far). A "
+        "direction the limb lacks is served by the nearest one it has (and says so) unless "
+        "--exact. Exit 2 with the error code when the databank refuses or nobody answers.",
     )
     q.add_argument("platform", help="platform name, e.g. baxter")
     q.add_argument("params", nargs="*", metavar="L O D S", help="limb origin direction size")
     q.add_argument("--catalogue", action="store_true",
                    help="print what the platform answers instead of a pose")
     q.add_argument("--json", action="store_true", help="print the reply message as JSON")
+    q.add_argument("--exact", action="store_true",
+                   help="this direction only: no substitution by the nearest one the limb has")
     q.add_argument("--timeout", type=float, default=2.0, metavar="S",
                    help="seconds to wait for an answer (default 2)")
     add_zenoh_arguments(q, QUERY)
@@ -109,9 +112,8 @@ def _query(args: argparse.Namespace) -> int:
             msg: Any = client.query_catalogue(s, args.platform, keys=keys, timeout=args.timeout)
         else:
             limb, origin, direction, size = args.params
-            msg = client.query_pose(
-                s, args.platform, limb, origin, direction, size, keys=keys, timeout=args.timeout
-            )
+            msg = client.query_pose(s, args.platform, limb, origin, direction, size, keys=keys,
+                                    timeout=args.timeout, exact=args.exact)
     if args.json:
         print(json.dumps(client.to_builtins(msg), indent=2))
     elif args.catalogue:
@@ -135,6 +137,9 @@ def _print_pose(pose: Any) -> None:
     if pose.translation is not None:
         x, y, z = pose.translation
         print(f"  translate base  x {x:+.4f}  y {y:+.4f}  z {z:+.4f} m (body frame)")
+    for sub in pose.substitutions:
+        print(f"  substituted: {sub.limb} has no {sub.requested}; served {sub.served} "
+              f"({sub.angle:.1f} degrees away)")
     sys.stdout.flush()
 
 

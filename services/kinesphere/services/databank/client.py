@@ -15,7 +15,7 @@ from typing import TypeVar
 import msgspec
 import zenoh
 
-from kinesphere.keyexpr import KEYS, Keys
+from kinesphere.keyexpr import EXACT, KEYS, Keys
 from kinesphere.protocol import (
     Catalogue,
     CompoundRequest,
@@ -68,10 +68,12 @@ def query_pose(
     *,
     keys: Keys = KEYS,
     timeout: float = DEFAULT_TIMEOUT,
+    exact: bool = False,
 ) -> Pose:
-    """f_SB over the network; ``size`` may be text (``far``, ``2.5``)."""
+    """f_SB over the network; ``size`` may be text (``far``, ``2.5``). A direction the limb
+    lacks comes back substituted (``Pose.substitutions``) unless ``exact``."""
     key = keys.pose(platform, limb, origin, direction, parse_size(size))
-    return request(session, key, Pose, timeout=timeout)
+    return request(session, key + EXACT if exact else key, Pose, timeout=timeout)
 
 
 def query_catalogue(

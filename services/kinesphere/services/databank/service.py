@@ -18,7 +18,8 @@ with its link and the next query goes to another. Replicas must agree on the kno
 
 Hot path: one dict hit on the key text, then ``query.reply`` with a pre-encoded payload.
 Records (SQL) run on the :class:`~kinesphere.services.databank.records.Recorder`'s worker
-thread.
+thread. A pose key with the selector parameter ``exact=true`` asks for that direction only: no
+substitution by the nearest one.
 """
 
 from __future__ import annotations
@@ -31,7 +32,7 @@ from typing import Any
 import zenoh
 
 from kinesphere.errors import KinesphereError, choices, did_you_mean
-from kinesphere.keyexpr import KEYS, Keys, check_segment
+from kinesphere.keyexpr import EXACT, KEYS, Keys, check_segment
 from kinesphere.protocol import CompoundRequest, check_spatial, decode
 from kinesphere.ratelog import RateLog
 from kinesphere.robots.platform import platform_names
@@ -56,6 +57,13 @@ log = logging.getLogger(__name__)
 
 
 Routed = Answer | Deferred | None  # None: answered already (wildcards) or silent
+EXACT_SUFFIX = EXACT  # the cache key of an exact-only query: the selector itself
+
+
+def exact_only(parameters: zenoh.Parameters) -> bool:
+    """Whether a query's selector parameters ask for the exact direction only (``exact=true``
+    or ``exact=1``); other parameters are ignored, so they cannot multiply cached answers."""
+    return (parameters.get("exact") or "").lower() in ("true", "1")
 
 
 def changed_key(keys: Keys, platform: str) -> str:
@@ -191,6 +199,8 @@ class DatabankService:
             try:
                 ke = query.key_expr
                 key = str(ke)
+                if query.parameters:  # only ``exact`` means anything (see exact_only)
+                    key += EXACT_SUFFIX if exact_only(query.parameters) else ""
                 answer = get(key) or get_error(key)
                 if answer is None:
                     routed = route(scope, query, key)
@@ -217,14 +227,16 @@ class DatabankService:
         if "*" in key or "$" in key:
             self._wildcard(scope, query, key)
             return None
-        platform, _, rest = key[len(self._head) :].partition("/")
+        plain = key.removesuffix(EXACT_SUFFIX)  # the cache keeps exact-only answers apart
+        exact = plain != key
+        platform, _, rest = plain[len(self._head) :].partition("/")
         st = scope.get(platform)
         if st is None:  # only when this replica serves every known platform
             return self.errors.put(key, self._unknown(platform), failed)
         try:
             if rest.startswith("pose/"):
-                pk = self.keys.parse_pose_key(key)
-                pose = st.ecl.query(pk.limb, pk.origin, pk.direction, parse_size(pk.size))
+                pk = self.keys.parse_pose_key(plain)
+                pose = st.ecl.query(pk.limb, pk.origin, pk.direction, parse_size(pk.size), exact)
                 answer = ok(pose)
             elif rest == "catalogue":
                 answer = ok(st.ecl.catalogue())

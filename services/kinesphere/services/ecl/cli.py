@@ -41,8 +41,10 @@ def register(sub: Any) -> None:
         help="f_SB: print the pose for LIMB ORIGIN DIRECTION SIZE",
         description="Evaluate f_SB locally: integer sizes give the stored row, fractions "
         "interpolate in joint space, sizes past the largest stored one add a base translation "
-        "(mobile platforms only), place-middle gives the limb's neutral pose. Use 'c_1 c_1 "
-        "DIRECTION SIZE' for a pure base translation on mobile platforms.",
+        "(mobile platforms only), place-middle gives the limb's neutral pose; a direction the "
+        "limb lacks is served by the nearest one it has within 45 degrees (and says so) unless "
+        "--exact. Use 'c_1 c_1 DIRECTION SIZE' for a pure base translation on mobile "
+        "platforms.",
     )
     _platform_args(g)
     g.add_argument("limb", help="limb label or alias, e.g. limb_11 or right_arm")
@@ -50,6 +52,8 @@ def register(sub: Any) -> None:
     g.add_argument("direction", help="Laban direction, e.g. left-high or 'Place Low'")
     g.add_argument("size", help="size: 1 near, 2 mid, 3 far, fractions, or near/mid/far")
     g.add_argument("--json", action="store_true", help="print the protocol Pose as JSON")
+    g.add_argument("--exact", action="store_true",
+                   help="this direction only: no substitution by the nearest one the limb has")
     g.set_defaults(func=_get)
 
     r = ecl_sub.add_parser(
@@ -166,7 +170,7 @@ def parse_joints(tokens: list[str]) -> dict[str, float]:
 
 
 def _get(args: argparse.Namespace) -> int:
-    pose = _open(args).query(args.limb, args.origin, args.direction, args.size)
+    pose = _open(args).query(args.limb, args.origin, args.direction, args.size, args.exact)
     _print_pose(pose, args.json)
     return 0
 
@@ -212,6 +216,9 @@ def _print_pose(pose: Pose, as_json: bool) -> None:
     if pose.translation is not None:
         table.add_row("base translation (m)", ", ".join(f"{v:.3f}" for v in pose.translation))
     console.print(table)
+    for sub in pose.substitutions:
+        console.print(f"substituted: {sub.limb} has no {sub.requested}; served {sub.served} "
+                      f"({sub.angle:.1f} degrees away)", highlight=False, markup=False)
 
 
 def _show(args: argparse.Namespace) -> int:

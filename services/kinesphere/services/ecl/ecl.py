@@ -24,6 +24,7 @@ from kinesphere.protocol import (
     JointLimit,
     LimbEntry,
     Pose,
+    Substitution,
 )
 from kinesphere.robots.platform import Platform, load_platform
 from kinesphere.services.ecl import transfer
@@ -31,8 +32,10 @@ from kinesphere.services.ecl.cells import Cell, build_cells
 from kinesphere.services.ecl.compound import PartLike as PartLike
 from kinesphere.services.ecl.compound import join
 from kinesphere.services.ecl.db import Tables, read_tables, upsert_pose, write_tables
+from kinesphere.services.ecl.fallback import nearest_cell
 from kinesphere.services.ecl.store import check_record, default_db_path, limb_neutral, size_value
 from kinesphere.services.ecl.vsam import Vsam, vsam_from_dict
+from kinesphere.sizes import MAX_TRANSLATION
 
 log = logging.getLogger(__name__)
 _DB_SUFFIXES = (".sqlite", ".sqlite3", ".db")
@@ -113,11 +116,21 @@ class Ecl:
         self._origins = _names(e.distals, set(e.J)) | _names(e.core, set(e.C))
         self._neutral = {li: limb_neutral(plat, li) for li in e.L}
         self._quality = {(p, k): (c, r, m) for p, k, c, r, m in t.quality}
+        self._max_size = vsam.max_size
+        self._core = frozenset(e.C)
         self._catalogue: Catalogue | None = None
 
     # -- f_SB --------------------------------------------------------------------------------
-    def query(self, limb: str, origin: str, direction: str | Direction, size: object) -> Pose:
-        """f_SB(l, o, d, s): the pose for a spatial command (see docs/architecture.md)."""
+    def query(self, limb: str, origin: str, direction: str | Direction, size: object,
+              exact: bool = False) -> Pose:
+        """f_SB(l, o, d, s): the pose for a spatial command (see docs/architecture.md).
+
+        A direction the limb does not have is served by the nearest one it has within
+        MAX_SUBSTITUTION degrees (:mod:`kinesphere.services.ecl.fallback`), reported in
+        ``Pose.substitutions`` with ``direction`` the served one; ``exact`` asks for this
+        direction only (else ``direction_unavailable``), and so does the core: the base is
+        driven only in its 8 translation directions, never in a substitute.
+        """
         try:
             lname = self._limbs[limb]
         except (KeyError, TypeError):
@@ -133,20 +146,19 @@ class Ecl:
             slug = self._slugs[direction]
         except (KeyError, TypeError):
             slug = self._direction(direction)
-        if (type(size) is float or type(size) is int) and 0 <= size < 1e15:
+        if (type(size) is float or type(size) is int) and 0 <= size <= self._max_size:
             s = float(size)
         else:
-            s = size_value(size)
+            s = self._size(size)
         cell = cells.get(slug)
         if slug == _PLACE_MIDDLE and lname in self._neutral:
             return Pose(platform=self._name, limb=lname, origin=oname, direction=slug, size=s,
                         joints=dict(self._neutral[lname]),
                         k_id=cell.k_id if cell is not None else NO_ID)
+        substitutions: list[Substitution] = []
         if cell is None:
-            raise KinesphereError(
-                "direction_unavailable", f"({lname}, {oname}) has no direction {slug}; it has: "
-                f"{', '.join(d.slug for d in self.directions(lname, oname))}",
-            )
+            cell, sub = nearest_cell(lname, oname, cells, slug, exact or lname in self._core)
+            substitutions.append(sub)
         translation: list[float] | None = None
         p_id: int | None = None
         knots = cell.knots
@@ -166,8 +178,9 @@ class Ecl:
         else:
             joints = dict(cell.stored[-1])
             translation = self._translate(cell, s - knots[-1])
-        return Pose(platform=self._name, limb=lname, origin=oname, direction=slug, size=s,
-                    joints=joints, translation=translation, k_id=cell.k_id, p_id=p_id)
+        return Pose(platform=self._name, limb=lname, origin=oname, direction=cell.slug, size=s,
+                    joints=joints, translation=translation, k_id=cell.k_id, p_id=p_id,
+                    substitutions=substitutions)
 
     def _translate(self, cell: Cell, units: float) -> list[float]:
         """``units`` translation steps along the cell's unit horizontal, body frame."""
@@ -183,14 +196,27 @@ class Ecl:
                 f"along it, so sizes above {cell.sizes[-1]} are not available",
             )
         k = units * step
-        if not math.isfinite(k):
-            raise KinesphereError("size_out_of_range", f"size too large: {units} steps")
+        if not math.isfinite(k) or k > MAX_TRANSLATION:
+            raise KinesphereError(
+                "size_out_of_range", f"size too large: {units:g} steps of {step:g} m is more "
+                f"than the {MAX_TRANSLATION:g} m one answer may translate the base",
+            )
         return [h[0] * k + 0.0, h[1] * k + 0.0, 0.0]  # + 0.0: no -0.0 at size 0
+
+    def _size(self, size: object) -> float:
+        s = size_value(size)
+        if s > self._max_size and self.vsam.can_translate:
+            raise KinesphereError(
+                "size_out_of_range", f"size {s:g} is past {self._name}'s largest size "
+                f"{self._max_size:g} (at most {MAX_TRANSLATION:g} m of base translation)",
+            )
+        return s
 
     def compound(self, parts: Sequence[PartLike], last_wins: bool = False) -> Pose:
         """Join several parts joint-wise; translations add (see :func:`compound.join`).
 
-        A joint set by two parts to different values is a ``conflict`` unless ``last_wins``.
+        A joint set by two parts to different values is a ``conflict`` unless ``last_wins``;
+        a part with ``exact`` is not substituted.
         """
         return join(self.query, self._name, parts, last_wins)
 
@@ -272,6 +298,8 @@ class Ecl:
             sizes=sorted({s for cs in self._cells.values() for c in cs.values() for s in c.sizes}),
             aliases=dict(e.aliases),
             version=self.version,
+            max_size=self._max_size,
+            base_kind=self.platform.base.kind,
         )
         return self._catalogue
 

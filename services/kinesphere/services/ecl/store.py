@@ -95,8 +95,8 @@ def check_record(
     joints: Mapping[str, object],
 ) -> tuple[str, str, Direction, int, dict[str, float]]:
     """Validate a super-user edit before anything is written: the (limb, origin) pair and the
-    direction are in the VSAM, place-middle is refused, the size is a positive integer and
-    the joints belong to the limb (:func:`check_joints`, not necessarily all of them).
+    direction are in the VSAM, place-middle is refused, the size is one of the VSAM's sizes
+    and the joints belong to the limb (:func:`check_joints`, not necessarily all of them).
 
     Returns the limb and origin labels, the direction, the size and the checked joints.
     """
@@ -124,9 +124,10 @@ def check_record(
             f"{platform.folder / 'platform.toml'} instead",
         )
     s = size_value(size)
-    if not s.is_integer() or s < 1:
+    if s not in vsam.sizes:
         raise KinesphereError(
-            "size_out_of_range", f"a recorded size must be a positive integer, got {size!r}"
+            "size_out_of_range", f"a recorded size must be one of the VSAM's sizes "
+            f"{', '.join(map(str, vsam.sizes))}, got {size!r}",
         )
     if not isinstance(joints, Mapping) or not joints:
         raise KinesphereError("malformed", "record needs joints: a non-empty name -> value map")

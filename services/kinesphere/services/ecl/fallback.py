@@ -1,0 +1,46 @@
+"""Honest fallbacks: a direction a limb lacks is served by the nearest one it has.
+
+A fleet command reaches bodies with different vocabularies (NAO's head has no place-high, a
+PackBot's arm no left-low). Rather than leave them silent, the ECL serves the nearest direction
+the limb has by the one rule the gamepad client uses too
+(:func:`kinesphere.substitution.nearest_direction`: never from the opposite side, smallest
+angle, ties toward the front), within MAX_SUBSTITUTION degrees, and says so in the answer. A
+command that asks for the exact direction gets ``direction_unavailable`` instead.
+"""
+
+from __future__ import annotations
+
+from kinesphere.errors import KinesphereError
+from kinesphere.laban import Direction
+from kinesphere.protocol import Substitution
+from kinesphere.services.ecl.cells import Cell
+from kinesphere.substitution import nearest_direction
+
+MAX_SUBSTITUTION = 45.0
+"""Degrees: the farthest a served direction may lie from the requested one. 45 degrees reaches
+every neighbour on Laban's cube but the corner-to-axis ones (54.7): left-low may be served by
+left-forward-low (35.3), place-high by forward-high (45), never forward-middle by left-middle
+(90)."""
+
+
+def nearest_cell(limb: str, origin: str, cells: dict[str, Cell], slug: str, exact: bool
+                 ) -> tuple[Cell, Substitution]:
+    """The cell serving ``slug`` for a pair whose ``cells`` lack it, and the substitution to
+    report; ``direction_unavailable`` when ``exact`` or nothing lies within the limit."""
+    have = [d for d in Direction if d.slug in cells]
+    valid = ", ".join(d.slug for d in have)
+    if exact:
+        raise KinesphereError(
+            "direction_unavailable", f"({limb}, {origin}) has no direction {slug} and the "
+            f"command asked for it exactly; it has: {valid}",
+        )
+    choice = nearest_direction(Direction.parse(slug), have, MAX_SUBSTITUTION)
+    if choice is None:
+        raise KinesphereError(
+            "direction_unavailable", f"({limb}, {origin}) has no direction {slug} nor one "
+            f"within {MAX_SUBSTITUTION:g} degrees on the same side; it has: {valid}",
+        )
+    served = choice.direction.slug
+    sub = Substitution(limb=limb, origin=origin, requested=slug, served=served,
+                       angle=round(choice.angle, 3))
+    return cells[served], sub

@@ -1,0 +1,173 @@
+"""Honest fallbacks and bounded sizes: a direction a body lacks is served by the nearest one it
+has (and says so) unless asked for exactly; sizes stop at the platform's max_size; over the wire
+too, with the shipped databanks."""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Iterator
+
+import numpy as np
+import pytest
+import zenoh
+from test_databank_support import KEYS, answered, error_code, peer, pose_of, raw_get
+from test_ecl_honesty import gaze
+
+from kinesphere import protocol as pr
+from kinesphere import zconfig
+from kinesphere.cli import main
+from kinesphere.errors import KinesphereError
+from kinesphere.keyexpr import EXACT
+from kinesphere.laban import Direction
+from kinesphere.services.databank.service import DatabankService
+from kinesphere.services.ecl.ecl import Ecl
+from kinesphere.services.ecl.fallback import MAX_SUBSTITUTION
+from kinesphere.sizes import MAX_TRANSLATION
+from kinesphere.substitution import nearest_direction
+
+ARM = ("limb_11", "distal_11")
+
+
+@pytest.fixture(scope="module")
+def packbot() -> Ecl:
+    return Ecl.open("packbot")
+
+
+def test_a_missing_direction_is_served_by_the_nearest_and_reported(packbot: Ecl) -> None:
+    have = packbot.directions(*ARM)
+    assert Direction.LEFT_LOW not in have and Direction.LEFT_FORWARD_LOW in have
+    pose = packbot.query("arm", "shoulder", "left-low", 2)
+    served = packbot.query(*ARM, "left-forward-low", 2)
+    assert pose.direction == "left-forward-low" and pose.joints == served.joints
+    assert pose.k_id == served.k_id and pose.p_id == 2
+    (sub,) = pose.substitutions
+    assert (sub.limb, sub.origin, sub.requested, sub.served) == (*ARM, "left-low",
+                                                                 "left-forward-low")
+    assert sub.angle == pytest.approx(35.264, abs=1e-3)
+    assert served.substitutions == []  # a direction it has: exact, nothing reported
+    with pytest.raises(KinesphereError) as err:
+        packbot.query(*ARM, "left-low", 2, exact=True)
+    assert err.value.code == "direction_unavailable" and "exactly" in err.value.message
+    assert "left-forward-low" in err.value.message
+
+
+@pytest.mark.parametrize("platform", ["baxter", "nao", "youbot", "packbot"])
+def test_every_substitution_follows_the_shared_rule_within_the_limit(platform: str) -> None:
+    ecl = Ecl.open(platform)
+    for entry in ecl.catalogue().limbs:
+        have = [Direction.parse(d) for d in entry.directions]
+        for requested in Direction.pulls():
+            choice = nearest_direction(requested, have, MAX_SUBSTITUTION)
+            if choice is None:
+                with pytest.raises(KinesphereError) as err:
+                    ecl.query(entry.limb, entry.origin, requested, 3)
+                assert err.value.code == "direction_unavailable"
+                continue
+            pose = ecl.query(entry.limb, entry.origin, requested, 3)
+            assert pose.direction == choice.direction.slug
+            if choice.angle == 0:
+                assert pose.substitutions == []
+            else:
+                assert pose.substitutions[0].angle <= MAX_SUBSTITUTION
+                assert pose.substitutions[0].requested == requested.slug
+
+
+def test_the_core_and_place_middle_are_never_substituted() -> None:
+    youbot = Ecl.open("youbot")
+    with pytest.raises(KinesphereError) as err:
+        youbot.query("c_1", "c_1", "forward-high", 1)
+    assert err.value.code == "direction_unavailable"
+    assert youbot.query(*ARM, "place-middle", 3).substitutions == []
+
+
+def test_compound_parts_substitute_or_stay_exact(packbot: Ecl) -> None:
+    parts = [pr.SpatialCommand("arm", "shoulder", "left-low", 3),
+             pr.SpatialCommand("flippers", "flipper_axle", "forward-high", 3)]
+    flipper_dirs = {d.slug for d in packbot.directions("limb_21", "distal_21")}
+    pose = packbot.compound(parts)
+    requested = {s.requested for s in pose.substitutions}
+    assert "left-low" in requested
+    assert ("forward-high" in requested) == ("forward-high" not in flipper_dirs)
+    assert pose.parts[0].direction == "left-forward-low"
+    exact = [parts[0], pr.SpatialCommand("arm", "shoulder", "left-low", 3, exact=True)]
+    with pytest.raises(KinesphereError) as err:
+        packbot.compound(exact, last_wins=True)
+    assert err.value.code == "direction_unavailable"
+
+
+def test_sizes_stop_at_max_size_and_translations_at_ten_metres() -> None:
+    youbot = Ecl.open("youbot")
+    cat = youbot.catalogue()
+    assert cat.max_size == 23 and cat.base_kind == "omni"
+    far = youbot.query("c_1", "c_1", "forward-middle", cat.max_size)
+    assert far.translation == pytest.approx([23 * 0.25, 0.0, 0.0])
+    for size in (23.5, 1.8e19, 1e300):
+        with pytest.raises(KinesphereError) as err:
+            youbot.query(*ARM, "forward-middle", size)
+        assert err.value.code == "size_out_of_range" and "23" in err.value.message
+    packbot = Ecl.open("packbot")  # 0.5 m steps: 20 past far is exactly the 10 m cap
+    drive = [pr.SpatialCommand("c_1", "c_1", "forward-middle", 20.0),
+             pr.SpatialCommand("c_1", "c_1", "left-middle", 20.0)]
+    with pytest.raises(KinesphereError) as err:
+        packbot.compound(drive, last_wins=True)
+    assert err.value.code == "size_out_of_range" and f"{MAX_TRANSLATION:g} m" in err.value.message
+    baxter = Ecl.open("baxter")
+    assert baxter.catalogue().max_size == 3 and baxter.catalogue().base_kind == "fixed"
+    with pytest.raises(KinesphereError) as err:
+        baxter.query(*ARM, "left-high", 4)
+    assert err.value.code == "cannot_translate"
+
+
+# -- over the wire ---------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def net() -> Iterator[tuple[str, zenoh.Session]]:
+    """The shipped NAO and PackBot databanks served in-process; the hub's endpoint and a
+    querier joined to it."""
+    with zconfig.loopback_hub() as (_hub, endpoint):
+        server, client = peer(endpoint), peer(endpoint)
+        ecls = {"nao": Ecl.open("nao"), "packbot": Ecl.open("packbot")}
+        try:
+            with DatabankService(server, ecls, KEYS, "shipped"):
+                answered(client, KEYS.catalogue("nao"))
+                yield endpoint, client
+        finally:
+            zconfig.close_session(client)
+            zconfig.close_session(server)
+
+
+def test_query_nao_head_left_middle_looks_left(
+    net: tuple[str, zenoh.Session], capsys: pytest.CaptureFixture[str],
+) -> None:
+    endpoint, _ = net
+    zargs = ["--connect", endpoint, "--prefix", KEYS.prefix, "--timeout", "5"]
+    assert main(["query", "nao", "head", "neck", "left-middle", "3", "--json", *zargs]) == 0
+    pose = json.loads(capsys.readouterr().out)
+    assert (pose["limb"], pose["direction"], pose["substitutions"]) == (
+        "limb_51", "left-middle", [])
+    looks = gaze("nao", pose["joints"])
+    assert looks[1] > 0.95, looks  # +y is the robot's left
+    assert main(["query", "nao", "head", "neck", "place-high", "3", *zargs]) == 0
+    out = capsys.readouterr().out
+    assert "forward-high" in out and "substituted: limb_51 has no place-high" in out
+    assert main(["query", "nao", "head", "neck", "place-high", "3", "--exact", *zargs]) == 2
+    assert "[direction_unavailable]" in capsys.readouterr().err
+
+
+def test_exact_selector_and_substitution_on_the_wire(net: tuple[str, zenoh.Session]) -> None:
+    _, client = net
+    key = KEYS.pose("packbot", *ARM, "left-low", 3)
+    pose = pose_of(raw_get(client, key))
+    assert pose.direction == "left-forward-low" and pose.substitutions[0].requested == "left-low"
+    assert error_code(raw_get(client, key + EXACT)) == "direction_unavailable"
+    assert pose_of(raw_get(client, key)) == pose  # the cached answers stay apart
+    assert pose_of(raw_get(client, key + "?other=1")) == pose  # other parameters: ignored
+    exact_hit = pose_of(raw_get(client, KEYS.pose("packbot", *ARM, "left-forward-low", 3) + EXACT))
+    assert exact_hit.joints == pose.joints and exact_hit.substitutions == []
+    big = KEYS.pose("packbot", "c_1", "c_1", "forward-middle", 1.8e19)
+    assert error_code(raw_get(client, big)) == "size_out_of_range"
+    request = pr.CompoundRequest(parts=[pr.SpatialCommand("arm", "shoulder", "left-low", 3)])
+    joined = pose_of(raw_get(client, KEYS.compound("packbot"), pr.encode(request)))
+    assert joined.substitutions[0].served == "left-forward-low"
+    assert math.isclose(joined.substitutions[0].angle, 35.264, abs_tol=1e-3)
+    assert np.isclose(joined.joints["turret"], pose.joints["turret"])
