@@ -16,11 +16,12 @@ Two candidate chains, tried in order:
 
 A chain is *honest* when the tip advances along d from neutral through every size (near at
 least MIN_ADVANCE ahead of neutral, then MIN_GAP of the even spacing up to far apart), every
-smaller size points within COS_SIZE of d, no pose touches anything or topples, no joint turns
-back more than DETOUR_SLACK on its way from neutral through the sizes to far, and none moves
-between two successive sizes more than STEP_SLACK beyond its even share of its way from near
-to far (no wrist flips between sizes). Deterministic: no randomness, fixed iteration caps,
-values rounded.
+smaller size points within COS_SIZE of d, no pose touches anything or topples, every size is
+reachable from neutral without touching anything (the agent's planner, waypoints allowed), no
+joint turns back more than DETOUR_SLACK on its way from neutral through the sizes to far, and
+none moves between two successive sizes more than STEP_SLACK beyond its even share of its way
+from near to far (no wrist flips between sizes). Deterministic: no randomness, fixed iteration
+caps, values rounded.
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from kinesphere.robots.clearance import Clearance, Touch
 from kinesphere.services.ecl.arcs import along_arc, arc_at, cosine
 from kinesphere.services.ecl.balance import Balance
 from kinesphere.services.ecl.ik import LimbSolver
@@ -40,7 +42,7 @@ NEAR_FRACTION = 0.4  # a ray's near reach: no closer than 40% of the far project
 SHORTEN = 0.2  # the ray family needs the tip to come back along d by 20% of far
 MIN_ADVANCE = 0.02  # near is at least 2% of the limb's span ahead of neutral along d
 MIN_GAP = 0.25  # consecutive sizes differ by at least 25% of their even spacing near..far
-DETOUR_SLACK = 1.0  # rad a joint may turn back, in all, from neutral through the sizes to far
+DETOUR_SLACK = 1.5  # rad a joint may turn back, in all, from neutral through the sizes to far
 STEP_SLACK = 0.75  # rad a joint may move between two sizes beyond its even share
 SIZE_POSTURE = 0.1  # posture weight per radian toward the straight joint-space way
 NUDGE_POSTURE = 1.0  # ... and toward a segment pose being nudged onto the ray
@@ -108,6 +110,9 @@ class Sizes:
         self.balance = balance
         self.sizes = sizes
         self.neutral_values = solver.neutral[solver.qadr]
+        self.clearance = Clearance(solver.pm)
+        names = solver.pm.platform.joint_names
+        self._in_p = np.array([names.index(j) for j in solver.joints], dtype=int)
 
     def candidates(self, far: Pose, d: np.ndarray) -> Iterator[list[Pose] | str | Beyond]:
         """The IK chain, then segment chains whose near starts where the tip first points at
@@ -147,6 +152,19 @@ class Sizes:
         if jump > STEP_SLACK:
             return (f"a joint jumps {jump:.2f} rad beyond its even step between sizes "
                     f"(> {STEP_SLACK})")
+        return None
+
+    def reachable(self, chain: list[Pose]) -> str | None:
+        """Why a size cannot be reached from neutral without touching anything, or None: the
+        agent's own planner (:mod:`kinesphere.robots.clearance`, waypoints allowed) must find
+        a clear way to every stored pose, so no stored pose is blocked from neutral."""
+        start = self.clearance.neutral
+        for size, pose in zip(self.sizes, chain, strict=True):
+            goal = start.copy()
+            goal[self._in_p] = pose.values
+            route = self.clearance.route(start, goal)
+            if isinstance(route, Touch):
+                return f"size {size}: no collision-free way from neutral ({route})"
         return None
 
     def path(self, chain: list[Pose]) -> str | None:

@@ -13,11 +13,13 @@ point).
 * smaller sizes (``chains``): near, mid, ... are steps from neutral toward far along d, an IK
   chain on the ray or arc, else the straight joint-space segment to far.
 
-A direction is kept only if it is honest: the far tip lies within COS_FAR of d (cosine of d
-and tip - origin; 0.85 is about 32 degrees), the tip advances along d from neutral through
-every size, no joint flips between sizes, and no pose touches another part of the robot, dips
-below the floor or topples (``balance``: the whole-body centre of mass stays over what still
-touches the floor). Everything else is dropped and reported, toppling apart ("unstable").
+A direction is kept only if it is honest: the far tip lies within COS_FAR of d (cosine of d and
+tip - origin; 0.85 is about 32 degrees), the tip advances along d from neutral through every
+size, no joint flips between sizes, and no pose touches another part of the robot, dips below
+the floor or topples (``balance``: the whole-body centre of mass stays over what still touches
+the floor), and the agent's planner finds a way from neutral to every size that touches nothing
+(``kinesphere.robots.clearance``). Everything else is dropped and reported, toppling apart
+("unstable").
 Among honest chains the one pointing best (highest mean cosine) whose f_SB interpolation
 (straight in joint space between sizes) stays clear is kept; if none stays clear, the pull is
 kept and the report names what its path touches. A smaller size that reaches past far shows
@@ -253,6 +255,10 @@ def _chain(solver: LimbSolver, sizes: Sizes, far: Pose, d: np.ndarray
         honest.append(chain)
     touching: list[tuple[list[Pose], str]] = []
     for chain in sorted(honest, key=_pointing, reverse=True):  # stable: ties keep their order
+        blocked = sizes.reachable(chain)
+        if blocked is not None:
+            whys.append(blocked)
+            continue
         touched = sizes.path(chain)
         if touched is None:
             return _nudge(sizes, chain, None, d)
