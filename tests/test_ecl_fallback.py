@@ -22,9 +22,8 @@ from kinesphere.keyexpr import EXACT
 from kinesphere.laban import Direction
 from kinesphere.services.databank.service import DatabankService
 from kinesphere.services.ecl.ecl import Ecl
-from kinesphere.services.ecl.fallback import MAX_SUBSTITUTION
 from kinesphere.sizes import MAX_TRANSLATION
-from kinesphere.substitution import nearest_direction
+from kinesphere.substitution import MAX_ANGLE_DEG, nearest_direction
 
 ARM = ("limb_11", "distal_11")
 
@@ -58,7 +57,7 @@ def test_every_substitution_follows_the_shared_rule_within_the_limit(platform: s
     for entry in ecl.catalogue().limbs:
         have = [Direction.parse(d) for d in entry.directions]
         for requested in Direction.pulls():
-            choice = nearest_direction(requested, have, MAX_SUBSTITUTION)
+            choice = nearest_direction(requested, have, MAX_ANGLE_DEG)
             if choice is None:
                 with pytest.raises(KinesphereError) as err:
                     ecl.query(entry.limb, entry.origin, requested, 3)
@@ -69,7 +68,7 @@ def test_every_substitution_follows_the_shared_rule_within_the_limit(platform: s
             if choice.angle == 0:
                 assert pose.substitutions == []
             else:
-                assert pose.substitutions[0].angle <= MAX_SUBSTITUTION
+                assert pose.substitutions[0].angle <= MAX_ANGLE_DEG
                 assert pose.substitutions[0].requested == requested.slug
 
 

@@ -126,10 +126,10 @@ class Ecl:
         """f_SB(l, o, d, s): the pose for a spatial command (see docs/architecture.md).
 
         A direction the limb does not have is served by the nearest one it has within
-        MAX_SUBSTITUTION degrees (:mod:`kinesphere.services.ecl.fallback`), reported in
-        ``Pose.substitutions`` with ``direction`` the served one; ``exact`` asks for this
-        direction only (else ``direction_unavailable``), and so does the core: the base is
-        driven only in its 8 translation directions, never in a substitute.
+        ``kinesphere.substitution.MAX_ANGLE_DEG`` (:mod:`kinesphere.services.ecl.fallback`),
+        reported in ``Pose.substitutions`` with ``direction`` the served one; ``exact`` asks
+        for this direction only (else ``direction_unavailable``), and so does the core: the
+        base is driven only in its 8 translation directions, never in a substitute.
         """
         try:
             lname = self._limbs[limb]

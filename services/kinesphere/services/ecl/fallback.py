@@ -4,8 +4,9 @@ A fleet command reaches bodies with different vocabularies (NAO's head has no pl
 PackBot's arm no left-low). Rather than leave them silent, the ECL serves the nearest direction
 the limb has by the one rule the gamepad client uses too
 (:func:`kinesphere.substitution.nearest_direction`: never from the opposite side, smallest
-angle, ties toward the front), within MAX_SUBSTITUTION degrees, and says so in the answer. A
-command that asks for the exact direction gets ``direction_unavailable`` instead.
+angle, ties toward the front), within the same :data:`kinesphere.substitution.MAX_ANGLE_DEG`
+(45 degrees), and says so in the answer. A command that asks for the exact direction gets
+``direction_unavailable`` instead.
 """
 
 from __future__ import annotations
@@ -14,13 +15,7 @@ from kinesphere.errors import KinesphereError
 from kinesphere.laban import Direction
 from kinesphere.protocol import Substitution
 from kinesphere.services.ecl.cells import Cell
-from kinesphere.substitution import nearest_direction
-
-MAX_SUBSTITUTION = 45.0
-"""Degrees: the farthest a served direction may lie from the requested one. 45 degrees reaches
-every neighbour on Laban's cube but the corner-to-axis ones (54.7): left-low may be served by
-left-forward-low (35.3), place-high by forward-high (45), never forward-middle by left-middle
-(90)."""
+from kinesphere.substitution import MAX_ANGLE_DEG, nearest_direction
 
 
 def nearest_cell(limb: str, origin: str, cells: dict[str, Cell], slug: str, exact: bool
@@ -34,11 +29,11 @@ def nearest_cell(limb: str, origin: str, cells: dict[str, Cell], slug: str, exac
             "direction_unavailable", f"({limb}, {origin}) has no direction {slug} and the "
             f"command asked for it exactly; it has: {valid}",
         )
-    choice = nearest_direction(Direction.parse(slug), have, MAX_SUBSTITUTION)
+    choice = nearest_direction(Direction.parse(slug), have, MAX_ANGLE_DEG)
     if choice is None:
         raise KinesphereError(
             "direction_unavailable", f"({limb}, {origin}) has no direction {slug} nor one "
-            f"within {MAX_SUBSTITUTION:g} degrees on the same side; it has: {valid}",
+            f"within {MAX_ANGLE_DEG:g} degrees on the same side; it has: {valid}",
         )
     served = choice.direction.slug
     sub = Substitution(limb=limb, origin=origin, requested=slug, served=served,
