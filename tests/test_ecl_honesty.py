@@ -5,6 +5,8 @@ README's coverage table."""
 
 from __future__ import annotations
 
+import copy
+from dataclasses import replace
 from functools import cache
 from pathlib import Path
 
@@ -99,6 +101,14 @@ def test_the_balance_check_sees_a_lifted_leg_topple() -> None:
     assert len(square) == 4
     assert inside(square, np.array([0.5, 0.5])) == pytest.approx(0.5)
     assert inside(square, np.array([2.0, 0.5])) == pytest.approx(-1.0)
+    # a fixed base is bolted down (Baxter's pedestal, a brought arm on a table): never checked
+    baxter = platform_model("baxter")
+    heavy = replace(baxter, model=copy.deepcopy(baxter.model))
+    heavy.model.body_ipos[heavy.model.body("torso").id] = (3.0, 0.0, 0.0)  # torso mass 3 m out
+    anchored = Balance(heavy)
+    assert anchored.anchored and not balance.anchored
+    assert anchored.margin(baxter.neutral_qpos())[0] < 0  # it would fall, were it not bolted
+    assert anchored.check(baxter.neutral_qpos()) is None
 
 
 def test_nao_legs_keep_only_stable_directions_and_the_report_says_why(

@@ -4,7 +4,9 @@ The paper leaves out the directions that would topple NAO. A pose is *statically
 the ground projection of the whole body's centre of mass lies inside the support polygon (the
 convex hull of every robot point within TOUCH of the floor: both soles, the stance sole when a
 foot is lifted, a track, a pedestal) at least MARGIN inside its edge. The check is the same
-for every platform; on wheels, tracks or a pedestal it rarely bites, on one foot it decides.
+for every mobile platform; on wheels or tracks it rarely bites, on one foot it decides. A fixed
+base (``[base] kind = "fixed"``: Baxter's pedestal, an arm bolted to a table) is anchored and
+cannot topple, so it is never checked: a Panda reaching forward is no fall.
 """
 
 from __future__ import annotations
@@ -33,6 +35,7 @@ class Balance:
                     points.append(p)
                     radii.append(r)
         self.model = m
+        self.anchored = not pm.platform.base.mobile
         self._bodies = np.array(bodies, dtype=int)
         self._points = np.array(points, dtype=float).reshape(-1, 3)
         self._radii = np.array(radii, dtype=float)
@@ -53,7 +56,10 @@ class Balance:
         return inside(hull(world[down, :2]), com), names
 
     def check(self, qpos: np.ndarray) -> str | None:
-        """Why a pose would topple (centre of mass too near or past the edge), or None."""
+        """Why a pose would topple (centre of mass too near or past the edge), or None; always
+        None on an anchored (fixed) base."""
+        if self.anchored:
+            return None
         margin, names = self.margin(qpos)
         if margin >= MARGIN:
             return None
