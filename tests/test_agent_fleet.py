@@ -31,6 +31,7 @@ from test_agent_support import (
 )
 
 from kinesphere import zconfig
+from kinesphere.cli import main
 from kinesphere.errors import KinesphereError
 from kinesphere.protocol import Catalogue, SpatialCommand
 from kinesphere.robots.agent.fleet import (
@@ -262,3 +263,35 @@ def test_fleet_command_line_errors(tmp_path: Path) -> None:
                         (["agent"], "give a PLATFORM")):
         done = run(*argv)
         assert done.returncode != 0 and named in done.stderr, (argv, done.stderr)
+
+
+def test_send_all_moves_every_body_exact_or_substituted(
+    hub: tuple[zenoh.Session, str], databank: Databank
+) -> None:
+    """A fleet command in a direction only some bodies keep: every robot moves, the others by
+    the nearest direction they have, each robot reporting what it was served."""
+    session, endpoint = hub
+    robots = [RobotSpec(p, f"s-{p}") for p in ("baxter", "nao", "packbot", "youbot")]
+    pose = ("limb_11", "distal_11", "left-low", 3)
+    answers = {r.robot_id: databank.query(r.platform, SpatialCommand(*pose)) for r in robots}
+    served = {rid: [(s.requested, s.served) for s in a.substitutions]
+              for rid, a in answers.items()}
+    assert served == {"s-baxter": [], "s-youbot": [],
+                      "s-nao": [("left-low", answers["s-nao"].direction)],
+                      "s-packbot": [("left-low", "left-forward-low")]}
+    acks = AckWatch(session, "*")
+    with running_fleet(endpoint, robots) as (_fleet, watches):
+        assert main(["send", "all", *map(str, pose), "--connect", endpoint,
+                     "--prefix", KEYS.prefix, "--wait", str(WAIT_S)]) == 0  # fmt: skip
+        for rid, watch in watches.items():
+            want = answers[rid].substitutions
+            accepted = acks.wait(lambda a, rid=rid: (a.robot_id, a.stage) == (rid, "accepted"),
+                                 f"{rid} accepting the command")
+            assert accepted.substitutions == want, rid
+            watch.wait(lambda st, rid=rid: joints_close(st, answers[rid].joints, 0.02),
+                       f"{rid} at its {answers[rid].direction} pose")
+            acks.wait(lambda a, rid=rid: (a.robot_id, a.stage) == (rid, "reached"),
+                      f"{rid} reaching its pose")
+            moving = [st.substitutions for st in watch.states if st.status == "moving"]
+            assert moving and all(subs == want for subs in moving), rid
+    acks.close()
