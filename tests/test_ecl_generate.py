@@ -179,6 +179,11 @@ def test_build_and_report_commands(tmp_path: Path, capsys: pytest.CaptureFixture
     assert "medians" in out and "limb_11" in out and "all" in out
     assert main(["ecl", "build", "--all", "--db", str(db)]) == 2
     assert "cannot be used with --all" in capsys.readouterr().err
+    # a base-only platform (what --all meets in Khepera) builds its core rows, no limb job
+    assert main(["ecl", "build", "khepera", "--db", str(tmp_path / "k.sqlite")]) == 0
+    assert "khepera: 0 rows" in capsys.readouterr().out
+    assert len(read_tables(tmp_path / "k.sqlite").pose) == len(read_tables(
+        default_db_path(load_platform("khepera"))).pose) > 0
 
 
 def test_parallel_build_gives_the_serial_rows(tmp_path: Path,

@@ -65,7 +65,7 @@ def jobs(platforms: Iterable[str], limbs: tuple[str, ...] = ()) -> list[Job]:
         vsam = load_vsam(plat)
         wanted = {plat.eurdf.limb(x).name for x in limbs}
         entries = [e for e in vsam.entries if not e.is_core and (not limbs or e.limb in wanted)]
-        if not entries:
+        if limbs and not entries:  # a base-only platform (Khepera) has none: core rows only
             raise KinesphereError("unknown_limb", f"{plat.name}: no VSAM entry for "
                                   f"{', '.join(limbs)} in {plat.vsam_path}")
         for entry in entries:
@@ -82,7 +82,7 @@ def generate_many(platforms: list[str], workers: int | None = None,
     todo = jobs(platforms, limbs)
     results: dict[Job, tuple[list[PoseRow], EntryReport, float]] = {}
     workers = default_workers() if workers is None else max(1, workers)
-    if workers == 1:
+    if workers == 1 or not todo:
         for job in todo:
             results[job] = _run(job)
             if done is not None:
