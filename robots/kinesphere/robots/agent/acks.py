@@ -87,13 +87,16 @@ class Acks:
     """One robot's acknowledgements: the followed motion, the rate limit, the publisher.
 
     ``publish`` puts encoded bytes (None until the agent declared its publisher: nothing is
-    sent); ``lease_holder`` says who holds the robot's lease, for every ack.
+    sent); ``publish_urgent`` puts e-stop and release acks on the highest priority, so a queue
+    full of ordinary acks and states never drops them (the same as ``publish`` when unset);
+    ``lease_holder`` says who holds the robot's lease, for every ack.
     """
 
     def __init__(self, robot_id: str, lease_holder: Callable[[], str]) -> None:
         self.robot_id = robot_id
         self.lease_holder = lease_holder
         self.publish: Callable[[bytes], None] | None = None
+        self.publish_urgent: Callable[[bytes], None] | None = None
         self.limiter = AckLimiter()
         self.motion: Motion | None = None
         self.sent = 0
@@ -119,10 +122,11 @@ class Acks:
         first step (the rate limit already bounds how many wait)."""
         pending, self._pending = self._pending, []
         for cmd, stage, code, detail, substitutions, holder, stamp_ns in pending:
-            if self.publish is None:
+            publish = (self.publish_urgent if stage in URGENT else None) or self.publish
+            if publish is None:
                 return
             try:
-                self.publish(make_ack(self.robot_id, cmd, stage, code=code, detail=detail,
+                publish(make_ack(self.robot_id, cmd, stage, code=code, detail=detail,
                                       substitutions=substitutions, lease_holder=holder,
                                       stamp_ns=stamp_ns))
                 self.sent += 1

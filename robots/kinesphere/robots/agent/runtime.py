@@ -110,8 +110,10 @@ class Agent:
         self._publisher = s.declare_publisher(self.keys.state(self.robot_id),
                                               congestion_control=drop)
         acks = s.declare_publisher(self.keys.ack(self.robot_id), congestion_control=drop)
-        self.conduct.acks.publish = acks.put
-        self._entities += [self._publisher, acks]
+        urgent = s.declare_publisher(self.keys.ack(self.robot_id), congestion_control=drop,
+                                     priority=zenoh.Priority.REAL_TIME, express=True)
+        self.conduct.acks.publish, self.conduct.acks.publish_urgent = acks.put, urgent.put
+        self._entities += [self._publisher, acks, urgent]
         self._entities.append(s.liveliness().declare_token(self.keys.alive_robot(self.robot_id)))
         self.resolver.start()
         log.info("agent %s (%s) up: %s", self.robot_id, self.platform, keys[0])
@@ -135,7 +137,7 @@ class Agent:
         self.conduct.acks.flush()  # what the last step had to say
         undeclare(*reversed(self._entities))
         self._entities = []
-        self._publisher = self.conduct.acks.publish = None
+        self._publisher = self.conduct.acks.publish = self.conduct.acks.publish_urgent = None
         self.controller.body.close()
         log.info("agent %s down after %d steps (%d slips)", self.robot_id, self.stats.steps,
                  self.stats.slips)
