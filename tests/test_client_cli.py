@@ -4,7 +4,6 @@ accepted; a headless gamepad replay; user mistakes print ``error: ...`` and exit
 
 from __future__ import annotations
 
-import json
 import os
 import subprocess
 import sys
@@ -238,13 +237,10 @@ def test_lease_acquire_and_a_refusal_naming_the_holder(
 def test_gamepad_replays_a_recording_headless(
     hub: tuple[zenoh.Session, str], boxes: dict[str, StandIn], tmp_path: Path
 ) -> None:
-    rec = tmp_path / "r.jsonl"
-    push = ControllerState(rx=1.0, held=frozenset({Action.DEADMAN})).to_dict()
-    lines = [{"kinesphere": "gamepad-recording", "version": 1}]
-    lines += [{"t": k / 30, "state": push} for k in range(10)]
-    lines += [{"t": 10 / 30, "state": ControllerState().to_dict()}]
-    rec.write_text("\n".join(json.dumps(x) for x in lines) + "\n")
-    again = tmp_path / "again.jsonl"
+    rec = tmp_path / "r.mcap"
+    push = ControllerState(rx=1.0, held=frozenset({Action.DEADMAN}))
+    record.save(rec, [(k / 30, push) for k in range(10)] + [(10 / 30, ControllerState())])
+    again = tmp_path / "again.mcap"
     code = cli(hub[1], "gamepad", "--replay", str(rec), "--headless", "--target", "c2",
                "--record", str(again))  # fmt: skip
     assert code == 0
@@ -271,7 +267,7 @@ def test_gamepad_replays_a_recording_headless(
         (["send", "c1", "a", "b", "left", "1", "--drive", "up", "1"], "unknown direction"),
         (["send", "nobody", "a", "b", "left", "1", "--wait", "0.2"], "no robot listens"),
         (["play", "nonexistent_phrase"], "shipped phrases"),
-        (["gamepad", "--replay", "/nonexistent.jsonl", "--headless"], "cannot read recording"),
+        (["gamepad", "--replay", "/nonexistent.mcap", "--headless"], "cannot read recording"),
         (["gamepad", "--mapping", "/nonexistent.toml", "--headless"], "cannot read mapping"),
     ],
 )

@@ -6,7 +6,6 @@ e-stop from the operator without the lease stops the robot at once."""
 
 from __future__ import annotations
 
-import json
 import signal
 import subprocess
 import sys
@@ -21,6 +20,7 @@ from test_client_support import pygame_up
 
 from kinesphere import zconfig
 from kinesphere.cli import main
+from kinesphere.clients import record
 from kinesphere.clients import targets as tg
 from kinesphere.clients.lease import LEASE_TIMEOUT_S
 from kinesphere.clients.state import Action, ControllerState
@@ -118,10 +118,8 @@ def test_two_operators_only_the_lease_holder_moves_the_robot(
 def test_a_killed_holders_lease_lapses_on_time_and_the_other_operator_gets_it(
     free: Fleet, pygame_up: None, tmp_path: Path
 ) -> None:
-    rec = tmp_path / "alice.jsonl"
-    lines = [{"kinesphere": "gamepad-recording", "version": 1}]
-    lines += [{"t": k / 10, "state": LEFT_LOW.to_dict()} for k in range(600)]  # a minute
-    rec.write_text("\n".join(json.dumps(x) for x in lines) + "\n")
+    rec = tmp_path / "alice.mcap"
+    record.save(rec, [(k / 10, LEFT_LOW) for k in range(600)])  # a minute
     start = time.monotonic()
     alice = subprocess.Popen(
         [sys.executable, "-m", "kinesphere.cli", "gamepad", "--replay", str(rec), "--headless",

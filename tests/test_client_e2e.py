@@ -8,7 +8,6 @@ group targets reach only their members; the e-stop halts everyone.
 
 from __future__ import annotations
 
-import json
 import math
 import subprocess
 import sys
@@ -33,6 +32,7 @@ from test_client_fleet_support import (
 from test_client_support import Pad, Script, VirtualPad, pygame_up
 
 from kinesphere import zconfig
+from kinesphere.clients import record
 from kinesphere.clients import targets as tg
 from kinesphere.clients.state import Action, ControllerState
 from kinesphere.clients.teleop import View, run
@@ -224,11 +224,9 @@ def test_the_gamepad_arcs_a_packbot(fleet: Fleet, pygame_up: None) -> None:
 def test_a_killed_client_leaves_its_robots_stopping_on_their_own(
     fleet: Fleet, tmp_path: Path
 ) -> None:
-    rec = tmp_path / "drive.jsonl"
-    drive = ControllerState(ly=-0.8, rx=-1.0, held=frozenset({Action.DEADMAN})).to_dict()
-    lines = [{"kinesphere": "gamepad-recording", "version": 1}]
-    lines += [{"t": k / 10, "state": drive} for k in range(600)]  # a minute of driving
-    rec.write_text("\n".join(json.dumps(x) for x in lines) + "\n")
+    rec = tmp_path / "drive.mcap"
+    drive = ControllerState(ly=-0.8, rx=-1.0, held=frozenset({Action.DEADMAN}))
+    record.save(rec, [(k / 10, drive) for k in range(600)])  # a minute of driving
     client = subprocess.Popen(
         [sys.executable, "-m", "kinesphere.cli", "gamepad", "--replay", str(rec), "--headless",
          "--target", PB, "--ttl-ms", str(TTL_MS), "--connect", fleet.endpoint,

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import replace
 from pathlib import Path
 
@@ -22,7 +22,7 @@ from test_client_support import (
 )
 
 from kinesphere.clients import input as pad
-from kinesphere.clients import mapfile, record
+from kinesphere.clients import mapfile, mcaplog, record
 from kinesphere.clients import targets as tg
 from kinesphere.clients.options import TeleopOptions
 from kinesphere.clients.state import NEUTRAL, Action, ControllerState
@@ -60,7 +60,7 @@ def test_a_replay_sends_what_the_recorded_session_sent(
             polled.append(script.poll())
             return polled[-1]
 
-    path = tmp_path / "session.jsonl"
+    path = tmp_path / "session.mcap"
     with client_link(hub[1]) as link:
         assert link.wait_subscribers([KEYS.command("rec")], WAIT_S) == []
         with record.Recorder(path, target="rec") as rec:
@@ -110,19 +110,49 @@ def replay_equal(a: ControllerState, b: ControllerState) -> bool:
     return replace(a, source="x") == replace(b, source="x")
 
 
+def _mcap(path: Path, meta: dict[str, str] | None, data: bytes = b"") -> None:
+    with mcaplog.McapWriter(path, meta) as w:
+        if data:
+            w.write_json(record.TOPIC, ControllerState, data, 1_000)
+
+
+GOOD = {"kinesphere": "gamepad-recording", "version": "2", "start_ns": "0"}
+
+
 @pytest.mark.parametrize(
-    ("text", "match"),
+    ("make", "match"),
     [
-        ("", "is empty"),
-        ('{"kinesphere": "other"}\n', "header"),
-        ('{"kinesphere": "gamepad-recording", "version": 9}\n', "version 9"),
-        ('{"kinesphere": "gamepad-recording", "version": 1}\n{"t": 0}\n', "line 2"),
-        ('{"kinesphere": "gamepad-recording", "version": 1}\nnot json\n', "line 2"),
+        (lambda f: f.write_bytes(b""), "not a readable MCAP file"),
+        (lambda f: f.write_text('{"kinesphere": "gamepad-recording", "version": 1}\n'),
+         "not a readable MCAP file"),  # the old JSON lines
+        (lambda f: _mcap(f, None), "no gamepad-recording header"),  # e.g. 'kinesphere record'
+        (lambda f: _mcap(f, {**GOOD, "version": "1"}), "version '1'"),
+        (lambda f: _mcap(f, {**GOOD, "start_ns": "soon"}), "header"),
+        (lambda f: _mcap(f, GOOD, b"not json"), "tick 1"),
+        (lambda f: _mcap(f, GOOD, b"[1, 2]"), "tick 1"),
+        (lambda f: None, "cannot read recording"),
     ],
 )
-def test_bad_recordings_are_explained(tmp_path: Path, text: str, match: str) -> None:
-    f = tmp_path / "bad.jsonl"
-    f.write_text(text)
+def test_bad_recordings_are_explained(
+    tmp_path: Path, make: Callable[[Path], object], match: str
+) -> None:
+    f = tmp_path / "bad.mcap"
+    make(f)
     with pytest.raises(KinesphereError, match=match) as info:
         record.load(f)
     assert info.value.code == "malformed"
+
+
+def test_a_recording_keeps_its_header_ticks_and_times(tmp_path: Path) -> None:
+    ticks = [(k / 30, ControllerState(rx=k / 10, held=frozenset({Action.DEADMAN})))
+             for k in range(10)]
+    record.save(tmp_path / "r.mcap", ticks, target="c2", rate_hz=30.0)
+    header, got = record.load(tmp_path / "r.mcap")
+    assert header == {"kinesphere": "gamepad-recording", "version": 2, "target": "c2",
+                      "rate_hz": 30.0}
+    assert [cs for _, cs in got] == [cs for _, cs in ticks]
+    assert [round(t, 9) for t, _ in got] == [round(t, 9) for t, _ in ticks]
+    # one format for every recording: the MCAP reader sees a channel with a JSON schema
+    (raw, *_) = mcaplog.messages(tmp_path / "r.mcap")
+    assert (raw.schema, raw.topic) == ("kinesphere.ControllerState", "gamepad/state")
+    assert list(mcaplog.read(tmp_path / "r.mcap")) == []  # nothing for 'kinesphere replay'

@@ -103,7 +103,7 @@ def register(sub: Any) -> None:
     g.add_argument(
         "--mapping", metavar="FILE", help="TOML mapping laid over clients/mappings/default.toml"
     )
-    g.add_argument("--record", metavar="FILE", help="record the session (JSON lines) to FILE")
+    g.add_argument("--record", metavar="FILE", help="record the session (MCAP) to FILE")
     g.add_argument(
         "--replay",
         metavar="FILE",

@@ -81,10 +81,15 @@ class McapWriter:
         return channel
 
     def write(self, key: str, msg: Message, log_ns: int, publish_ns: int | None = None) -> None:
-        data = msgspec.json.encode(msg)
         publish = publish_ns if publish_ns is not None else (stamp_of(msg) or log_ns)
-        self._w.add_message(self._channel(key, type(msg)), log_time=log_ns, data=data,
-                            publish_time=publish, sequence=self._seq)
+        self.write_json(key, type(msg), msgspec.json.encode(msg), log_ns, publish)
+
+    def write_json(self, key: str, type_: type[Any], data: bytes, log_ns: int,
+                   publish_ns: int | None = None) -> None:
+        """One JSON message of ``type_`` (any type msgspec derives a schema for)."""
+        self._w.add_message(self._channel(key, type_), log_time=log_ns, data=data,
+                            publish_time=log_ns if publish_ns is None else publish_ns,
+                            sequence=self._seq)
         self._seq += 1
         self.count += 1
         self.bytes += len(data)
@@ -100,30 +105,48 @@ class McapWriter:
         self.close()
 
 
-def read(path: str | Path) -> Iterator[Recorded]:
-    """Every kinesphere message of a recording in log-time order, decoded and checked."""
+@dataclass(frozen=True)
+class Raw:
+    """One message of a recording as stored: schema name, topic, JSON bytes, times."""
+
+    schema: str
+    topic: str
+    data: bytes
+    log_ns: int
+    publish_ns: int
+
+
+def messages(path: str | Path, schema: str | None = None) -> Iterator[Raw]:
+    """Every message of a recording (of one schema, if given) in log-time order, undecoded."""
     try:
         f = Path(path).open("rb")
     except OSError as exc:
         raise KinesphereError("malformed", f"cannot read {path}: {exc.strerror}") from None
     with f:
         try:
-            for schema, channel, message in make_reader(f).iter_messages(log_time_order=True):
-                if schema is None or schema.name not in BY_NAME:
-                    continue  # another tool's channel: not ours to replay
-                try:
-                    msg = msgspec.json.decode(message.data, type=BY_NAME[schema.name])
-                except msgspec.ValidationError as exc:
-                    raise KinesphereError(
-                        "malformed", f"{path}: bad {schema.name} on {channel.topic}: {exc}"
-                    ) from None
-                yield Recorded(channel.topic, msg, message.log_time,  # type: ignore[arg-type]
-                               message.publish_time)
+            for sch, channel, message in make_reader(f).iter_messages(log_time_order=True):
+                if sch is not None and (schema is None or sch.name == schema):
+                    yield Raw(sch.name, channel.topic, message.data, message.log_time,
+                              message.publish_time)
         except KinesphereError:
             raise
         except Exception as exc:  # the mcap library raises assorted types on a broken file
             raise KinesphereError("malformed", f"{path} is not a readable MCAP file: {exc}"
                                   ) from None
+
+
+def read(path: str | Path) -> Iterator[Recorded]:
+    """Every kinesphere message of a recording in log-time order, decoded and checked."""
+    for raw in messages(path):
+        if raw.schema not in BY_NAME:
+            continue  # another tool's channel (or the gamepad's input): not ours to replay
+        try:
+            msg = msgspec.json.decode(raw.data, type=BY_NAME[raw.schema])
+        except msgspec.DecodeError as exc:  # bad JSON, or a field the schema does not allow
+            raise KinesphereError(
+                "malformed", f"{path}: bad {raw.schema} on {raw.topic}: {exc}"
+            ) from None
+        yield Recorded(raw.topic, msg, raw.log_ns, raw.publish_ns)  # type: ignore[arg-type]
 
 
 def metadata(path: str | Path) -> dict[str, str]:

@@ -1,10 +1,13 @@
-"""Record a gamepad session as JSON lines and replay it, so a scenario can be rerun exactly.
+"""Record a gamepad session to MCAP and replay it, so a scenario can be rerun exactly.
 
-What is recorded is the device-independent :class:`ControllerState` of every tick with its
-time since the start, not raw pygame events: a replay then needs no pygame, no window and no
-pad, and gives the same commands whatever controller made the recording. The first line is a
-header (``{"kinesphere": "gamepad-recording", "version": 1, ...}``), each further line
-``{"t": seconds, "state": {...}}``.
+What is recorded is the device-independent :class:`ControllerState` of every tick, not raw
+pygame events: a replay then needs no pygame, no window and no pad, and gives the same
+commands whatever controller made the recording. The file is MCAP like every other recording
+of kinesphere (``kinesphere record``): one channel, :data:`TOPIC`, schema
+``kinesphere.ControllerState`` (JSON Schema, JSON messages, so Foxglove and the ``mcap`` CLI
+read it), each message's ``log_time`` the tick's time; the ``kinesphere`` metadata record
+names the format (``{"kinesphere": "gamepad-recording", "version": "2", ...}``) and carries
+the header (target, rate, mapping) as JSON values.
 
 A replay follows its own clock: each ``poll`` returns the newest recorded snapshot whose time
 has come, with the presses of every snapshot it skipped (a tap is never lost to a slower
@@ -18,36 +21,34 @@ import time
 from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
-from typing import IO, Any
+from typing import Any, Final
 
+from kinesphere.clients import mcaplog
 from kinesphere.clients.state import NEUTRAL, ControllerState
 from kinesphere.errors import KinesphereError
 
-MAGIC = "gamepad-recording"
-VERSION = 1
+MAGIC: Final = "gamepad-recording"
+VERSION: Final = 2
+"""2: MCAP (1 was JSON lines)."""
+TOPIC: Final = "gamepad/state"
+SCHEMA: Final = f"{mcaplog.SCHEMA_PREFIX}{ControllerState.__name__}"
 
 
 class Recorder:
-    """Appends ticks to a JSON-lines file; use as a context manager or call :meth:`close`."""
+    """Appends ticks to an MCAP file; use as a context manager or call :meth:`close`."""
 
     def __init__(self, path: str | Path, **header: Any) -> None:
-        self.path = Path(path)
-        try:
-            self._f: IO[str] = self.path.open("w", encoding="utf-8")
-        except OSError as exc:
-            raise KinesphereError(
-                "malformed", f"cannot write recording {path}: {exc.strerror}"
-            ) from None
-        self._write({"kinesphere": MAGIC, "version": VERSION, **header})
-
-    def _write(self, obj: dict[str, Any]) -> None:
-        self._f.write(json.dumps(obj, separators=(",", ":")) + "\n")
+        self._start_ns = time.time_ns()
+        meta = {k: json.dumps(v) for k, v in header.items()}
+        meta.update(kinesphere=MAGIC, version=str(VERSION), start_ns=str(self._start_ns))
+        self._w = mcaplog.McapWriter(path, meta)
 
     def __call__(self, t: float, cs: ControllerState) -> None:
-        self._write({"t": round(t, 4), "state": cs.to_dict()})
+        data = json.dumps(cs.to_dict(), separators=(",", ":")).encode()
+        self._w.write_json(TOPIC, ControllerState, data, self._start_ns + round(t * 1e9))
 
     def close(self) -> None:
-        self._f.close()
+        self._w.close()
 
     def __enter__(self) -> Recorder:
         return self
@@ -56,31 +57,44 @@ class Recorder:
         self.close()
 
 
+def save(path: str | Path, ticks: list[tuple[float, ControllerState]], **header: Any) -> None:
+    """Write ``(t, state)`` ticks as a recording (scenarios made by hand, tests)."""
+    with Recorder(path, **header) as rec:
+        for t, cs in ticks:
+            rec(t, cs)
+
+
 def load(path: str | Path) -> tuple[dict[str, Any], list[tuple[float, ControllerState]]]:
-    """Header and ``(t, state)`` ticks of a recording, checked line by line."""
+    """Header and ``(t, state)`` ticks of a recording, checked message by message."""
     try:
-        lines = Path(path).read_text(encoding="utf-8").splitlines()
+        Path(path).open("rb").close()
     except OSError as exc:
         raise KinesphereError(
             "malformed", f"cannot read recording {path}: {exc.strerror}"
         ) from None
-    if not lines:
-        raise KinesphereError("malformed", f"recording {path} is empty")
-    where = "header"
+    meta = mcaplog.metadata(path)
+    if meta.get("kinesphere") != MAGIC:
+        raise KinesphereError("malformed", f"recording {path} has no gamepad-recording header "
+                              "(record one with 'kinesphere gamepad --record FILE')")
+    if meta.get("version") != str(VERSION):
+        raise KinesphereError("malformed", f"recording {path}: version {meta.get('version')!r}, "
+                              f"this client reads {VERSION}")
     try:
-        header = json.loads(lines[0])
-        if header.get("kinesphere") != MAGIC:
-            raise ValueError("no gamepad-recording header")
-        if header.get("version") != VERSION:
-            raise ValueError(f"version {header.get('version')!r}, this client reads {VERSION}")
-        ticks = []
-        for n, line in enumerate(lines[1:], start=2):
-            where = f"line {n}"
-            if line.strip():
-                obj = json.loads(line)
-                ticks.append((float(obj["t"]), ControllerState.from_dict(obj["state"])))
-    except (ValueError, KeyError, TypeError, AttributeError) as exc:
-        raise KinesphereError("malformed", f"recording {path} {where}: {exc}") from None
+        start_ns = int(meta["start_ns"])
+        header: dict[str, Any] = {k: json.loads(v) for k, v in meta.items()
+                                  if k not in ("kinesphere", "version", "start_ns")}
+    except (KeyError, ValueError) as exc:
+        raise KinesphereError("malformed", f"recording {path} header: {exc}") from None
+    header.update(kinesphere=MAGIC, version=VERSION)
+    ticks = []
+    for n, m in enumerate(mcaplog.messages(path, SCHEMA), start=1):
+        try:
+            state = json.loads(m.data)
+            if not isinstance(state, dict):
+                raise TypeError(f"a state is an object, got {type(state).__name__}")
+            ticks.append(((m.log_ns - start_ns) / 1e9, ControllerState.from_dict(state)))
+        except (ValueError, TypeError) as exc:
+            raise KinesphereError("malformed", f"recording {path} tick {n}: {exc}") from None
     return header, ticks
 
 
