@@ -18,10 +18,11 @@ from test_databank_support import wait_until
 
 from kinesphere import protocol as pr
 from kinesphere import zconfig
-from kinesphere.clients.mcaplog import read
+from kinesphere.clients.mcaplog import McapWriter, read
 from kinesphere.clients.taps import Recorder, replay, tapped_keys
 from kinesphere.errors import KinesphereError
 from kinesphere.keyexpr import Keys
+from kinesphere.robots.agent.ordering import Ordering, Received
 
 KEYS = Keys("kstest-rec")
 GAP_S = 0.05
@@ -107,3 +108,52 @@ def test_bad_recordings(tmp_path: Path) -> None:
     with pytest.raises(KinesphereError, match="choose one of"):
         with zconfig.loopback_hub() as (hub, _):
             replay(hub, bad, "everything")
+
+
+def test_a_restamped_replay_is_new_to_robots_that_heard_the_original(tmp_path: Path) -> None:
+    """As recorded, a replay is stale to a robot that heard the session (the agent's own
+    ordering rules decide); restamped, each recorded session comes back as a fresh one with
+    the same order, sent now."""
+    part = pr.SpatialCommand("limb_11", "distal_11", "left-high", 3)
+    t0 = time.time_ns() - 3_600 * 10**9  # recorded an hour ago
+    original = [pr.Command(seq=i, sent_ns=t0 + i * 10**7, parts=[part], deadman=True, ttl_ms=0,
+                           sender=sender, session=session)
+                for sender, session in (("alice", "s-1"), ("bob", "")) for i in range(3)]
+    path = tmp_path / "s.mcap"
+    with McapWriter(path) as w:
+        for i, cmd in enumerate(original):
+            w.write(KEYS.command("r1"), cmd, t0 + i * 10**6)
+
+    def heard(ordering: Ordering, cmds: list[pr.Command]) -> list[str]:
+        out = []
+        for cmd in cmds:
+            now = time.time_ns()
+            err = ordering.admit(Received(cmd, time.monotonic_ns(), now), time.monotonic_ns())
+            out.append("ok" if err is None else err.code)
+        return out
+
+    robot = Ordering()
+    assert heard(robot, original) == ["ok"] * 6
+    with zconfig.loopback_hub() as (hub, endpoint):
+        with zconfig.session(config=zconfig.loopback_config(endpoint)) as s:
+            got: list[pr.Command] = []
+            sub = s.declare_subscriber(KEYS.command("r1"),
+                                       lambda sample: got.append(pr.decode(
+                                           sample.payload.to_bytes(), pr.Command)))
+            pub = hub.declare_publisher(KEYS.command("r1"))
+            assert zconfig.wait_matching(pub, 20.0)
+            zconfig.undeclare(pub)
+            assert replay(hub, path, "commands", speed=100.0) == 6
+            assert wait_until(lambda: len(got) == 6, 20.0)
+            assert replay(hub, path, "commands", speed=100.0, restamp=True) == 6
+            assert wait_until(lambda: len(got) == 12, 20.0)
+            zconfig.undeclare(sub)
+    as_recorded, restamped = got[:6], got[6:]
+    assert as_recorded == original
+    assert heard(robot, as_recorded) == ["stale"] * 6
+    assert heard(robot, restamped) == ["ok"] * 6
+    sessions = {c.session for c in restamped}
+    assert "" in sessions and len(sessions) == 2 and "s-1" not in sessions
+    assert [(c.sender, c.seq, c.parts) for c in restamped] == \
+        [(c.sender, c.seq, c.parts) for c in original]
+    assert all(c.sent_ns > original[-1].sent_ns + 3_000 * 10**9 for c in restamped)

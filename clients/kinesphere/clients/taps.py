@@ -8,7 +8,11 @@ bounded by ``max_bytes``.
 
 A replay re-puts recorded messages on their keys with the original spacing (``speed`` scales
 it): commands to drive robots again, or states to watch a session in ``kinesphere view``
-without any robot running.
+without any robot running. Commands go out as recorded, with their sender, session, ``seq``
+and ``sent_ns``: a robot that already heard that session drops them as stale (that is its
+ordering rule, not a fault). ``restamp`` makes them new: ``sent_ns`` becomes the time of the
+put, and each recorded session is replaced by a fresh one (``seq`` and sender are kept, so
+the order within a session holds), which every robot takes as a new order.
 """
 
 from __future__ import annotations
@@ -21,8 +25,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Final
 
+import msgspec
 import zenoh
 
+from kinesphere.clients.link import new_sender
 from kinesphere.clients.mcaplog import McapWriter, read
 from kinesphere.errors import KinesphereError
 from kinesphere.keyexpr import WILDCARD, Keys
@@ -103,9 +109,9 @@ def wanted(kind: str) -> Callable[[Message], bool]:
 
 def replay(session: zenoh.Session, path: str | Path, kind: str = "commands",
            speed: float = 1.0, should_stop: Callable[[], bool] = lambda: False,
-           on_put: Callable[[str, Message], None] | None = None) -> int:
-    """Put the recording's ``kind`` messages back on their keys with the original timing;
-    returns how many were put."""
+           on_put: Callable[[str, Message], None] | None = None, restamp: bool = False) -> int:
+    """Put the recording's ``kind`` messages back on their keys with the original timing
+    (commands as new ones with ``restamp``); returns how many were put."""
     if not speed > 0:
         raise KinesphereError("malformed", f"--speed must be > 0, got {speed}")
     keep = wanted(kind)
@@ -113,6 +119,7 @@ def replay(session: zenoh.Session, path: str | Path, kind: str = "commands",
     if not items:
         return 0
     publishers: dict[str, Any] = {}
+    sessions: dict[tuple[str, str], str] = {}
     start, t0 = time.monotonic(), items[0].log_ns
     sent = 0
     try:
@@ -126,13 +133,25 @@ def replay(session: zenoh.Session, path: str | Path, kind: str = "commands",
             if pub is None:
                 pub = publishers[rec.key] = session.declare_publisher(
                     rec.key, congestion_control=zenoh.CongestionControl.BLOCK, express=True)
-            pub.put(encode(rec.message))
+            msg = rec.message
+            if restamp and isinstance(msg, Command):
+                msg = _restamped(msg, sessions)
+            pub.put(encode(msg))
             sent += 1
             if on_put is not None:
-                on_put(rec.key, rec.message)
+                on_put(rec.key, msg)
     finally:
         undeclare(*publishers.values())
     return sent
+
+
+def _restamped(cmd: Command, sessions: dict[tuple[str, str], str]) -> Command:
+    """``cmd`` sent now, in a fresh session standing for its recorded one (a sender without a
+    session keeps none: a later ``sent_ns`` is what makes its commands new)."""
+    session = cmd.session
+    if session:
+        session = sessions.setdefault((cmd.sender, session), new_sender("replay"))
+    return msgspec.structs.replace(cmd, sent_ns=time.time_ns(), session=session)
 
 
 def summary(tally: Tally, path: Path) -> str:

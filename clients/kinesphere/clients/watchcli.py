@@ -63,12 +63,17 @@ def register(sub: Any) -> None:
         help="re-publish a recorded session's commands (or states) with the original timing",
         description="Put the messages of an MCAP recording back on their keys, spaced as "
         "they were recorded: 'commands' drive running robots again; 'states' replay what "
-        "the robots did, to watch it in 'kinesphere view' with no robot running.",
+        "the robots did, to watch it in 'kinesphere view' with no robot running. Commands "
+        "keep their recorded sender, session, seq and sent_ns, so robots that heard the "
+        "original session drop them as stale; --restamp sends them as new.",
     )
     p.add_argument("recording", metavar="FILE", help="MCAP file written by kinesphere record")
     p.add_argument("--what", choices=("commands", "states", "all"), default="commands",
                    help="which messages to put back (default commands)")
     p.add_argument("--speed", type=float, default=1.0, help="time scale (default 1 = as recorded)")
+    p.add_argument("--restamp", action="store_true",
+                   help="send commands now, each recorded session as a fresh one (seq and "
+                   "sender kept), so robots that heard the original do not drop them as stale")
     add_zenoh_arguments(p, OPERATOR)
     p.set_defaults(func=replay)
 
@@ -137,6 +142,7 @@ def replay(args: argparse.Namespace) -> int:
 
     stop, signals = _until_signal()
     with signals, _session(args) as session:
-        sent = put_back(session, args.recording, args.what, args.speed, stop.is_set)
+        sent = put_back(session, args.recording, args.what, args.speed, stop.is_set,
+                        restamp=args.restamp)
     print(f"replayed {sent} {args.what} message(s) from {args.recording}", file=sys.stderr)
     return 130 if stop.is_set() else 0
