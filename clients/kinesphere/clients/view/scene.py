@@ -49,6 +49,11 @@ class Skeleton:
                 self.meshes.append(scene.add_mesh_trimesh(name, shape.mesh))
         self._q: Array | None = None
 
+    @property
+    def q(self) -> Array | None:
+        """The joints last sent to the browsers (None before the first pose)."""
+        return self._q
+
     def pose(self, q: Array) -> int:
         """Move to ``q`` (this body's joint order); returns how many frames were sent."""
         wxyz, xyz = self.body.transforms(q)
