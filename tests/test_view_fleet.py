@@ -1,0 +1,74 @@
+"""What the view knows of each robot, over real Zenoh: who is alive, its state, and which
+commands reach it (its own key, every robot's, and a group's: the robots whose state lists
+that group), with states on another robot's key ignored."""
+
+from __future__ import annotations
+
+import time
+
+from test_databank_support import wait_until
+
+from kinesphere import protocol as pr
+from kinesphere import zconfig
+from kinesphere.clients.view.fleet import Fleet
+from kinesphere.keyexpr import Keys
+
+KEYS = Keys("kstest-fleet")
+PART = pr.SpatialCommand("limb_11", "distal_11", "left-high", 3)
+
+
+def state(rid: str, groups: list[str], seq: int = 0) -> pr.RobotState:
+    return pr.RobotState(robot_id=rid, platform="baxter", seq=seq, stamp_ns=time.time_ns(),
+                         joint_names=["a"], q=[0.0], qd=[0.0], base_pose=[0.0, 0.0, 0.0],
+                         status="idle", last_command_seq=-1, groups=groups)
+
+
+def seq_of(fleet: Fleet, rid: str) -> int:
+    st = fleet.snapshot()[rid].state
+    assert st is not None
+    return st.seq
+
+
+def command(seq: int, **kw: object) -> pr.Command:
+    return pr.Command(seq=seq, sent_ns=time.time_ns(), ttl_ms=300, sender="t", **kw)  # type: ignore[arg-type]
+
+
+def test_commands_reach_the_robots_they_address() -> None:
+    with zconfig.loopback_hub() as (hub, endpoint), \
+            zconfig.session(config=zconfig.loopback_config(endpoint)) as robots:
+        fleet = Fleet(hub, KEYS)
+        try:
+            tokens = {rid: robots.liveliness().declare_token(KEYS.alive_robot(rid))
+                      for rid in ("r1", "r2")}
+            assert wait_until(lambda: set(fleet.snapshot()) == {"r1", "r2"}, 20.0)
+            robots.put(KEYS.state("r1"), pr.encode(state("r1", ["arms"])))
+            robots.put(KEYS.state("r2"), pr.encode(state("r2", [])))
+            assert wait_until(lambda: all(r.state for r in fleet.snapshot().values()), 20.0)
+            robots.put(KEYS.state("r1"), pr.encode(state("r2", ["arms"], seq=7)))  # spoofed
+            robots.put(KEYS.state("r2"), pr.encode(state("r2", [], seq=1)))  # after it
+            assert wait_until(lambda: seq_of(fleet, "r2") == 1, 20.0)
+            assert seq_of(fleet, "r1") == 0, "a state on r1's key claiming to be r2 is ignored"
+
+            move = command(1, parts=[PART], deadman=True)
+            robots.put(KEYS.group_command("arms"), pr.encode(move))
+            ack = pr.Ack(robot_id="r2", sender="t", seq=1, stage=pr.AckStage.ACCEPTED,
+                         stamp_ns=time.time_ns())
+            robots.put(KEYS.ack("r2"), pr.encode(ack))  # after the group command
+            assert wait_until(lambda: fleet.snapshot()["r1"].motion == move, 20.0)
+            assert wait_until(lambda: fleet.snapshot()["r2"].ack == ack, 20.0)
+            assert fleet.snapshot()["r2"].command is None, "r2 is not in the group"
+            own = command(2, parts=[PART], deadman=True)
+            robots.put(KEYS.command("r2"), pr.encode(own))
+            assert wait_until(lambda: fleet.snapshot()["r2"].motion == own, 20.0)
+            assert fleet.snapshot()["r1"].motion == move, "r2's command is not r1's"
+
+            stop = command(3, deadman=False, stop=True)
+            robots.put(KEYS.command("*"), pr.encode(stop))
+            assert wait_until(lambda: all(r.command == stop and r.motion is None
+                                          for r in fleet.snapshot().values()), 20.0)
+
+            tokens.pop("r2").undeclare()
+            assert wait_until(lambda: set(fleet.snapshot()) == {"r1"}, 20.0)
+            tokens.pop("r1").undeclare()
+        finally:
+            fleet.close()
