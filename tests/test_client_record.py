@@ -21,11 +21,13 @@ from test_client_support import (
     sentinel,
 )
 
+from kinesphere import zconfig
 from kinesphere.clients import input as pad
 from kinesphere.clients import mapfile, mcaplog, record
 from kinesphere.clients import targets as tg
 from kinesphere.clients.options import TeleopOptions
 from kinesphere.clients.state import NEUTRAL, Action, ControllerState
+from kinesphere.clients.taps import replay
 from kinesphere.clients.teleop import Teleop, run
 from kinesphere.errors import KinesphereError
 
@@ -155,4 +157,7 @@ def test_a_recording_keeps_its_header_ticks_and_times(tmp_path: Path) -> None:
     # one format for every recording: the MCAP reader sees a channel with a JSON schema
     (raw, *_) = mcaplog.messages(tmp_path / "r.mcap")
     assert (raw.schema, raw.topic) == ("kinesphere.ControllerState", "gamepad/state")
-    assert list(mcaplog.read(tmp_path / "r.mcap")) == []  # nothing for 'kinesphere replay'
+    assert list(mcaplog.read(tmp_path / "r.mcap")) == []  # no message to put on the wire
+    with zconfig.loopback_hub() as (net, _):
+        with pytest.raises(KinesphereError, match="kinesphere gamepad --replay"):
+            replay(net, tmp_path / "r.mcap")

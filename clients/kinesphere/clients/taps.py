@@ -29,7 +29,8 @@ import msgspec
 import zenoh
 
 from kinesphere.clients.link import new_sender
-from kinesphere.clients.mcaplog import McapWriter, read
+from kinesphere.clients.mcaplog import McapWriter, metadata, read
+from kinesphere.clients.record import MAGIC as GAMEPAD_RECORDING
 from kinesphere.errors import KinesphereError
 from kinesphere.keyexpr import WILDCARD, Keys
 from kinesphere.protocol import Command, Message, RobotState, decode_any, encode
@@ -117,6 +118,10 @@ def replay(session: zenoh.Session, path: str | Path, kind: str = "commands",
     keep = wanted(kind)
     items = [r for r in read(path) if keep(r.message)]
     if not items:
+        if metadata(path).get("kinesphere") == GAMEPAD_RECORDING:
+            raise KinesphereError(
+                "malformed", f"{path} holds a gamepad's controller ticks, not messages: play "
+                f"it with 'kinesphere gamepad --replay {path}'")
         return 0
     publishers: dict[str, Any] = {}
     sessions: dict[tuple[str, str], str] = {}
