@@ -1,11 +1,14 @@
 """``kinesphere view`` in headless Chromium: robots appear with their liveliness, and move.
 
-A databank, a Baxter and a youBot agent and the view run as processes on loopback; Debian's
-Chromium opens the page. Baxter is started first so it takes the left slot and the youBot the
-right one. The test waits until the page lists both robots and both halves of the 3D canvas
-show a robot's coloured links, takes a screenshot, moves Baxter's right arm (away from the
-youBot) with ``kinesphere send``, waits until the agent reports it reached the pose, and
-checks that Baxter's half of the canvas changed while the youBot's stayed as it was.
+A router (the hub), a databank, a Baxter and a youBot agent and the view run as processes on
+loopback; Debian's Chromium opens the page. The command goes through the router as a client:
+a peer's put could reach only the view's wildcard subscriber while its direct link to the
+agent is still forming, and ``send`` would report it sent. Baxter is started first so it
+takes the left slot and the youBot the right one. The test waits until the page lists both
+robots and both halves of the 3D canvas show a robot's coloured links, takes a screenshot,
+moves Baxter's right arm (away from the youBot) with ``kinesphere send``, waits until the
+agent reports it reached the pose, and checks that Baxter's half of the canvas changed while
+the youBot's stayed as it was.
 """
 
 from __future__ import annotations
@@ -17,7 +20,15 @@ from typing import Any
 
 import numpy as np
 import pytest
-from test_system_support import WAIT_S, Observer, at_pose, query_pose, supervisor, until
+from test_system_support import (
+    WAIT_S,
+    Observer,
+    at_pose,
+    port_open,
+    query_pose,
+    supervisor,
+    until,
+)
 from test_view_support import browser_page, coloured, pixels
 
 from kinesphere.deploy.procs import Supervisor
@@ -48,7 +59,9 @@ def test_view_draws_and_moves_robots(sup: Supervisor) -> None:
     port = free_port()
     endpoint = f"tcp/127.0.0.1:{port}"
     web = free_port()
-    sup.spawn("databank", ["databank", "serve", "--listen", endpoint, "--platform", "baxter",
+    sup.spawn("router", ["router", "--listen", endpoint])  # the hub: it routes every put
+    until(lambda: sup.check() or port_open(port), WAIT_S, "the router")
+    sup.spawn("databank", ["databank", "serve", "--connect", endpoint, "--platform", "baxter",
                            "--platform", "youbot"])
     obs = Observer(mode="peer", connect=[endpoint])
     try:
@@ -77,7 +90,7 @@ def test_view_draws_and_moves_robots(sup: Supervisor) -> None:
 
             target = query_pose(obs.session, "baxter", *POSE).joints
             sup.spawn("send", ["send", "baxter-1", *map(str, POSE), "--connect", endpoint,
-                               "--wait", "20"], expect_exit=True)
+                               "--mode", "client", "--wait", "20"], expect_exit=True)
             assert sup.wait("send", WAIT_S) == 0
             until(lambda: at_pose(obs.states.snapshot().get("baxter-1"), target), WAIT_S,
                   "Baxter at the commanded pose", explain=obs.describe)

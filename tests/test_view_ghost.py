@@ -1,6 +1,7 @@
 """The view shows a robot's target as a translucent ghost while it moves, and hides it after.
 
-A databank and a Baxter agent run as processes on loopback; the view runs in this process and
+A router, a databank and a Baxter agent run as processes on loopback (the command goes
+through the router, see test_view_browser); the view runs in this process and
 the test drives its frames, so it reads the scene's own handles: while Baxter reports moving
 toward a commanded pose, the ghost is shown posed at the pose the databank answers for that
 command (ahead of the body, which is still on its way), and it is hidden at rest.
@@ -14,7 +15,16 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_system_support import KEYS, WAIT_S, Observer, at_pose, query_pose, supervisor, until
+from test_system_support import (
+    KEYS,
+    WAIT_S,
+    Observer,
+    at_pose,
+    port_open,
+    query_pose,
+    supervisor,
+    until,
+)
 
 from kinesphere.clients.view.app import View
 from kinesphere.deploy.procs import Supervisor
@@ -41,8 +51,11 @@ def sup(tmp_path: Path) -> Iterator[Supervisor]:
 
 
 def test_the_target_ghost_shows_while_a_robot_moves(sup: Supervisor) -> None:
-    endpoint = f"tcp/127.0.0.1:{free_port()}"
-    sup.spawn("databank", ["databank", "serve", "--listen", endpoint, "--platform", "baxter"])
+    port = free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    sup.spawn("router", ["router", "--listen", endpoint])  # the hub: it routes every put
+    until(lambda: sup.check() or port_open(port), WAIT_S, "the router")
+    sup.spawn("databank", ["databank", "serve", "--connect", endpoint, "--platform", "baxter"])
     obs = Observer(mode="peer", connect=[endpoint])
     view: View | None = None
     try:
@@ -62,8 +75,8 @@ def test_the_target_ghost_shows_while_a_robot_moves(sup: Supervisor) -> None:
         assert not drawing.ghost.root.visible, "no ghost before any command"
 
         target = query_pose(obs.session, "baxter", *POSE).joints
-        sup.spawn("send", ["send", RID, *map(str, POSE), "--connect", endpoint, "--wait", "20"],
-                  expect_exit=True)
+        sup.spawn("send", ["send", RID, *map(str, POSE), "--connect", endpoint, "--mode",
+                           "client", "--wait", "20"], expect_exit=True)
         seen: list[Seen] = []
 
         def frame_until_back_at_rest() -> bool:
