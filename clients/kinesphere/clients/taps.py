@@ -28,7 +28,7 @@ from typing import Any, Final
 import msgspec
 import zenoh
 
-from kinesphere.clients.link import new_sender
+from kinesphere.clients.link import new_session
 from kinesphere.clients.mcaplog import McapWriter, metadata, read
 from kinesphere.clients.record import MAGIC as GAMEPAD_RECORDING
 from kinesphere.errors import KinesphereError
@@ -155,7 +155,7 @@ def _restamped(cmd: Command, sessions: dict[tuple[str, str], str]) -> Command:
     session keeps none: a later ``sent_ns`` is what makes its commands new)."""
     session = cmd.session
     if session:
-        session = sessions.setdefault((cmd.sender, session), new_sender("replay"))
+        session = sessions.setdefault((cmd.sender, session), new_session())
     return msgspec.structs.replace(cmd, sent_ns=time.time_ns(), session=session)
 
 
