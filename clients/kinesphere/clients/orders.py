@@ -138,9 +138,12 @@ def estop(args: argparse.Namespace) -> int:
         first = seq.seq
         link.estop_all(seq)  # at once: an e-stop never waits for discovery
         left = answers.deadline(args.timeout)
-        alive = set(link.alive_robots(min(1.0, args.timeout)))
+        # the liveliness query ends when the network has answered (at once when it is quick),
+        # so it may take the whole budget on a slow one rather than miss a robot
+        alive = set(link.alive_robots(max(0.1, left())))
 
         def everyone(lk: Any) -> bool:
+            alive.update(lk.robots())  # a robot heard of meanwhile must ack too
             now = answers.outcomes(lk.answers(first), alive)
             return bool(now) and all(
                 any(a.stage == AckStage.ESTOPPED for a in o.acks) for o in now.values())
