@@ -150,7 +150,6 @@ def estop(args: argparse.Namespace) -> int:
 
         while not link.wait_for(everyone, min(ESTOP_RESEND_S, left())) and left() > 0:
             link.estop_all(seq)  # robots discovered a moment later get a copy
-            alive |= set(link.robots())
         found = answers.outcomes(link.answers(first), alive)
     if not found:
         print(f"E-STOP REACHED NO ROBOT: nobody acknowledged it within {args.timeout:g} s and "
