@@ -232,7 +232,7 @@ BEHIND_THE_LEFT_ARM = {  # baxter's right hand reaching high to the left, across
 def test_a_body_caught_on_itself_is_reported_not_called_at_target() -> None:
     with zconfig.session(listen=[zconfig.LOOPBACK_ANY_PORT], connect=[]) as s:
         agent = Agent("baxter", "blocked", s)
-        agent.controller.joints.retarget(BEHIND_THE_LEFT_ARM)
+        agent.controller.joints.retarget(BEHIND_THE_LEFT_ARM)  # past the guard's planning
         agent.conduct.set("moving", "test")
         while agent.controller.moving:
             agent.tick()
@@ -240,8 +240,9 @@ def test_a_body_caught_on_itself_is_reported_not_called_at_target() -> None:
             agent.tick()
         status, detail = agent.status()
         agent.close()
-    assert status == "error"
-    assert detail.startswith("blocked: right_w") and "self-contact" in detail
+    assert status == "error"  # the guard halts at the first contact and names the links
+    assert detail.startswith("contact left_") and "/r_gripper" in detail
+    assert "during motion; halted" in detail
 
 
 @pytest.mark.parametrize("bad", [{"rate": 0.0}, {"state_rate": 1000.0}, {"speed": -1.0},

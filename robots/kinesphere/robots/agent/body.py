@@ -75,5 +75,9 @@ class Body(abc.ABC):
         """Pairs of links touching each other now (explains a blocked body); [] if unknown."""
         return []
 
+    def touching(self) -> bool:
+        """Whether any links touch now (asked every step while moving: keep it cheap)."""
+        return bool(self.contacts())
+
     def close(self) -> None:  # noqa: B027 - optional: a simulation has nothing to release
         """Release the body."""

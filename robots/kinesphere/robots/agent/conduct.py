@@ -278,7 +278,7 @@ class Conduct:
                     "size_out_of_range", f"the pose translates the base {far:.4g} m; this "
                     f"robot moves at most {self.max_translation_m:g} m per command")
         try:
-            clamps = ctrl.joints.retarget(pose.joints)
+            clamps = ctrl.move(pose.joints)  # checked by the guard, waypoints if needed
         except (KeyError, ValueError) as exc:
             raise KinesphereError(
                 "internal", f"databank pose has joints {self.platform} cannot take: {exc}"

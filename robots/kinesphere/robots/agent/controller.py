@@ -8,13 +8,14 @@ and benchmarks step it as fast as they like.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 
 import numpy as np
 
 from kinesphere.robots.agent.base import BaseController, make_base
 from kinesphere.robots.agent.body import Body, Reading
-from kinesphere.robots.agent.trajectory import DEFAULT_MARGIN, JointTrajectory
+from kinesphere.robots.agent.guard import Guard
+from kinesphere.robots.agent.trajectory import DEFAULT_MARGIN, Clamp, JointTrajectory
 
 BLOCKED_TOL = 0.05
 """rad (m): a joint this far from where its finished trajectory ended is blocked."""
@@ -24,8 +25,10 @@ _FIXED = np.zeros(3)
 class Controller:
     """Joint and base trajectories for one body, stepped every ``body.dt`` seconds."""
 
-    def __init__(self, body: Body, margin: float = DEFAULT_MARGIN):
+    def __init__(self, body: Body, margin: float = DEFAULT_MARGIN, guard: Guard | None = None):
         self.body = body
+        self.guard = guard
+        """Checks each move against the robot's geometry (``guard.py``); None: unchecked."""
         self.platform = body.platform
         self.dt = body.dt
         self.joint_names = body.joint_names
@@ -52,6 +55,13 @@ class Controller:
         """A trajectory, drive or stop is still being followed."""
         return self.joints.moving or (self.base is not None and self.base.moving)
 
+    def move(self, joints: Mapping[str, float]) -> list[Clamp]:
+        """Retarget the named joints: through the guard (checked, via waypoints when the
+        straight way touches something) when there is one."""
+        if self.guard is None:
+            return self.joints.retarget(joints)
+        return self.guard.move(self.joints, joints)
+
     def step(self) -> None:
         """One control cycle: trajectories forward, body commanded, body stepped."""
         self.prepare()
@@ -61,6 +71,8 @@ class Controller:
     def prepare(self) -> None:
         """The cycle up to the body's step: trajectories forward, body commanded. (A fleet
         host steps many bodies between :meth:`prepare` and :meth:`finish`.)"""
+        if self.guard is not None:
+            self.guard.before_step(self.joints)
         self.joints.step()
         twist = _FIXED
         if self.base is not None:
@@ -70,6 +82,8 @@ class Controller:
 
     def finish(self) -> None:
         """The cycle after the body's step: one period of robot time has passed."""
+        if self.guard is not None:
+            self.guard.after_step(self.joints)
         self._reading = None
         self.time += self.dt
         self.steps += 1
@@ -78,6 +92,8 @@ class Controller:
 
     def halt(self) -> None:
         """Brake joints and base to rest where they are (jerk-limited)."""
+        if self.guard is not None:
+            self.guard.cancel()
         self.joints.stop()
         if self.base is not None:
             self.base.stop()
@@ -96,9 +112,10 @@ class Controller:
         """Why a trajectory was braked instead of followed ("" when none was)."""
         joints = self.joints.fault
         base = self.base.fault if self.base is not None else ""
-        if not (joints or base):  # every step asks: the usual answer without a join
+        guard = self.guard.fault if self.guard is not None else ""
+        if not (joints or base or guard):  # every step asks: the usual answer without a join
             return ""
-        return "; ".join(f for f in (joints, base) if f)
+        return "; ".join(f for f in (joints, base, guard) if f)
 
     def reading(self) -> Reading:
         """The body's measurement after the last step (read once, when first asked for)."""

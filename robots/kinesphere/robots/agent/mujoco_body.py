@@ -116,6 +116,9 @@ class MujocoBody(Body):
     def contacts(self) -> list[tuple[str, str]]:
         return robot_contacts(self.model, self.data)
 
+    def touching(self) -> bool:
+        return bool(self.data.ncon)  # robot geoms collide only with each other, never the floor
+
 
 def _as_slice(index: np.ndarray) -> slice | np.ndarray:
     """A contiguous run of indices as a slice (a quicker numpy assignment), else the indices."""

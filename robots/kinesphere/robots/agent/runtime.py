@@ -47,6 +47,7 @@ from kinesphere.robots.agent.conduct import SETTLE_S as SETTLE_S
 from kinesphere.robots.agent.conduct import Conduct
 from kinesphere.robots.agent.controller import BLOCKED_TOL as BLOCKED_TOL
 from kinesphere.robots.agent.controller import Controller
+from kinesphere.robots.agent.guard import make_guard
 from kinesphere.robots.agent.inbox import Inbox, clocks, received
 from kinesphere.robots.agent.options import AgentOptions as AgentOptions
 from kinesphere.robots.agent.pacing import LoopStats, run_paced
@@ -78,7 +79,7 @@ class Agent:
         if body is None:
             body = make_body(self.options.body, platform, 1.0 / self.options.rate,
                              session=session, options=self.options, robot_id=robot_id)
-        self.controller = Controller(body, self.options.margin)
+        self.controller = Controller(body, self.options.margin, make_guard(body, platform))
         self.platform = self.controller.platform.name
         self.resolver = Resolver(session, self.platform, self.keys, self.options.query_timeout_s)
         self.inbox = Inbox(wake)
@@ -138,6 +139,8 @@ class Agent:
         undeclare(*reversed(self._entities))
         self._entities = []
         self._publisher = self.conduct.acks.publish = self.conduct.acks.publish_urgent = None
+        if self.controller.guard is not None:
+            self.controller.guard.close()
         self.controller.body.close()
         log.info("agent %s down after %d steps (%d slips)", self.robot_id, self.stats.steps,
                  self.stats.slips)

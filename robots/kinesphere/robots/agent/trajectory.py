@@ -21,6 +21,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
+from ruckig import Synchronization
 
 from kinesphere.robots.agent.otg import Otg, Values
 
@@ -141,10 +142,12 @@ class JointTrajectory:
             out[name] = target
         return out, clamps
 
-    def retarget(self, joints: Mapping[str, float]) -> list[Clamp]:
+    def retarget(self, joints: Mapping[str, float], straight: bool = False) -> list[Clamp]:
         """Move the named joints to ``joints`` (clamped); the others keep their last target.
 
-        Unknown joint names (KeyError) and non-finite values (ValueError) change nothing.
+        ``straight``: phase-synchronised, so a move from rest follows the straight line in
+        joint space (what the guard checked). Unknown joint names (KeyError) and non-finite
+        values (ValueError) change nothing.
         """
         if not joints.keys() <= self.index.keys():
             raise KeyError(", ".join(sorted(set(joints) - set(self.index))))
@@ -158,7 +161,7 @@ class JointTrajectory:
                 self.clamped.pop(name, None)
         self.clamped.update({c.joint: c for c in clamps if c.beyond})
         if self.dof:
-            self._otg.go_to(goal)
+            self._otg.go_to(goal, Synchronization.Phase if straight else Synchronization.Time)
         return clamps
 
     def reset(self, q: Values) -> None:

@@ -1,0 +1,198 @@
+"""Motion that does not hit itself: every stored pose reachable without a contact, waypoints
+when the straight way touches, and a contact nobody planned halts the joints with its pair
+named. Real MuJoCo models, real Ruckig, the shipped databanks."""
+
+from __future__ import annotations
+
+from functools import cache
+from typing import Any
+
+import mujoco
+import numpy as np
+import pytest
+
+from kinesphere.robots.agent.bodies import make_body
+from kinesphere.robots.agent.controller import Controller
+from kinesphere.robots.agent.guard import Guard, make_guard
+from kinesphere.robots.agent.mujoco_body import MujocoBody
+from kinesphere.robots.clearance import PATH_STEP, Clearance, Touch
+from kinesphere.robots.mjcf import platform_model
+from kinesphere.services.ecl.ecl import Ecl
+
+DT = 0.002
+ARTICULATED = ("baxter", "nao", "youbot", "packbot")
+
+
+@cache
+def ecl(name: str) -> Ecl:
+    return Ecl.open(name)
+
+
+class Sampler:
+    """This test's own check of a straight joint-space way: kinematics and collision detection
+    at PATH_STEP, on a fresh MjData of the platform's model (mimic joints following)."""
+
+    def __init__(self, name: str) -> None:
+        pm = platform_model(name)
+        self.model, self.data = pm.model, mujoco.MjData(pm.model)
+        names = pm.platform.joint_names
+        self.qpos = pm.neutral_qpos()
+        self.adr = np.array([pm.qpos_index[j] for j in names])
+        self.mimics = [(pm.qpos_index[m.joint], names.index(m.leader), m)
+                       for m in pm.platform.eurdf.mimics.values()]
+
+    def contacts_along(self, a: np.ndarray, b: np.ndarray) -> list[tuple[str, str]]:
+        m, data = self.model, self.data
+        found: list[tuple[str, str]] = []
+        steps = max(1, int(np.ceil(float(np.max(np.abs(b - a), initial=0.0)) / PATH_STEP)))
+        for t in np.linspace(0.0, 1.0, steps + 1):
+            q = a + t * (b - a)
+            self.qpos[self.adr] = q
+            for adr, leader, mimic in self.mimics:
+                self.qpos[adr] = mimic.value(float(q[leader]))
+            data.qpos[:] = self.qpos
+            mujoco.mj_kinematics(m, data)
+            mujoco.mj_collision(m, data)
+            found += [(m.body(m.geom_bodyid[c.geom1]).name, m.body(m.geom_bodyid[c.geom2]).name)
+                      for c in data.contact[: data.ncon]]
+        return found
+
+
+@pytest.mark.parametrize("name", ARTICULATED)
+def test_every_stored_pose_is_reached_without_a_contact(name: str) -> None:
+    """From neutral and from the far poses of two other directions of the same limb: the
+    planner finds a way to every stored pose, and no leg of it touches anything."""
+    cl = Clearance(platform_model(name))
+    sampler = Sampler(name)
+    index = {j: i for i, j in enumerate(cl.joint_names)}
+
+    def at(start: np.ndarray, joints: dict[str, float]) -> np.ndarray:
+        q = start.copy()
+        for j, v in joints.items():
+            q[index[j]] = v
+        return q
+
+    pairs: dict[tuple[str, str], list[dict[str, Any]]] = {}
+    for r in ecl(name).rows():
+        if r["joints"]:
+            pairs.setdefault((r["limb"], r["origin"]), []).append(r)
+    swept = via = 0
+    for rows in pairs.values():
+        fars = [r for r in rows if r["size"] == 3]
+        others = fars[1::max(1, len(fars) // 2)][:2]  # two other directions, far
+        starts = [cl.neutral, *(at(cl.neutral, r["joints"]) for r in others)]
+        for i, start in enumerate(starts):
+            for r in rows:
+                goal = at(start, r["joints"])
+                route = cl.route(start, goal)
+                assert not isinstance(route, Touch), (i, r["limb"], r["direction"], r["size"],
+                                                      route)
+                assert np.array_equal(route[-1], goal)
+                for a, b in zip([start, *route], route, strict=False):
+                    assert sampler.contacts_along(a, b) == [], (r["limb"], r["direction"],
+                                                                 r["size"])
+                swept += 1
+                via += len(route) > 1
+    assert swept >= len([r for r in ecl(name).rows() if r["joints"]])
+    if name == "baxter":
+        assert via > 0  # some ways cross the other arm and need waypoints
+
+
+def run(ctrl: Controller, guard: Guard, limit: int = 20_000
+        ) -> tuple[set[tuple[str, str]], int]:
+    """Step until the move, its checks and its legs are done; contacts seen, legs taken."""
+    seen: set[tuple[str, str]] = set()
+    legs = 0
+    for _ in range(limit):
+        if not (ctrl.moving or guard.pending or guard.legs):
+            break
+        legs = max(legs, len(guard.legs))
+        ctrl.step()
+        seen |= set(ctrl.body.contacts())
+    return seen, legs
+
+
+def baxter() -> tuple[Controller, Guard]:
+    body = make_body("mujoco", "baxter", DT)
+    guard = make_guard(body, "baxter")
+    return Controller(body, guard=guard), guard
+
+
+def test_the_right_arm_crosses_to_left_high_without_knocking_the_left_arm() -> None:
+    ctrl, guard = baxter()
+    try:
+        left = [i for i, j in enumerate(ctrl.joint_names) if j.startswith("left_")]
+        before = ctrl.reading().q.copy()
+        pose = ecl("baxter").query("right_arm", "right_shoulder", "left-high", 3)
+        ctrl.move(pose.joints)
+        seen, _ = run(ctrl, guard)
+        assert seen == set() and ctrl.fault() == "" and ctrl.blocked() == ""
+        assert np.max(np.abs(ctrl.reading().q[left] - before[left])) < 0.005
+    finally:
+        guard.close()
+
+
+def test_a_straight_way_that_touches_goes_via_waypoints() -> None:
+    ctrl, guard = baxter()
+    try:
+        pose = ecl("baxter").query("right_arm", "right_shoulder", "left-middle", 3)
+        start = ctrl.reading().q.copy()
+        goal = start.copy()
+        for j, v in pose.joints.items():
+            goal[ctrl.joint_names.index(j)] = v
+        assert isinstance(guard.clearance.leg(start, goal), Touch)  # straight: the left arm
+        ctrl.move(pose.joints)
+        seen, legs = run(ctrl, guard)
+        assert legs >= 1 and seen == set() and ctrl.fault() == "" and ctrl.blocked() == ""
+        got = ctrl.reading().q
+        for j, v in pose.joints.items():
+            assert got[ctrl.joint_names.index(j)] == pytest.approx(v, abs=0.02)
+    finally:
+        guard.close()
+
+
+def test_a_contact_nobody_planned_halts_the_joints_and_names_the_links() -> None:
+    """Mid-motion someone holds the left arm out into the right arm's way (the check saw it at
+    rest): the contact halts every joint and the fault names the pair."""
+    ctrl, guard = baxter()
+    try:
+        body = ctrl.body
+        assert isinstance(body, MujocoBody)
+        pose = ecl("baxter").query("right_arm", "right_shoulder", "left-forward-middle", 3)
+        ctrl.move(pose.joints)
+        for _ in range(100):  # under way, the way checked clear
+            ctrl.step()
+        assert ctrl.moving and ctrl.fault() == ""
+        block = ecl("baxter").query("left_arm", "left_shoulder", "forward-middle", 3)
+        held = {body.pm.qpos_index[j]: v for j, v in block.joints.items()}
+        dofs = [body.pm.dof_index[j] for j in block.joints]
+
+        def hold_left_arm_out(_: Controller) -> None:  # someone holds it out, into the way
+            for adr, v in held.items():
+                body.data.qpos[adr] = v
+            body.data.qvel[dofs] = 0.0
+
+        ctrl.on_step = hold_left_arm_out
+        run(ctrl, guard)
+        fault = ctrl.fault()
+        assert fault.startswith("contact ") and "during motion; halted" in fault
+        pair = sorted(fault.removeprefix("contact ").split(" ")[0].split("/"))
+        assert pair[0].startswith("left_") and pair[1].startswith("right_"), fault
+        target = [ctrl.joint_names.index(j) for j in pose.joints]
+        assert np.max(np.abs(ctrl.reading().q[target] - np.array(list(pose.joints.values())))
+                      ) > 0.05
+    finally:
+        guard.close()
+
+
+def test_no_route_to_a_pose_inside_the_robot_is_refused_with_the_pair() -> None:
+    cl = Clearance(platform_model("baxter"))
+    goal = cl.neutral.copy()
+    names = list(cl.joint_names)
+    crossed = ecl("baxter").query("right_arm", "right_shoulder", "left-forward-middle", 3)
+    other = ecl("baxter").query("left_arm", "left_shoulder", "right-forward-middle", 3)
+    for j, v in {**crossed.joints, **other.joints}.items():
+        goal[names.index(j)] = v
+    assert cl.touching(goal) is not None  # both arms across each other: the goal itself touches
+    route = cl.route(cl.neutral, goal)
+    assert isinstance(route, Touch) and "/" in str(route)
