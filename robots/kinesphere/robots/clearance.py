@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from kinesphere.robots.mjcf import PlatformModel
+from kinesphere.robots.mjcf import PlatformModel, robot_contacts
 
 PATH_STEP = 0.05
 """rad (or m) of the largest joint motion between two checked samples of a leg."""
@@ -80,9 +80,7 @@ class Clearance:
         data.qpos[:] = qpos
         mujoco.mj_kinematics(m, data)
         mujoco.mj_collision(m, data)
-        for c in data.contact[: data.ncon]:
-            a = m.body(m.geom_bodyid[c.geom1]).name
-            b = m.body(m.geom_bodyid[c.geom2]).name
+        for a, b in robot_contacts(m, data):
             pair = (a, b) if a <= b else (b, a)
             if pair not in allowed:
                 return pair
@@ -141,14 +139,9 @@ class Clearance:
 
     def contacts(self, q: np.ndarray) -> frozenset[tuple[str, str]]:
         """Every pair in contact at ``q``: a motion may start touching and move apart."""
-        m, data = self.model, self.data
         self.touching(q)
-        out = set()
-        for c in data.contact[: data.ncon]:
-            x = m.body(m.geom_bodyid[c.geom1]).name
-            y = m.body(m.geom_bodyid[c.geom2]).name
-            out.add((x, y) if x <= y else (y, x))
-        return frozenset(out)
+        return frozenset((x, y) if x <= y else (y, x)
+                         for x, y in robot_contacts(self.model, self.data))
 
     def _through(self, a: np.ndarray, vias: list[np.ndarray], b: np.ndarray,
                  start: frozenset[tuple[str, str]]) -> list[np.ndarray] | None:
