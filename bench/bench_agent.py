@@ -75,9 +75,9 @@ def two_parts(agent: Agent) -> list[SpatialCommand]:
             SpatialCommand(e.limb, e.origin, pulls[-1], size)]
 
 
-def command(seq: int, part: SpatialCommand) -> bytes:
+def command(seq: int, part: SpatialCommand, sender: str = "bench") -> bytes:
     return encode(Command(seq=seq, sent_ns=time.time_ns(), parts=[part], deadman=True,
-                          ttl_ms=0, sender="bench"))
+                          ttl_ms=0, sender=sender))
 
 
 def step_cost(endpoint: str) -> None:
@@ -114,6 +114,78 @@ def step_cost(endpoint: str) -> None:
             b50, b99 = pct(bare_costs, 50) * 1e6, pct(bare_costs, 99) * 1e6
             print(f"  {name:<9} {len(agent.controller.joint_names):>3} {a50:>7.1f}us "
                   f"{a99:>6.1f}us {b50:>10.1f}us {b99:>6.1f}us {a50 / b50:>8.2f}x")
+
+
+FLOOD_S = 3.0
+FLOOD_RATE = 5000
+"""Commands per second put into the flooded agent's inbox (from 10 senders, as fast as a
+loaded machine lets a Python thread)."""
+
+
+def flood_parts(agent: Agent) -> list[SpatialCommand]:
+    """Every pull of the first limb at every size (Baxter: straight ways that cross the other
+    arm among them, so the guard also plans routes), resolved once."""
+    assert agent.resolver.wait_ready(10) and agent.resolver.refresh()
+    cat = agent.resolver.catalogue
+    assert cat is not None
+    e = cat.limbs[0]
+    return [SpatialCommand(e.limb, e.origin, d, float(z)) for d in e.directions[:9]
+            for z in e.sizes]
+
+
+def flood_cost(endpoint: str) -> None:
+    """The control step's own cost (Baxter at 500 Hz real time) while commands pour in, with
+    the collision guard and without it (the same agent, the guard taken out): a stream of
+    one target (a gamepad's 30 Hz repeat, a flood's repeats) and a stream of new targets."""
+    print(f"control step under a command flood: Baxter at 500 Hz real time, {FLOOD_RATE} "
+          f"commands/s for {FLOOD_S:g} s from 10 senders; step cost from the loop itself, "
+          "guard on against guard off in the same run:")
+    print(f"  {'stream':<13} {'guard':<5} {'step p50':>9} {'p99':>8} {'late':>5} "
+          f"{'ratio p50':>9} {'p99':>6}  checks")
+    with zconfig.session(config=zconfig.loopback_config(endpoint)) as s:
+        for stream in ("one target", "new targets"):
+            base: tuple[float, float] | None = None
+            for guarded in (False, True):
+                agent = Agent("baxter", f"bench-flood-{int(guarded)}", s, AgentOptions())
+                guard = agent.controller.guard
+                if not guarded and guard is not None:
+                    guard.close()
+                    agent.controller.guard = None
+                agent.declare()
+                parts = flood_parts(agent)
+                for i, p in enumerate(parts):  # warm the cache: no command waits on the network
+                    agent.receive(command(i + 1, p))
+                    while agent.resolver.queries < i + 1:
+                        agent.tick()
+                while agent.controller.moving or (guard is not None and guard.pending):
+                    agent.tick()
+                stop = threading.Event()
+                loop = threading.Thread(target=agent.run, args=(stop,), daemon=True)
+                loop.start()
+                agent.stats.costs_s.clear()
+                late0 = agent.stats.late
+                checks0 = (guard.checks, guard.skipped) if guard is not None else (0, 0)
+                n = int(FLOOD_S * FLOOD_RATE)
+                t0 = time.perf_counter()
+                for k in range(n):
+                    part = parts[-1] if stream == "one target" else parts[(k // 10) % len(parts)]
+                    agent.receive(command(1000 + k, part, f"bench{k % 10}"))
+                    ahead = t0 + (k + 1) / FLOOD_RATE - time.perf_counter()
+                    if ahead > 0:
+                        time.sleep(ahead)
+                costs = np.fromiter(agent.stats.costs_s, dtype=float) * 1e6
+                late = agent.stats.late - late0
+                checks = (f"{guard.checks - checks0[0]} checked, {guard.skipped - checks0[1]} "
+                          "on a clear way") if guarded and guard is not None else "-"
+                stop.set()
+                loop.join()
+                agent.close()
+                c50, c99 = pct(costs, 50), pct(costs, 99)
+                if base is None:
+                    base = (c50, c99)
+                print(f"  {stream:<13} {'on' if guarded else 'off':<5} {c50:>7.1f}us "
+                      f"{c99:>6.1f}us {late:>5} {c50 / base[0]:>8.2f}x {c99 / base[1]:>5.2f}x  "
+                      f"{checks}", flush=True)
 
 
 class Floor:
@@ -311,6 +383,7 @@ def main() -> None:
     logging.getLogger("kinesphere.robots.agent").setLevel(logging.ERROR)
     with zconfig.loopback_hub() as (hub, endpoint), databank(endpoint, hub):
         step_cost(endpoint)
+        flood_cost(endpoint)
         latency(endpoint, hub)
         fleet_parts(endpoint)
         scale(endpoint, hub)

@@ -4,22 +4,28 @@ named. Real MuJoCo models, real Ruckig, the shipped databanks."""
 
 from __future__ import annotations
 
+import time
 from functools import cache
 from typing import Any
 
 import mujoco
 import numpy as np
 import pytest
+import zenoh
+from test_agent_support import AckWatch, Databank, Operator, databank, hub, running_agent
 
-from kinesphere.robots.agent.bodies import make_body
+from kinesphere.protocol import SpatialCommand
 from kinesphere.robots.agent.controller import Controller
-from kinesphere.robots.agent.guard import Guard, make_guard
+from kinesphere.robots.agent.guard import CHECK_GAP_S, Guard, make_guard
 from kinesphere.robots.agent.mujoco_body import MujocoBody
 from kinesphere.robots.clearance import PATH_STEP, Clearance, Touch
 from kinesphere.robots.mjcf import platform_model
 from kinesphere.services.ecl.ecl import Ecl
 
+__all__ = ["databank", "hub"]  # fixtures
+
 DT = 0.002
+WAIT_S = 30.0
 ARTICULATED = ("baxter", "nao", "youbot", "packbot")
 
 
@@ -100,9 +106,12 @@ def test_every_stored_pose_is_reached_without_a_contact(name: str) -> None:
 
 def run(ctrl: Controller, guard: Guard, limit: int = 20_000
         ) -> tuple[set[tuple[str, str]], int]:
-    """Step until the move, its checks and its legs are done; contacts seen, legs taken."""
+    """Step until the move, its checks and its legs are done; contacts seen, legs taken.
+    The steps run many times faster than real time: the first waits for the way's check, as
+    real time would (the worker takes milliseconds: a few steps at 500 Hz)."""
     seen: set[tuple[str, str]] = set()
     legs = 0
+    assert guard.settle(WAIT_S)
     for _ in range(limit):
         if not (ctrl.moving or guard.pending or guard.legs):
             break
@@ -112,10 +121,29 @@ def run(ctrl: Controller, guard: Guard, limit: int = 20_000
     return seen, legs
 
 
+class CountingBody(MujocoBody):
+    """Baxter's MuJoCo body, counting how often the guard lists its contacts."""
+
+    def __init__(self) -> None:
+        super().__init__(platform_model("baxter"), DT)
+        self.listed = 0
+
+    def contacts(self) -> list[tuple[str, str]]:
+        self.listed += 1
+        return super().contacts()
+
+
 def baxter() -> tuple[Controller, Guard]:
-    body = make_body("mujoco", "baxter", DT)
+    body = CountingBody()
     guard = make_guard(body, "baxter")
     return Controller(body, guard=guard), guard
+
+
+def goal_of(ctrl: Controller, joints: dict[str, float]) -> np.ndarray:
+    goal = ctrl.joints.target.copy()
+    for j, v in joints.items():
+        goal[ctrl.joint_names.index(j)] = v
+    return goal
 
 
 def test_the_right_arm_crosses_to_left_high_without_knocking_the_left_arm() -> None:
@@ -181,6 +209,22 @@ def test_a_contact_nobody_planned_halts_the_joints_and_names_the_links() -> None
         target = [ctrl.joint_names.index(j) for j in pose.joints]
         assert np.max(np.abs(ctrl.reading().q[target] - np.array(list(pose.joints.values())))
                       ) > 0.05
+        checks = guard.checks
+        ctrl.move(pose.joints)  # the same target again (the stream goes on): still halted
+        ctrl.step()
+        assert not ctrl.moving and ctrl.fault() == fault and guard.checks == checks
+        ctrl.on_step = None  # let go of the left arm; the operator lets go and presses again
+        ctrl.halt()
+        left = [ctrl.joint_names.index(j) for j in block.joints]
+        for _ in range(5000):  # robot time: the left arm's servos take it back to its target
+            if np.max(np.abs(ctrl.reading().q[left] - ctrl.joints.target[left])) < 0.01:
+                break
+            ctrl.step()
+        run(ctrl, guard)
+        ctrl.move(pose.joints)
+        assert ctrl.fault() == ""
+        seen, _ = run(ctrl, guard)
+        assert ctrl.fault() == "" and guard.checks == checks + 1
     finally:
         guard.close()
 
@@ -196,3 +240,127 @@ def test_no_route_to_a_pose_inside_the_robot_is_refused_with_the_pair() -> None:
     assert cl.touching(goal) is not None  # both arms across each other: the goal itself touches
     route = cl.route(cl.neutral, goal)
     assert isinstance(route, Touch) and "/" in str(route)
+
+
+def test_the_same_target_again_restarts_nothing() -> None:
+    """A gamepad streams its target at 30 Hz, a flood repeats it: sent again every step, the
+    move goes on exactly as if sent once, with one check and no contact listed."""
+    pose = ecl("baxter").query("right_arm", "right_shoulder", "forward-middle", 3)
+    paths = []
+    for repeat in (False, True):
+        ctrl, guard = baxter()
+        try:
+            assert guard.clearance.leg(ctrl.reading().q, goal_of(ctrl, pose.joints)) is None
+            ctrl.move(pose.joints)
+            path = []
+            for _ in range(300):
+                if repeat:
+                    assert ctrl.move(pose.joints) == []
+                ctrl.step()
+                path.append(ctrl.joints.position.copy())
+            assert isinstance(ctrl.body, CountingBody) and ctrl.body.listed == 0
+            run(ctrl, guard)
+            paths.append(np.array(path))
+            assert guard.checks == 1 and guard.skipped == 0
+            assert ctrl.fault() == "" and ctrl.blocked() == ""
+        finally:
+            guard.close()
+    assert np.array_equal(paths[0], paths[1])
+
+
+def test_a_burst_of_new_targets_is_checked_for_the_newest_only() -> None:
+    """A hundred targets between two steps: the worker checks the first and then the newest,
+    no more often than every CHECK_GAP_S, and the arm goes to the last one untouched."""
+    directions = ["forward-middle", "left-forward-middle", "forward-high", "left-middle",
+                  "right-forward-low"]
+    poses = [ecl("baxter").query("right_arm", "right_shoulder", d, 3) for d in directions]
+    ctrl, guard = baxter()
+    try:
+        t0 = time.monotonic()
+        for k in range(100):
+            ctrl.move(poses[k % len(poses)].joints)
+        last = poses[99 % len(poses)]
+        seen, _ = run(ctrl, guard)
+        elapsed = time.monotonic() - t0
+        assert 1 <= guard.checks <= 2 + elapsed / CHECK_GAP_S and guard.checks < 25
+        assert seen == set() and ctrl.fault() == "" and ctrl.blocked() == ""
+        got = ctrl.reading().q
+        for j, v in last.joints.items():
+            assert got[ctrl.joint_names.index(j)] == pytest.approx(v, abs=0.02)
+    finally:
+        guard.close()
+
+
+def test_a_goal_on_a_way_found_clear_needs_no_new_check() -> None:
+    """Half-way back along a straight way already checked clear (a reach trigger let go a
+    little): the worker answers without sampling the way again."""
+    pose = ecl("baxter").query("right_arm", "right_shoulder", "forward-middle", 3)
+    ctrl, guard = baxter()
+    try:
+        start = ctrl.reading().q.copy()
+        far = goal_of(ctrl, pose.joints)
+        ctrl.move(pose.joints)
+        while guard.pending:  # the way checked clear, the arm a little way along it
+            ctrl.step()
+        half = start + 0.5 * (far - start)
+        ctrl.move({j: float(half[ctrl.joint_names.index(j)]) for j in pose.joints})
+        seen, _ = run(ctrl, guard)
+        assert guard.checks == 1 and guard.skipped == 1
+        assert seen == set() and ctrl.fault() == ""
+        assert np.max(np.abs(ctrl.reading().q - half)) < 0.02
+    finally:
+        guard.close()
+
+
+class HoldOut:
+    """Someone holds Baxter's left arm out while the robot moves (every step, until let go)."""
+
+    def __init__(self, body: MujocoBody, joints: dict[str, float]) -> None:
+        self.body = body
+        self.held = {body.pm.qpos_index[j]: v for j, v in joints.items()}
+        self.dofs = [body.pm.dof_index[j] for j in joints]
+        self.active = True
+
+    def __call__(self, ctrl: Controller) -> None:
+        if self.active and ctrl.joints.moving:
+            for adr, v in self.held.items():
+                self.body.data.qpos[adr] = v
+            self.body.data.qvel[self.dofs] = 0.0
+
+
+def test_a_halted_target_sent_again_is_blocked_again_and_nothing_moves(
+    hub: tuple[zenoh.Session, str], databank: Databank
+) -> None:
+    """Over the wire: the contact halt ends the command ``blocked`` with the pair; the same
+    target streamed again is ``accepted`` then ``blocked`` with the same reason, never
+    ``moving``, and the arm stays put; after the deadman is let go and pressed, it tries anew."""
+    session, endpoint = hub
+    part = ("right_arm", "right_shoulder", "left-forward-middle", 3.0)
+    block = databank.query("baxter", SpatialCommand("left_arm", "left_shoulder",
+                                                     "forward-middle", 3.0))
+    acks = AckWatch(session, "guarded")
+    with running_agent(endpoint, "baxter", robot_id="guarded") as (agent, watch):
+        body = agent.controller.body
+        assert isinstance(body, MujocoBody)
+        hold = HoldOut(body, block.joints)
+        agent.controller.on_step = hold
+        op = Operator(session, "guarded", sender="op")
+        first = op.send(part)
+        halted = acks.of("op", first, "blocked").detail
+        assert halted.startswith("contact left_") and "during motion; halted" in halted
+        hold.active = False
+        right = [agent.controller.joint_names.index(j) for j in
+                 databank.query("baxter", SpatialCommand(*part)).joints]
+        before = np.array(watch.after(first, lambda s: s.status == "error" and max(
+            map(abs, s.qd)) < 1e-3, "halted, at rest, the left arm back").q)[right]
+        again = op.send(part)
+        acks.of("op", again, "accepted")
+        assert acks.of("op", again, "blocked").detail == halted
+        after = np.array(watch.after(again, lambda s: s.status == "error", "still halted").q)
+        assert "moving" not in acks.stages("op", again)
+        assert np.max(np.abs(after[right] - before)) < 1e-3
+        acks.of("op", op.send(deadman=False), "holding")
+        retry = op.send(part)
+        assert acks.of("op", retry, "reached")
+        op.close()
+    acks.close()

@@ -283,6 +283,13 @@ class Conduct:
             raise KinesphereError(
                 "internal", f"databank pose has joints {self.platform} cannot take: {exc}"
             ) from None
+        refused = ctrl.guard.fault if ctrl.guard is not None else ""
+        if refused:  # the target the guard halted or refused, again: said again, not retried
+            self.acks.follow(cmd, parts_key(cmd.parts), pose.substitutions)
+            self.acks.send(cmd, AckStage.ACCEPTED, substitutions=pose.substitutions)
+            self.acks.end(AckStage.BLOCKED, refused)
+            self.set(Status.ERROR, f"{refused} and holding")
+            return
         if pose.translation is not None and ctrl.base is not None and not ctrl.base.driving:
             ctrl.base.translate(pose.translation, yaw)
         beyond = [c for c in clamps if c.beyond]

@@ -101,6 +101,8 @@ class Controller:
     def fail_safe(self) -> None:
         """The last resort when a step failed: the body holds where it is and the
         trajectories start again from there, at rest."""
+        if self.guard is not None:
+            self.guard.cancel()
         self.body.halt()
         self._reading = None
         now = self.reading()

@@ -10,6 +10,12 @@ fault names the links that would touch. During motion, a contact between two lin
 motion did not start with (a push from outside, a body straying from its plan) halts every
 joint and is reported with the pair.
 
+Cheap under a command stream, because it runs on the control thread: the same target again
+(a gamepad streams it at 30 Hz, a flood repeats it) restarts nothing, contacts are listed only
+when the body says something touches, and the worker checks only the newest target, no more
+often than every :data:`CHECK_GAP_S` while targets keep coming (its Python competes with the
+control loop for the GIL), and not at all when the new way lies on one already found clear.
+
 The hook is small: :class:`~kinesphere.robots.agent.controller.Controller` calls
 :meth:`Guard.move` instead of retargeting directly and :meth:`Guard.before_step` /
 :meth:`Guard.after_step` around each step; the fault shows in the agent's state.
@@ -19,6 +25,7 @@ from __future__ import annotations
 
 import logging
 import threading
+import time
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -32,6 +39,13 @@ if TYPE_CHECKING:
     from kinesphere.robots.agent.trajectory import Clamp, JointTrajectory
 
 log = logging.getLogger(__name__)
+
+CHECK_GAP_S = 0.02
+"""s: while new targets keep arriving, a check starts at most this long after the previous one
+began (the newest target then); the first target after a quiet spell is checked at once."""
+ON_WAY_TOL = 1e-6
+"""rad (m): how far from a way found clear a new start or goal may lie and still be on it."""
+
 
 @dataclass(frozen=True)
 class Blocked:
@@ -55,9 +69,17 @@ class Guard:
         """Why the joints were halted or refused ("" when they were not)."""
         self.legs: list[np.ndarray] = []
         """Waypoints still to go (the last is the goal); empty on a direct way."""
+        self.checks = 0
+        """Straight ways checked by the worker (skipped ones not counted)."""
+        self.skipped = 0
+        """New targets that needed no check: on a way already found clear."""
+        self._goal: np.ndarray | None = None
+        """The target of the move under way (every joint), until a halt or stop cancels it."""
         self._generation = 0
         self._asked: tuple[int, np.ndarray, np.ndarray] | None = None
         self._verdicts: list[tuple[int, Verdict]] = []
+        self._clear: tuple[np.ndarray, np.ndarray] | None = None
+        """The last straight way found clear (worker thread only)."""
         self._start_contacts: frozenset[tuple[str, str]] = frozenset()
         self._braked = self._halted = False
         self._wake = threading.Condition()
@@ -73,27 +95,46 @@ class Guard:
             return (self._asked is not None or self._busy
                     or any(g == self._generation for g, _ in self._verdicts))
 
+    def settle(self, timeout: float) -> bool:
+        """Wait until the way to the newest target is checked (and a route planned when it
+        touches); False on timeout. For tests and tools that step faster than real time, where
+        the worker's few milliseconds are many steps."""
+        with self._wake:
+            return self._wake.wait_for(
+                lambda: self._closed or (self._asked is None and not self._busy), timeout)
+
     # --- control thread ----------------------------------------------------------------------
     def move(self, joints: JointTrajectory, targets: Mapping[str, float]) -> list[Clamp]:
-        """Start toward ``targets`` at once and have the way there checked."""
+        """Start toward ``targets`` at once and have the way there checked; the target of the
+        move under way again changes nothing (not even a halt it came to)."""
+        clamped, clamps = joints.clamp(targets)  # KeyError, ValueError: nothing changes
+        goal = self._goal
+        if goal is not None and not joints.fault and all(
+                goal[joints.index[j]] == v for j, v in clamped.items()):
+            return clamps
         start = joints.position.copy()
-        clamps = joints.retarget(targets, straight=True)
+        base = goal if goal is not None and self.legs else None  # not a waypoint's joints
+        joints.retarget(clamped, straight=True, base=base)
+        self._goal = joints.target.copy()
         self.legs = []
         self.fault = ""
         self._braked = self._halted = False
-        self._start_contacts = _pairs(self.body.contacts())
+        self._start_contacts = (_pairs(self.body.contacts()) if self.body.touching()
+                                else frozenset())
         with self._wake:
             self._generation += 1
-            self._asked = (self._generation, start, joints.target.copy())
-            self._wake.notify()
+            self._asked = (self._generation, start, self._goal)
+            self._wake.notify_all()
         return clamps
 
     def cancel(self) -> None:
-        """Forget the move under way (a halt, a stop): no verdict or waypoint applies any more."""
+        """Forget the move under way (a halt, a stop): no verdict or waypoint applies any more,
+        and its target, sent again, starts a new move."""
         with self._wake:
             self._generation += 1
             self._asked = None
         self.legs = []
+        self._goal = None
 
     def before_step(self, joints: JointTrajectory) -> None:
         """Apply a verdict that arrived; start the next leg once the last one is at rest."""
@@ -111,8 +152,7 @@ class Guard:
                 self.legs = list(verdict)
                 log.info("way blocked; going via %d waypoint(s)", len(verdict) - 1)
         if self.legs and not joints.moving:
-            leg = self.legs.pop(0)
-            joints.retarget(dict(zip(joints.names, leg.tolist(), strict=True)), straight=True)
+            joints.go_to(self.legs.pop(0))
 
     def after_step(self, joints: JointTrajectory) -> None:
         """Halt on a contact the motion did not start with, naming the links (once)."""
@@ -121,7 +161,10 @@ class Guard:
         new = _pairs(self.body.contacts()) - self._start_contacts
         if new:
             a, b = sorted(new)[0]
-            self.cancel()
+            with self._wake:  # no verdict on this move applies any more; its target stays
+                self._generation += 1
+                self._asked = None
+            self.legs = []
             joints.stop()
             self._halted = True
             self.fault = f"contact {a}/{b} during motion; halted"
@@ -130,7 +173,7 @@ class Guard:
     def close(self) -> None:
         with self._wake:
             self._closed = True
-            self._wake.notify()
+            self._wake.notify_all()
         self._thread.join(timeout=5.0)
 
     def _take(self) -> Verdict | None:
@@ -144,27 +187,46 @@ class Guard:
 
     # --- worker thread -----------------------------------------------------------------------
     def _work(self) -> None:
+        began = -CHECK_GAP_S
         while True:
             with self._wake:
                 while self._asked is None and not self._closed:
                     self._wake.wait()
+                # a stream of targets: let it settle until the gap has passed, then the newest
+                while not self._closed and (rest := began + CHECK_GAP_S - time.monotonic()) > 0:
+                    self._wake.wait(rest)
                 if self._closed:
                     return
+                if self._asked is None:  # cancelled meanwhile
+                    continue
                 asked, self._asked = self._asked, None
                 self._busy = True
-            assert asked is not None
-            generation, start, goal = asked
-            try:  # first the straight way alone (milliseconds), then a route if it touches
-                touch = self.clearance.leg(start, goal, self.clearance.contacts(start))
-                self._post(generation, touch if touch is not None else [goal])
-                if touch is not None:
-                    route = self.clearance.route(start, goal)
-                    self._post(generation, Blocked(route) if isinstance(route, Touch) else route)
+            began = time.monotonic()
+            try:
+                self._check(*asked)
             except Exception:  # a planner bug must not stop the checks for good
-                log.exception("planning the way to %s failed", goal)
+                log.exception("planning the way to %s failed", asked[2])
             finally:
                 with self._wake:
                     self._busy = False
+                    self._wake.notify_all()
+
+    def _check(self, generation: int, start: np.ndarray, goal: np.ndarray) -> None:
+        """First the straight way alone (milliseconds), then a route if it touches."""
+        clear = self._clear
+        if clear is not None and _on_way(start, *clear) and _on_way(goal, *clear):
+            self.skipped += 1
+            self._post(generation, [goal])
+            return
+        self.checks += 1
+        touch = self.clearance.leg(start, goal, self.clearance.contacts(start))
+        if touch is None:
+            self._clear = (start, goal)
+            self._post(generation, [goal])
+            return
+        self._post(generation, touch)
+        route = self.clearance.route(start, goal)
+        self._post(generation, Blocked(route) if isinstance(route, Touch) else route)
 
     def _post(self, generation: int, verdict: Verdict) -> None:
         with self._wake:
@@ -179,6 +241,15 @@ def make_guard(body: Body, platform: str) -> Guard:
 
     pm = getattr(body, "pm", None) or platform_model(platform)
     return Guard(Clearance(pm), body)
+
+
+def _on_way(q: np.ndarray, a: np.ndarray, b: np.ndarray) -> bool:
+    """``q`` lies on the straight segment from ``a`` to ``b``."""
+    d = b - a
+    dd = float(d @ d)
+    t = float((q - a) @ d) / dd if dd > 0.0 else 0.0
+    t = min(max(t, 0.0), 1.0)
+    return float(np.max(np.abs(q - (a + t * d)), initial=0.0)) <= ON_WAY_TOL
 
 
 def _pairs(contacts: list[tuple[str, str]]) -> frozenset[tuple[str, str]]:

@@ -142,8 +142,10 @@ class JointTrajectory:
             out[name] = target
         return out, clamps
 
-    def retarget(self, joints: Mapping[str, float], straight: bool = False) -> list[Clamp]:
-        """Move the named joints to ``joints`` (clamped); the others keep their last target.
+    def retarget(self, joints: Mapping[str, float], straight: bool = False,
+                 base: np.ndarray | None = None) -> list[Clamp]:
+        """Move the named joints to ``joints`` (clamped); the others keep their last target
+        (or go to ``base``'s, every joint in P order: the guard's goal past a waypoint).
 
         ``straight``: phase-synchronised, so a move from rest follows the straight line in
         joint space (what the guard checked). Unknown joint names (KeyError) and non-finite
@@ -152,7 +154,7 @@ class JointTrajectory:
         if not joints.keys() <= self.index.keys():
             raise KeyError(", ".join(sorted(set(joints) - set(self.index))))
         targets, clamps = self.clamp(joints)
-        goal = self.target.tolist()
+        goal = (self.target if base is None else base).tolist()
         index = self.index
         for name, value in targets.items():
             goal[index[name]] = value
@@ -163,6 +165,12 @@ class JointTrajectory:
         if self.dof:
             self._otg.go_to(goal, Synchronization.Phase if straight else Synchronization.Time)
         return clamps
+
+    def go_to(self, q: np.ndarray) -> None:
+        """Straight (phase-synchronised) to ``q``, every joint, already inside the limits (the
+        guard's waypoints); what was clamped stays reported."""
+        if self.dof:
+            self._otg.go_to(q, Synchronization.Phase)
 
     def reset(self, q: Values) -> None:
         """At rest at ``q`` (where the body was found), held there."""
