@@ -2,19 +2,26 @@
 
 from __future__ import annotations
 
+import gc
 import threading
 
+import msgspec
+import psutil
 import zenoh
 
 from kinesphere.errors import KinesphereError
+from kinesphere.keyexpr import Keys
 from kinesphere.services.databank.replies import (
+    DEFAULT_BUDGET,
     ENTRY_BYTES,
     Answer,
     ReplyCache,
     entry_bytes,
     err,
+    ok,
 )
 from kinesphere.services.databank.worker import MAX_JOBS, Worker
+from kinesphere.services.ecl.ecl import Ecl
 
 
 def answer(n: int) -> Answer:
@@ -40,6 +47,30 @@ def test_bounded_by_bytes_least_recently_used_first() -> None:
     for i in range(10_000):
         cache.put("x" * (i % 3000) + str(i), answer(i % 500), cache.generation)
         assert cache.bytes <= cache.max_bytes
+
+
+def test_a_full_cache_costs_the_process_no_more_than_its_budget() -> None:
+    """The charge per entry is what an entry really costs (key and payload objects, the
+    ZBytes, the dict slot and LRU link): a cache filled with real pose answers from the shipped
+    Baxter databank, past the service's own answer budget, grows the process's RSS by at most
+    that budget. Before, 256 bytes per entry undercounted: 35.4 MiB for 32 MiB charged."""
+    keys = Keys()
+    pose = Ecl.open("baxter").query("limb_11", "distal_11", "left-high", 2.0, False)
+    budget = DEFAULT_BUDGET.answers
+    cache = ReplyCache(budget)
+    per_entry = entry_bytes(keys.pose("baxter", "limb_11", "distal_11", "left-high", 1.5),
+                            ok(pose))
+    n = budget * 13 // 10 // per_entry  # past the budget, so eviction runs too
+    gc.collect()
+    before = psutil.Process().memory_info().rss
+    for i in range(n):
+        size = 1.0 + i / n
+        cache.put(keys.pose("baxter", "limb_11", "distal_11", "left-high", size),
+                  ok(msgspec.structs.replace(pose, size=size)), cache.generation)
+    gc.collect()
+    grown = psutil.Process().memory_info().rss - before
+    assert cache.bytes <= budget and len(cache) < n
+    assert grown <= budget, f"{grown / 2**20:.1f} MiB for a {budget >> 20} MiB cache"
 
 
 def test_an_answer_over_a_quarter_of_the_budget_is_not_cached() -> None:
