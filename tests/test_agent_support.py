@@ -227,11 +227,16 @@ def running_agent(
 
 class Operator:
     """A client putting Commands, as the gamepad client would (``session`` "" is a version-1
-    client's)."""
+    client's): on publishers like ``RobotLink.publisher``'s, never dropped under congestion
+    (BLOCK), express, e-stops at REAL_TIME priority and the rest at INTERACTIVE_HIGH."""
 
     def __init__(self, session: zenoh.Session, robot_id: str = "*", sender: str = "test",
                  key: str | None = None, client_session: str = "") -> None:
-        self.pub = session.declare_publisher(key or KEYS.command(robot_id))
+        key = key or KEYS.command(robot_id)
+        self.pub, self.urgent = (session.declare_publisher(
+            key, congestion_control=zenoh.CongestionControl.BLOCK, priority=priority,
+            express=True) for priority in (zenoh.Priority.INTERACTIVE_HIGH,
+                                           zenoh.Priority.REAL_TIME))
         self.sender = sender
         self.session = client_session
         self.seq = 0
@@ -245,7 +250,7 @@ class Operator:
         self.seq = self.seq + 1 if seq is None else seq
         if isinstance(drive, tuple):
             drive = Drive(*drive)
-        self.pub.put(encode(Command(
+        (self.urgent if estop else self.pub).put(encode(Command(
             seq=self.seq, sent_ns=time.time_ns() if sent_ns is None else sent_ns,
             parts=[SpatialCommand(*p) for p in parts], drive=drive, deadman=deadman,
             ttl_ms=ttl_ms, estop=estop, stop=stop, release=release, sender=self.sender,
@@ -256,7 +261,7 @@ class Operator:
         self.pub.put(payload)
 
     def close(self) -> None:
-        zconfig.undeclare(self.pub)
+        zconfig.undeclare(self.pub, self.urgent)
 
 
 class AckWatch:
