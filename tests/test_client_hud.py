@@ -198,3 +198,19 @@ def test_level_shading_follows_laban(window: hud.Hud) -> None:
 def test_every_state_renders(window: hud.Hud, kw: dict[str, object]) -> None:
     window._last = 0.0
     window.draw(view(**kw))
+
+
+def test_a_direction_with_no_pose_near_is_crossed_out_in_red_while_driving(
+    window: hud.Hud,
+) -> None:
+    """The stick points where no targeted body has a pose within the limit: its lit cell is
+    crossed out in the refusal colour (the command carries the drive alone)."""
+    have = frozenset({Direction.LEFT_FORWARD_LOW, Direction.FORWARD_LOW, Direction.PLACE_HIGH})
+    intent = Intent(direction=Direction.LEFT_MIDDLE, size=3.0, deadman=True)
+    for holds in (False, True):
+        hud.render(window.screen, view(available=have, limb_holds=holds, intent=intent),
+                   window.fonts)
+        r = hud.cell_rect(Direction.LEFT_MIDDLE)
+        diagonal = [window.screen.get_at((r.left + 4 + k, r.top + 4 + k))[:3]
+                    for k in range(4, 8)]
+        assert (hud.BAD in diagonal) is holds, (holds, diagonal)

@@ -323,7 +323,7 @@ FAKEBOT = Catalogue(
         LimbEntry("limb_11", "distal_11", ["left-high", "place-middle"], [1, 2, 3]),
         LimbEntry("limb_12", "distal_11", ["left-high"], [1, 2, 3]),
         LimbEntry("limb_12", "distal_12", ["left-high"], [1, 2, 3]),
-        LimbEntry("limb_21", "distal_21", ["left-high"], [1, 2, 3]),
+        LimbEntry("limb_21", "distal_21", ["left-high", "forward-middle"], [1, 2, 3]),
         LimbEntry("c_1", "c_1", ["forward-middle"], [1, 2, 3]),
     ],
     joints=[],
@@ -407,6 +407,40 @@ def test_a_direction_the_limb_lacks_is_served_in_front(
     settle(link, inboxes)
     assert [c.parts[0].direction for c in inboxes["r2"].commands()[-2:]] == [
         "left-forward-low", "right-forward-low"]  # fmt: skip
+
+
+def test_a_direction_no_body_has_near_sends_the_drive_alone(
+    hub: tuple[zenoh.Session, str], link: RobotLink, inboxes: dict[str, Inbox],
+    inp: pad.PygameInput,
+) -> None:  # fmt: skip
+    """PackBot's arm (shipped databank) has nothing within 45 degrees of plain left-middle:
+    stick left while driving forward sends the drive alone (a robot would refuse the whole
+    command for the part), the limb holds and the view says so; a servable push sends its
+    part again."""
+    session, _ = hub
+    FakeRobot(session, "r2", "packbot").state()
+    assert link.wait_for(lambda lk: "r2" in lk.states(), WAIT_S)
+    with databank(session, "packbot"):
+        await_catalogue(link, "packbot")
+        op = teleop(link, tg.robot("r2"))
+        op.tick(inp.poll())
+        assert op.catalogues.arrived.wait(WAIT_S)
+        p = Pad()
+        p.deadman()
+        p.left(0.0, -0.6)  # base: forward
+        p.right(-1.0, 0.0)  # arm: left, middle level
+        held = op.tick(inp.poll())
+        p.axis(pygame.CONTROLLER_AXIS_TRIGGERLEFT, 1.0)  # low: the sweep, served in front
+        swept = op.tick(inp.poll())
+    assert held.intent.direction is Direction.LEFT_MIDDLE and held.limb_holds
+    assert held.available is not None and Direction.LEFT_MIDDLE not in held.available
+    assert not swept.limb_holds and swept.intent.direction is Direction.LEFT_FORWARD_LOW
+    settle(link, inboxes)
+    drive_only, sweep = inboxes["r2"].commands()[-2:]
+    assert drive_only.parts == [] and drive_only.drive is not None
+    assert drive_only.drive.forward > 0
+    assert [s.direction for s in sweep.parts] == ["left-forward-low"]
+    assert sweep.drive is not None and sweep.drive.forward > 0
 
 
 def test_a_recorded_pose_makes_the_client_fetch_catalogues_again(

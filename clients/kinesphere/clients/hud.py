@@ -144,11 +144,14 @@ def _chart(surf: pygame.Surface, fonts: dict[str, pygame.font.Font], view: View)
         ink = BG if lit else UNAVAILABLE if missing else INK
         draw_symbol(surf, d, cell.inflate(-16, -12), ink)
         if missing:
-            _cross(surf, cell.inflate(-8, -8), BAD if view.asked is d else UNAVAILABLE)
+            refused = view.asked is d or (lit and view.limb_holds)
+            _cross(surf, cell.inflate(-8, -8), BAD if refused else UNAVAILABLE)
     size = view.intent.size
     label = f"{active.slug}   size {size:.2f} ({size_name(size if size > 3 else round(size))})"
     if view.asked is not None:
         label = f"{view.asked.slug} -> {label}"
+    if view.limb_holds:
+        label = f"{active.slug}: no pose near it, the limb holds (driving still works)"
     y = y0 + 3 * CELL + 8
     y = _text(surf, fonts["big"], label, (x0, y), LIT if view.engaged else FG)
     _text(surf, fonts["tiny"], "crossed out: no pose stored for this limb; a push there is "

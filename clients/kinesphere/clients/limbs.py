@@ -85,6 +85,17 @@ def served(asked: Direction, available: frozenset[Direction] | None) -> Directio
     return asked if choice is None else choice.direction
 
 
+def servable(asked: Direction, catalogues: Sequence[Catalogue], limb: str, origin: str) -> bool:
+    """Whether some body with (limb, origin) has ``asked`` or a substitute for it within
+    ``MAX_ANGLE_DEG`` (what its ECL would serve). False: every targeted robot would refuse
+    the part (``direction_unavailable``), and with it the rest of the command. True when no
+    catalogue knows the pair (nothing to go by: the robot answers)."""
+    sets = [frozenset(_directions(e.directions)) for c in catalogues for e in c.limbs
+            if (e.limb, e.origin) == (limb, origin)]
+    return not sets or any(
+        nearest_direction(asked, have, MAX_ANGLE_DEG) is not None for have in sets)
+
+
 def aliases_of(catalogues: Sequence[Catalogue]) -> dict[str, str]:
     """Label -> alias, when every catalogue that has the label calls it the same."""
     seen: dict[str, set[str]] = {}

@@ -37,6 +37,7 @@ from kinesphere.clients.limbs import (
     aliases_of,
     available_directions,
     pairs_of,
+    servable,
     served,
 )
 from kinesphere.clients.link import Answer, RobotLink, Seen
@@ -96,6 +97,9 @@ class View:
     """Directions the limb has poses for (None: no catalogue yet)."""
     asked: Direction | None = None
     """The direction the stick asked for, when the nearest available one replaced it."""
+    limb_holds: bool = False
+    """No targeted body has a pose near the stick's direction: the command carries the drive
+    alone and the limb holds (rather than every robot refusing the whole command)."""
 
 
 class Teleop:
@@ -130,6 +134,7 @@ class Teleop:
         self._aliases: dict[str, str] = {}
         self._available: frozenset[Direction] | None = None
         self._asked: Direction | None = None
+        self._limb_holds = False
 
     # --- decisions ----------------------------------------------------------------------
 
@@ -233,6 +238,7 @@ class Teleop:
         asked = self.intent.direction
         snapped = served(asked, self._available)
         self._asked = asked if snapped is not asked else None
+        self._limb_holds = not servable(asked, cats, self.selection.limb, self.selection.origin)
         if snapped is not asked:
             self.intent = replace(self.intent, direction=snapped)
         remote = self._remote_estop()
@@ -255,7 +261,8 @@ class Teleop:
                 size=self.intent.size,
             )
             lease = self.lease.action_for_command(self.target)
-            cmd = self.seq.command([part], self.intent.drive, deadman=True, lease=lease)
+            parts = [] if self._limb_holds else [part]
+            cmd = self.seq.command(parts, self.intent.drive, deadman=True, lease=lease)
             self.link.put(self.target.keys(self.link.keys), cmd)
             self.streaming = True
         else:
@@ -284,6 +291,7 @@ class Teleop:
             catalogue_errors=self.catalogues.errors(),
             available=self._available,
             asked=self._asked,
+            limb_holds=self._limb_holds,
             members=sorted(targeted),
             sender=self.seq.sender,
             answers=self.link.last_answers(),
