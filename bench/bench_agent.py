@@ -117,10 +117,12 @@ def step_cost(endpoint: str) -> None:
                   f"{a99:>6.1f}us {b50:>10.1f}us {b99:>6.1f}us {a50 / b50:>8.2f}x")
 
 
-FLOOD_S = 3.0
+FLOOD_S = 4.0
 FLOOD_RATE = 5000
 """Commands per second put into the flooded agent's inbox (from 10 senders, as fast as a
 loaded machine lets a Python thread)."""
+TOGGLE_S = 0.25
+"""The guard is taken out and put back every this long: both sides see the same load."""
 
 
 def flood_parts(agent: Agent) -> list[SpatialCommand]:
@@ -136,57 +138,62 @@ def flood_parts(agent: Agent) -> list[SpatialCommand]:
 
 def flood_cost(endpoint: str) -> None:
     """The control step's own cost (Baxter at 500 Hz real time) while commands pour in, with
-    the collision guard and without it (the same agent, the guard taken out): a stream of
-    one target (a gamepad's 30 Hz repeat, a flood's repeats) and a stream of new targets."""
+    the collision guard and without it, interleaved on one agent: a stream of one target (a
+    gamepad's 30 Hz repeat, a flood's repeats) and a stream of new targets."""
     print(f"control step under a command flood: Baxter at 500 Hz real time, {FLOOD_RATE} "
           f"commands/s for {FLOOD_S:g} s from 10 senders; step cost from the loop itself, "
-          "guard on against guard off in the same run:")
-    print(f"  {'stream':<13} {'guard':<5} {'step p50':>9} {'p99':>8} {'late':>5} "
-          f"{'ratio p50':>9} {'p99':>6}  checks")
+          f"the guard taken out and put back every {TOGGLE_S:g} s (same load on both sides):")
+    print(f"  {'stream':<12} {'guard off p50':>13} {'p99':>8} {'late':>5} {'guard on p50':>13} "
+          f"{'p99':>8} {'late':>5} {'ratio p50':>9} {'p99':>6}  way checks")
     with zconfig.session(config=zconfig.loopback_config(endpoint)) as s:
         for stream in ("one target", "new targets"):
-            base: tuple[float, float] | None = None
-            for guarded in (False, True):
-                agent = Agent("baxter", f"bench-flood-{int(guarded)}", s, AgentOptions())
-                guard = agent.controller.guard
-                if not guarded and guard is not None:
-                    guard.close()
-                    agent.controller.guard = None
-                agent.declare()
-                parts = flood_parts(agent)
-                for i, p in enumerate(parts):  # warm the cache: no command waits on the network
-                    agent.receive(command(i + 1, p))
-                    while agent.resolver.queries < i + 1:
-                        agent.tick()
-                while agent.controller.moving or (guard is not None and guard.pending):
+            agent = Agent("baxter", "bench-flood", s, AgentOptions())
+            ctrl, guard = agent.controller, agent.controller.guard
+            assert guard is not None
+            agent.declare()
+            parts = flood_parts(agent)
+            for i, p in enumerate(parts):  # warm the cache: no command waits on the network
+                agent.receive(command(i + 1, p))
+                while agent.resolver.queries < i + 1:
                     agent.tick()
-                stop = threading.Event()
-                loop = threading.Thread(target=agent.run, args=(stop,), daemon=True)
-                loop.start()
-                agent.stats.costs_s.clear()
-                late0 = agent.stats.late
-                checks0 = (guard.checks, guard.skipped) if guard is not None else (0, 0)
-                n = int(FLOOD_S * FLOOD_RATE)
-                t0 = time.perf_counter()
-                for k in range(n):
-                    part = parts[-1] if stream == "one target" else parts[(k // 10) % len(parts)]
-                    agent.receive(command(1000 + k, part, f"bench{k % 10}"))
-                    ahead = t0 + (k + 1) / FLOOD_RATE - time.perf_counter()
-                    if ahead > 0:
-                        time.sleep(ahead)
-                costs = np.fromiter(agent.stats.costs_s, dtype=float) * 1e6
-                late = agent.stats.late - late0
-                checks = (f"{guard.checks - checks0[0]} checked, {guard.skipped - checks0[1]} "
-                          "on a clear way") if guarded and guard is not None else "-"
-                stop.set()
-                loop.join()
-                agent.close()
-                c50, c99 = pct(costs, 50), pct(costs, 99)
-                if base is None:
-                    base = (c50, c99)
-                print(f"  {stream:<13} {'on' if guarded else 'off':<5} {c50:>7.1f}us "
-                      f"{c99:>6.1f}us {late:>5} {c50 / base[0]:>8.2f}x {c99 / base[1]:>5.2f}x  "
-                      f"{checks}", flush=True)
+            while ctrl.moving or guard.pending:
+                agent.tick()
+            stop = threading.Event()
+            loop = threading.Thread(target=agent.run, args=(stop,), daemon=True)
+            loop.start()
+            costs: dict[bool, list[float]] = {False: [], True: []}
+            late = {False: 0, True: 0}
+            checks0 = guard.checks, guard.skipped
+            stats = agent.stats
+            n, every = int(FLOOD_S * FLOOD_RATE), int(TOGGLE_S * FLOOD_RATE)
+            on, late0 = False, stats.late
+            ctrl.guard = None
+            stats.costs_s.clear()
+            t0 = time.perf_counter()
+            for k in range(n):
+                if k % every == every - 1:  # close this segment, switch
+                    costs[on] += list(stats.costs_s)
+                    stats.costs_s.clear()
+                    late[on] += stats.late - late0
+                    late0, on = stats.late, not on
+                    ctrl.guard = guard if on else None
+                part = parts[-1] if stream == "one target" else parts[(k // 10) % len(parts)]
+                agent.receive(command(1000 + k, part, f"bench{k % 10}"))
+                ahead = t0 + (k + 1) / FLOOD_RATE - time.perf_counter()
+                if ahead > 0:
+                    time.sleep(ahead)
+            costs[on] += list(stats.costs_s)
+            late[on] += stats.late - late0
+            stop.set()
+            loop.join()
+            ctrl.guard = guard
+            checked, skipped = guard.checks - checks0[0], guard.skipped - checks0[1]
+            agent.close()
+            f50, f99, g50, g99 = (pct(np.array(costs[m]) * 1e6, q) for m in (False, True)
+                                  for q in (50, 99))
+            print(f"  {stream:<12} {f50:>11.1f}us {f99:>6.1f}us {late[False]:>5} {g50:>11.1f}us "
+                  f"{g99:>6.1f}us {late[True]:>5} {g50 / f50:>8.2f}x {g99 / f99:>5.2f}x  "
+                  f"{checked} checked, {skipped} on a clear way", flush=True)
 
 
 class Floor:
