@@ -43,6 +43,10 @@ log = logging.getLogger(__name__)
 CHECK_GAP_S = 0.02
 """s: while new targets keep arriving, a check starts at most this long after the previous one
 began (the newest target then); the first target after a quiet spell is checked at once."""
+CHECKING = threading.Lock()
+"""One way check at a time per process: a fleet host's control loop then competes for the
+interpreter with one checker, not with one per robot after a command to all (48 at once held
+ticks up to 100 ms); waiting checkers block on the lock, not on the interpreter."""
 ON_WAY_TOL = 1e-6
 """rad (m): how far from a way found clear a new start or goal may lie and still be on it."""
 
@@ -82,6 +86,8 @@ class Guard:
         """The last straight way found clear (worker thread only)."""
         self._start_contacts: frozenset[tuple[str, str]] = frozenset()
         self._braked = self._halted = False
+        self._unheard = False
+        """A move was asked that the worker has not been woken for yet."""
         self._wake = threading.Condition()
         self._busy = False
         self._closed = False
@@ -99,7 +105,9 @@ class Guard:
         """Wait until the way to the newest target is checked (and a route planned when it
         touches); False on timeout. For tests and tools that step faster than real time, where
         the worker's few milliseconds are many steps."""
+        self._unheard = False
         with self._wake:
+            self._wake.notify_all()  # a move asked without a step since is checked now
             return self._wake.wait_for(
                 lambda: self._closed or (self._asked is None and not self._busy), timeout)
 
@@ -124,7 +132,7 @@ class Guard:
         with self._wake:
             self._generation += 1
             self._asked = (self._generation, start, self._goal)
-            self._wake.notify_all()
+        self._unheard = True  # the worker is woken after this step (after_step)
         return clamps
 
     def cancel(self) -> None:
@@ -155,7 +163,13 @@ class Guard:
             joints.go_to(self.legs.pop(0))
 
     def after_step(self, joints: JointTrajectory) -> None:
-        """Halt on a contact the motion did not start with, naming the links (once)."""
+        """Wake the worker for a move this step started (not earlier: its checks would take
+        the interpreter from the first step toward the new target, the command's latency);
+        halt on a contact the motion did not start with, naming the links (once)."""
+        if self._unheard:
+            self._unheard = False
+            with self._wake:
+                self._wake.notify_all()
         if self._halted or not (joints.moving or self.legs) or not self.body.touching():
             return
         new = _pairs(self.body.contacts()) - self._start_contacts
@@ -203,7 +217,8 @@ class Guard:
                 self._busy = True
             began = time.monotonic()
             try:
-                self._check(*asked)
+                with CHECKING:
+                    self._check(*asked)
             except Exception:  # a planner bug must not stop the checks for good
                 log.exception("planning the way to %s failed", asked[2])
             finally:
