@@ -12,17 +12,25 @@ import math
 
 import pytest
 
-from kinesphere.clients.limbs import available_directions, pairs_of, served
+from kinesphere.clients.limbs import (
+    available_directions,
+    direction_sets,
+    pairs_of,
+    servable,
+    served,
+)
 from kinesphere.clients.mapping import MapperState, map_controls
 from kinesphere.clients.state import ControllerState
 from kinesphere.clients.sticks import RING, Tuning
+from kinesphere.errors import KinesphereError
 from kinesphere.laban import Direction, Level
 from kinesphere.protocol import Catalogue
 from kinesphere.robots.platform import platform_names
 from kinesphere.services.ecl.ecl import Ecl
 from kinesphere.substitution import MAX_ANGLE_DEG, angle_between, forward_sign
 
-CATALOGUES = {p: Ecl.open(p).catalogue() for p in platform_names()}
+ECLS = {p: Ecl.open(p) for p in platform_names()}
+CATALOGUES = {p: ecl.catalogue() for p, ecl in ECLS.items()}
 TRIGGERS = {Level.LOW: {"lt": 1.0}, Level.MIDDLE: {}, Level.HIGH: {"rt": 1.0}}
 
 
@@ -57,7 +65,7 @@ def test_every_articulated_platform_is_covered() -> None:
 def test_stick_headings_keep_their_side_on_every_shipped_limb(
     name: str, cat: Catalogue, limb: str, origin: str
 ) -> None:
-    available = available_directions([cat], limb, origin)
+    available = available_directions(direction_sets([cat], limb, origin))
     assert available, name
     signs = {forward_sign(d) for d in available if d is not Direction.PLACE_MIDDLE}
     for k, horizontal in enumerate(RING):
@@ -78,9 +86,30 @@ def test_stick_headings_keep_their_side_on_every_shipped_limb(
             assert angle_between(asked, got) <= MAX_ANGLE_DEG + 1e-9, where
 
 
+@pytest.mark.parametrize(("name", "cat", "limb", "origin"), LIMBS, ids=[n for n, *_ in LIMBS])
+def test_the_client_drops_a_part_exactly_when_the_databank_would_refuse_it(
+    name: str, cat: Catalogue, limb: str, origin: str
+) -> None:
+    """``servable`` (the client sends the drive alone when it is False) agrees with the real
+    ECL on every stick heading and level: a part is dropped only when the databank would
+    answer ``direction_unavailable``, never when it would serve it or a substitute."""
+    sets = direction_sets([cat], limb, origin)
+    ecl = ECLS[cat.platform]
+    for k in range(len(RING)):
+        for level in Level:
+            asked = pushed(k * 45.0, level)
+            try:
+                ecl.query(limb, origin, asked.slug, 3, False)
+                answered = True
+            except KinesphereError as exc:
+                assert exc.code == "direction_unavailable", (name, asked.slug, exc)
+                answered = False
+            assert servable(asked, sets) is answered, (name, asked.slug)
+
+
 def test_the_packbot_sweep_is_served_in_front() -> None:
     """The headline gesture: low + stick left/right on the PackBot arm (it has no left-low)."""
-    arm = available_directions([CATALOGUES["packbot"]], "limb_11", "distal_11")
+    arm = available_directions(direction_sets([CATALOGUES["packbot"]], "limb_11", "distal_11"))
     assert arm is not None and Direction.LEFT_LOW not in arm
     assert served(pushed(90, Level.LOW), arm) is Direction.LEFT_FORWARD_LOW
     assert served(pushed(-90, Level.LOW), arm) is Direction.RIGHT_FORWARD_LOW
@@ -101,10 +130,10 @@ def test_without_a_catalogue_the_stick_goes_out_as_asked() -> None:
 def test_a_group_is_served_what_every_member_has() -> None:
     """Mixed platforms: the group moves together, on a direction all of them store."""
     cats = [CATALOGUES["packbot"], CATALOGUES["youbot"]]
-    both = available_directions(cats, "limb_11", "distal_11")
+    both = available_directions(direction_sets(cats, "limb_11", "distal_11"))
     assert both is not None
     for cat in cats:
-        own = available_directions([cat], "limb_11", "distal_11")
+        own = available_directions(direction_sets([cat], "limb_11", "distal_11"))
         assert own is not None and both <= own
     got = served(Direction.LEFT_LOW, both)
     assert got in both and forward_sign(got) >= 0

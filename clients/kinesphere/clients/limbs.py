@@ -44,20 +44,22 @@ def pairs_of(catalogues: Sequence[Catalogue]) -> list[tuple[str, str]]:
     return common or union or [DEFAULT_PAIR]
 
 
-def available_directions(
+def direction_sets(
     catalogues: Sequence[Catalogue], limb: str, origin: str
-) -> frozenset[Direction] | None:
-    """Directions with poses for (limb, origin) on every platform that has the pair.
+) -> list[frozenset[Direction]]:
+    """The directions each platform with (limb, origin) has poses for, one set per catalogue
+    that knows the pair (read once per tick: :func:`available_directions` and
+    :func:`servable` both judge from them). Names a catalogue spells in a way this client does
+    not know are skipped."""
+    return [frozenset(_directions(e.directions)) for c in catalogues for e in c.limbs
+            if (e.limb, e.origin) == (limb, origin)]
 
-    None when no catalogue knows the pair (nothing to go by: send what was asked). Names a
-    catalogue spells in a way this client does not know are skipped.
+
+def available_directions(sets: Sequence[frozenset[Direction]]) -> frozenset[Direction] | None:
+    """Directions with poses on every platform that has the pair (:func:`direction_sets`).
+
+    None when no catalogue knows the pair (nothing to go by: send what was asked).
     """
-    sets = [
-        frozenset(_directions(e.directions))
-        for c in catalogues
-        for e in c.limbs
-        if (e.limb, e.origin) == (limb, origin)
-    ]
     if not sets:
         return None
     return frozenset.intersection(*sets)
@@ -85,13 +87,11 @@ def served(asked: Direction, available: frozenset[Direction] | None) -> Directio
     return asked if choice is None else choice.direction
 
 
-def servable(asked: Direction, catalogues: Sequence[Catalogue], limb: str, origin: str) -> bool:
-    """Whether some body with (limb, origin) has ``asked`` or a substitute for it within
-    ``MAX_ANGLE_DEG`` (what its ECL would serve). False: every targeted robot would refuse
-    the part (``direction_unavailable``), and with it the rest of the command. True when no
-    catalogue knows the pair (nothing to go by: the robot answers)."""
-    sets = [frozenset(_directions(e.directions)) for c in catalogues for e in c.limbs
-            if (e.limb, e.origin) == (limb, origin)]
+def servable(asked: Direction, sets: Sequence[frozenset[Direction]]) -> bool:
+    """Whether some body with the pair (:func:`direction_sets`) has ``asked`` or a substitute
+    for it within ``MAX_ANGLE_DEG`` (what its ECL would serve). False: every targeted robot
+    would refuse the part (``direction_unavailable``), and with it the rest of the command.
+    True when no catalogue knows the pair (nothing to go by: the robot answers)."""
     return not sets or any(
         nearest_direction(asked, have, MAX_ANGLE_DEG) is not None for have in sets)
 

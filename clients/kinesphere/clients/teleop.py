@@ -36,6 +36,7 @@ from kinesphere.clients.limbs import (
     Selection,
     aliases_of,
     available_directions,
+    direction_sets,
     pairs_of,
     servable,
     served,
@@ -234,11 +235,12 @@ class Teleop:
         )
         self.selection.update(pairs_of(cats))
         self._aliases = aliases_of(cats)
-        self._available = available_directions(cats, self.selection.limb, self.selection.origin)
+        sets = direction_sets(cats, self.selection.limb, self.selection.origin)
+        self._available = available_directions(sets)
         asked = self.intent.direction
         snapped = served(asked, self._available)
         self._asked = asked if snapped is not asked else None
-        self._limb_holds = not servable(asked, cats, self.selection.limb, self.selection.origin)
+        self._limb_holds = not servable(asked, sets)
         if snapped is not asked:
             self.intent = replace(self.intent, direction=snapped)
         remote = self._remote_estop()
