@@ -149,6 +149,13 @@ def goal_of(ctrl: Controller, joints: dict[str, float]) -> np.ndarray:
     return goal
 
 
+def assert_at(ctrl: Controller, joints: dict[str, float]) -> None:
+    """The body stands at ``joints`` (within 0.02 rad)."""
+    got = ctrl.reading().q
+    for j, v in joints.items():
+        assert got[ctrl.joint_names.index(j)] == pytest.approx(v, abs=0.02), j
+
+
 def test_the_right_arm_crosses_to_left_high_without_knocking_the_left_arm() -> None:
     ctrl, guard = baxter()
     try:
@@ -175,9 +182,7 @@ def test_a_straight_way_that_touches_goes_via_waypoints() -> None:
         ctrl.move(pose.joints)
         seen, legs = run(ctrl, guard)
         assert legs >= 1 and seen == set() and ctrl.fault() == "" and ctrl.blocked() == ""
-        got = ctrl.reading().q
-        for j, v in pose.joints.items():
-            assert got[ctrl.joint_names.index(j)] == pytest.approx(v, abs=0.02)
+        assert_at(ctrl, pose.joints)
     finally:
         guard.close()
 
@@ -287,9 +292,7 @@ def test_a_burst_of_new_targets_is_checked_for_the_newest_only() -> None:
         elapsed = time.monotonic() - t0
         assert 1 <= guard.checks <= 2 + elapsed / CHECK_GAP_S and guard.checks < 25
         assert seen == set() and ctrl.fault() == "" and ctrl.blocked() == ""
-        got = ctrl.reading().q
-        for j, v in last.joints.items():
-            assert got[ctrl.joint_names.index(j)] == pytest.approx(v, abs=0.02)
+        assert_at(ctrl, last.joints)
     finally:
         guard.close()
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import statistics
 from collections.abc import Iterator
+from contextlib import contextmanager
 
 import msgspec
 import pygame
@@ -379,12 +380,11 @@ def test_groups_of_different_platforms_offer_the_shared_pairs_first() -> None:
     assert (sel.limb, sel.origin) == ("limb_12", "distal_12"), "a still valid choice is kept"
 
 
-def test_a_direction_the_limb_lacks_is_served_in_front(
-    hub: tuple[zenoh.Session, str], link: RobotLink, inboxes: dict[str, Inbox],
-    inp: pad.PygameInput,
-) -> None:  # fmt: skip
-    """The PackBot arm (real databank) has no left-low: low + stick left sends left-forward-low."""
-    session, _ = hub
+@contextmanager
+def packbot_operator(session: zenoh.Session, link: RobotLink, inp: pad.PygameInput
+                     ) -> Iterator[Teleop]:
+    """An operator targeting a stand-in PackBot "r2", with the real PackBot databank serving
+    and its catalogue already fetched."""
     FakeRobot(session, "r2", "packbot").state()
     assert link.wait_for(lambda lk: "r2" in lk.states(), WAIT_S)
     with databank(session, "packbot"):
@@ -392,6 +392,15 @@ def test_a_direction_the_limb_lacks_is_served_in_front(
         op = teleop(link, tg.robot("r2"))
         op.tick(inp.poll())
         assert op.catalogues.arrived.wait(WAIT_S)
+        yield op
+
+
+def test_a_direction_the_limb_lacks_is_served_in_front(
+    hub: tuple[zenoh.Session, str], link: RobotLink, inboxes: dict[str, Inbox],
+    inp: pad.PygameInput,
+) -> None:  # fmt: skip
+    """The PackBot arm (real databank) has no left-low: low + stick left sends left-forward-low."""
+    with packbot_operator(hub[0], link, inp) as op:
         p = Pad()
         p.deadman()
         p.axis(pygame.CONTROLLER_AXIS_TRIGGERLEFT, 1.0)
@@ -417,14 +426,7 @@ def test_a_direction_no_body_has_near_sends_the_drive_alone(
     stick left while driving forward sends the drive alone (a robot would refuse the whole
     command for the part), the limb holds and the view says so; a servable push sends its
     part again."""
-    session, _ = hub
-    FakeRobot(session, "r2", "packbot").state()
-    assert link.wait_for(lambda lk: "r2" in lk.states(), WAIT_S)
-    with databank(session, "packbot"):
-        await_catalogue(link, "packbot")
-        op = teleop(link, tg.robot("r2"))
-        op.tick(inp.poll())
-        assert op.catalogues.arrived.wait(WAIT_S)
+    with packbot_operator(hub[0], link, inp) as op:
         p = Pad()
         p.deadman()
         p.left(0.0, -0.6)  # base: forward

@@ -20,8 +20,8 @@ from test_system_support import (
     at_pose,
     client_config,
     databank_args,
-    port_open,
     query_pose,
+    router_hub,
     supervisor,
     until,
 )
@@ -29,7 +29,6 @@ from test_system_support import (
 from kinesphere.deploy.procs import Supervisor
 from kinesphere.keyexpr import KEYS
 from kinesphere.protocol import Command, SpatialCommand, encode
-from kinesphere.zconfig import free_port
 
 ROBOTS = {"baxter-1": "baxter", "nao-1": "nao", "youbot-1": "youbot"}
 POSE_A = ("limb_11", "distal_11", "right-high", 2)
@@ -59,10 +58,7 @@ def _put(obs: Observer, pose: tuple[str, str, str, int], seq: int) -> None:
 
 def test_fleet_through_router(tmp_path: Path, sup: Supervisor) -> None:
     dbs = databank_args(sorted(set(ROBOTS.values())))
-    port = free_port()
-    endpoint = f"tcp/127.0.0.1:{port}"
-    sup.spawn("router", ["router", "--listen", endpoint])
-    until(lambda: sup.check() or port_open(port), WAIT_S, "the router to listen")
+    endpoint = router_hub(sup)  # the hub: it routes every put
     cfg = client_config(tmp_path / "client.json5", endpoint)
 
     obs = Observer(mode="client", connect=[endpoint])

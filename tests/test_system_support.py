@@ -21,7 +21,7 @@ from kinesphere.deploy.watch import Alive, StateRecorder, watch_alive
 from kinesphere.keyexpr import Keys
 from kinesphere.protocol import Pose, RobotState, decode, error_from_reply
 from kinesphere.services.ecl.store import DATA_DIR
-from kinesphere.zconfig import close_session, open_session, undeclare
+from kinesphere.zconfig import close_session, free_port, open_session, undeclare
 
 ROOT = Path(__file__).resolve().parent.parent
 DEPLOY = ROOT / "deploy"
@@ -150,6 +150,16 @@ class Observer:
         undeclare(*self._subs)  # type: ignore[arg-type]
         self.states.close()
         close_session(self.session)
+
+
+def router_hub(sup: Supervisor) -> str:
+    """A ``kinesphere router`` listening on a free loopback port (the hub every process
+    connects to); its endpoint, once it listens."""
+    port = free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    sup.spawn("router", ["router", "--listen", endpoint])
+    until(lambda: sup.check() or port_open(port), WAIT_S, "the router to listen")
+    return endpoint
 
 
 def supervisor(log_dir: Path) -> Iterator[Supervisor]:

@@ -24,8 +24,8 @@ from test_system_support import (
     WAIT_S,
     Observer,
     at_pose,
-    port_open,
     query_pose,
+    router_hub,
     supervisor,
     until,
 )
@@ -56,11 +56,8 @@ def halves(mask: np.ndarray) -> tuple[int, int]:
 
 
 def test_view_draws_and_moves_robots(sup: Supervisor) -> None:
-    port = free_port()
-    endpoint = f"tcp/127.0.0.1:{port}"
+    endpoint = router_hub(sup)  # the hub: it routes every put
     web = free_port()
-    sup.spawn("router", ["router", "--listen", endpoint])  # the hub: it routes every put
-    until(lambda: sup.check() or port_open(port), WAIT_S, "the router")
     sup.spawn("databank", ["databank", "serve", "--connect", endpoint, "--platform", "baxter",
                            "--platform", "youbot"])
     obs = Observer(mode="peer", connect=[endpoint])

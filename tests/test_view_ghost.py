@@ -20,8 +20,8 @@ from test_system_support import (
     WAIT_S,
     Observer,
     at_pose,
-    port_open,
     query_pose,
+    router_hub,
     supervisor,
     until,
 )
@@ -55,10 +55,7 @@ def sup(tmp_path: Path) -> Iterator[Supervisor]:
 
 
 def test_the_target_ghost_shows_while_a_robot_moves(sup: Supervisor) -> None:
-    port = free_port()
-    endpoint = f"tcp/127.0.0.1:{port}"
-    sup.spawn("router", ["router", "--listen", endpoint])  # the hub: it routes every put
-    until(lambda: sup.check() or port_open(port), WAIT_S, "the router")
+    endpoint = router_hub(sup)  # the hub: it routes every put
     sup.spawn("databank", ["databank", "serve", "--connect", endpoint, "--platform", "baxter"])
     obs = Observer(mode="peer", connect=[endpoint])
     view: View | None = None
