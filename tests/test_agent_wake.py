@@ -18,7 +18,7 @@ from test_agent_support import WAIT_S, Databank, Operator, databank, hub
 
 from kinesphere import zconfig
 from kinesphere.protocol import Catalogue
-from kinesphere.robots.agent.pacing import LoopStats, run_paced
+from kinesphere.robots.agent.pacing import LoopStats, Wake, run_paced
 from kinesphere.robots.agent.runtime import Agent, AgentOptions
 
 __all__ = ["databank", "hub"]  # fixtures
@@ -114,7 +114,7 @@ def test_the_loop_never_runs_more_than_one_step_ahead_of_its_schedule() -> None:
     period = 0.05
     starts: list[float] = []
     stats = LoopStats()
-    wake = threading.Event()
+    wake = Wake()
     stop = threading.Event()
 
     def step() -> None:
@@ -134,3 +134,27 @@ def test_the_loop_never_runs_more_than_one_step_ahead_of_its_schedule() -> None:
     assert stats.early > 0
     for k, at in enumerate(starts):  # step k may start at slot k-1 at the earliest
         assert at >= starts[0] + (k - 1) * period - 1e-3, (k, at - starts[0])
+
+
+def test_wake_behaves_like_an_event() -> None:
+    """Set from another thread wakes a waiter; it stays set until cleared; set twice is set."""
+    wake = Wake()
+    assert not wake.is_set() and not wake.wait(0.01)
+    wake.set()
+    wake.set()  # twice: still just set
+    assert wake.is_set() and wake.wait(0.0) and wake.wait(0.0)
+    wake.clear()
+    wake.clear()  # twice: still just clear
+    assert not wake.is_set() and not wake.wait(0.01)
+    waiting, woke = threading.Event(), []
+
+    def waiter() -> None:
+        waiting.set()
+        woke.append(wake.wait(30.0))
+
+    t = threading.Thread(target=waiter)
+    t.start()
+    assert waiting.wait(5.0)
+    wake.set()
+    t.join(30.0)
+    assert woke == [True] and wake.is_set()

@@ -29,12 +29,15 @@ from kinesphere.robots.agent.inbox import Resolved
 from kinesphere.robots.agent.lease import Lease, holder_name
 from kinesphere.robots.agent.ordering import Ordering, Received
 from kinesphere.robots.agent.pacing import WARN_EVERY_S
-from kinesphere.robots.agent.resolver import Answer, Resolver, parts_key
+from kinesphere.robots.agent.resolver import Answer, PartsKey, Resolver, parts_key
 from kinesphere.robots.agent.safety import Safety, Verdict
 from kinesphere.robots.agent.status import reported_status
+from kinesphere.robots.agent.trajectory import Aim, Clamp
 
 log = logging.getLogger(__name__)
 
+AIMS_KEPT = 256
+"""Compiled poses kept (:meth:`Conduct._aim`; a few hundred bytes each, oldest dropped)."""
 SETTLE_S = 0.2
 """Robot time the servos get after a trajectory ends before the body is held to it."""
 _DRIVE = ("drive",)
@@ -73,6 +76,9 @@ class Conduct:
         self._body_fault = False
         self._ratelog = RateLog(log)
         self._moved_at = 0.0
+        self._aims: dict[int, tuple[Pose, Aim]] = {}
+        self._started: tuple[Command, Pose, PartsKey, list[Clamp]] | None = None
+        """The move started this step, its status and acks not yet said (:meth:`_settle`)."""
 
     def watch(self, now: float) -> None:
         """The wall-clock timers: an expired lease frees, an expired watchdog holds."""
@@ -83,9 +89,11 @@ class Conduct:
     def commanded(self) -> None:
         """The step's setpoints went to the body: the first toward a new target is the moment
         the robot started moving for that command (``moving``; the latency probe)."""
+        now_ns = time.time_ns()
+        self._settle()
         first = self.acks.stepped()
         if first is not None:
-            self.latencies.append((first.seq, first.sent_ns, time.time_ns()))
+            self.latencies.append((first.seq, first.sent_ns, now_ns))
 
     def after_step(self) -> None:
         """After each step: faults, the first step of a motion, the end of one."""
@@ -112,6 +120,7 @@ class Conduct:
 
     def step_failed(self, exc: Exception) -> None:
         """A step raised (a bug, or a body that failed): hold the body and say so."""
+        self._settle()
         now = time.monotonic()
         if isinstance(exc, KinesphereError):  # the body says what is wrong with it
             detail = f"body: {exc.message}; holding"
@@ -141,6 +150,7 @@ class Conduct:
 
     def handle(self, item: Received | KinesphereError | Resolved, now_ns: int) -> None:
         """Act on one inbox item; whatever goes wrong is reported, never raised into the loop."""
+        self._settle()
         cmd: Command | None = None
         try:
             if isinstance(item, Resolved):
@@ -260,15 +270,17 @@ class Conduct:
         if hit is not None:
             self._overtake()
             self.ordering.acted(cmd.seq)
-            self._apply_pose(hit, yaw, cmd)
+            self._apply_pose(hit, yaw, cmd, key)
         else:
             ticket, overtaken = self.ordering.wait(cmd, yaw)
             if overtaken is not None:
                 self.acks.send(overtaken.cmd, AckStage.SUPERSEDED, "a newer command arrived first")
             self.resolver.submit(ticket, key, self._on_resolved)
 
-    def _apply_pose(self, pose: Pose, yaw: float | None, cmd: Command) -> None:
+    def _apply_pose(self, pose: Pose, yaw: float | None, cmd: Command,
+                    key: PartsKey | None = None) -> None:
         ctrl = self.controller
+        key = parts_key(cmd.parts) if key is None else key
         if pose.platform != self.platform:
             raise KinesphereError("internal", f"databank answered for {pose.platform!r}")
         if pose.translation is not None:
@@ -278,20 +290,34 @@ class Conduct:
                     "size_out_of_range", f"the pose translates the base {far:.4g} m; this "
                     f"robot moves at most {self.max_translation_m:g} m per command")
         try:
-            clamps = ctrl.move(pose.joints)  # checked by the guard, waypoints if needed
+            clamps = ctrl.move(self._aim(pose))  # checked by the guard, waypoints if needed
         except (KeyError, ValueError) as exc:
             raise KinesphereError(
                 "internal", f"databank pose has joints {self.platform} cannot take: {exc}"
             ) from None
         refused = ctrl.guard.fault if ctrl.guard is not None else ""
         if refused:  # the target the guard halted or refused, again: said again, not retried
-            self.acks.follow(cmd, parts_key(cmd.parts), pose.substitutions)
+            self.acks.follow(cmd, key, pose.substitutions)
             self.acks.send(cmd, AckStage.ACCEPTED, substitutions=pose.substitutions)
             self.acks.end(AckStage.BLOCKED, refused)
             self.set(Status.ERROR, f"{refused} and holding")
             return
         if pose.translation is not None and ctrl.base is not None and not ctrl.base.driving:
             ctrl.base.translate(pose.translation, yaw)
+        self._started = (cmd, pose, key, clamps)
+
+    def _settle(self) -> None:
+        """Say what the move started this step is: status, followed motion, ``accepted``.
+
+        Deferred from :meth:`_apply_pose` until the first setpoint went to the body
+        (:meth:`commanded`), or until anything else the robot does next (another command, a
+        halt, a failed step) could depend on it; so this bookkeeping never delays a command's
+        first step, and the acks keep their order.
+        """
+        started, self._started = self._started, None
+        if started is None:
+            return
+        cmd, pose, key, clamps = started
         beyond = [c for c in clamps if c.beyond]
         if beyond:
             detail = "clamped " + ", ".join(f"{c.joint} {c.requested:+.4f}->{c.target:+.4f}"
@@ -300,8 +326,21 @@ class Conduct:
         else:
             detail = f"to {pose.limb}/{pose.origin}/{pose.direction}/{pose.size:g}"
         self.set(Status.MOVING, detail)
-        self.acks.follow(cmd, parts_key(cmd.parts), pose.substitutions)
+        self.acks.follow(cmd, key, pose.substitutions)
         self.acks.send(cmd, AckStage.ACCEPTED, detail, substitutions=pose.substitutions)
+
+    def _aim(self, pose: Pose) -> Aim:
+        """``pose`` compiled for this robot's joints, once per pose: the resolver hands out
+        the same Pose for every hit on its cache, so a repeated or alternating command skips
+        the per-joint checks and clamps on its way to the first setpoint."""
+        entry = self._aims.get(id(pose))
+        if entry is not None and entry[0] is pose:  # the entry holds the pose: its id is its own
+            return entry[1]
+        aim = self.controller.joints.aim(pose.joints)
+        if len(self._aims) >= AIMS_KEPT:
+            del self._aims[next(iter(self._aims))]
+        self._aims[id(pose)] = (pose, aim)
+        return aim
 
     def _overtake(self) -> None:
         overtaken = self.ordering.overtake()
@@ -309,6 +348,7 @@ class Conduct:
             self.acks.send(overtaken.cmd, AckStage.SUPERSEDED, "a newer command arrived first")
 
     def halt(self, status: str, detail: str, stage: AckStage) -> None:
+        self._settle()
         self._overtake()  # a pose still waiting for the databank no longer applies
         self.acks.end(stage, detail)
         self.controller.halt()

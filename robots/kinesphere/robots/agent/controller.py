@@ -15,7 +15,7 @@ import numpy as np
 from kinesphere.robots.agent.base import BaseController, make_base
 from kinesphere.robots.agent.body import Body, Reading
 from kinesphere.robots.agent.guard import Guard
-from kinesphere.robots.agent.trajectory import DEFAULT_MARGIN, Clamp, JointTrajectory
+from kinesphere.robots.agent.trajectory import DEFAULT_MARGIN, Aim, Clamp, JointTrajectory
 
 BLOCKED_TOL = 0.05
 """rad (m): a joint this far from where its finished trajectory ended is blocked."""
@@ -55,12 +55,13 @@ class Controller:
         """A trajectory, drive or stop is still being followed."""
         return self.joints.moving or (self.base is not None and self.base.moving)
 
-    def move(self, joints: Mapping[str, float]) -> list[Clamp]:
-        """Retarget the named joints: through the guard (checked, via waypoints when the
-        straight way touches something) when there is one."""
+    def move(self, joints: Mapping[str, float] | Aim) -> list[Clamp]:
+        """Retarget the named joints (or a compiled :class:`Aim`): through the guard
+        (checked, via waypoints when the straight way touches something) when there is one."""
         if self.guard is None:
             return self.joints.retarget(joints)
-        return self.guard.move(self.joints, joints)
+        aim = joints if isinstance(joints, Aim) else self.joints.aim(joints)
+        return self.guard.move(self.joints, aim)
 
     def step(self) -> None:
         """One control cycle: trajectories forward, body commanded, body stepped."""

@@ -35,7 +35,7 @@ from kinesphere.errors import KinesphereError
 from kinesphere.keyexpr import check_segment
 from kinesphere.protocol import Status
 from kinesphere.robots.agent.options import AgentOptions
-from kinesphere.robots.agent.pacing import LoopStats, run_paced
+from kinesphere.robots.agent.pacing import LoopStats, Wake, run_paced
 from kinesphere.robots.agent.runtime import Agent
 from kinesphere.robots.agent.stepper import Stepper
 
@@ -118,7 +118,7 @@ class Fleet:
             raise KinesphereError("malformed", f"a fleet host runs simulated bodies (--body "
                                   f"mujoco), not {self.options.body!r}: run one agent per "
                                   "real robot")
-        self.wake = threading.Event()
+        self.wake = Wake()
         self.stats = LoopStats()
         self.agents: list[Agent] = []
         try:

@@ -26,7 +26,6 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -36,7 +35,7 @@ from kinesphere.robots.clearance import Clearance, Touch
 
 if TYPE_CHECKING:
     from kinesphere.robots.agent.body import Body
-    from kinesphere.robots.agent.trajectory import Clamp, JointTrajectory
+    from kinesphere.robots.agent.trajectory import Aim, Clamp, JointTrajectory
 
 log = logging.getLogger(__name__)
 
@@ -112,17 +111,15 @@ class Guard:
                 lambda: self._closed or (self._asked is None and not self._busy), timeout)
 
     # --- control thread ----------------------------------------------------------------------
-    def move(self, joints: JointTrajectory, targets: Mapping[str, float]) -> list[Clamp]:
-        """Start toward ``targets`` at once and have the way there checked; the target of the
+    def move(self, joints: JointTrajectory, aim: Aim) -> list[Clamp]:
+        """Start toward ``aim`` at once and have the way there checked; the target of the
         move under way again changes nothing (not even a halt it came to)."""
-        clamped, clamps = joints.clamp(targets)  # KeyError, ValueError: nothing changes
         goal = self._goal
-        if goal is not None and not joints.fault and all(
-                goal[joints.index[j]] == v for j, v in clamped.items()):
-            return clamps
+        if goal is not None and not joints.fault and goal[aim.index].tolist() == aim.targets:
+            return list(aim.clamps)
         start = joints.position.copy()
         base = goal if goal is not None and self.legs else None  # not a waypoint's joints
-        joints.retarget(clamped, straight=True, base=base)
+        clamps = joints.retarget(aim, straight=True, base=base)
         self._goal = joints.target.copy()
         self.legs = []
         self.fault = ""

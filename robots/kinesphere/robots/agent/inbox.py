@@ -22,10 +22,12 @@ import threading
 import time
 from collections import OrderedDict, deque
 from dataclasses import dataclass
+from typing import NamedTuple
 
 from kinesphere.errors import KinesphereError
 from kinesphere.protocol import Command, LeaseAction
 from kinesphere.robots.agent.ordering import Received
+from kinesphere.robots.agent.pacing import Wake
 from kinesphere.robots.agent.resolver import Answer
 
 MAX_ESTOPS = 64
@@ -59,8 +61,7 @@ class Resolved:
     answer: Answer
 
 
-@dataclass(frozen=True)
-class Drained:
+class Drained(NamedTuple):
     """One step's worth: e-stops, then everything else in arrival order, then the commands
     replaced while they waited (to be acknowledged ``superseded``)."""
 
@@ -79,8 +80,8 @@ class Inbox:
     """Thread-safe intake; :meth:`drain` empties it. Every put sets ``wake``, the control
     loop's signal to look now rather than at its next tick (``pacing.py``)."""
 
-    def __init__(self, wake: threading.Event | None = None) -> None:
-        self.wake = threading.Event() if wake is None else wake
+    def __init__(self, wake: Wake | None = None) -> None:
+        self.wake = Wake() if wake is None else wake
         self._lock = threading.Lock()
         self._arrivals = 0
         self._estops: deque[Received] = deque(maxlen=MAX_ESTOPS)

@@ -31,6 +31,7 @@ from __future__ import annotations
 
 from collections import OrderedDict
 from dataclasses import dataclass
+from typing import NamedTuple
 
 from kinesphere.errors import KinesphereError
 from kinesphere.protocol import Command
@@ -42,11 +43,11 @@ MAX_CLOCK_AHEAD_S = 60.0
 """How far a command's ``sent_ns`` may lie ahead of the robot's clock."""
 
 
-@dataclass(frozen=True)
-class Received:
+class Received(NamedTuple):
     """A decoded command with the robot's clocks at receipt, in ns: monotonic, and the wall
     clock (taken from the monotonic one, so a stepped system clock does not age commands),
-    and the step during which it arrived."""
+    and the step during which it arrived. (A named tuple: one is made per command in the
+    network callback, on the way to the command's first step.)"""
 
     cmd: Command
     mono_ns: int

@@ -122,7 +122,7 @@ class Otg:
         """Reach ``target`` at rest."""
         self.target[:] = target
         self._plan(ControlInterface.Position, sync)
-        self._inp.target_position = list(self.target)
+        self._inp.target_position = self.target.tolist()
 
     def go_at(self, velocity: Values,
               sync: Synchronization = Synchronization.Phase) -> None:

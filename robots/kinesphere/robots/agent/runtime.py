@@ -50,7 +50,7 @@ from kinesphere.robots.agent.controller import Controller
 from kinesphere.robots.agent.guard import make_guard
 from kinesphere.robots.agent.inbox import Inbox, clocks, received
 from kinesphere.robots.agent.options import AgentOptions as AgentOptions
-from kinesphere.robots.agent.pacing import LoopStats, run_paced
+from kinesphere.robots.agent.pacing import LoopStats, Wake, run_paced
 from kinesphere.robots.agent.resolver import Resolver
 from kinesphere.zconfig import undeclare
 
@@ -69,7 +69,7 @@ class Agent:
     def __init__(
         self, platform: str, robot_id: str, session: zenoh.Session,
         options: AgentOptions | None = None, body: Body | None = None,
-        wake: threading.Event | None = None, phase: int = 0,
+        wake: Wake | None = None, phase: int = 0,
     ) -> None:
         self.options = options or AgentOptions()
         self.keys = Keys(self.options.prefix)

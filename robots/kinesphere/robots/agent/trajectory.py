@@ -50,6 +50,23 @@ class Clamp:
     beyond: bool
 
 
+@dataclass(frozen=True)
+class Aim:
+    """A pose's targets compiled for one robot's joints: P indices and clamped values as
+    vectors, and what the clamp moved. Why: a command for a cached pose is aimed at with a
+    vector assignment, not a per-joint Python loop, on its way to the first setpoint (the
+    agent keeps one per cached pose, ``conduct.py``)."""
+
+    index: np.ndarray
+    values: np.ndarray
+    targets: list[float]
+    """``values`` as Python floats (compared without numpy's per-call overhead)."""
+    names: tuple[str, ...]
+    clamps: tuple[Clamp, ...]
+    beyond: dict[str, Clamp]
+    """The clamps of requests outside the limits themselves, by joint (reported)."""
+
+
 def clamp_margin(limit: JointLimit, margin: float = DEFAULT_MARGIN) -> float:
     """The margin used for ``limit``: at most 5 % of the range, so small joints keep a range."""
     span = limit.upper - limit.lower
@@ -142,7 +159,20 @@ class JointTrajectory:
             out[name] = target
         return out, clamps
 
-    def retarget(self, joints: Mapping[str, float], straight: bool = False,
+    def aim(self, joints: Mapping[str, float]) -> Aim:
+        """``joints`` checked, clamped and compiled to vectors (:class:`Aim`). Unknown joint
+        names raise KeyError, non-finite values ValueError."""
+        if not joints.keys() <= self.index.keys():
+            raise KeyError(", ".join(sorted(set(joints) - set(self.index))))
+        targets, clamps = self.clamp(joints)
+        index = self.index
+        values = list(targets.values())
+        return Aim(
+            np.fromiter((index[name] for name in targets), dtype=np.intp, count=len(targets)),
+            np.array(values, dtype=float), values, tuple(targets), tuple(clamps),
+            {c.joint: c for c in clamps if c.beyond})
+
+    def retarget(self, joints: Mapping[str, float] | Aim, straight: bool = False,
                  base: np.ndarray | None = None) -> list[Clamp]:
         """Move the named joints to ``joints`` (clamped); the others keep their last target
         (or go to ``base``'s, every joint in P order: the guard's goal past a waypoint).
@@ -151,20 +181,18 @@ class JointTrajectory:
         joint space (what the guard checked). Unknown joint names (KeyError) and non-finite
         values (ValueError) change nothing.
         """
-        if not joints.keys() <= self.index.keys():
-            raise KeyError(", ".join(sorted(set(joints) - set(self.index))))
-        targets, clamps = self.clamp(joints)
-        goal = (self.target if base is None else base).tolist()
-        index = self.index
-        for name, value in targets.items():
-            goal[index[name]] = value
-        if self.clamped:
-            for name in targets:
-                self.clamped.pop(name, None)
-        self.clamped.update({c.joint: c for c in clamps if c.beyond})
+        aim = joints if isinstance(joints, Aim) else self.aim(joints)
+        goal = (self.target if base is None else base).copy()
+        goal[aim.index] = aim.values
+        clamped = self.clamped
+        if clamped:
+            for name in aim.names:
+                clamped.pop(name, None)
+        if aim.beyond:
+            clamped.update(aim.beyond)
         if self.dof:
             self._otg.go_to(goal, Synchronization.Phase if straight else Synchronization.Time)
-        return clamps
+        return list(aim.clamps)
 
     def go_to(self, q: np.ndarray) -> None:
         """Straight (phase-synchronised) to ``q``, every joint, already inside the limits (the
