@@ -81,6 +81,28 @@ def test_targets_are_clamped_with_margin_and_reported() -> None:
     assert traj.target[0] == 0.0
 
 
+def test_a_compiled_aim_moves_exactly_like_the_joints_it_came_from() -> None:
+    """The agent aims cached poses through :class:`Aim` (vectors): same clamps, same report,
+    same Ruckig output step by step as the mapping itself; bad input is refused alike."""
+    request = {"b": 2.5, "a": -0.4}  # b beyond its limit, a inside
+    by_map = JointTrajectory(LIMITS, ACC, JERK, DT, [0.3, 0.0, 1.0])
+    by_aim = JointTrajectory(LIMITS, ACC, JERK, DT, [0.3, 0.0, 1.0])
+    aim = by_aim.aim(request)
+    assert aim.names == ("b", "a") and aim.index.tolist() == [1, 0]
+    assert by_map.retarget(request) == by_aim.retarget(aim)
+    assert set(by_aim.clamped) == set(by_map.clamped) == {"b"}
+    for _ in range(400):
+        by_map.step()
+        by_aim.step()
+        assert by_aim.position.tolist() == by_map.position.tolist()
+    assert by_aim.target.tolist() == by_map.target.tolist()
+    assert by_aim.target[2] == 1.0  # a joint the pose does not name keeps its target
+    with pytest.raises(KeyError):
+        by_aim.aim({"nope": 0.0})
+    with pytest.raises(ValueError):
+        by_aim.aim({"a": math.inf})
+
+
 def test_stop_brakes_in_place_within_limits() -> None:
     traj = JointTrajectory(LIMITS, ACC, JERK, DT, [0.0, 0.0, 0.0])
     traj.retarget({"a": -0.9, "b": 1.9})
