@@ -16,7 +16,8 @@ import argparse
 import json
 import socket
 import threading
-from collections.abc import Iterator, Sequence
+import time
+from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Protocol
@@ -322,3 +323,11 @@ def wait_matching(entity: zenoh.Publisher | zenoh.Querier, timeout: float = 5.0)
         return matched.wait(timeout)
     finally:
         undeclare(listener)
+
+
+def unmatched(entities: Mapping[str, zenoh.Publisher | zenoh.Querier], timeout: float) -> list[str]:
+    """The names of ``entities`` still without a match after waiting up to ``timeout`` seconds
+    in all (:func:`wait_matching` on each in turn, against one deadline)."""
+    deadline = time.monotonic() + timeout
+    return [name for name, entity in entities.items()
+            if not wait_matching(entity, max(0.0, deadline - time.monotonic()))]

@@ -84,19 +84,47 @@ def test_record_replay_round_trip(tmp_path: Path) -> None:
             got = list(read(first))
             assert [(r.key, r.message) for r in got] == sent  # contents equal, in order
 
-            # replay commands and states; a second recorder sees exactly those again
+            # replay commands and states; a second recorder sees exactly those again (the
+            # replay waits until its publishers match the recorder, which has just subscribed)
             rec2 = Recorder(rec_s, KEYS, second)
-            t0 = time.monotonic()
-            n = replay(pub_s, first, "all")
-            replay_span = time.monotonic() - t0
+            put_at: list[float] = []
+            done = replay(pub_s, first, "all", wait=20.0,
+                          on_put=lambda k, m: put_at.append(time.monotonic()))
             wanted = [(k, m) for k, m in sent if isinstance(m, (pr.Command, pr.RobotState))]
-            assert n == len(wanted)
-            assert wait_until(lambda: rec2.tally.recorded == n, 20.0), rec2.tally
+            assert done.sent == len(wanted) and done.unheard == []
+            assert wait_until(lambda: rec2.tally.recorded == done.sent, 20.0), rec2.tally
             rec2.close()
     again = list(read(second))
     assert [(r.key, r.message) for r in again] == wanted
+    replay_span = put_at[-1] - put_at[0]
     assert replay_span >= 0.8 * (span - 4 * GAP_S)  # the original spacing, not a burst
     assert len(tapped_keys(KEYS)) == 5
+
+
+def test_a_replay_says_which_keys_nobody_heard(tmp_path: Path) -> None:
+    path = tmp_path / "two.mcap"
+    cmds = [(KEYS.command(rid), pr.Command(seq=1, sent_ns=time.time_ns(), deadman=False,
+                                           ttl_ms=0, stop=True, sender="t"))
+            for rid in ("r1", "r2")]
+    with McapWriter(path) as w:
+        for i, (key, cmd) in enumerate(cmds):
+            w.write(key, cmd, time.time_ns() + i)
+    with zconfig.loopback_hub() as (hub, endpoint):
+        with pytest.raises(KinesphereError) as err:
+            replay(hub, path, wait=0.2)  # nobody at all: nothing is put
+        assert err.value.code == "unavailable"
+        assert KEYS.command("r1") in err.value.message and "nothing replayed" in err.value.message
+        with zconfig.session(config=zconfig.loopback_config(endpoint)) as s:
+            got: list[str] = []
+            sub = s.declare_subscriber(KEYS.command("r1"),
+                                       lambda sample: got.append(str(sample.key_expr)))
+            probe = hub.declare_publisher(KEYS.command("r1"))
+            assert zconfig.wait_matching(probe, 20.0)  # the hub knows r1's subscriber now
+            zconfig.undeclare(probe)
+            done = replay(hub, path, wait=0.2)  # r1 heard at once, r2 never
+            assert done.sent == 2 and done.unheard == [KEYS.command("r2")]
+            assert wait_until(lambda: got == [KEYS.command("r1")], 20.0), got
+            zconfig.undeclare(sub)
 
 
 def test_bad_recordings(tmp_path: Path) -> None:
@@ -140,12 +168,9 @@ def test_a_restamped_replay_is_new_to_robots_that_heard_the_original(tmp_path: P
             sub = s.declare_subscriber(KEYS.command("r1"),
                                        lambda sample: got.append(pr.decode(
                                            sample.payload.to_bytes(), pr.Command)))
-            pub = hub.declare_publisher(KEYS.command("r1"))
-            assert zconfig.wait_matching(pub, 20.0)
-            zconfig.undeclare(pub)
-            assert replay(hub, path, "commands", speed=100.0) == 6
+            assert replay(hub, path, "commands", speed=100.0, wait=20.0).sent == 6
             assert wait_until(lambda: len(got) == 6, 20.0)
-            assert replay(hub, path, "commands", speed=100.0, restamp=True) == 6
+            assert replay(hub, path, "commands", speed=100.0, restamp=True).sent == 6
             assert wait_until(lambda: len(got) == 12, 20.0)
             zconfig.undeclare(sub)
     as_recorded, restamped = got[:6], got[6:]

@@ -337,13 +337,7 @@ class RobotLink:
 
     def wait_subscribers(self, keys: Iterable[str], timeout: float) -> list[str]:
         """Declare publishers for ``keys`` and wait until each has a subscriber; the unmatched."""
-        missing = []
-        deadline = time.monotonic() + timeout
-        for key in keys:
-            left = max(0.0, deadline - time.monotonic())
-            if not zconfig.wait_matching(self.publisher(key), left):
-                missing.append(key)
-        return missing
+        return zconfig.unmatched({key: self.publisher(key) for key in keys}, timeout)
 
     def put(self, keys: Iterable[str], cmd: Command) -> None:
         """Put ``cmd`` on every key (the same seq: each robot sees it once)."""

@@ -8,11 +8,14 @@ bounded by ``max_bytes``.
 
 A replay re-puts recorded messages on their keys with the original spacing (``speed`` scales
 it): commands to drive robots again, or states to watch a session in ``kinesphere view``
-without any robot running. Commands go out as recorded, with their sender, session, ``seq``
-and ``sent_ns``: a robot that already heard that session drops them as stale (that is its
-ordering rule, not a fault). ``restamp`` makes them new: ``sent_ns`` becomes the time of the
-put, and each recorded session is replaced by a fresh one (``seq`` and sender are kept, so
-the order within a session holds), which every robot takes as a new order.
+without any robot running. It declares a publisher per key and waits until each has a
+subscriber before the first put: a put made before the subscribers' declarations reached this
+session goes nowhere, so the first messages of a replay would be lost. Commands go out as
+recorded, with their sender, session, ``seq`` and ``sent_ns``: a robot that already heard that
+session drops them as stale (that is its ordering rule, not a fault). ``restamp`` makes them
+new: ``sent_ns`` becomes the time of the put, and each recorded session is replaced by a fresh
+one (``seq`` and sender are kept, so the order within a session holds), which every robot takes
+as a new order.
 """
 
 from __future__ import annotations
@@ -34,11 +37,13 @@ from kinesphere.clients.record import MAGIC as GAMEPAD_RECORDING
 from kinesphere.errors import KinesphereError
 from kinesphere.keyexpr import WILDCARD, Keys
 from kinesphere.protocol import Command, Message, RobotState, decode_any, encode
-from kinesphere.zconfig import undeclare
+from kinesphere.zconfig import undeclare, unmatched
 
 log = logging.getLogger(__name__)
 MAX_BYTES: Final = 1 << 30
 KINDS: Final = ("commands", "states", "all")
+WAIT_S: Final = 5.0
+"""How long a replay waits for a subscriber on each recorded key before its first put."""
 
 
 def tapped_keys(keys: Keys) -> list[str]:
@@ -108,13 +113,26 @@ def wanted(kind: str) -> Callable[[Message], bool]:
     raise KinesphereError("malformed", f"replay {kind!r}? choose one of {', '.join(KINDS)}")
 
 
+@dataclass(frozen=True)
+class Replayed:
+    """What a replay did: how many messages it put, and the recorded keys nobody subscribed
+    to when it began (their messages went out to no one)."""
+
+    sent: int
+    unheard: list[str]
+
+
 def replay(session: zenoh.Session, path: str | Path, kind: str = "commands",
            speed: float = 1.0, should_stop: Callable[[], bool] = lambda: False,
-           on_put: Callable[[str, Message], None] | None = None, restamp: bool = False) -> int:
+           on_put: Callable[[str, Message], None] | None = None, restamp: bool = False,
+           wait: float = WAIT_S) -> Replayed:
     """Put the recording's ``kind`` messages back on their keys with the original timing
-    (commands as new ones with ``restamp``); returns how many were put."""
+    (commands as new ones with ``restamp``), once each key has a subscriber or ``wait``
+    seconds have passed; unavailable when no key has one by then."""
     if not speed > 0:
         raise KinesphereError("malformed", f"--speed must be > 0, got {speed}")
+    if not wait >= 0:
+        raise KinesphereError("malformed", f"--wait must be >= 0, got {wait}")
     keep = wanted(kind)
     items = [r for r in read(path) if keep(r.message)]
     if not items:
@@ -122,32 +140,41 @@ def replay(session: zenoh.Session, path: str | Path, kind: str = "commands",
             raise KinesphereError(
                 "malformed", f"{path} holds a gamepad's controller ticks, not messages: play "
                 f"it with 'kinesphere gamepad --replay {path}'")
-        return 0
+        return Replayed(0, [])
     publishers: dict[str, Any] = {}
     sessions: dict[tuple[str, str], str] = {}
-    start, t0 = time.monotonic(), items[0].log_ns
     sent = 0
     try:
+        for key in dict.fromkeys(r.key for r in items):
+            publishers[key] = session.declare_publisher(
+                key, congestion_control=zenoh.CongestionControl.BLOCK, express=True)
+        unheard = unmatched(publishers, wait)
+        if len(unheard) == len(publishers):
+            raise KinesphereError("unavailable", f"nobody listens on {_some(unheard)} (waited "
+                                  f"{wait:g} s): nothing replayed")
+        start, t0 = time.monotonic(), items[0].log_ns
         for rec in items:
             due = start + (rec.log_ns - t0) / 1e9 / speed
             while (left := due - time.monotonic()) > 0:
                 if should_stop():
-                    return sent
+                    return Replayed(sent, unheard)
                 time.sleep(min(left, 0.05))
-            pub = publishers.get(rec.key)
-            if pub is None:
-                pub = publishers[rec.key] = session.declare_publisher(
-                    rec.key, congestion_control=zenoh.CongestionControl.BLOCK, express=True)
             msg = rec.message
             if restamp and isinstance(msg, Command):
                 msg = _restamped(msg, sessions)
-            pub.put(encode(msg))
+            publishers[rec.key].put(encode(msg))
             sent += 1
             if on_put is not None:
                 on_put(rec.key, msg)
     finally:
         undeclare(*publishers.values())
-    return sent
+    return Replayed(sent, unheard)
+
+
+def _some(keys: list[str], most: int = 3) -> str:
+    """``keys`` for a message: the first ``most`` and how many more."""
+    more = f" and {len(keys) - most} more" if len(keys) > most else ""
+    return ", ".join(keys[:most]) + more
 
 
 def _restamped(cmd: Command, sessions: dict[tuple[str, str], str]) -> Command:

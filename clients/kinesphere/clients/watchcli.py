@@ -65,7 +65,8 @@ def register(sub: Any) -> None:
         "they were recorded: 'commands' drive running robots again; 'states' replay what "
         "the robots did, to watch it in 'kinesphere view' with no robot running. Commands "
         "keep their recorded sender, session, seq and sent_ns, so robots that heard the "
-        "original session drop them as stale; --restamp sends them as new.",
+        "original session drop them as stale; --restamp sends them as new. Waits first "
+        "for a subscriber on each recorded key (--wait); fails when nobody listens on any.",
     )
     p.add_argument("recording", metavar="FILE", help="MCAP file written by kinesphere record")
     p.add_argument("--what", choices=("commands", "states", "all"), default="commands",
@@ -74,6 +75,9 @@ def register(sub: Any) -> None:
     p.add_argument("--restamp", action="store_true",
                    help="send commands now, each recorded session as a fresh one (seq and "
                    "sender kept), so robots that heard the original do not drop them as stale")
+    p.add_argument("--wait", type=float, default=5.0, metavar="S",
+                   help="wait up to S seconds for a subscriber on each recorded key before "
+                   "the first put (default 5)")
     add_zenoh_arguments(p, OPERATOR)
     p.set_defaults(func=replay)
 
@@ -142,7 +146,10 @@ def replay(args: argparse.Namespace) -> int:
 
     stop, signals = _until_signal()
     with signals, _session(args) as session:
-        sent = put_back(session, args.recording, args.what, args.speed, stop.is_set,
-                        restamp=args.restamp)
-    print(f"replayed {sent} {args.what} message(s) from {args.recording}", file=sys.stderr)
+        done = put_back(session, args.recording, args.what, args.speed, stop.is_set,
+                        restamp=args.restamp, wait=args.wait)
+    if done.unheard:
+        print(f"nobody listened on {len(done.unheard)} recorded key(s): "
+              f"{', '.join(done.unheard[:10])}", file=sys.stderr)
+    print(f"replayed {done.sent} {args.what} message(s) from {args.recording}", file=sys.stderr)
     return 130 if stop.is_set() else 0
