@@ -13,6 +13,7 @@ import time
 from pathlib import Path
 
 import pytest
+import zenoh
 from mcap.reader import make_reader
 from test_databank_support import wait_until
 
@@ -99,6 +100,27 @@ def test_record_replay_round_trip(tmp_path: Path) -> None:
     replay_span = put_at[-1] - put_at[0]
     assert replay_span >= 0.8 * (span - 4 * GAP_S)  # the original spacing, not a burst
     assert len(tapped_keys(KEYS)) == 5
+
+
+def test_a_burst_over_every_tapped_key_is_recorded_in_the_order_it_was_put(
+        tmp_path: Path) -> None:
+    """No spacing at all: the recording keeps the order of arrival across keys (a command,
+    then the state and ack it caused), not the order in which per-key threads got to run."""
+    path = tmp_path / "burst.mcap"
+    kinds = session_messages()[8:] + session_messages()[:2]  # ack, *, group, changed, cmd, state
+    burst = [kinds[i % len(kinds)] for i in range(300)]
+    with zconfig.loopback_hub() as (hub, endpoint):
+        with zconfig.session(config=zconfig.loopback_config(endpoint)) as s:
+            rec = Recorder(s, KEYS, path)
+            pubs = {k: hub.declare_publisher(k, congestion_control=zenoh.CongestionControl.BLOCK)
+                    for k, _ in kinds}
+            assert zconfig.unmatched(pubs, 20.0) == []
+            for key, msg in burst:
+                pubs[key].put(pr.encode(msg))
+            assert wait_until(lambda: rec.tally.recorded == len(burst), 20.0), rec.tally
+            rec.close()
+            zconfig.undeclare(*pubs.values())
+    assert [(r.key, r.message) for r in read(path)] == burst
 
 
 def test_a_replay_says_which_keys_nobody_heard(tmp_path: Path) -> None:

@@ -1,10 +1,11 @@
 """``kinesphere record`` and ``kinesphere replay``: a session on Zenoh to MCAP and back.
 
-The recorder subscribes to every kind of message kinesphere puts: commands (robot, all and
-group keys), robot states, acks and the databank's ``changed`` poses. It decodes each (what
-does not decode is counted, not recorded) and writes it on its own key's channel. Writes
-happen under a lock on Zenoh's threads: an MCAP append is a memory copy, and the file is
-bounded by ``max_bytes``.
+The recorder records every kind of message kinesphere puts: commands (robot, all and group
+keys), robot states, acks and the databank's ``changed`` poses. It decodes each (what does not
+decode is counted, not recorded) and writes it on its own key's channel, in arrival order: one
+subscriber takes everything under the prefix, because zenoh-python calls each subscriber back
+on a thread of its own, and with one subscriber per kind a command and the state right after
+it could be written (and replayed) the wrong way round. The file is bounded by ``max_bytes``.
 
 A replay re-puts recorded messages on their keys with the original spacing (``speed`` scales
 it): commands to drive robots again, or states to watch a session in ``kinesphere view``
@@ -47,7 +48,7 @@ WAIT_S: Final = 5.0
 
 
 def tapped_keys(keys: Keys) -> list[str]:
-    """Every key expression the recorder listens on."""
+    """Every key expression the recorder records."""
     return [keys.command(WILDCARD), f"{keys.prefix}/group/*/command", keys.state(WILDCARD),
             keys.ack(WILDCARD), keys.changed(WILDCARD)]
 
@@ -70,11 +71,13 @@ class Recorder:
         self.full = threading.Event()
         self._lock = threading.Lock()
         self._open = True
-        self._subs: list[Any] = [session.declare_subscriber(k, self._on_sample)
-                                 for k in tapped_keys(keys)]
+        self._taps = [zenoh.KeyExpr(k) for k in tapped_keys(keys)]
+        self._sub: Any = session.declare_subscriber(f"{keys.prefix}/**", self._on_sample)
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
         now = time.time_ns()
+        if not any(tap.intersects(sample.key_expr) for tap in self._taps):
+            return
         try:
             msg = decode_any(sample.payload)
         except KinesphereError:
@@ -93,8 +96,8 @@ class Recorder:
                 self.full.set()
 
     def close(self) -> Tally:
-        undeclare(*self._subs)
-        self._subs.clear()
+        undeclare(self._sub)
+        self._sub = None
         with self._lock:
             if self._open:
                 self._open = False

@@ -45,7 +45,7 @@ def register(sub: Any) -> None:
     r = sub.add_parser(
         "record",
         help="record every command, state, ack and recorded pose to an MCAP file",
-        description="Subscribe to {prefix}/robot/*/command, {prefix}/group/*/command, "
+        description="Record {prefix}/robot/*/command, {prefix}/group/*/command, "
         "{prefix}/robot/*/state, {prefix}/robot/*/ack and {prefix}/ecl/*/changed and write "
         "every message to an MCAP file (one channel per key, JSON with a JSON Schema per "
         "message type: Foxglove and 'mcap info' read it). Stops on Ctrl-C, SIGTERM, "
