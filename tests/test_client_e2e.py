@@ -2,7 +2,8 @@
 run as processes on loopback, the client in this process reads posted pygame events.
 
 The sweep gesture makes the base translate while the arm sweeps sideways, at the same time;
-letting go of the deadman stops within the TTL; a killed client's robots stop by themselves;
+letting go of the deadman stops within the TTL; a direction no body has a pose near drives the
+base alone (through SDL's joystick path); a killed client's robots stop by themselves;
 group targets reach only their members; the e-stop halts everyone.
 """
 
@@ -134,6 +135,47 @@ def test_sweep_gesture_through_sdls_real_joystick_path(fleet: Fleet, pygame_up: 
     assert (Direction.RIGHT_LOW, Direction.RIGHT_FORWARD_LOW) in sent
     assert all(d in (Direction.LEFT_FORWARD_LOW, Direction.RIGHT_FORWARD_LOW) for _, d in sent)
     assert_sweep(fleet, t0, released[0])
+
+
+def test_a_direction_no_body_has_near_drives_alone_through_sdls_joystick_path(
+    fleet: Fleet, pygame_up: None
+) -> None:
+    """PackBot's arm (shipped databank) has no pose within 45 degrees of plain left-middle.
+    From an SDL virtual GameController, right stick left (no trigger) while driving forward:
+    the client sends the drive alone, the robot refuses nothing and drives, the arm holds."""
+    with operator(fleet, tg.robot(PB)) as (op, inp):
+        vpad = VirtualPad()
+        try:
+            op.tick(inp.poll())  # SDL reports the device; the client opens it, nothing held
+            t0 = time.monotonic()
+
+            def push() -> None:
+                vpad.deadman()
+                vpad.right(-1.0, 0.0)
+                vpad.left(0.0, -0.6)
+
+            script = Script(inp, {0: push, 45: lambda: vpad.deadman(False),
+                                  46: lambda: None})  # fmt: skip
+            views: list[View] = []
+            run(op, script, draw=views.append, finished=lambda: script.finished)
+        finally:
+            vpad.unplug()
+    pushed = [v for v in views if v.engaged and v.asked is None
+              and v.intent.direction is Direction.LEFT_MIDDLE]  # fmt: skip
+    assert len(pushed) > 30 and {v.source for v in pushed} == {"controller"}
+    assert all(v.limb_holds for v in pushed), "no body serves left-middle: the limb holds"
+    refused = [v.answers[PB].ack for v in views if PB in v.answers
+               and v.answers[PB].ack.stage == "rejected"]  # fmt: skip
+    assert refused == [], "the drive alone is a command the robot obeys"
+    halted = fleet.track.wait(PB, lambda h: h.state.status in ("stopped", "holding"),
+                              "the stop", after=t0)  # fmt: skip
+    hs = [h for h in fleet.track.since(PB, t0) if h.at <= halted.at]
+    forward, _, _ = body_motion(hs, halted)
+    assert forward > 0.2, "it drove forward"
+    names = hs[0].state.joint_names
+    arm = [names.index(j) for j in ("turret", "shoulder", "elbow1", "elbow2", "tilt", "pan",
+                                    "wrist")]  # fmt: skip
+    assert max(abs(h.state.q[j] - hs[0].state.q[j]) for h in hs for j in arm) < 0.01
 
 
 def test_deadman_release_stops_within_the_ttl(fleet: Fleet, pygame_up: None) -> None:
