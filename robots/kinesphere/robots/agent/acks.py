@@ -19,6 +19,7 @@ import time
 from collections import Counter, OrderedDict
 from collections.abc import Callable, Hashable, Sequence
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 from kinesphere.protocol import MAX_TEXT, Ack, AckStage, Command, Substitution, encode
 
@@ -73,6 +74,18 @@ class AckLimiter:
         return ok
 
 
+class Pending(NamedTuple):
+    """An ack decided during a step, published at the step's flush."""
+
+    cmd: Command
+    stage: AckStage
+    code: str
+    detail: str
+    substitutions: tuple[Substitution, ...]
+    lease_holder: str
+    stamp_ns: int
+
+
 @dataclass
 class Motion:
     """The command being followed and what the robot said about it."""
@@ -102,8 +115,7 @@ class Acks:
         self.sent = 0
         self.refused: Counter[str] = Counter()
         """Commands rejected, by error code (whether or not the ack was held back)."""
-        self._pending: list[tuple[Command, AckStage, str, str, tuple[Substitution, ...],
-                                  str, int]] = []
+        self._pending: list[Pending] = []
 
     def send(self, cmd: Command, stage: AckStage, detail: str = "", *, code: str = "",
              substitutions: Sequence[Substitution] = ()) -> None:
@@ -113,22 +125,22 @@ class Acks:
             self.refused[code] += 1
         if self.publish is None or not (stage in URGENT or self.limiter.allow(cmd.sender)):
             return
-        self._pending.append((cmd, stage, code, detail, tuple(substitutions),
-                              self.lease_holder(), time.time_ns()))
+        self._pending.append(Pending(cmd, stage, code, detail, tuple(substitutions),
+                                     self.lease_holder(), time.time_ns()))
 
     def flush(self) -> None:
         """Publish what :meth:`send` queued. The control loop flushes once the step's
         setpoints went to the body, so encoding and putting acks never delays a command's
         first step (the rate limit already bounds how many wait)."""
         pending, self._pending = self._pending, []
-        for cmd, stage, code, detail, substitutions, holder, stamp_ns in pending:
-            publish = (self.publish_urgent if stage in URGENT else None) or self.publish
+        for p in pending:
+            publish = (self.publish_urgent if p.stage in URGENT else None) or self.publish
             if publish is None:
                 return
             try:
-                publish(make_ack(self.robot_id, cmd, stage, code=code, detail=detail,
-                                      substitutions=substitutions, lease_holder=holder,
-                                      stamp_ns=stamp_ns))
+                publish(make_ack(self.robot_id, p.cmd, p.stage, code=p.code, detail=p.detail,
+                                 substitutions=p.substitutions, lease_holder=p.lease_holder,
+                                 stamp_ns=p.stamp_ns))
                 self.sent += 1
             except Exception as exc:  # session closing or congested: the loop goes on
                 log.debug("ack not published: %s", exc)
