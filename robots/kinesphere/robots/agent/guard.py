@@ -85,8 +85,8 @@ class Guard:
         """The last straight way found clear (worker thread only)."""
         self._start_contacts: frozenset[tuple[str, str]] = frozenset()
         self._braked = self._halted = False
-        self._unheard = False
-        """A move was asked that the worker has not been woken for yet."""
+        self._ask: tuple[int, np.ndarray, np.ndarray] | None = None
+        """A move asked this step, handed to the worker after the step (:meth:`after_step`)."""
         self._wake = threading.Condition()
         self._busy = False
         self._closed = False
@@ -97,16 +97,15 @@ class Guard:
     def pending(self) -> bool:
         """A move's way is still being checked (or its verdict not yet applied)."""
         with self._wake:
-            return (self._asked is not None or self._busy
+            return (self._ask is not None or self._asked is not None or self._busy
                     or any(g == self._generation for g, _ in self._verdicts))
 
     def settle(self, timeout: float) -> bool:
         """Wait until the way to the newest target is checked (and a route planned when it
         touches); False on timeout. For tests and tools that step faster than real time, where
         the worker's few milliseconds are many steps."""
-        self._unheard = False
+        self._hand_over()  # a move asked without a step since is checked now
         with self._wake:
-            self._wake.notify_all()  # a move asked without a step since is checked now
             return self._wake.wait_for(
                 lambda: self._closed or (self._asked is None and not self._busy), timeout)
 
@@ -126,15 +125,16 @@ class Guard:
         self._braked = self._halted = False
         self._start_contacts = (_pairs(self.body.contacts()) if self.body.touching()
                                 else frozenset())
-        with self._wake:
-            self._generation += 1
-            self._asked = (self._generation, start, self._goal)
-        self._unheard = True  # the worker is woken after this step (after_step)
+        # Only this thread writes the generation; the worker reads it under the lock and a
+        # verdict on an older one is dropped either way (_post, _take).
+        self._generation += 1
+        self._ask = (self._generation, start, self._goal)  # handed over after the step
         return clamps
 
     def cancel(self) -> None:
         """Forget the move under way (a halt, a stop): no verdict or waypoint applies any more,
         and its target, sent again, starts a new move."""
+        self._ask = None
         with self._wake:
             self._generation += 1
             self._asked = None
@@ -163,10 +163,7 @@ class Guard:
         """Wake the worker for a move this step started (not earlier: its checks would take
         the interpreter from the first step toward the new target, the command's latency);
         halt on a contact the motion did not start with, naming the links (once)."""
-        if self._unheard:
-            self._unheard = False
-            with self._wake:
-                self._wake.notify_all()
+        self._hand_over()
         if self._halted or not (joints.moving or self.legs) or not self.body.touching():
             return
         new = _pairs(self.body.contacts()) - self._start_contacts
@@ -180,6 +177,15 @@ class Guard:
             self._halted = True
             self.fault = f"contact {a}/{b} during motion; halted"
             log.warning("%s", self.fault)
+
+    def _hand_over(self) -> None:
+        """Give the worker the move asked this step, if any, and wake it."""
+        ask, self._ask = self._ask, None
+        if ask is not None:
+            with self._wake:
+                if ask[0] == self._generation:
+                    self._asked = ask
+                self._wake.notify_all()
 
     def close(self) -> None:
         with self._wake:

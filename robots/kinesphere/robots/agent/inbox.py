@@ -146,6 +146,10 @@ class Inbox:
         if not (self._estops or self._pairs or self._other or self._bad or self._superseded):
             return _EMPTY  # the common step: nothing new (reading emptiness needs no lock)
         with self._lock:
+            if len(self._pairs) == 1 and not (self._estops or self._other or self._bad
+                                              or self._superseded):
+                queue = self._pairs.popitem()[1]  # the usual step with news: one sender's
+                return Drained([], [item for _, item in queue], [])  # commands, in order
             estops = list(self._estops)
             self._estops.clear()
             queued: list[tuple[int, Received | KinesphereError | Resolved]] = [
