@@ -154,8 +154,13 @@ def test_a_direction_no_body_has_near_drives_alone_through_sdls_joystick_path(
                 vpad.right(-1.0, 0.0)
                 vpad.left(0.0, -0.6)
 
-            script = Script(inp, {0: push, 45: lambda: vpad.deadman(False),
-                                  46: lambda: None})  # fmt: skip
+            released: list[float] = []
+
+            def let_go() -> None:
+                released.append(time.monotonic())
+                vpad.deadman(False)
+
+            script = Script(inp, {0: push, 45: let_go, 46: lambda: None})
             views: list[View] = []
             run(op, script, draw=views.append, finished=lambda: script.finished)
         finally:
@@ -168,7 +173,7 @@ def test_a_direction_no_body_has_near_drives_alone_through_sdls_joystick_path(
                and v.answers[PB].ack.stage == "rejected"]  # fmt: skip
     assert refused == [], "the drive alone is a command the robot obeys"
     halted = fleet.track.wait(PB, lambda h: h.state.status in ("stopped", "holding"),
-                              "the stop", after=t0)  # fmt: skip
+                              "the stop", after=released[0])  # fmt: skip
     hs = [h for h in fleet.track.since(PB, t0) if h.at <= halted.at]
     forward, _, _ = body_motion(hs, halted)
     assert forward > 0.2, "it drove forward"
