@@ -58,9 +58,9 @@ class Controller:
     def move(self, joints: Mapping[str, float] | Aim) -> list[Clamp]:
         """Retarget the named joints (or a compiled :class:`Aim`): through the guard
         (checked, via waypoints when the straight way touches something) when there is one."""
-        if self.guard is None:
-            return self.joints.retarget(joints)
         aim = joints if isinstance(joints, Aim) else self.joints.aim(joints)
+        if self.guard is None:
+            return self.joints.retarget(aim)
         return self.guard.move(self.joints, aim)
 
     def step(self) -> None:

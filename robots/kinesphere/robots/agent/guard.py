@@ -181,10 +181,9 @@ class Guard:
     def _hand_over(self) -> None:
         """Give the worker the move asked this step, if any, and wake it."""
         ask, self._ask = self._ask, None
-        if ask is not None:
+        if ask is not None:  # of the current generation: a cancel drops the ask with it
             with self._wake:
-                if ask[0] == self._generation:
-                    self._asked = ask
+                self._asked = ask
                 self._wake.notify_all()
 
     def close(self) -> None:
