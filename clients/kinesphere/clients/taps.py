@@ -153,7 +153,7 @@ def replay(session: zenoh.Session, path: str | Path, kind: str = "commands",
                 key, congestion_control=zenoh.CongestionControl.BLOCK, express=True)
         unheard = unmatched(publishers, wait)
         if len(unheard) == len(publishers):
-            raise KinesphereError("unavailable", f"nobody listens on {_some(unheard)} (waited "
+            raise KinesphereError("unavailable", f"nobody listens on {few(unheard)} (waited "
                                   f"{wait:g} s): nothing replayed")
         start, t0 = time.monotonic(), items[0].log_ns
         for rec in items:
@@ -174,7 +174,7 @@ def replay(session: zenoh.Session, path: str | Path, kind: str = "commands",
     return Replayed(sent, unheard)
 
 
-def _some(keys: list[str], most: int = 3) -> str:
+def few(keys: list[str], most: int = 3) -> str:
     """``keys`` for a message: the first ``most`` and how many more."""
     more = f" and {len(keys) - most} more" if len(keys) > most else ""
     return ", ".join(keys[:most]) + more

@@ -142,6 +142,7 @@ def record(args: argparse.Namespace) -> int:
 
 
 def replay(args: argparse.Namespace) -> int:
+    from kinesphere.clients.taps import few
     from kinesphere.clients.taps import replay as put_back
 
     stop, signals = _until_signal()
@@ -150,6 +151,6 @@ def replay(args: argparse.Namespace) -> int:
                         restamp=args.restamp, wait=args.wait)
     if done.unheard:
         print(f"nobody listened on {len(done.unheard)} recorded key(s): "
-              f"{', '.join(done.unheard[:10])}", file=sys.stderr)
+              f"{few(done.unheard, 10)}", file=sys.stderr)
     print(f"replayed {done.sent} {args.what} message(s) from {args.recording}", file=sys.stderr)
     return 130 if stop.is_set() else 0
