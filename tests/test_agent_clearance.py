@@ -19,7 +19,7 @@ from kinesphere.robots.agent.controller import Controller
 from kinesphere.robots.agent.guard import CHECK_GAP_S, Guard, make_guard
 from kinesphere.robots.agent.mujoco_body import MujocoBody
 from kinesphere.robots.clearance import PATH_STEP, Clearance, Touch
-from kinesphere.robots.mjcf import platform_model
+from kinesphere.robots.mjcf import platform_model, robot_contacts
 from kinesphere.services.ecl.ecl import Ecl
 
 __all__ = ["databank", "hub"]  # fixtures
@@ -59,9 +59,7 @@ class Sampler:
             data.qpos[:] = self.qpos
             mujoco.mj_kinematics(m, data)
             mujoco.mj_collision(m, data)
-            if data.ncon:  # the contact columns (iterating data.contact is slow even empty)
-                found += [(m.body(a).name, m.body(b).name)
-                          for a, b in m.geom_bodyid[data.contact.geom].tolist()]
+            found += robot_contacts(m, data)
         return found
 
 

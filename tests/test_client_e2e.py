@@ -14,6 +14,8 @@ import subprocess
 import sys
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
 import pygame
@@ -101,40 +103,56 @@ def test_sweep_gesture_translates_the_base_while_the_arm_sweeps(
     assert_sweep(fleet, t0, released[0])
 
 
-def test_sweep_gesture_through_sdls_real_joystick_path(fleet: Fleet, pygame_up: None) -> None:
-    """The same gesture from an SDL virtual GameController: SDL's device, mapping and event
-    path, as a USB pad would drive it."""
+@dataclass(frozen=True)
+class SdlRun:
+    views: list[View]
+    t0: float  # the device opened, before the first press
+    released: float  # the deadman let go
+
+
+def through_sdl(fleet: Fleet, robot: str, steps: dict[int, Callable[[VirtualPad], None]],
+                release_at: int) -> SdlRun:  # fmt: skip
+    """Play ``steps`` (tick -> what to do on the pad) on an SDL virtual GameController
+    driving a gamepad client aimed at ``robot``, let go of the deadman at ``release_at``."""
     released: list[float] = []
-    with operator(fleet, tg.robot(PB)) as (op, inp):
+    with operator(fleet, tg.robot(robot)) as (op, inp):
         vpad = VirtualPad()
         try:
             op.tick(inp.poll())  # SDL reports the device; the client opens it, nothing held
-
-            def sweep_left() -> None:
-                vpad.deadman()
-                vpad.axis(pygame.CONTROLLER_AXIS_TRIGGERLEFT, 1.0)
-                vpad.right(-1.0, 0.0)
-                vpad.left(0.0, -0.6)
 
             def let_go() -> None:
                 released.append(time.monotonic())
                 vpad.deadman(False)
 
             t0 = time.monotonic()
-            end = LEFT + RIGHT
-            script = Script(inp, {0: sweep_left, LEFT: lambda: vpad.right(1.0, 0.0),
-                                  end: let_go, end + 1: lambda: None})  # fmt: skip
+            script = Script(inp, {**{k: partial(step, vpad) for k, step in steps.items()},
+                                  release_at: let_go, release_at + 1: lambda: None})  # fmt: skip
             views: list[View] = []
             run(op, script, draw=views.append, finished=lambda: script.finished)
         finally:
             vpad.unplug()
-    engaged = [v for v in views if v.engaged]
+    return SdlRun(views, t0, released[0])
+
+
+def test_sweep_gesture_through_sdls_real_joystick_path(fleet: Fleet, pygame_up: None) -> None:
+    """The same gesture from an SDL virtual GameController: SDL's device, mapping and event
+    path, as a USB pad would drive it."""
+
+    def sweep_left(vpad: VirtualPad) -> None:
+        vpad.deadman()
+        vpad.axis(pygame.CONTROLLER_AXIS_TRIGGERLEFT, 1.0)
+        vpad.right(-1.0, 0.0)
+        vpad.left(0.0, -0.6)
+
+    done = through_sdl(fleet, PB, {0: sweep_left, LEFT: lambda vpad: vpad.right(1.0, 0.0)},
+                       release_at=LEFT + RIGHT)  # fmt: skip
+    engaged = [v for v in done.views if v.engaged]
     assert engaged and {v.source for v in engaged} == {"controller"}, "the SDL device drove it"
     sent = [(v.asked or v.intent.direction, v.intent.direction) for v in engaged]
     assert (Direction.LEFT_LOW, Direction.LEFT_FORWARD_LOW) in sent
     assert (Direction.RIGHT_LOW, Direction.RIGHT_FORWARD_LOW) in sent
     assert all(d in (Direction.LEFT_FORWARD_LOW, Direction.RIGHT_FORWARD_LOW) for _, d in sent)
-    assert_sweep(fleet, t0, released[0])
+    assert_sweep(fleet, done.t0, done.released)
 
 
 def test_a_direction_no_body_has_near_drives_alone_through_sdls_joystick_path(
@@ -143,28 +161,14 @@ def test_a_direction_no_body_has_near_drives_alone_through_sdls_joystick_path(
     """PackBot's arm (shipped databank) has no pose within 45 degrees of plain left-middle.
     From an SDL virtual GameController, right stick left (no trigger) while driving forward:
     the client sends the drive alone, the robot refuses nothing and drives, the arm holds."""
-    with operator(fleet, tg.robot(PB)) as (op, inp):
-        vpad = VirtualPad()
-        try:
-            op.tick(inp.poll())  # SDL reports the device; the client opens it, nothing held
-            t0 = time.monotonic()
 
-            def push() -> None:
-                vpad.deadman()
-                vpad.right(-1.0, 0.0)
-                vpad.left(0.0, -0.6)
+    def push(vpad: VirtualPad) -> None:
+        vpad.deadman()
+        vpad.right(-1.0, 0.0)
+        vpad.left(0.0, -0.6)
 
-            released: list[float] = []
-
-            def let_go() -> None:
-                released.append(time.monotonic())
-                vpad.deadman(False)
-
-            script = Script(inp, {0: push, 45: let_go, 46: lambda: None})
-            views: list[View] = []
-            run(op, script, draw=views.append, finished=lambda: script.finished)
-        finally:
-            vpad.unplug()
+    done = through_sdl(fleet, PB, {0: push}, release_at=45)
+    views = done.views
     pushed = [v for v in views if v.engaged and v.asked is None
               and v.intent.direction is Direction.LEFT_MIDDLE]  # fmt: skip
     assert len(pushed) > 30 and {v.source for v in pushed} == {"controller"}
@@ -173,8 +177,8 @@ def test_a_direction_no_body_has_near_drives_alone_through_sdls_joystick_path(
                and v.answers[PB].ack.stage == "rejected"]  # fmt: skip
     assert refused == [], "the drive alone is a command the robot obeys"
     halted = fleet.track.wait(PB, lambda h: h.state.status in ("stopped", "holding"),
-                              "the stop", after=released[0])  # fmt: skip
-    hs = [h for h in fleet.track.since(PB, t0) if h.at <= halted.at]
+                              "the stop", after=done.released)  # fmt: skip
+    hs = [h for h in fleet.track.since(PB, done.t0) if h.at <= halted.at]
     forward, _, _ = body_motion(hs, halted)
     assert forward > 0.2, "it drove forward"
     names = hs[0].state.joint_names
