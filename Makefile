@@ -3,11 +3,12 @@ PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
-# The five distributions of this repository (docs/architecture.md): the core and one per role.
-PARTS  := . robots services clients deploy
+# The six distributions of this repository (docs/architecture.md): the core, the platform
+# descriptions and one per role.
+PARTS  := . platforms robots services clients deploy
 # Everything editable, with the extras the tests and `kinesphere up` use (README, "Install").
-EDITABLE := -e '.[test,ros2]' -e robots -e services -e clients -e 'deploy[up]'
-SRC    := kinesphere robots services clients deploy tests bench
+EDITABLE := -e '.[test,ros2]' -e platforms -e robots -e services -e clients -e 'deploy[up]'
+SRC    := kinesphere platforms robots services clients deploy tests bench
 export MUJOCO_GL ?= egl
 export SDL_VIDEODRIVER ?= dummy
 export SDL_AUDIODRIVER ?= dummy
@@ -15,7 +16,7 @@ export PYTHONDONTWRITEBYTECODE := 1
 
 .PHONY: install demo test lint typecheck layers browser bench soak lock clean
 
-$(STAMP): pyproject.toml robots/pyproject.toml services/pyproject.toml clients/pyproject.toml deploy/pyproject.toml constraints.txt
+$(STAMP): $(addsuffix /pyproject.toml,$(PARTS)) constraints.txt
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet -c constraints.txt $(EDITABLE)

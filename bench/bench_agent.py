@@ -25,9 +25,9 @@ import zenoh
 
 from kinesphere import zconfig
 from kinesphere.keyexpr import Keys
+from kinesphere.platforms.mjcf import platform_model
 from kinesphere.protocol import Command, RobotState, SpatialCommand, decode, encode
 from kinesphere.robots.agent.runtime import Agent, AgentOptions
-from kinesphere.robots.mjcf import platform_model
 
 KEYS = Keys()
 PLATFORMS = ["baxter", "nao", "youbot", "packbot", "khepera"]

@@ -22,7 +22,7 @@ from pathlib import Path
 import zenoh
 
 from kinesphere.keyexpr import Keys
-from kinesphere.robots.platform import load_platform
+from kinesphere.platforms.platform import load_platform
 from kinesphere.services.ecl.ecl import Ecl
 from kinesphere.services.ecl.store import PoseRow, default_db_path, write_databank
 from kinesphere.services.ecl.vsam import load_vsam

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import time
 
-from kinesphere.robots.platform import platform_names
+from kinesphere.platforms.platform import platform_names
 from kinesphere.services.ecl.parallel import default_workers, generate_many
 
 

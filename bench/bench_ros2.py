@@ -20,8 +20,8 @@ from kinesphere import rmw_zenoh as rz
 from kinesphere import ros2msgs as rm
 from kinesphere import zconfig
 from kinesphere.keyexpr import Keys
+from kinesphere.platforms.platform import load_platform
 from kinesphere.protocol import RobotState, encode
-from kinesphere.robots.platform import load_platform
 
 KEYS = Keys("ros2bench")
 ENCODES = 5000

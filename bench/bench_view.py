@@ -32,8 +32,8 @@ WINDOW_S = 8.0
 
 def robots(endpoint: str, moving: Any, stop: Any) -> None:
     """The stand-in fleet (a child process): tokens and states, all joints swinging."""
+    from kinesphere.platforms.platform import load_platform
     from kinesphere.protocol import RobotState, encode
-    from kinesphere.robots.platform import load_platform
 
     with zconfig.session(config=zconfig.loopback_config(endpoint)) as s:
         plats = {rid: load_platform(p) for rid, p in FLEET.items()}

@@ -19,7 +19,8 @@ from kinesphere.cliargs import PLATFORMS_ENV, add_platforms_argument, use_platfo
 from kinesphere.errors import KinesphereError
 
 ROLE_COMMANDS: dict[str, tuple[str, ...]] = {
-    "kinesphere-robots": ("agent", "describe", "fleet", "platform", "platforms"),
+    "kinesphere-platforms": ("describe", "platform", "platforms"),
+    "kinesphere-robots": ("agent", "fleet"),
     "kinesphere-services": ("databank", "ecl", "pose", "query"),
     "kinesphere-clients": ("estop", "gamepad", "lease", "play", "record", "replay", "ros2", "send",
                            "view"),

@@ -27,13 +27,13 @@ from test_agent_support import (
 from kinesphere import zconfig
 from kinesphere.errors import KinesphereError
 from kinesphere.laban import Direction
+from kinesphere.platforms.platform import load_platform
 from kinesphere.protocol import Drive, SpatialCommand
 from kinesphere.robots.agent.base import rotate
 from kinesphere.robots.agent.bodies import BODIES, make_body
 from kinesphere.robots.agent.body import Body, Reading
 from kinesphere.robots.agent.options import BODY_KINDS
 from kinesphere.robots.agent.runtime import Agent, AgentOptions
-from kinesphere.robots.platform import load_platform
 
 __all__ = ["databank", "hub"]  # fixtures
 

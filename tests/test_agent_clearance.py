@@ -14,12 +14,12 @@ import pytest
 import zenoh
 from test_agent_support import AckWatch, Databank, Operator, databank, hub, running_agent
 
+from kinesphere.platforms.clearance import PATH_STEP, Clearance, Touch
+from kinesphere.platforms.mjcf import platform_model, robot_contacts
 from kinesphere.protocol import SpatialCommand
 from kinesphere.robots.agent.controller import Controller
 from kinesphere.robots.agent.guard import CHECK_GAP_S, Guard, make_guard
 from kinesphere.robots.agent.mujoco_body import MujocoBody
-from kinesphere.robots.clearance import PATH_STEP, Clearance, Touch
-from kinesphere.robots.mjcf import platform_model, robot_contacts
 from kinesphere.services.ecl.ecl import Ecl
 
 __all__ = ["databank", "hub"]  # fixtures

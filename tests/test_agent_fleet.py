@@ -33,6 +33,7 @@ from test_agent_support import (
 from kinesphere import zconfig
 from kinesphere.cli import main
 from kinesphere.errors import KinesphereError
+from kinesphere.platforms.mjcf import platform_model
 from kinesphere.protocol import Catalogue, SpatialCommand
 from kinesphere.robots.agent.fleet import (
     Fleet,
@@ -43,7 +44,6 @@ from kinesphere.robots.agent.fleet import (
 )
 from kinesphere.robots.agent.mujoco_body import MujocoBody
 from kinesphere.robots.agent.runtime import AgentOptions
-from kinesphere.robots.mjcf import platform_model
 
 __all__ = ["databank", "hub"]  # fixtures
 

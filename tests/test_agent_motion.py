@@ -13,6 +13,7 @@ import pytest
 from kinesphere import zconfig
 from kinesphere.errors import KinesphereError
 from kinesphere.eurdf import JointLimit
+from kinesphere.platforms.platform import BaseSpec
 from kinesphere.protocol import Command, Drive
 from kinesphere.robots.agent.base import DiffBase, OmniBase, make_base, wrap_angle
 from kinesphere.robots.agent.bodies import make_body
@@ -21,7 +22,6 @@ from kinesphere.robots.agent.otg import Otg
 from kinesphere.robots.agent.runtime import SETTLE_S, Agent, AgentOptions
 from kinesphere.robots.agent.safety import DRIVE_TTL_S, Safety, Verdict
 from kinesphere.robots.agent.trajectory import DEFAULT_MARGIN, JointTrajectory
-from kinesphere.robots.platform import BaseSpec
 
 DT = 0.002
 ACC, JERK = 4.0, 40.0

@@ -11,11 +11,11 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 DOC = ROOT / "docs" / "architecture.md"
-LAYERS = ("core", "robots", "services", "clients", "deploy")
+LAYERS = ("core", "platforms", "robots", "services", "clients", "deploy")
 
 
 def tree_modules() -> dict[str, str]:
-    """Every module of the five distributions (``__init__`` excluded) -> its layer."""
+    """Every module of the six distributions (``__init__`` excluded) -> its layer."""
     out: dict[str, str] = {}
     for layer in LAYERS:
         dist = ROOT if layer == "core" else ROOT / layer  # the distribution's folder
@@ -38,6 +38,7 @@ def test_the_tree_has_every_layer_and_no_core_init() -> None:
     modules = tree_modules()
     assert set(modules.values()) == set(LAYERS)
     assert "kinesphere.protocol" in modules and "kinesphere.robots.agent.runtime" in modules
+    assert "kinesphere.platforms.platform" in modules
     assert not (ROOT / "kinesphere" / "__init__.py").exists()  # PEP 420: never add one
 
 

@@ -23,9 +23,9 @@ from test_byor_support import PANDA, TALOS, TIAGO, UR5, robot_data
 from kinesphere import zconfig
 from kinesphere.cli import main
 from kinesphere.laban import Direction
+from kinesphere.platforms.mjcf import platform_model
+from kinesphere.platforms.platform import load_platform
 from kinesphere.protocol import SpatialCommand
-from kinesphere.robots.mjcf import platform_model
-from kinesphere.robots.platform import load_platform
 
 # name: (URDF, limb, origin, direction, what the user edits in platform.toml's [neutral])
 ROBOTS = {

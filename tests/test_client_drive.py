@@ -102,7 +102,7 @@ def test_steering_follows_the_targets_base_kinds() -> None:
 
 
 def test_base_kinds_of_the_shipped_platforms() -> None:
-    from kinesphere.robots.platform import load_platform
+    from kinesphere.platforms.platform import load_platform
     from kinesphere.services.ecl.ecl import Ecl
 
     for p in ("baxter", "nao", "youbot", "packbot", "khepera"):

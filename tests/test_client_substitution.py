@@ -24,8 +24,8 @@ from kinesphere.clients.state import ControllerState
 from kinesphere.clients.sticks import RING, Tuning
 from kinesphere.errors import KinesphereError
 from kinesphere.laban import Direction, Level
+from kinesphere.platforms.platform import platform_names
 from kinesphere.protocol import Catalogue
-from kinesphere.robots.platform import platform_names
 from kinesphere.services.ecl.ecl import Ecl
 from kinesphere.substitution import MAX_ANGLE_DEG, angle_between, forward_sign
 

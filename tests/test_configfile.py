@@ -12,7 +12,7 @@ import pytest
 
 from kinesphere.configfile import convert, load_toml, read_toml
 from kinesphere.errors import KinesphereError
-from kinesphere.robots.platform import PLATFORMS_DIR, load_platform, platform_names
+from kinesphere.platforms.platform import PLATFORMS_DIR, load_platform, platform_names
 
 
 class Leaf(msgspec.Struct, forbid_unknown_fields=True):
@@ -82,7 +82,7 @@ def test_good_data_decodes_into_the_types() -> None:
     assert tree == Tree({"oak": [Leaf("red", 2)]}, 3.0)
 
 
-# --- platform.toml, decoded by kinesphere.robots.platform -----------------------------------
+# --- platform.toml, decoded by kinesphere.platforms.platform -----------------------------------
 
 
 def _platform_copy(tmp_path: Path, edit: tuple[str, str]) -> Path:

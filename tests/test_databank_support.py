@@ -20,7 +20,7 @@ import zenoh
 
 from kinesphere import protocol as pr
 from kinesphere.keyexpr import Keys
-from kinesphere.robots.platform import load_platform
+from kinesphere.platforms.platform import load_platform
 from kinesphere.services.ecl.store import PoseRow, write_databank
 from kinesphere.services.ecl.vsam import load_vsam
 from kinesphere.zconfig import loopback_config, open_session

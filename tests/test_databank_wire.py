@@ -18,7 +18,7 @@ from test_databank_support import ROOT, answered
 
 from kinesphere import zconfig
 from kinesphere.keyexpr import Keys
-from kinesphere.robots.platform import load_platform
+from kinesphere.platforms.platform import load_platform
 from kinesphere.services.databank.service import DatabankService
 from kinesphere.services.ecl.ecl import Ecl
 from kinesphere.services.ecl.store import PoseRow, write_databank

@@ -9,8 +9,8 @@ import matplotlib.image
 import numpy as np
 
 from kinesphere.deploy.pictures import TILE, pose_sheets, trajectory_png
+from kinesphere.platforms.platform import load_platform
 from kinesphere.protocol import RobotState
-from kinesphere.robots.platform import load_platform
 
 
 def _at_neutral(platform: str, robot_id: str, x: float = 0.0) -> RobotState:

@@ -13,9 +13,9 @@ import pytest
 
 from kinesphere.cli import main
 from kinesphere.laban import Direction
-from kinesphere.robots.frames import pivot
-from kinesphere.robots.mjcf import PlatformModel, platform_model
-from kinesphere.robots.platform import load_platform, platform_names
+from kinesphere.platforms.frames import pivot
+from kinesphere.platforms.mjcf import PlatformModel, platform_model
+from kinesphere.platforms.platform import load_platform, platform_names
 from kinesphere.services.ecl.constraints import tip_point
 from kinesphere.services.ecl.db import content_digest, read_tables
 from kinesphere.services.ecl.ecl import Ecl

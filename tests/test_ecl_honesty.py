@@ -17,9 +17,9 @@ from test_ecl_generate import configure, origin_of, shipped, tip_world
 
 from kinesphere.cli import main
 from kinesphere.laban import Direction
-from kinesphere.robots.frames import pivot
-from kinesphere.robots.mjcf import platform_model
-from kinesphere.robots.platform import load_platform, platform_names
+from kinesphere.platforms.frames import pivot
+from kinesphere.platforms.mjcf import platform_model
+from kinesphere.platforms.platform import load_platform, platform_names
 from kinesphere.services.ecl.balance import MARGIN, Balance, hull, inside
 from kinesphere.services.ecl.chains import COS_FAR, DETOUR_SLACK, STEP_SLACK
 from kinesphere.services.ecl.coverage import markdown

@@ -13,8 +13,8 @@ from test_ecl_store import TOY, build, toy_rows
 from kinesphere.cli import main
 from kinesphere.errors import KinesphereError
 from kinesphere.laban import Direction
+from kinesphere.platforms.platform import load_platform
 from kinesphere.protocol import COMPOUND, NO_ID, Pose, SpatialCommand
-from kinesphere.robots.platform import load_platform
 from kinesphere.services.ecl.db import content_digest
 from kinesphere.services.ecl.ecl import Ecl
 from kinesphere.services.ecl.store import PoseRow, write_databank

@@ -15,7 +15,7 @@ import pytest
 
 from kinesphere.errors import KinesphereError
 from kinesphere.laban import Direction
-from kinesphere.robots.platform import Platform, load_platform
+from kinesphere.platforms.platform import Platform, load_platform
 from kinesphere.services.ecl.db import connect, content_digest, quote_ident, read_tables
 from kinesphere.services.ecl.ecl import Ecl
 from kinesphere.services.ecl.store import PoseRow, write_databank
@@ -253,7 +253,7 @@ def test_missing_and_foreign_files_are_clear_errors(tmp_path: Path) -> None:
 # the commit) and says so; the parent kills it there with SIGKILL.
 CHILD = r"""
 import dataclasses, sys
-from kinesphere.robots.platform import load_platform
+from kinesphere.platforms.platform import load_platform
 from kinesphere.services.ecl import store
 from kinesphere.services.ecl.vsam import load_vsam
 sys.path.insert(0, sys.argv[3])

@@ -217,7 +217,7 @@ def test_limb_tip_attribute_overrides_the_deepest_link() -> None:
 
 def test_plain_urdf_strips_only_the_labels() -> None:
     from kinesphere.eurdf import plain_urdf
-    from kinesphere.robots.platform import load_platform
+    from kinesphere.platforms.platform import load_platform
 
     for name in ("baxter", "nao", "youbot"):
         platform = load_platform(name)

@@ -7,7 +7,7 @@ import pytest
 
 from kinesphere.eurdf import load_eurdf
 from kinesphere.labeller import propose_eurdf
-from kinesphere.robots.platform import load_platform, platform_names
+from kinesphere.platforms.platform import load_platform, platform_names
 
 TOY = Path(__file__).parent / "data" / "toyarm" / "toyarm.eurdf"
 

@@ -10,7 +10,7 @@ from kinesphere.errors import KinesphereError
 from kinesphere.eurdf import Eurdf, load_eurdf
 from kinesphere.labeller import propose_eurdf
 from kinesphere.labeller_names import is_finger_name, is_limb_name
-from kinesphere.robots.cli import describe_dict
+from kinesphere.platforms.cli import describe_dict
 
 EMPTY = {"ur_description/urdf/ur3.urdf"}  # an xacro stub: a <robot> without links
 

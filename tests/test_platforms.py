@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 import yourdfpy
 
-from kinesphere.robots.mjcf import BASE_JOINTS, platform_model
-from kinesphere.robots.platform import load_platform, platform_names
+from kinesphere.platforms.mjcf import BASE_JOINTS, platform_model
+from kinesphere.platforms.platform import load_platform, platform_names
 
 REFERENCE = Path(__file__).resolve().parents[2] / "shared" / "reference" / "robots"
 PLATFORMS = ["baxter", "khepera", "nao", "packbot", "youbot"]

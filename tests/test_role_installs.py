@@ -19,8 +19,9 @@ import pytest
 from kinesphere.cli import ROLE_COMMANDS, _command_word, build_parser, commands, missing_role
 
 ROOT = Path(__file__).resolve().parents[1]
-DISTS = {".": "kinesphere", "robots": "kinesphere-robots", "services": "kinesphere-services",
-         "clients": "kinesphere-clients", "deploy": "kinesphere-deploy"}
+DISTS = {".": "kinesphere", "platforms": "kinesphere-platforms", "robots": "kinesphere-robots",
+         "services": "kinesphere-services", "clients": "kinesphere-clients",
+         "deploy": "kinesphere-deploy"}
 INSTALL_TIMEOUT_S = 600
 
 
@@ -38,7 +39,7 @@ class Host:
 
 HOSTS = {
     "robot": Host(
-        (".", "robots"),
+        (".", "platforms", "robots"),
         ((("agent", "--help"), "--body"), (("describe", "baxter"), "baxter: 14 DOF"),
          (("platforms",), "youbot")),
         ("pygame", "mink", "matplotlib"),
@@ -48,21 +49,22 @@ HOSTS = {
         (".", "clients"),
         ((("send", "--help"), "--drive"), (("gamepad", "--help"), "deadman"),
          (("play", "--help"), "left_high")),
-        ("mujoco", "mink", "ruckig", "matplotlib"),
+        ("mujoco", "mink", "ruckig", "matplotlib", "kinesphere-platforms"),
         ("agent", "kinesphere-robots"),
     ),
     "databank": Host(
-        (".", "robots", "services"),
+        (".", "platforms", "services"),
         ((("query", "--help"), "--catalogue"),
          (("ecl", "get", "baxter", "right_arm", "right_shoulder", "left-high", "far"),
-          "right_s0")),
-        ("pygame", "matplotlib"),
+          "right_s0"),
+         (("describe", "baxter"), "baxter: 14 DOF")),
+        ("pygame", "matplotlib", "ruckig", "kinesphere-robots"),
         ("send", "kinesphere-clients"),
     ),
     "router": Host(
         (".", "deploy"),
         ((("router", "--help"), "--config"), (("status", "--help"), "--timeout")),
-        ("mujoco", "pygame", "mink", "ruckig", "matplotlib"),
+        ("mujoco", "pygame", "mink", "ruckig", "matplotlib", "kinesphere-platforms"),
         ("databank", "kinesphere-services"),
     ),
 }
@@ -159,7 +161,8 @@ def test_up_names_what_a_router_host_lacks(venvs: dict[str, Path]) -> None:
     venv = venvs["router"]
     done = _run([str(venv / "bin" / "kinesphere"), "up", "--headless"], venv)
     assert done.returncode == 2 and "Traceback" not in done.stderr
-    for dist in ("kinesphere-robots", "kinesphere-services", "kinesphere-clients", "matplotlib"):
+    for dist in ("kinesphere-platforms", "kinesphere-robots", "kinesphere-services",
+                 "kinesphere-clients", "matplotlib"):
         assert dist in done.stderr
     assert "kinesphere-deploy[up]" in done.stderr
 
@@ -168,7 +171,8 @@ def test_film_names_what_a_router_host_lacks(venvs: dict[str, Path]) -> None:
     venv = venvs["router"]
     done = _run([str(venv / "bin" / "kinesphere"), "film", "left_high"], venv)
     assert done.returncode == 2 and "Traceback" not in done.stderr
-    for dist in ("kinesphere-robots", "kinesphere-services", "imageio-ffmpeg"):
+    for dist in ("kinesphere-platforms", "kinesphere-robots", "kinesphere-services",
+                 "imageio-ffmpeg"):
         assert dist in done.stderr
     assert "kinesphere-deploy[up]" in done.stderr
 

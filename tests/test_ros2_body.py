@@ -44,10 +44,10 @@ from kinesphere.clients.options import TeleopOptions
 from kinesphere.clients.state import ControllerState
 from kinesphere.clients.teleop import Teleop, run
 from kinesphere.errors import KinesphereError
+from kinesphere.platforms.platform import load_platform
 from kinesphere.protocol import Pose, SpatialCommand
 from kinesphere.robots.agent.bodies import make_body
 from kinesphere.robots.agent.options import AgentOptions, Ros2BodyOptions
-from kinesphere.robots.platform import load_platform
 
 __all__ = ["databank", "hub", "pygame_up"]  # fixtures
 

@@ -25,8 +25,8 @@ from test_ros2_support import JAZZY, GraphWatch, RosTap, dds, graph
 from kinesphere import zconfig
 from kinesphere.clients.options import BridgeOptions
 from kinesphere.clients.ros2bridge import Bridge
+from kinesphere.platforms.platform import load_platform
 from kinesphere.protocol import RobotState, encode
-from kinesphere.robots.platform import load_platform
 
 __all__ = ["databank", "hub"]  # fixtures
 

@@ -7,7 +7,7 @@ import random
 import pytest
 
 from kinesphere.laban import Direction
-from kinesphere.robots.platform import platform_names
+from kinesphere.platforms.platform import platform_names
 from kinesphere.services.ecl.ecl import Ecl
 from kinesphere.substitution import angle_between, forward_sign, nearest_direction
 

@@ -12,8 +12,8 @@ from test_databank_support import KEYS, answered, error_code, peer, raw_get
 from kinesphere import protocol as pr
 from kinesphere import zconfig
 from kinesphere.eurdf import load_eurdf
+from kinesphere.platforms.platform import load_platform, platform_names
 from kinesphere.query import get_one
-from kinesphere.robots.platform import load_platform, platform_names
 from kinesphere.services.databank.service import DatabankService
 from kinesphere.services.ecl.ecl import Ecl
 

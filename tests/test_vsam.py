@@ -7,7 +7,7 @@ import pytest
 
 from kinesphere.errors import KinesphereError
 from kinesphere.laban import Direction
-from kinesphere.robots.platform import load_platform
+from kinesphere.platforms.platform import load_platform
 from kinesphere.services.ecl.vsam import load_vsam, vsam_from_dict
 
 TOY = Path(__file__).resolve().parent / "data" / "toyarm"

@@ -51,9 +51,9 @@ def _font(size: int) -> ImageFont.FreeTypeFont | ImageFont.ImageFont:
 
 def _performers(platforms: Sequence[str], phrase: Any, width: int, height: int
                 ) -> list[Performer]:
+    from kinesphere.platforms.mjcf import platform_model
     from kinesphere.robots.agent.bodies import make_body
     from kinesphere.robots.agent.controller import Controller
-    from kinesphere.robots.mjcf import platform_model
     from kinesphere.services.ecl.ecl import Ecl
     from kinesphere.services.ecl.render import Camera, frame, pose_qpos
     from kinesphere.words import label_names

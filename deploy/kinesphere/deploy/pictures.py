@@ -33,7 +33,7 @@ DPI = 100
 
 def _qpos(pm: Any, state: RobotState) -> np.ndarray:
     """The model configuration of a reported state: its joints and its base pose."""
-    from kinesphere.robots.mjcf import BASE_JOINTS
+    from kinesphere.platforms.mjcf import BASE_JOINTS
 
     q: np.ndarray = pm.neutral_qpos()
     for name, value in zip(state.joint_names, state.q, strict=True):
@@ -53,7 +53,7 @@ def render_poses(states: Sequence[RobotState], size: int = TILE) -> list[np.ndar
     is not available. A software GL context costs about a frame: one camera per robot.
     """
     os.environ.setdefault("MUJOCO_GL", "egl")
-    from kinesphere.robots.mjcf import BASE_JOINTS, platform_model
+    from kinesphere.platforms.mjcf import BASE_JOINTS, platform_model
 
     if not states:
         return []

@@ -47,7 +47,7 @@ class UpOptions:
 
 def parse_robots(text: str) -> list[Robot]:
     """``baxter,nao`` or ``baxter:left,baxter:right``: ids default to the platform name."""
-    from kinesphere.robots.platform import platform_names, platform_spelling
+    from kinesphere.platforms.platform import platform_names, platform_spelling
 
     robots: list[Robot] = []
     seen: dict[str, int] = {}
@@ -108,6 +108,7 @@ def default_phrases(robots: list[Robot], phrases_dir: Path | None = None) -> lis
 
 
 UP_NEEDS = {
+    "kinesphere.platforms": "kinesphere-platforms",
     "kinesphere.robots": "kinesphere-robots",
     "kinesphere.services": "kinesphere-services",
     "kinesphere.clients": "kinesphere-clients",
@@ -116,6 +117,7 @@ UP_NEEDS = {
 """What ``kinesphere up`` imports (module: distribution): it runs every role on one machine."""
 
 FILM_NEEDS = {
+    "kinesphere.platforms": "kinesphere-platforms",
     "kinesphere.robots": "kinesphere-robots",
     "kinesphere.services": "kinesphere-services",
     "kinesphere.clients": "kinesphere-clients",

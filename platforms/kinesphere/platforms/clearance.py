@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from kinesphere.robots.mjcf import PlatformModel, robot_contacts
+from kinesphere.platforms.mjcf import PlatformModel, robot_contacts
 
 PATH_STEP = 0.05
 """rad (or m) of the largest joint motion between two checked samples of a leg."""

@@ -51,8 +51,8 @@ def register(sub: Any) -> None:
 
 
 def _platform_new(args: argparse.Namespace) -> int:
-    from kinesphere.robots.platform import search_path
-    from kinesphere.robots.scaffold import new_platform
+    from kinesphere.platforms.platform import search_path
+    from kinesphere.platforms.scaffold import new_platform
 
     parent = args.dir if args.dir is not None else (search_path() or [Path(".")])[0]
     s = new_platform(args.name, args.urdf, parent, args.merge_distance, args.force)
@@ -73,7 +73,7 @@ def _platform_new(args: argparse.Namespace) -> int:
 
 
 def _platforms(args: argparse.Namespace) -> int:
-    from kinesphere.robots.platform import load_platform, platform_names
+    from kinesphere.platforms.platform import load_platform, platform_names
 
     rows = []
     for name in platform_names():
@@ -135,7 +135,7 @@ def describe_dict(e: Eurdf, base: str | None = None) -> dict[str, Any]:
 
 def _describe(args: argparse.Namespace) -> int:
     from kinesphere.eurdf import load_eurdf
-    from kinesphere.robots.platform import load_platform, platform_names
+    from kinesphere.platforms.platform import load_platform, platform_names
 
     if args.platform == "all" and args.json:  # one JSON document: a list, one per platform
         every = [describe_dict(p.eurdf, p.base.kind) for p in map(load_platform, platform_names())]

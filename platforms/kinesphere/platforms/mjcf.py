@@ -21,8 +21,8 @@ import mujoco
 import numpy as np
 import yourdfpy
 
-from kinesphere.robots.meshes import MUJOCO_READS
-from kinesphere.robots.platform import Platform, load_platform
+from kinesphere.platforms.meshes import MUJOCO_READS
+from kinesphere.platforms.platform import Platform, load_platform
 
 BASE_JOINTS = ("base_x", "base_y", "base_yaw")
 TIMESTEP = 0.002

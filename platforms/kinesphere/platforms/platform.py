@@ -1,6 +1,6 @@
 """The platform registry: each folder with a ``platform.toml`` is one robot body.
 
-Platforms are found by name among the shipped ones (``platforms/`` in this package), then in
+Platforms are found by name among the shipped ones (``shipped/`` in this package), then in
 the folders of the platform search path (``--platforms DIR`` or ``$KINESPHERE_PLATFORMS``; a
 brought robot lives there, made by ``kinesphere platform new``), or opened by folder path. A
 databank opened alone (``--db FILE``) names its platform, which must then be shipped or on
@@ -28,7 +28,7 @@ from kinesphere.configfile import load_toml
 from kinesphere.errors import KinesphereError, did_you_mean
 from kinesphere.eurdf import Eurdf, load_eurdf
 
-PLATFORMS_DIR = Path(__file__).resolve().parent / "platforms"
+PLATFORMS_DIR = Path(__file__).resolve().parent / "shipped"
 BaseKind = Literal["fixed", "omni", "diff", "skid"]
 BASE_KINDS: tuple[str, ...] = get_args(BaseKind)
 

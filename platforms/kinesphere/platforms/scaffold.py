@@ -22,8 +22,8 @@ from kinesphere.errors import KinesphereError
 from kinesphere.eurdf import Eurdf, load_eurdf
 from kinesphere.labeller import propose, propose_eurdf, read_urdf
 from kinesphere.labeller_names import is_drive_name
-from kinesphere.robots.meshes import import_meshes
-from kinesphere.robots.platform import BaseSpec, Platform, platform_names
+from kinesphere.platforms.meshes import import_meshes
+from kinesphere.platforms.platform import BaseSpec, Platform, platform_names
 
 _NAME = re.compile(r"^[a-z][a-z0-9_-]{0,31}$")
 NEUTRAL_MARGIN = 0.05  # rad (or m) between the neutral pose and any joint limit
@@ -138,7 +138,7 @@ def _neutral(eurdf: Eurdf) -> dict[str, float]:
 
 def _height(name: str, folder: Path, eurdf: Eurdf, neutral: dict[str, float]) -> float:
     """How high the root must sit for the lowest geometry at neutral to clear the floor."""
-    from kinesphere.robots.mjcf import build_spec
+    from kinesphere.platforms.mjcf import build_spec
 
     base = BaseSpec("fixed", 0.0, 0.0, 0.0, 0.0, 0.0)
     plat = Platform(name, name, folder, eurdf, base, 4.0, 40.0, neutral)

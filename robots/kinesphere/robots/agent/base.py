@@ -36,9 +36,9 @@ from ruckig import Synchronization
 
 from kinesphere.errors import KinesphereError
 from kinesphere.laban import Direction
+from kinesphere.platforms.platform import BaseSpec
 from kinesphere.protocol import Drive
 from kinesphere.robots.agent.otg import Otg
-from kinesphere.robots.platform import BaseSpec
 
 
 def wrap_angle(a: float) -> float:

@@ -19,17 +19,17 @@ agent also passes, by keyword, its ``session`` (Zenoh), ``options`` (AgentOption
 
 
 def _mujoco(platform: str, dt: float, **_context: object) -> Body:
+    from kinesphere.platforms.mjcf import platform_model
     from kinesphere.robots.agent.mujoco_body import MujocoBody  # MuJoCo loads only when chosen
-    from kinesphere.robots.mjcf import platform_model
 
     return MujocoBody(platform_model(platform), dt)
 
 
 def _ros2(platform: str, dt: float, *, session: Any = None, options: Any = None,
           robot_id: str = "robot", **_context: object) -> Body:
+    from kinesphere.platforms.platform import load_platform
     from kinesphere.robots.agent.options import AgentOptions
     from kinesphere.robots.agent.ros2_body import make_ros2_body  # rmw_zenoh only when chosen
-    from kinesphere.robots.platform import load_platform
 
     if session is None:
         raise KinesphereError("malformed", "the ros2 body needs the agent's Zenoh session")

@@ -19,7 +19,7 @@ if TYPE_CHECKING:  # the CLI reads BODIES for --help: no numpy, no URDF parser a
     import numpy as np
 
     from kinesphere.eurdf import JointLimit
-    from kinesphere.robots.platform import Platform
+    from kinesphere.platforms.platform import Platform
 
 
 @dataclass(frozen=True)

@@ -139,8 +139,8 @@ def _until_signal() -> Iterator[threading.Event]:
 
 
 def _agent(args: argparse.Namespace) -> int:
+    from kinesphere.platforms.platform import platform_spelling
     from kinesphere.robots.agent.runtime import Agent
-    from kinesphere.robots.platform import platform_spelling
     from kinesphere.zconfig import close_session, session_from_args
 
     if args.robot:

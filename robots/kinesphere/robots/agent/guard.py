@@ -1,4 +1,4 @@
-"""The agent's side of motion that does not hit itself (:mod:`kinesphere.robots.clearance`).
+"""The agent's side of motion that does not hit itself (:mod:`kinesphere.platforms.clearance`).
 
 A new target starts at once along the straight joint-space way (so command latency stays at the
 floor) while a worker thread checks that way against the robot's collision geometry; its
@@ -31,7 +31,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from kinesphere.robots.clearance import Clearance, Touch
+from kinesphere.platforms.clearance import Clearance, Touch
 
 if TYPE_CHECKING:
     from kinesphere.robots.agent.body import Body
@@ -254,7 +254,7 @@ class Guard:
 def make_guard(body: Body, platform: str) -> Guard:
     """A guard for ``body`` checking against ``platform``'s MuJoCo model (the body's own when
     it is simulated, else compiled once for the checks)."""
-    from kinesphere.robots.mjcf import platform_model
+    from kinesphere.platforms.mjcf import platform_model
 
     pm = getattr(body, "pm", None) or platform_model(platform)
     return Guard(Clearance(pm), body)

@@ -21,9 +21,9 @@ from collections.abc import Sequence
 import mujoco
 import numpy as np
 
+from kinesphere.platforms.mjcf import BASE_JOINTS, PlatformModel, robot_contacts
 from kinesphere.robots.agent.base import rotate, wrap_angle
 from kinesphere.robots.agent.body import Body, Reading
-from kinesphere.robots.mjcf import BASE_JOINTS, PlatformModel, robot_contacts
 
 
 class MujocoBody(Body):

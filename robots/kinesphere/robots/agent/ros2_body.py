@@ -34,9 +34,9 @@ import zenoh
 
 from kinesphere import ros2msgs as rm
 from kinesphere.errors import KinesphereError
+from kinesphere.platforms.platform import Platform
 from kinesphere.robots.agent.body import Body, Reading
 from kinesphere.robots.agent.options import Ros2BodyOptions
-from kinesphere.robots.platform import Platform
 from kinesphere.ros2node import Node
 
 log = logging.getLogger(__name__)

@@ -10,8 +10,8 @@ so it is encoded once per platform.
 from __future__ import annotations
 
 from kinesphere.errors import KinesphereError
+from kinesphere.platforms.platform import Platform
 from kinesphere.protocol import MAX_LARGE_PAYLOAD, BodyModel, encode
-from kinesphere.robots.platform import Platform
 
 
 def body_model(platform: Platform) -> BodyModel:

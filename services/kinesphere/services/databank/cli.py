@@ -101,7 +101,7 @@ def _query(args: argparse.Namespace) -> int:
     if args.catalogue and args.params:
         raise KinesphereError("malformed", "--catalogue takes no LIMB ORIGIN DIRECTION SIZE")
     from kinesphere.keyexpr import Keys
-    from kinesphere.robots.platform import platform_spelling
+    from kinesphere.platforms.platform import platform_spelling
     from kinesphere.services.databank import client
     from kinesphere.zconfig import session_from_args
 

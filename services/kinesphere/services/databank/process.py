@@ -24,7 +24,7 @@ import zenoh
 
 from kinesphere.errors import KinesphereError
 from kinesphere.keyexpr import Keys
-from kinesphere.robots.platform import load_platform, platform_folders, platform_names
+from kinesphere.platforms.platform import load_platform, platform_folders, platform_names
 from kinesphere.services.databank.service import DatabankService
 from kinesphere.services.ecl.ecl import Ecl
 from kinesphere.services.ecl.store import DATA_DIR

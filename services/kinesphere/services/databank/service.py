@@ -33,9 +33,9 @@ import zenoh
 
 from kinesphere.errors import KinesphereError, choices, did_you_mean
 from kinesphere.keyexpr import EXACT, KEYS, Keys, check_segment
+from kinesphere.platforms.platform import platform_names
 from kinesphere.protocol import CompoundRequest, check_spatial, decode
 from kinesphere.ratelog import RateLog
-from kinesphere.robots.platform import platform_names
 from kinesphere.services.databank.body import body_model
 from kinesphere.services.databank.records import Recorder, Served
 from kinesphere.services.databank.replies import (

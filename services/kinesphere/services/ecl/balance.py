@@ -14,7 +14,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from kinesphere.robots.mjcf import PlatformModel
+from kinesphere.platforms.mjcf import PlatformModel
 from kinesphere.services.ecl.constraints import samples
 
 TOUCH = 0.003  # metres: a point of the robot this close to the floor bears weight

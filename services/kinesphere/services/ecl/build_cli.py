@@ -133,7 +133,7 @@ def _gl() -> None:
 
 # --- build -------------------------------------------------------------------------------------
 def _build(args: argparse.Namespace) -> int:
-    from kinesphere.robots.platform import platform_names
+    from kinesphere.platforms.platform import platform_names
     from kinesphere.services.ecl.parallel import default_workers, generate_many
 
     if args.all == bool(args.platform):
@@ -173,7 +173,7 @@ def _build(args: argparse.Namespace) -> int:
 def store_built(name: str, built: Any, db: Path | None, console: Console,
                 reasons: bool = False) -> Path:
     """Store one platform's generated rows atomically; print what was dropped and why."""
-    from kinesphere.robots.platform import load_platform
+    from kinesphere.platforms.platform import load_platform
     from kinesphere.services.ecl.generate import GENERATOR_VERSION, report_meta
     from kinesphere.services.ecl.store import default_db_path, write_databank
     from kinesphere.services.ecl.vsam import load_vsam
@@ -272,7 +272,7 @@ def _fmt(v: float | None) -> str:
 
 
 def _coverage(args: argparse.Namespace) -> int:
-    from kinesphere.robots.platform import platform_names
+    from kinesphere.platforms.platform import platform_names
     from kinesphere.services.ecl.coverage import markdown
 
     names = [n.strip() for n in args.platforms.split(",")] if args.platforms else platform_names()
@@ -293,7 +293,7 @@ def _render(args: argparse.Namespace) -> int:
 
 def _compare(args: argparse.Namespace) -> int:
     _gl()
-    from kinesphere.robots.platform import platform_names
+    from kinesphere.platforms.platform import platform_names
     from kinesphere.services.ecl.render import compare_sheet
 
     names = [n.strip() for n in args.platforms.split(",")] if args.platforms else platform_names()

@@ -16,7 +16,7 @@ import numpy as np
 
 from kinesphere.errors import KinesphereError
 from kinesphere.laban import Direction
-from kinesphere.robots.platform import Platform
+from kinesphere.platforms.platform import Platform
 from kinesphere.services.ecl.db import Tables
 from kinesphere.services.ecl.store import limb_neutral
 

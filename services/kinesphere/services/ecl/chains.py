@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from kinesphere.robots.clearance import Clearance, Touch
+from kinesphere.platforms.clearance import Clearance, Touch
 from kinesphere.services.ecl.arcs import along_arc, arc_at, cosine
 from kinesphere.services.ecl.balance import Balance
 from kinesphere.services.ecl.ik import LimbSolver
@@ -156,7 +156,7 @@ class Sizes:
 
     def reachable(self, chain: list[Pose]) -> str | None:
         """Why a size cannot be reached from neutral without touching anything, or None: the
-        agent's own planner (:mod:`kinesphere.robots.clearance`, waypoints allowed) must find
+        agent's own planner (:mod:`kinesphere.platforms.clearance`, waypoints allowed) must find
         a clear way to every stored pose, so no stored pose is blocked from neutral."""
         start = self.clearance.neutral
         for size, pose in zip(self.sizes, chain, strict=True):

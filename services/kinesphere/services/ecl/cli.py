@@ -254,7 +254,7 @@ def _export(args: argparse.Namespace) -> int:
 
 
 def _import(args: argparse.Namespace) -> int:
-    from kinesphere.robots.platform import load_platform
+    from kinesphere.platforms.platform import load_platform
     from kinesphere.services.ecl.ecl import Ecl
     from kinesphere.services.ecl.store import default_db_path
 

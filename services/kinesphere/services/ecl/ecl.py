@@ -18,6 +18,7 @@ from typing import Any
 
 from kinesphere.errors import KinesphereError, did_you_mean
 from kinesphere.laban import Direction
+from kinesphere.platforms.platform import Platform, load_platform
 from kinesphere.protocol import (
     NO_ID,
     Catalogue,
@@ -26,7 +27,6 @@ from kinesphere.protocol import (
     Pose,
     Substitution,
 )
-from kinesphere.robots.platform import Platform, load_platform
 from kinesphere.services.ecl import transfer
 from kinesphere.services.ecl.cells import Cell, build_cells
 from kinesphere.services.ecl.compound import PartLike as PartLike

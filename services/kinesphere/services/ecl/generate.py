@@ -3,7 +3,7 @@
 For every VSAM entry (limb l, origin o) and every pull d the limb alone moves (everything else
 stays at neutral, the base at the origin, a joint that also drives a mimic joint outside the
 limb at neutral too) so that its distal end goes from o toward d. o is the pivot of the joint
-location (``kinesphere.robots.frames``), the distal end the limb's tip (NAO's head: its gaze
+location (``kinesphere.platforms.frames``), the distal end the limb's tip (NAO's head: its gaze
 point).
 
 * far (k_smax): the tip is pulled toward a point far out on the ray ``o + t * d`` (4 spans,
@@ -18,7 +18,7 @@ tip - origin; 0.85 is about 32 degrees), the tip advances along d from neutral t
 size, no joint flips between sizes, and no pose touches another part of the robot, dips below
 the floor or topples (``balance``: the whole-body centre of mass stays over what still touches
 the floor), and the agent's planner finds a way from neutral to every size that touches nothing
-(``kinesphere.robots.clearance``). Everything else is dropped and reported, toppling apart
+(``kinesphere.platforms.clearance``). Everything else is dropped and reported, toppling apart
 ("unstable").
 Among honest chains the one pointing best (highest mean cosine) whose f_SB interpolation
 (straight in joint space between sizes) stays clear is kept; if none stays clear, the pull is
@@ -39,8 +39,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from kinesphere.laban import Direction
-from kinesphere.robots.mjcf import platform_model
-from kinesphere.robots.platform import load_platform
+from kinesphere.platforms.mjcf import platform_model
+from kinesphere.platforms.platform import load_platform
 from kinesphere.services.ecl.arcs import halfway
 from kinesphere.services.ecl.balance import Balance
 from kinesphere.services.ecl.chains import (

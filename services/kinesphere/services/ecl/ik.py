@@ -19,8 +19,8 @@ import mink
 import mujoco
 import numpy as np
 
-from kinesphere.robots.frames import pivot
-from kinesphere.robots.mjcf import PlatformModel
+from kinesphere.platforms.frames import pivot
+from kinesphere.platforms.mjcf import PlatformModel
 from kinesphere.services.ecl.constraints import (
     GAIN,
     FloorLimit,

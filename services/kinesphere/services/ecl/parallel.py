@@ -17,7 +17,7 @@ from concurrent.futures import Future, ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 
 from kinesphere.errors import KinesphereError
-from kinesphere.robots.platform import load_platform
+from kinesphere.platforms.platform import load_platform
 from kinesphere.services.ecl.generate import (
     GENERATOR_VERSION,
     EntryReport,

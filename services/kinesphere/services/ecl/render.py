@@ -27,8 +27,8 @@ from PIL import Image, ImageDraw, ImageFont  # noqa: E402
 
 from kinesphere.errors import KinesphereError
 from kinesphere.laban import Direction, Horizontal, Level
+from kinesphere.platforms.mjcf import PlatformModel, model_of, platform_model  # noqa: E402
 from kinesphere.protocol import Pose
-from kinesphere.robots.mjcf import PlatformModel, model_of, platform_model  # noqa: E402
 from kinesphere.services.ecl.ecl import Ecl
 from kinesphere.sizes import size_name
 

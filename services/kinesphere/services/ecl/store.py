@@ -19,7 +19,7 @@ from pathlib import Path
 
 from kinesphere.errors import KinesphereError
 from kinesphere.laban import Direction
-from kinesphere.robots.platform import Platform
+from kinesphere.platforms.platform import Platform
 from kinesphere.services.ecl.db import Tables, Values, canon, write_tables
 from kinesphere.services.ecl.vsam import Vsam
 from kinesphere.sizes import parse_size

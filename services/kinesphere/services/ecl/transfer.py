@@ -13,7 +13,7 @@ from typing import Any
 
 from kinesphere.errors import KinesphereError
 from kinesphere.laban import Direction
-from kinesphere.robots.platform import Platform
+from kinesphere.platforms.platform import Platform
 from kinesphere.services.ecl.db import META_KEYS, Tables
 from kinesphere.services.ecl.store import check_joints
 from kinesphere.services.ecl.vsam import vsam_from_dict

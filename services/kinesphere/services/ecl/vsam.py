@@ -21,7 +21,7 @@ import msgspec
 from kinesphere.configfile import convert, read_toml
 from kinesphere.errors import KinesphereError
 from kinesphere.laban import Direction
-from kinesphere.robots.platform import Platform, load_platform
+from kinesphere.platforms.platform import Platform, load_platform
 from kinesphere.sizes import DEFAULT_BEYOND, DEFAULT_SIZES, MAX_TRANSLATION
 
 LABAN_27: Final = "laban-27"

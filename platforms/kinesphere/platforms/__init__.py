@@ -1,0 +1,1 @@
+"""kinesphere.platforms: the platform descriptions every role reads a robot body from."""
