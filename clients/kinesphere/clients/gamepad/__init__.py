@@ -1,0 +1,1 @@
+"""The gamepad wing: the streaming loop (``kinesphere gamepad``), its mapping, drive and HUD."""
