@@ -66,7 +66,7 @@ def bench_encode() -> None:
 def relay(hub: zenoh.Session, endpoint: str, key_in: str, key_out: str,
           bridge: bool) -> list[float]:
     """Latencies (us) from putting a RobotState on ``key_in`` to its arrival on ``key_out``."""
-    from kinesphere.clients.ros2bridge import Bridge
+    from kinesphere.clients.ros2.bridge import Bridge
 
     got: list[float] = []
     arrived = threading.Semaphore(0)
@@ -107,7 +107,7 @@ def relay(hub: zenoh.Session, endpoint: str, key_in: str, key_out: str,
 
 def bench_relay() -> None:
     # no databank here, so no body: the bridge relays joint states only (and says so once)
-    logging.getLogger("kinesphere.clients.ros2bridge").setLevel(logging.ERROR)
+    logging.getLogger("kinesphere.clients.ros2.bridge").setLevel(logging.ERROR)
     with zconfig.loopback_hub() as (hub, endpoint):
         key_in = KEYS.state("bench-1")
         base = relay(hub, endpoint, key_in, "ros2bench/echo", bridge=False)

@@ -16,8 +16,8 @@ import zenoh
 from test_client_support import KEYS, Inbox, Reply, StandIn, hub, usual
 
 from kinesphere.cli import main
-from kinesphere.clients import record
-from kinesphere.clients.state import Action, ControllerState
+from kinesphere.clients.gamepad.inputs import record
+from kinesphere.clients.gamepad.state import Action, ControllerState
 from kinesphere.protocol import AckStage, Command, Substitution
 
 __all__ = ["hub"]  # fixtures

@@ -20,11 +20,12 @@ from test_client_support import pygame_up
 
 from kinesphere import zconfig
 from kinesphere.cli import main
-from kinesphere.clients import record
 from kinesphere.clients import targets as tg
-from kinesphere.clients.lease import LEASE_TIMEOUT_S
-from kinesphere.clients.state import Action, ControllerState
-from kinesphere.clients.teleop import Teleop, View
+from kinesphere.clients.gamepad.inputs import record
+from kinesphere.clients.gamepad.lease import LEASE_TIMEOUT_S
+from kinesphere.clients.gamepad.readout import View
+from kinesphere.clients.gamepad.state import Action, ControllerState
+from kinesphere.clients.gamepad.teleop import Teleop
 from kinesphere.protocol import AckStage
 
 __all__ = ["fleet", "pygame_up"]  # fixtures

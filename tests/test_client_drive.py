@@ -7,9 +7,9 @@ import math
 
 import pytest
 
-from kinesphere.clients.drive import Steering, base_kind, drive_of, steering_for
-from kinesphere.clients.state import Action, ControllerState
-from kinesphere.clients.sticks import Tuning
+from kinesphere.clients.gamepad.drive import Steering, base_kind, drive_of, steering_for
+from kinesphere.clients.gamepad.state import Action, ControllerState
+from kinesphere.clients.gamepad.sticks import Tuning
 from kinesphere.laban import Direction
 from kinesphere.protocol import Drive
 

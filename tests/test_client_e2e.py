@@ -35,10 +35,11 @@ from test_client_fleet_support import (
 from test_client_support import Pad, Script, VirtualPad, pygame_up
 
 from kinesphere import zconfig
-from kinesphere.clients import record
 from kinesphere.clients import targets as tg
-from kinesphere.clients.state import Action, ControllerState
-from kinesphere.clients.teleop import View, run
+from kinesphere.clients.gamepad.inputs import record
+from kinesphere.clients.gamepad.readout import View
+from kinesphere.clients.gamepad.state import Action, ControllerState
+from kinesphere.clients.gamepad.teleop import run
 from kinesphere.laban import Direction
 
 __all__ = ["fleet", "pygame_up"]  # fixtures

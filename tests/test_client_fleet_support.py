@@ -21,12 +21,12 @@ import pytest
 import zenoh
 
 from kinesphere import zconfig
-from kinesphere.clients import input as pad
-from kinesphere.clients import mapfile
 from kinesphere.clients import targets as tg
+from kinesphere.clients.gamepad import mapfile
+from kinesphere.clients.gamepad.inputs import input as pad
+from kinesphere.clients.gamepad.teleop import Teleop
 from kinesphere.clients.link import RobotLink
 from kinesphere.clients.options import TeleopOptions
-from kinesphere.clients.teleop import Teleop
 from kinesphere.keyexpr import Keys
 from kinesphere.protocol import RobotState, decode
 

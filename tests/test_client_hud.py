@@ -14,15 +14,15 @@ os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
 import pygame  # noqa: E402
 import pytest  # noqa: E402
 
-from kinesphere.clients import hud  # noqa: E402
 from kinesphere.clients import targets as tg  # noqa: E402
-from kinesphere.clients.drive import Steering  # noqa: E402
+from kinesphere.clients.gamepad import hud  # noqa: E402
+from kinesphere.clients.gamepad.drive import Steering  # noqa: E402
+from kinesphere.clients.gamepad.mapping import Intent, MapperState, map_controls  # noqa: E402
+from kinesphere.clients.gamepad.readout import View  # noqa: E402
+from kinesphere.clients.gamepad.state import ControllerState  # noqa: E402
+from kinesphere.clients.gamepad.sticks import Tuning  # noqa: E402
+from kinesphere.clients.gamepad.symbols import draw_symbol  # noqa: E402
 from kinesphere.clients.link import Answer, Seen  # noqa: E402
-from kinesphere.clients.mapping import Intent, MapperState, map_controls  # noqa: E402
-from kinesphere.clients.state import ControllerState  # noqa: E402
-from kinesphere.clients.sticks import Tuning  # noqa: E402
-from kinesphere.clients.symbols import draw_symbol  # noqa: E402
-from kinesphere.clients.teleop import View  # noqa: E402
 from kinesphere.laban import Direction, Horizontal, Level  # noqa: E402
 from kinesphere.protocol import Ack, AckStage, Drive, RobotState, Substitution  # noqa: E402
 

@@ -23,13 +23,13 @@ from test_client_support import (
     usual,
 )
 
-from kinesphere.clients import input as pad
-from kinesphere.clients import mapfile
 from kinesphere.clients import targets as tg
-from kinesphere.clients.lease import KEEPALIVE_S
+from kinesphere.clients.gamepad import mapfile
+from kinesphere.clients.gamepad.inputs import input as pad
+from kinesphere.clients.gamepad.lease import KEEPALIVE_S
+from kinesphere.clients.gamepad.teleop import Teleop
 from kinesphere.clients.link import RobotLink
 from kinesphere.clients.options import TeleopOptions
-from kinesphere.clients.teleop import Teleop
 from kinesphere.protocol import AckStage, Command
 
 __all__ = ["hub", "pygame_up"]  # fixtures

@@ -7,10 +7,10 @@ from pathlib import Path
 
 import pytest
 
-from kinesphere.clients import mapfile
-from kinesphere.clients.mapping import Intent, MapperState, map_controls
-from kinesphere.clients.state import Action, ControllerState
-from kinesphere.clients.sticks import Tuning
+from kinesphere.clients.gamepad import mapfile
+from kinesphere.clients.gamepad.mapping import Intent, MapperState, map_controls
+from kinesphere.clients.gamepad.state import Action, ControllerState
+from kinesphere.clients.gamepad.sticks import Tuning
 from kinesphere.errors import KinesphereError
 from kinesphere.laban import Direction
 

@@ -11,8 +11,8 @@ import pytest
 import zenoh
 from test_client_support import KEYS, WAIT_S, Inbox, client_link, hub, sentinel
 
-from kinesphere.clients import phrases
 from kinesphere.clients.link import Sequencer
+from kinesphere.clients.orders import phrases
 from kinesphere.errors import KinesphereError
 from kinesphere.laban import Direction
 

@@ -22,13 +22,15 @@ from test_client_support import (
 )
 
 from kinesphere import zconfig
-from kinesphere.clients import input as pad
-from kinesphere.clients import mapfile, mcaplog, record
+from kinesphere.clients import mcaplog
 from kinesphere.clients import targets as tg
+from kinesphere.clients.gamepad import mapfile
+from kinesphere.clients.gamepad.inputs import input as pad
+from kinesphere.clients.gamepad.inputs import record
+from kinesphere.clients.gamepad.state import NEUTRAL, Action, ControllerState
+from kinesphere.clients.gamepad.teleop import Teleop, run
 from kinesphere.clients.options import TeleopOptions
-from kinesphere.clients.state import NEUTRAL, Action, ControllerState
-from kinesphere.clients.taps import replay
-from kinesphere.clients.teleop import Teleop, run
+from kinesphere.clients.recording.taps import replay
 from kinesphere.errors import KinesphereError
 
 __all__ = ["hub", "pygame_up"]  # fixtures

@@ -12,16 +12,16 @@ import math
 
 import pytest
 
-from kinesphere.clients.limbs import (
+from kinesphere.clients.gamepad.limbs import (
     available_directions,
     direction_sets,
     pairs_of,
     servable,
     served,
 )
-from kinesphere.clients.mapping import MapperState, map_controls
-from kinesphere.clients.state import ControllerState
-from kinesphere.clients.sticks import RING, Tuning
+from kinesphere.clients.gamepad.mapping import MapperState, map_controls
+from kinesphere.clients.gamepad.state import ControllerState
+from kinesphere.clients.gamepad.sticks import RING, Tuning
 from kinesphere.errors import KinesphereError
 from kinesphere.laban import Direction, Level
 from kinesphere.platforms.platform import platform_names

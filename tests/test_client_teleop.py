@@ -29,13 +29,13 @@ from test_client_support import (
 )
 
 from kinesphere import zconfig
-from kinesphere.clients import input as pad
-from kinesphere.clients import mapfile
 from kinesphere.clients import targets as tg
-from kinesphere.clients.limbs import CatalogueCache, Selection, pairs_of
+from kinesphere.clients.gamepad import mapfile
+from kinesphere.clients.gamepad.inputs import input as pad
+from kinesphere.clients.gamepad.limbs import CatalogueCache, Selection, pairs_of
+from kinesphere.clients.gamepad.teleop import Teleop, run
 from kinesphere.clients.link import RobotLink
 from kinesphere.clients.options import TeleopOptions
-from kinesphere.clients.teleop import Teleop, run
 from kinesphere.laban import Direction
 from kinesphere.protocol import Catalogue, LimbEntry, SpatialCommand
 

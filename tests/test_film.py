@@ -9,7 +9,7 @@ import imageio_ffmpeg
 import numpy as np
 from PIL import Image
 
-from kinesphere.clients.phrases import load_phrase
+from kinesphere.clients.orders.phrases import load_phrase
 from kinesphere.deploy.film import CAPTION_H, PLATFORMS, render
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -36,13 +36,13 @@ from test_client_support import Pad, pygame_up
 from test_ros2_support import JAZZY, GraphWatch, RosPublisher, StandInRobot, dds
 
 from kinesphere import zconfig
-from kinesphere.clients import input as pad
-from kinesphere.clients import mapfile
 from kinesphere.clients import targets as tg
+from kinesphere.clients.gamepad import mapfile
+from kinesphere.clients.gamepad.inputs import input as pad
+from kinesphere.clients.gamepad.state import ControllerState
+from kinesphere.clients.gamepad.teleop import Teleop, run
 from kinesphere.clients.link import RobotLink
 from kinesphere.clients.options import TeleopOptions
-from kinesphere.clients.state import ControllerState
-from kinesphere.clients.teleop import Teleop, run
 from kinesphere.errors import KinesphereError
 from kinesphere.platforms.platform import load_platform
 from kinesphere.protocol import Pose, SpatialCommand

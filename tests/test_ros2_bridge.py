@@ -24,7 +24,7 @@ from test_ros2_support import JAZZY, GraphWatch, RosTap, dds, graph
 
 from kinesphere import zconfig
 from kinesphere.clients.options import BridgeOptions
-from kinesphere.clients.ros2bridge import Bridge
+from kinesphere.clients.ros2.bridge import Bridge
 from kinesphere.platforms.platform import load_platform
 from kinesphere.protocol import RobotState, encode
 

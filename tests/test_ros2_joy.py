@@ -20,12 +20,12 @@ import pytest  # noqa: E402
 from test_ros2_support import JAZZY, WAIT_S, RosPublisher  # noqa: E402
 
 from kinesphere import zconfig  # noqa: E402
-from kinesphere.clients import mapfile  # noqa: E402
-from kinesphere.clients.commands import _joy_topic  # noqa: E402
-from kinesphere.clients.input import PygameInput, init_pygame  # noqa: E402
+from kinesphere.clients.gamepad import mapfile  # noqa: E402
+from kinesphere.clients.gamepad.handler import _joy_topic  # noqa: E402
+from kinesphere.clients.gamepad.inputs.input import PygameInput, init_pygame  # noqa: E402
+from kinesphere.clients.gamepad.inputs.ros2joy import JoyInput  # noqa: E402
+from kinesphere.clients.gamepad.state import Action  # noqa: E402
 from kinesphere.clients.options import JoyOptions  # noqa: E402
-from kinesphere.clients.ros2joy import JoyInput  # noqa: E402
-from kinesphere.clients.state import Action  # noqa: E402
 from kinesphere.errors import KinesphereError  # noqa: E402
 
 JOY = "sensor_msgs/msg/Joy"

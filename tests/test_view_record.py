@@ -20,7 +20,7 @@ from test_databank_support import wait_until
 from kinesphere import protocol as pr
 from kinesphere import zconfig
 from kinesphere.clients.mcaplog import McapWriter, read
-from kinesphere.clients.taps import Recorder, replay, tapped_keys
+from kinesphere.clients.recording.taps import Recorder, replay, tapped_keys
 from kinesphere.errors import KinesphereError
 from kinesphere.keyexpr import Keys
 from kinesphere.robots.agent.ordering import Ordering, Received

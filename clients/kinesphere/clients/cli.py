@@ -1,8 +1,10 @@
 """The operator's sub-commands: ``gamepad``, ``send``, ``play``, ``estop`` and ``lease``.
 
 Only the parsers live here (registered by the ``kinesphere`` dispatcher through the
-``kinesphere.commands`` entry point); the handlers are in :mod:`kinesphere.clients.commands`
-(gamepad) and :mod:`kinesphere.clients.orders` (the commands that wait for acks).
+``kinesphere.commands`` entry point); the handlers are in their wings,
+:mod:`kinesphere.clients.gamepad.handler` and :mod:`kinesphere.clients.orders.handlers` (the
+commands that wait for acks), imported when a command runs: they bring Zenoh, mcap and the
+streaming loop (~0.2 s), which ``kinesphere --help`` does not need.
 """
 
 from __future__ import annotations
@@ -11,7 +13,6 @@ import argparse
 from typing import Any
 
 from kinesphere.cliargs import add_zenoh_arguments
-from kinesphere.clients import commands, orders
 from kinesphere.clients.options import JOY_LAYOUTS, JoyOptions, TeleopOptions
 
 KEYS_HELP = """keys (keyboard fallback, the HUD window needs focus):
@@ -26,7 +27,7 @@ KEYS_HELP = """keys (keyboard fallback, the HUD window needs focus):
   K           take control (the lease) of the target from another operator
   F10         quit
 
-gamepad (SDL layout, see clients/mappings/default.toml):
+gamepad (SDL layout, see clients/kinesphere/clients/gamepad/mappings/default.toml):
   right stick limb direction + reach   left stick   drive the base (proportional)
   LT / RT     low / high level         LB (hold)    deadman       RB (hold) beyond
   d-pad left/right: turn the base (hold)            L3 (hold)     turbo
@@ -38,6 +39,36 @@ gamepad (SDL layout, see clients/mappings/default.toml):
 
 STREAM = TeleopOptions()
 """The defaults the streaming commands show and use."""
+
+
+def _gamepad(args: argparse.Namespace) -> int:
+    from kinesphere.clients.gamepad.handler import gamepad
+
+    return gamepad(args)
+
+
+def _send(args: argparse.Namespace) -> int:
+    from kinesphere.clients.orders.handlers import send
+
+    return send(args)
+
+
+def _play(args: argparse.Namespace) -> int:
+    from kinesphere.clients.orders.handlers import play
+
+    return play(args)
+
+
+def _estop(args: argparse.Namespace) -> int:
+    from kinesphere.clients.orders.handlers import estop
+
+    return estop(args)
+
+
+def _lease(args: argparse.Namespace) -> int:
+    from kinesphere.clients.orders.handlers import lease
+
+    return lease(args)
 
 
 def _targeting(
@@ -101,7 +132,9 @@ def register(sub: Any) -> None:
     )
     g.add_argument("--headless", action="store_true", help="no HUD window (needs a gamepad)")
     g.add_argument(
-        "--mapping", metavar="FILE", help="TOML mapping laid over clients/mappings/default.toml"
+        "--mapping", metavar="FILE",
+        help="TOML mapping laid over the defaults, "
+        "clients/kinesphere/clients/gamepad/mappings/default.toml",
     )
     g.add_argument("--record", metavar="FILE", help="record the session (MCAP) to FILE")
     g.add_argument(
@@ -147,7 +180,7 @@ def register(sub: Any) -> None:
     _targeting(g, wait=False)
     _identity(g)
     add_zenoh_arguments(g)
-    g.set_defaults(func=commands.gamepad)
+    g.set_defaults(func=_gamepad)
 
     s = sub.add_parser(
         "send",
@@ -189,7 +222,7 @@ def register(sub: Any) -> None:
     _answers(s, 5.0, "(the last command's final stage: reached, clamped, blocked...)")
     _identity(s)
     add_zenoh_arguments(s)
-    s.set_defaults(func=orders.send)
+    s.set_defaults(func=_send)
 
     p = sub.add_parser(
         "play",
@@ -208,7 +241,7 @@ def register(sub: Any) -> None:
     _answers(p, 5.0, "after the phrase")
     _identity(p)
     add_zenoh_arguments(p)
-    p.set_defaults(func=orders.play)
+    p.set_defaults(func=_play)
 
     e = sub.add_parser(
         "estop",
@@ -226,7 +259,7 @@ def register(sub: Any) -> None:
     _answers(e, 2.0, "(estopped, released)")
     _identity(e)
     add_zenoh_arguments(e)
-    e.set_defaults(func=orders.estop)
+    e.set_defaults(func=_estop)
 
     ls = sub.add_parser(
         "lease",
@@ -246,4 +279,4 @@ def register(sub: Any) -> None:
     _answers(ls, 2.0, "(leased, or refused naming the holder)")
     _identity(ls)
     add_zenoh_arguments(ls)
-    ls.set_defaults(func=orders.lease)
+    ls.set_defaults(func=_lease)

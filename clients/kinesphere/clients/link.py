@@ -1,6 +1,9 @@
 """The client's Zenoh side: put commands, watch robots and their acks, read catalogues.
 
-One :class:`RobotLink` per client process. Commands go through publishers cached per key (a
+One :class:`RobotLink` per client process; :func:`link_for` opens it from a command's Zenoh
+options, :func:`reachable` waits until the robots addressed listen, :func:`signals` lets
+SIGTERM end a command's work so its final stop still goes out (every operator command uses
+these three). Commands go through publishers cached per key (a
 stream at 30 Hz should not re-resolve its key every tick) with express delivery and blocking
 congestion control: a stop or an e-stop must never be dropped to make room. Robot states,
 liveliness and the acks robots send for this client's commands arrive on Zenoh's threads and
@@ -16,22 +19,27 @@ command's ``ttl_ms``, which the robot enforces itself.
 
 from __future__ import annotations
 
+import argparse
 import getpass
 import logging
 import re
+import signal
 import socket
 import threading
 import time
 import uuid
 from collections import OrderedDict, deque
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
+from types import FrameType
 from typing import TypeVar
 
 import zenoh
 
 from kinesphere import zconfig
-from kinesphere.errors import KinesphereError
+from kinesphere.clients import targets as tg
+from kinesphere.errors import KinesphereError, did_you_mean
 from kinesphere.keyexpr import Keys
 from kinesphere.protocol import (
     MAX_NAME,
@@ -46,6 +54,7 @@ from kinesphere.protocol import (
     encode,
 )
 from kinesphere.query import get_one
+from kinesphere.signals import handle_signals
 
 log = logging.getLogger(__name__)
 T = TypeVar("T")
@@ -374,3 +383,48 @@ class RobotLink:
             self._publishers.clear()
         zconfig.undeclare(*self._subs, *pubs)
         self._subs.clear()
+
+
+# --- what every operator command shares ---------------------------------------------------
+
+
+@contextmanager
+def link_for(args: argparse.Namespace) -> Iterator[RobotLink]:
+    """A watching RobotLink as ``args.sender`` on a session made from the Zenoh options."""
+    keys = Keys(args.prefix)
+    with zconfig.session_from_args(args) as session:
+        link = RobotLink(session, keys, sender=args.sender)
+        try:
+            yield link
+        finally:
+            link.close()
+
+
+def reachable(link: RobotLink, target: tg.Target, wait: float) -> list[str]:
+    """The target's command keys, once a robot listens on each; else unavailable, with a hint
+    when a robot id was given for what is a group, or is near a live robot's id."""
+    keys = target.keys(link.keys)
+    missing = link.wait_subscribers(keys, wait)
+    if missing:
+        hint = ""
+        if target.kind == "robot":
+            as_group = tg.group(target.name)
+            if not link.wait_subscribers(as_group.keys(link.keys), 0.5):
+                hint = f"; did you mean --target {as_group.spelling}?"
+            else:
+                hint = did_you_mean(target.name, link.alive_robots())
+        raise KinesphereError(
+            "unavailable", f"no robot listens on {', '.join(missing)} (waited {wait:g} s){hint}"
+        )
+    return keys
+
+
+@contextmanager
+def signals(on_stop: Callable[[], None]) -> Iterator[None]:
+    """SIGTERM (and SIGINT) end the work through ``on_stop`` so the final stop still goes out."""
+
+    def handler(signum: int, frame: FrameType | None) -> None:
+        on_stop()
+
+    with handle_signals(handler, (signal.SIGTERM, signal.SIGINT)):
+        yield

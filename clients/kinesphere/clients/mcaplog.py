@@ -24,6 +24,9 @@ from kinesphere.errors import KinesphereError
 from kinesphere.protocol import MESSAGE_TYPES, PROTOCOL_VERSION, AnyMessage, Message
 
 SCHEMA_PREFIX: Final = "kinesphere."
+GAMEPAD_RECORDING: Final = "gamepad-recording"
+"""The ``kinesphere`` metadata value of a gamepad's controller ticks (``gamepad --record``):
+the gamepad replays such a file, ``kinesphere replay`` names it and refuses it."""
 LIBRARY: Final = f"kinesphere (protocol {PROTOCOL_VERSION})"
 BY_NAME: Final[dict[str, type[Message]]] = {
     f"{SCHEMA_PREFIX}{t.__name__}": t for t in MESSAGE_TYPES

@@ -136,7 +136,7 @@ def render(phrase_ref: str | Path, out: Path, gif: Path | None, platforms: Seque
     """Render the phrase; returns the number of frames written to each file."""
     import imageio_ffmpeg
 
-    from kinesphere.clients.phrases import load_phrase
+    from kinesphere.clients.orders.phrases import load_phrase
     from kinesphere.words import drive_words, part_words
 
     if width % 2 or height % 2 or width < 64 or height < 64:

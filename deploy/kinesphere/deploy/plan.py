@@ -85,7 +85,7 @@ def parse_phrase(spec: str) -> Phrase:
 def shipped_phrases_dir() -> Path:
     """The phrases the client distribution ships (``kinesphere up`` plays them with it)."""
     try:
-        return Path(str(resources.files("kinesphere.clients") / "phrases"))
+        return Path(str(resources.files("kinesphere.clients.orders") / "phrases"))
     except ModuleNotFoundError:
         raise KinesphereError(
             "unavailable", "kinesphere up plays phrases: install kinesphere-clients too"

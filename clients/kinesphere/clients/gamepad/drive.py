@@ -30,8 +30,8 @@ import math
 from collections.abc import Iterable
 from enum import StrEnum
 
-from kinesphere.clients.state import Action, ControllerState
-from kinesphere.clients.sticks import RING, Tuning, body_xy, deflection, scaled, sector
+from kinesphere.clients.gamepad.state import Action, ControllerState
+from kinesphere.clients.gamepad.sticks import RING, Tuning, body_xy, deflection, scaled, sector
 from kinesphere.laban import Direction, Level
 from kinesphere.protocol import Catalogue, Drive
 

@@ -24,10 +24,10 @@ os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
 
 import pygame  # noqa: E402
 
-from kinesphere.clients.drive import Steering  # noqa: E402
+from kinesphere.clients.gamepad.drive import Steering  # noqa: E402
+from kinesphere.clients.gamepad.readout import View  # noqa: E402
+from kinesphere.clients.gamepad.symbols import draw_symbol  # noqa: E402
 from kinesphere.clients.report import Line, robot_lines  # noqa: E402
-from kinesphere.clients.symbols import draw_symbol  # noqa: E402
-from kinesphere.clients.teleop import View  # noqa: E402
 from kinesphere.errors import KinesphereError  # noqa: E402
 from kinesphere.laban import Direction, Horizontal, Level  # noqa: E402
 from kinesphere.sizes import size_name  # noqa: E402

@@ -1,7 +1,7 @@
 """The mapping file: which physical stick, trigger, button or key does what.
 
-Defaults live in ``clients/mappings/default.toml`` (the SDL GameController layout, a raw
-joystick fallback and the keyboard). A user file passed with ``--mapping`` is laid over the
+Defaults live in ``mappings/default.toml`` beside this module (the SDL GameController layout,
+a raw joystick fallback and the keyboard). A user file passed with ``--mapping`` is laid over the
 defaults key by key, so it only needs the lines it changes. The file's schema is the
 ``_*Section`` Structs below, decoded by msgspec (:mod:`kinesphere.configfile`): unknown
 sections, keys, axes and buttons are errors naming what is valid, because a typo must not
@@ -18,8 +18,8 @@ from typing import Annotated, Any, Literal, get_args
 
 import msgspec
 
-from kinesphere.clients.state import Action
-from kinesphere.clients.sticks import Tuning
+from kinesphere.clients.gamepad.state import Action
+from kinesphere.clients.gamepad.sticks import Tuning
 from kinesphere.configfile import convert, read_toml
 from kinesphere.errors import KinesphereError
 
@@ -144,7 +144,8 @@ class MapFile:
 
 def default_text() -> str:
     """The shipped default mapping (package data)."""
-    return resources.files("kinesphere.clients").joinpath("mappings/default.toml").read_text()
+    mappings = resources.files("kinesphere.clients.gamepad").joinpath("mappings")
+    return mappings.joinpath("default.toml").read_text()
 
 
 def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:

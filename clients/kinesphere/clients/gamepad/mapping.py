@@ -6,10 +6,10 @@ middle), and its deflection is the size, continuous from 0 (neutral) through nea
 at the rim; holding "beyond" at the rim keeps growing the size past far, which the ECL turns
 into base translation. With the right stick centred and a trigger pulled, the pull is Place
 High/Low and the trigger's depth is the size. The left stick, the turn buttons and turbo drive
-the base (:mod:`kinesphere.clients.drive`), at the same time.
+the base (:mod:`kinesphere.clients.gamepad.drive`), at the same time.
 
 Stick geometry (frames, dead zone, sectors with hysteresis) is in
-:mod:`kinesphere.clients.sticks`. No state lives here except the small :class:`MapperState`
+:mod:`kinesphere.clients.gamepad.sticks`. No state lives here except the small :class:`MapperState`
 passed in and returned.
 """
 
@@ -17,9 +17,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from kinesphere.clients.drive import Steering, drive_of
-from kinesphere.clients.state import Action, ControllerState
-from kinesphere.clients.sticks import RING, Tuning, body_xy, deflection, scaled, sector
+from kinesphere.clients.gamepad.drive import Steering, drive_of
+from kinesphere.clients.gamepad.state import Action, ControllerState
+from kinesphere.clients.gamepad.sticks import RING, Tuning, body_xy, deflection, scaled, sector
 from kinesphere.laban import Direction, Horizontal, Level
 from kinesphere.protocol import Drive
 

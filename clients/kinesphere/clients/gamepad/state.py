@@ -3,7 +3,7 @@
 Input (gamepad, joystick, keyboard, or a replayed recording) is reduced to a
 :class:`ControllerState` so the mapping, the teleop loop and recordings never see pygame.
 Sticks keep SDL's convention (x right +, y down +, -1..1) so a recording reads like the device;
-:mod:`kinesphere.clients.mapping` turns them into the body frame (stick up = forward).
+:mod:`kinesphere.clients.gamepad.mapping` turns them into the body frame (stick up = forward).
 """
 
 from __future__ import annotations

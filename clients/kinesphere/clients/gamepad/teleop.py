@@ -25,13 +25,13 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from typing import Protocol
 
 from kinesphere.clients import targets as tg
-from kinesphere.clients.drive import Steering, base_kind, steering_for
-from kinesphere.clients.lease import LeaseKeeper
-from kinesphere.clients.limbs import (
+from kinesphere.clients.gamepad.drive import Steering, base_kind, steering_for
+from kinesphere.clients.gamepad.lease import LeaseKeeper
+from kinesphere.clients.gamepad.limbs import (
     CatalogueCache,
     Selection,
     aliases_of,
@@ -41,16 +41,16 @@ from kinesphere.clients.limbs import (
     servable,
     served,
 )
-from kinesphere.clients.link import Answer, RobotLink, Seen
-from kinesphere.clients.mapfile import MapFile
-from kinesphere.clients.mapping import (
+from kinesphere.clients.gamepad.mapfile import MapFile
+from kinesphere.clients.gamepad.mapping import (
     NEUTRAL_INTENT,
-    Intent,
     MapperState,
     map_controls,
 )
+from kinesphere.clients.gamepad.readout import View
+from kinesphere.clients.gamepad.state import Action, ControllerState
+from kinesphere.clients.link import RobotLink, Seen
 from kinesphere.clients.options import TeleopOptions
-from kinesphere.clients.state import Action, ControllerState
 from kinesphere.laban import Direction
 from kinesphere.protocol import SpatialCommand, Status
 
@@ -64,43 +64,6 @@ class Source(Protocol):
     """Anything that yields controller snapshots: pygame input or a replayed recording."""
 
     def poll(self) -> ControllerState: ...
-
-
-@dataclass(frozen=True)
-class View:
-    """Everything the HUD shows after a tick: what the robots are about to do and are doing."""
-
-    target: tg.Target
-    limb: str
-    origin: str
-    aliases: dict[str, str]
-    intent: Intent
-    engaged: bool
-    deadman_required: bool
-    estopped: bool
-    remote_estop: list[str]
-    need_fresh_deadman: bool
-    connected: bool
-    source: str
-    robots: dict[str, Seen]
-    seq: int
-    message: str
-    catalogue_errors: dict[str, str] = field(default_factory=dict)
-    members: list[str] = field(default_factory=list)
-    """The robots heard from that the target reaches."""
-    sender: str = ""
-    """This operator's sender id (robots name it as their lease holder or e-stop latcher)."""
-    answers: dict[str, Answer] = field(default_factory=dict)
-    """Each robot's newest ack to this operator's commands, and when it came."""
-    notice: str = ""
-    """A standing problem the operator must see (robots refusing us for another's lease)."""
-    available: frozenset[Direction] | None = None
-    """Directions the limb has poses for (None: no catalogue yet)."""
-    asked: Direction | None = None
-    """The direction the stick asked for, when the nearest available one replaced it."""
-    limb_holds: bool = False
-    """No targeted body has a pose near the stick's direction: the command carries the drive
-    alone and the limb holds (rather than every robot refusing the whole command)."""
 
 
 class Teleop:

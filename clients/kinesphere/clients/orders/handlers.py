@@ -1,10 +1,11 @@
 """``send``, ``play``, ``estop`` and ``lease``: commands that wait for the robots' answers.
 
-Each finds whom it addresses (:func:`answers.addressed`), sends, waits up to ``--timeout`` for
-every addressed robot's acks, prints one line per robot on stdout (what it did, substitutions,
-refusals with their code, or "NO ACKNOWLEDGEMENT") and a summary on stderr, and exits 0 only
-when every addressed robot accepted: 1 when any refused, was blocked or did not answer, or
-when nobody was there to answer. An e-stop that reaches nobody is a loud failure.
+Each finds whom it addresses (:func:`~kinesphere.clients.orders.answers.addressed`), sends,
+waits up to ``--timeout`` for every addressed robot's acks, prints one line per robot on stdout
+(what it did, substitutions, refusals with their code, or "NO ACKNOWLEDGEMENT") and a summary on
+stderr, and exits 0 only when every addressed robot accepted: 1 when any refused, was blocked or
+did not answer, or when nobody was there to answer. An e-stop that reaches nobody is a loud
+failure.
 """
 
 from __future__ import annotations
@@ -14,11 +15,14 @@ import sys
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
-from typing import Any
 
-from kinesphere.clients.commands import link_for, reachable, signals
+from kinesphere.clients import targets
+from kinesphere.clients.link import RobotLink, Sequencer, link_for, reachable, signals
 from kinesphere.clients.options import TeleopOptions
+from kinesphere.clients.orders import answers, phrases
+from kinesphere.clients.orders.answers import Outcome
 from kinesphere.errors import KinesphereError
+from kinesphere.protocol import AckStage, LeaseAction, SpatialCommand
 
 ESTOP_RESEND_S = 0.1
 """``kinesphere estop`` puts its e-stop at once, then again every 0.1 s to the robots that have
@@ -38,40 +42,33 @@ class _Interrupt:
 
 
 @contextmanager
-def _addressing(args: argparse.Namespace, target: Any, ttl_ms: int) -> Iterator[Any]:
+def _addressing(
+    args: argparse.Namespace, target: targets.Target, ttl_ms: int
+) -> Iterator[tuple[RobotLink, list[str], list[str], Sequencer]]:
     """``(link, keys, robots, seq)``: the link, the target's keys once someone listens, the
     robots it addresses, and the link's Sequencer."""
-    from kinesphere.clients import answers
-
     with link_for(args) as link:
         keys = reachable(link, target, args.wait)
         yield link, keys, answers.addressed(link, target), link.sequencer(ttl_ms)
 
 
-def _finish(found: dict[str, Any], timeout: float, what: str, sent: int = 1) -> int:
-    from kinesphere.clients import answers
-
+def _finish(found: dict[str, Outcome], timeout: float, what: str, sent: int = 1) -> int:
     answers.report(found, timeout, sent)
     print(answers.summary(found, what), file=sys.stderr)
     return answers.exit_code(found)
 
 
-def _parse_parts(words: list[str]) -> list[Any]:
-    from kinesphere.clients.phrases import parse_part
-
+def _parse_parts(words: list[str]) -> list[SpatialCommand]:
     if len(words) % 4:
         raise KinesphereError(
             "malformed", f"parts come in fours (LIMB ORIGIN DIRECTION SIZE), got {len(words)} words"
         )
-    return [parse_part(" ".join(words[i : i + 4]), "send") for i in range(0, len(words), 4)]
+    return [phrases.parse_part(" ".join(words[i : i + 4]), "send") for i in range(0, len(words), 4)]
 
 
 def send(args: argparse.Namespace) -> int:
-    from kinesphere.clients import answers, targets
-    from kinesphere.clients.phrases import make_drive
-
     parts = _parse_parts(args.parts)
-    drive = make_drive(args.drive[0], args.drive[1], "--drive") if args.drive else None
+    drive = phrases.make_drive(args.drive[0], args.drive[1], "--drive") if args.drive else None
     if not parts and drive is None:
         raise KinesphereError("malformed", "nothing to send: give L O D S parts and/or --drive")
     target = targets.parse_target(args.target)
@@ -94,8 +91,6 @@ def send(args: argparse.Namespace) -> int:
 
 
 def play(args: argparse.Namespace) -> int:
-    from kinesphere.clients import answers, phrases, targets
-
     phrase = phrases.load_phrase(args.phrase)
     target = targets.parse_target(args.target)
     ttl = args.ttl_ms if args.ttl_ms is not None else (phrase.ttl_ms or TeleopOptions.ttl_ms)
@@ -119,9 +114,6 @@ def play(args: argparse.Namespace) -> int:
 
 
 def estop(args: argparse.Namespace) -> int:
-    from kinesphere.clients import answers, targets
-    from kinesphere.protocol import AckStage
-
     if args.release:
         if args.target is None:
             raise KinesphereError(
@@ -142,7 +134,7 @@ def estop(args: argparse.Namespace) -> int:
         # so it may take the whole budget on a slow one rather than miss a robot
         alive = set(link.alive_robots(max(0.1, left())))
 
-        def everyone(lk: Any) -> bool:
+        def everyone(lk: RobotLink) -> bool:
             alive.update(lk.robots())  # a robot heard of meanwhile must ack too
             now = answers.outcomes(lk.answers(first), alive)
             return bool(now) and all(
@@ -159,9 +151,6 @@ def estop(args: argparse.Namespace) -> int:
 
 
 def lease(args: argparse.Namespace) -> int:
-    from kinesphere.clients import answers, targets
-    from kinesphere.protocol import LeaseAction
-
     action = LeaseAction(args.action)
     target = targets.parse_target(args.target)
     stop = _Interrupt()

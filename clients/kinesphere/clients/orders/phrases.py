@@ -159,7 +159,7 @@ def parse_phrase(data: dict[str, Any], source: str) -> Phrase:
 
 def shipped() -> list[str]:
     """Names of the phrases that come with the client."""
-    root = resources.files("kinesphere.clients").joinpath("phrases")
+    root = resources.files("kinesphere.clients.orders").joinpath("phrases")
     return sorted(p.name[: -len(".toml")] for p in root.iterdir() if p.name.endswith(".toml"))
 
 
@@ -174,7 +174,7 @@ def load_phrase(ref: str | Path) -> Phrase:
             raise KinesphereError(
                 "malformed", f"no phrase file {ref}; shipped phrases: {', '.join(shipped())}"
             )
-        res = resources.files("kinesphere.clients").joinpath(f"phrases/{name}.toml")
+        res = resources.files("kinesphere.clients.orders").joinpath(f"phrases/{name}.toml")
         text, source = res.read_text(encoding="utf-8"), f"{name}.toml"
     data = parse_toml(text, source)
     return parse_phrase(data, source)

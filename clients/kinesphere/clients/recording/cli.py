@@ -1,47 +1,24 @@
-"""Sub-commands that watch the Zenoh network: ``view``, ``record`` and ``replay``.
+"""``kinesphere record`` and ``kinesphere replay``: a session on Zenoh to MCAP and back.
 
-Registered through their own ``kinesphere.commands`` entry point; the handlers import viser,
-mcap and Zenoh only when they run, so ``kinesphere --help`` stays quick.
+Registered through their own ``kinesphere.commands`` entry point; the handlers import mcap and
+Zenoh only when they run, so ``kinesphere --help`` stays quick.
 """
 
 from __future__ import annotations
 
 import argparse
-import logging
-import signal
 import sys
 import threading
 import time
-from types import FrameType
+from pathlib import Path
 from typing import Any
 
 from kinesphere.cliargs import OPERATOR, WATCHER, add_zenoh_arguments
 from kinesphere.errors import KinesphereError
-
-log = logging.getLogger(__name__)
+from kinesphere.signals import handle_signals
 
 
 def register(sub: Any) -> None:
-    v = sub.add_parser(
-        "view",
-        help="a live 3D view of every robot, in the browser",
-        description="Serve a web page (viser) that draws every robot on the Zenoh network at "
-        "its live joint state and base pose, with its id, status, current command in words, "
-        "substitutions and e-stop state, and the target pose as a translucent ghost while "
-        "it moves. Bodies come from the databank ({prefix}/ecl/PLATFORM/body): no platform "
-        "files are needed here. Open http://HOST:PORT in a browser; no internet access is "
-        "needed.",
-    )
-    v.add_argument("--host", default="127.0.0.1",
-                   help="address to serve the page on (default 127.0.0.1; 0.0.0.0 = every "
-                   "interface, for other machines)")
-    v.add_argument("--port", type=int, default=8080, help="HTTP/websocket port (default 8080)")
-    v.add_argument("--fps", type=float, default=30.0,
-                   help="scene updates per second sent to browsers (default 30)")
-    v.add_argument("--duration", type=float, metavar="S", help="quit after S seconds")
-    add_zenoh_arguments(v, WATCHER)
-    v.set_defaults(func=view)
-
     r = sub.add_parser(
         "record",
         help="record every command, state, ack and recorded pose to an MCAP file",
@@ -82,49 +59,15 @@ def register(sub: Any) -> None:
     p.set_defaults(func=replay)
 
 
-def _session(args: argparse.Namespace) -> Any:
-    from kinesphere.zconfig import session_from_args
-
-    return session_from_args(args)
-
-
-def _until_signal() -> Any:
-    from kinesphere.signals import handle_signals
-
-    stop = threading.Event()
-
-    def on_signal(signum: int, frame: FrameType | None) -> None:
-        stop.set()
-
-    return stop, handle_signals(on_signal, (signal.SIGINT, signal.SIGTERM))
-
-
-def view(args: argparse.Namespace) -> int:
-    from kinesphere.clients.view.app import View
-    from kinesphere.keyexpr import Keys
-
-    stop, signals = _until_signal()
-    with signals, _session(args) as session:
-        app = View(session, Keys(args.prefix), args.host, args.port, args.fps)
-        try:
-            print(f"kinesphere view on http://{args.host}:{app.port}/", file=sys.stderr,
-                  flush=True)
-            app.run(stop, args.duration)
-        finally:
-            app.close()
-    return 0
-
-
 def record(args: argparse.Namespace) -> int:
-    from pathlib import Path
-
-    from kinesphere.clients.taps import Recorder, summary
+    from kinesphere.clients.recording.taps import Recorder, summary
     from kinesphere.keyexpr import Keys
+    from kinesphere.zconfig import session_from_args
 
     if not args.max_mb > 0:
         raise KinesphereError("malformed", f"--max-mb must be > 0, got {args.max_mb}")
-    stop, signals = _until_signal()
-    with signals, _session(args) as session:
+    stop = threading.Event()
+    with handle_signals(lambda signum, frame: stop.set()), session_from_args(args) as session:
         rec = Recorder(session, Keys(args.prefix), args.output, int(args.max_mb * 1e6))
         try:
             print(f"recording to {args.output}; Ctrl-C to stop", file=sys.stderr, flush=True)
@@ -142,11 +85,12 @@ def record(args: argparse.Namespace) -> int:
 
 
 def replay(args: argparse.Namespace) -> int:
-    from kinesphere.clients.taps import few
-    from kinesphere.clients.taps import replay as put_back
+    from kinesphere.clients.recording.taps import few
+    from kinesphere.clients.recording.taps import replay as put_back
+    from kinesphere.zconfig import session_from_args
 
-    stop, signals = _until_signal()
-    with signals, _session(args) as session:
+    stop = threading.Event()
+    with handle_signals(lambda signum, frame: stop.set()), session_from_args(args) as session:
         done = put_back(session, args.recording, args.what, args.speed, stop.is_set,
                         restamp=args.restamp, wait=args.wait)
     if done.unheard:

@@ -33,8 +33,7 @@ import msgspec
 import zenoh
 
 from kinesphere.clients.link import new_session
-from kinesphere.clients.mcaplog import McapWriter, metadata, read
-from kinesphere.clients.record import MAGIC as GAMEPAD_RECORDING
+from kinesphere.clients.mcaplog import GAMEPAD_RECORDING, McapWriter, metadata, read
 from kinesphere.errors import KinesphereError
 from kinesphere.keyexpr import WILDCARD, Keys
 from kinesphere.protocol import Command, Message, RobotState, decode_any, encode

@@ -61,7 +61,7 @@ def register(sub: Any) -> None:
 def bridge(args: argparse.Namespace) -> int:
     import dataclasses
 
-    from kinesphere.clients.ros2bridge import Bridge
+    from kinesphere.clients.ros2.bridge import Bridge
     from kinesphere.keyexpr import Keys
     from kinesphere.signals import handle_signals
     from kinesphere.zconfig import session_from_args

@@ -26,8 +26,8 @@ os.environ.setdefault("SDL_JOYSTICK_ALLOW_BACKGROUND_EVENTS", "1")
 import pygame  # noqa: E402
 from pygame._sdl2 import controller as sdl_controller  # noqa: E402
 
-from kinesphere.clients.mapfile import MapFile  # noqa: E402
-from kinesphere.clients.state import Action, ControllerState  # noqa: E402
+from kinesphere.clients.gamepad.mapfile import MapFile  # noqa: E402
+from kinesphere.clients.gamepad.state import Action, ControllerState  # noqa: E402
 from kinesphere.errors import KinesphereError  # noqa: E402
 
 AXIS_MAX = 32767.0

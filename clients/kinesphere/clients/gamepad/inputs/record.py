@@ -24,10 +24,10 @@ from pathlib import Path
 from typing import Any, Final
 
 from kinesphere.clients import mcaplog
-from kinesphere.clients.state import NEUTRAL, ControllerState
+from kinesphere.clients.gamepad.state import NEUTRAL, ControllerState
 from kinesphere.errors import KinesphereError
 
-MAGIC: Final = "gamepad-recording"
+MAGIC: Final = mcaplog.GAMEPAD_RECORDING
 VERSION: Final = 2
 """2: MCAP (1 was JSON lines)."""
 TOPIC: Final = "gamepad/state"
@@ -99,7 +99,7 @@ def load(path: str | Path) -> tuple[dict[str, Any], list[tuple[float, Controller
 
 
 class Replay:
-    """A :class:`~kinesphere.clients.teleop.Source` that plays a recording back in time."""
+    """A :class:`~kinesphere.clients.gamepad.teleop.Source` that plays a recording back in time."""
 
     def __init__(
         self,

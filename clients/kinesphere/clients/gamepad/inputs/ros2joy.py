@@ -2,12 +2,12 @@
 
 A ROS user's joystick setup (``ros2 run joy game_controller_node``) publishes Joy messages over
 rmw_zenoh; :class:`JoyInput` subscribes to them and replays each one into the gamepad's
-:class:`~kinesphere.clients.input.PygameInput` as the SDL events a locally plugged pad would
-have produced, so the mapping file, the deadman, presses and hot-plug rules are exactly those
-of a real pad. game_controller_node reports axes in SDL's GameController order with ROS signs
-(stick up and left positive, a pulled trigger -1), so each value goes in negated: SDL's
-convention. With ``layout="joystick"`` (joy_node's device order) they go in as raw joystick
-events, read with the mapping's ``[joystick]`` numbers.
+:class:`~kinesphere.clients.gamepad.inputs.input.PygameInput` as the SDL events a locally
+plugged pad would have produced, so the mapping file, the deadman, presses and hot-plug rules
+are exactly those of a real pad. game_controller_node reports axes in SDL's GameController order
+with ROS signs (stick up and left positive, a pulled trigger -1), so each value goes in negated:
+SDL's convention. With ``layout="joystick"`` (joy_node's device order) they go in as raw
+joystick events, read with the mapping's ``[joystick]`` numbers.
 
 Safety: Joy messages repeat at game_controller_node's autorepeat rate (20 Hz by default) even
 when nothing changes; when none arrives for ``timeout_s`` the pad is reported unplugged, so the
@@ -30,9 +30,9 @@ import pygame
 import zenoh
 
 from kinesphere import ros2msgs as rm
-from kinesphere.clients.input import PygameInput
+from kinesphere.clients.gamepad.inputs.input import PygameInput
+from kinesphere.clients.gamepad.state import ControllerState
 from kinesphere.clients.options import JOY_LAYOUTS, JoyOptions
-from kinesphere.clients.state import ControllerState
 from kinesphere.errors import KinesphereError
 from kinesphere.rmw_zenoh import resolve
 from kinesphere.ros2node import Node

@@ -1,0 +1,54 @@
+"""``kinesphere view``: the parser and its handler.
+
+Registered through its own ``kinesphere.commands`` entry point; the handler imports viser and
+Zenoh only when it runs, so ``kinesphere --help`` stays quick.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import threading
+from typing import Any
+
+from kinesphere.cliargs import WATCHER, add_zenoh_arguments
+from kinesphere.signals import handle_signals
+
+
+def register(sub: Any) -> None:
+    v = sub.add_parser(
+        "view",
+        help="a live 3D view of every robot, in the browser",
+        description="Serve a web page (viser) that draws every robot on the Zenoh network at "
+        "its live joint state and base pose, with its id, status, current command in words, "
+        "substitutions and e-stop state, and the target pose as a translucent ghost while "
+        "it moves. Bodies come from the databank ({prefix}/ecl/PLATFORM/body): no platform "
+        "files are needed here. Open http://HOST:PORT in a browser; no internet access is "
+        "needed.",
+    )
+    v.add_argument("--host", default="127.0.0.1",
+                   help="address to serve the page on (default 127.0.0.1; 0.0.0.0 = every "
+                   "interface, for other machines)")
+    v.add_argument("--port", type=int, default=8080, help="HTTP/websocket port (default 8080)")
+    v.add_argument("--fps", type=float, default=30.0,
+                   help="scene updates per second sent to browsers (default 30)")
+    v.add_argument("--duration", type=float, metavar="S", help="quit after S seconds")
+    add_zenoh_arguments(v, WATCHER)
+    v.set_defaults(func=view)
+
+
+def view(args: argparse.Namespace) -> int:
+    from kinesphere.clients.view.app import View
+    from kinesphere.keyexpr import Keys
+    from kinesphere.zconfig import session_from_args
+
+    stop = threading.Event()
+    with handle_signals(lambda signum, frame: stop.set()), session_from_args(args) as session:
+        app = View(session, Keys(args.prefix), args.host, args.port, args.fps)
+        try:
+            print(f"kinesphere view on http://{args.host}:{app.port}/", file=sys.stderr,
+                  flush=True)
+            app.run(stop, args.duration)
+        finally:
+            app.close()
+    return 0
