@@ -15,6 +15,7 @@ from typing import Any
 
 from kinesphere.cliargs import OPERATOR, WATCHER, add_zenoh_arguments
 from kinesphere.errors import KinesphereError
+from kinesphere.keyexpr import Keys
 from kinesphere.signals import handle_signals
 
 
@@ -61,7 +62,6 @@ def register(sub: Any) -> None:
 
 def record(args: argparse.Namespace) -> int:
     from kinesphere.clients.recording.taps import Recorder, summary
-    from kinesphere.keyexpr import Keys
     from kinesphere.zconfig import session_from_args
 
     if not args.max_mb > 0:

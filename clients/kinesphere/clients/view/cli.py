@@ -12,6 +12,7 @@ import threading
 from typing import Any
 
 from kinesphere.cliargs import WATCHER, add_zenoh_arguments
+from kinesphere.keyexpr import Keys
 from kinesphere.signals import handle_signals
 
 
@@ -39,7 +40,6 @@ def register(sub: Any) -> None:
 
 def view(args: argparse.Namespace) -> int:
     from kinesphere.clients.view.app import View
-    from kinesphere.keyexpr import Keys
     from kinesphere.zconfig import session_from_args
 
     stop = threading.Event()
