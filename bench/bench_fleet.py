@@ -36,7 +36,7 @@ from bench.bench_agent import (
 from kinesphere import zconfig
 from kinesphere.protocol import SpatialCommand
 from kinesphere.robots.agent.bodies import make_body
-from kinesphere.robots.agent.fleet import Fleet, RobotSpec
+from kinesphere.robots.agent.fleet import FleetHost, RobotSpec
 from kinesphere.robots.agent.mujoco_body import MujocoBody
 from kinesphere.robots.agent.otg import Otg
 from kinesphere.robots.agent.runtime import AgentOptions
@@ -54,7 +54,7 @@ def robots(n: int, tag: str) -> list[RobotSpec]:
     return [RobotSpec(PLATFORMS[i % len(PLATFORMS)], f"{tag}-{n}-{i}") for i in range(n)]
 
 
-def warm(fleet: Fleet, parts: dict[str, list[SpatialCommand]]) -> None:
+def warm(fleet: FleetHost, parts: dict[str, list[SpatialCommand]]) -> None:
     """Both poses of every robot resolved and cached: the loop never waits on the network."""
     for k in range(2):
         for a in fleet.agents:
@@ -66,7 +66,7 @@ def warm(fleet: Fleet, parts: dict[str, list[SpatialCommand]]) -> None:
                 raise RuntimeError("poses were not resolved within 30 s")
 
 
-def tick_costs(fleet: Fleet, parts: dict[str, list[SpatialCommand]], ticks: int = TICKS,
+def tick_costs(fleet: FleetHost, parts: dict[str, list[SpatialCommand]], ticks: int = TICKS,
                seq0: int = 10) -> list[float]:
     """Seconds per tick, robots retargeted every :data:`RETARGET` ticks."""
     clock = time.perf_counter
@@ -111,9 +111,9 @@ def mj_step_us(platform: str) -> float:
 
 
 def run(endpoint: str, n: int, helpers: int, parts: dict[str, list[SpatialCommand]],
-        tag: str, tweak: Callable[[Fleet], None] | None = None) -> list[float]:
+        tag: str, tweak: Callable[[FleetHost], None] | None = None) -> list[float]:
     with zconfig.session(config=zconfig.loopback_config(endpoint)) as s:
-        fleet = Fleet(robots(n, tag), s, AgentOptions(speed=0.0), helpers=helpers)
+        fleet = FleetHost(robots(n, tag), s, AgentOptions(speed=0.0), helpers=helpers)
         try:
             fleet.declare()
             if tweak is not None:
@@ -141,14 +141,14 @@ def curve(endpoint: str, parts: dict[str, list[SpatialCommand]]) -> None:
           "a 500 Hz loop has 2 ms per tick)")
 
 
-def private_models(fleet: Fleet) -> None:
+def private_models(fleet: FleetHost) -> None:
     for a in fleet.agents:
         body = a.controller.body
         assert isinstance(body, MujocoBody)
         body.model = copy.copy(body.model)  # a real copy of the compiled model (mj_copyModel)
 
 
-def aligned_states(fleet: Fleet) -> None:
+def aligned_states(fleet: FleetHost) -> None:
     for a in fleet.agents:
         a._phase = 0  # every robot publishes in the same tick
 

@@ -88,7 +88,7 @@ def measure(view: Any, counter: list[int], window: float) -> dict[str, float]:
 
 def main() -> None:
     logging.getLogger("websockets").setLevel(logging.WARNING)
-    from kinesphere.clients.view.app import View
+    from kinesphere.clients.view.app import FleetView
     from kinesphere.services.databank.service import DatabankService
     from kinesphere.services.ecl.ecl import Ecl
 
@@ -102,7 +102,7 @@ def main() -> None:
             counter = [0]
             bare = view_s.declare_subscriber(KEYS.state("*"),
                                              lambda _: counter.__setitem__(0, counter[0] + 1))
-            view = View(view_s, KEYS, port=zconfig.free_port(), fps=FPS)
+            view = FleetView(view_s, KEYS, port=zconfig.free_port(), fps=FPS)
             ws_stop, sent = threading.Event(), [0]
             ws = threading.Thread(target=drain, args=(view.port, ws_stop, sent), daemon=True)
             fleet = ctx.Process(target=robots, args=(endpoint, moving, stop), daemon=True)

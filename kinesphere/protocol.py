@@ -138,7 +138,7 @@ class Substitution(msgspec.Struct, forbid_unknown_fields=False):
     angle: float
 
 
-class JointLimit(msgspec.Struct, forbid_unknown_fields=False):
+class BodyJoint(msgspec.Struct, forbid_unknown_fields=False):
     """An actuated joint: limits in rad (m if prismatic), velocity limit in rad/s (m/s)."""
 
     name: str
@@ -228,7 +228,7 @@ class Catalogue(Message, tag="catalogue", kw_only=True):
     platform: str
     core: list[str]
     limbs: list[LimbEntry]
-    joints: list[JointLimit]
+    joints: list[BodyJoint]
     translation_step: float | None = None
     can_translate: bool = False
     directions_for_core: list[str] = []
@@ -392,7 +392,7 @@ Payload = bytes | bytearray | memoryview | SupportsBytes
 ENCODER: Final = msgspec.msgpack.Encoder()
 _DECODERS: dict[Any, msgspec.msgpack.Decoder[Any]] = {
     t: msgspec.msgpack.Decoder(t)
-    for t in (*MESSAGE_TYPES, AnyMessage, SpatialCommand, JointLimit, LimbEntry, Drive,
+    for t in (*MESSAGE_TYPES, AnyMessage, SpatialCommand, BodyJoint, LimbEntry, Drive,
               Substitution)
 }
 

@@ -36,7 +36,7 @@ from kinesphere.errors import KinesphereError
 from kinesphere.platforms.mjcf import platform_model
 from kinesphere.protocol import Catalogue, SpatialCommand
 from kinesphere.robots.agent.fleet import (
-    Fleet,
+    FleetHost,
     RobotSpec,
     check_fleet,
     load_fleet_file,
@@ -59,10 +59,10 @@ def far(cat: Catalogue, k: int) -> tuple[str, str, str, float]:
 
 @contextmanager
 def running_fleet(endpoint: str, robots: list[RobotSpec], speed: float = 2.0,
-                  ) -> Iterator[tuple[Fleet, dict[str, StateWatch]]]:
+                  ) -> Iterator[tuple[FleetHost, dict[str, StateWatch]]]:
     """A fleet host in this process on its own session, and each robot's state stream."""
     with zconfig.session(config=zconfig.loopback_config(endpoint)) as s:
-        fleet = Fleet(robots, s, AgentOptions(speed=speed), helpers=1)
+        fleet = FleetHost(robots, s, AgentOptions(speed=speed), helpers=1)
         watches = {r.robot_id: StateWatch(s, r.robot_id) for r in robots}
         fleet.start()
         try:
@@ -160,7 +160,7 @@ def test_a_failing_body_holds_its_robot_alone(hub: tuple[zenoh.Session, str]) ->
     _session, endpoint = hub
     robots = [RobotSpec("youbot", "f-fail"), RobotSpec("khepera", "f-fine")]
     with zconfig.session(config=zconfig.loopback_config(endpoint)) as s:
-        fleet = Fleet(robots, s, AgentOptions(speed=0.0), helpers=1)
+        fleet = FleetHost(robots, s, AgentOptions(speed=0.0), helpers=1)
         bad, fine = fleet.agents
         bad.controller.body = FailingBody("youbot", bad.controller.dt, ok=50)
         fleet.declare()

@@ -16,7 +16,7 @@ import zenoh
 from test_client_support import KEYS, Inbox, Reply, StandIn, hub, usual
 
 from kinesphere.cli import main
-from kinesphere.clients.gamepad.inputs import record
+from kinesphere.clients.gamepad.inputs import ticks
 from kinesphere.clients.gamepad.state import Action, ControllerState
 from kinesphere.protocol import AckStage, Command, Substitution
 
@@ -239,14 +239,14 @@ def test_gamepad_replays_a_recording_headless(
 ) -> None:
     rec = tmp_path / "r.mcap"
     push = ControllerState(rx=1.0, held=frozenset({Action.DEADMAN}))
-    record.save(rec, [(k / 30, push) for k in range(10)] + [(10 / 30, ControllerState())])
+    ticks.save(rec, [(k / 30, push) for k in range(10)] + [(10 / 30, ControllerState())])
     again = tmp_path / "again.mcap"
     code = cli(hub[1], "gamepad", "--replay", str(rec), "--headless", "--target", "c2",
                "--record", str(again))  # fmt: skip
     assert code == 0
-    header, ticks = record.load(again)
+    header, recorded = ticks.load(again)
     assert header["target"] == "c2" and header["rate_hz"] == 30.0
-    assert any(Action.DEADMAN in cs.held for _, cs in ticks)
+    assert any(Action.DEADMAN in cs.held for _, cs in recorded)
     boxes["c2"].wait(lambda g: g.cmd.lease == "release", "the lease given back at exit")
     cmds = boxes["c2"].commands()
     moves = [c for c in cmds if c.parts]

@@ -21,9 +21,9 @@ from test_client_support import pygame_up
 from kinesphere import zconfig
 from kinesphere.cli import main
 from kinesphere.clients import targets as tg
-from kinesphere.clients.gamepad.inputs import record
+from kinesphere.clients.gamepad.inputs import ticks
 from kinesphere.clients.gamepad.lease import LEASE_TIMEOUT_S
-from kinesphere.clients.gamepad.readout import View
+from kinesphere.clients.gamepad.readout import Readout
 from kinesphere.clients.gamepad.state import Action, ControllerState
 from kinesphere.clients.gamepad.teleop import Teleop
 from kinesphere.protocol import AckStage
@@ -41,9 +41,9 @@ def turret(h: Heard) -> float:
     return h.state.q[h.state.joint_names.index("turret")]
 
 
-def tick_together(ops: list[tuple[Teleop, ControllerState]], seconds: float) -> list[View]:
+def tick_together(ops: list[tuple[Teleop, ControllerState]], seconds: float) -> list[Readout]:
     """Tick every operator at 30 Hz for ``seconds``; the last operator's views."""
-    views: list[View] = []
+    views: list[Readout] = []
     end = time.monotonic() + seconds
     next_t = time.monotonic()
     while time.monotonic() < end:
@@ -120,7 +120,7 @@ def test_a_killed_holders_lease_lapses_on_time_and_the_other_operator_gets_it(
     free: Fleet, pygame_up: None, tmp_path: Path
 ) -> None:
     rec = tmp_path / "alice.mcap"
-    record.save(rec, [(k / 10, LEFT_LOW) for k in range(600)])  # a minute
+    ticks.save(rec, [(k / 10, LEFT_LOW) for k in range(600)])  # a minute
     start = time.monotonic()
     alice = subprocess.Popen(
         [sys.executable, "-m", "kinesphere.cli", "gamepad", "--replay", str(rec), "--headless",

@@ -36,8 +36,8 @@ from test_client_support import Pad, Script, VirtualPad, pygame_up
 
 from kinesphere import zconfig
 from kinesphere.clients import targets as tg
-from kinesphere.clients.gamepad.inputs import record
-from kinesphere.clients.gamepad.readout import View
+from kinesphere.clients.gamepad.inputs import ticks
+from kinesphere.clients.gamepad.readout import Readout
 from kinesphere.clients.gamepad.state import Action, ControllerState
 from kinesphere.clients.gamepad.teleop import run
 from kinesphere.laban import Direction
@@ -106,7 +106,7 @@ def test_sweep_gesture_translates_the_base_while_the_arm_sweeps(
 
 @dataclass(frozen=True)
 class SdlRun:
-    views: list[View]
+    views: list[Readout]
     t0: float  # the device opened, before the first press
     released: float  # the deadman let go
 
@@ -128,7 +128,7 @@ def through_sdl(fleet: Fleet, robot: str, steps: dict[int, Callable[[VirtualPad]
             t0 = time.monotonic()
             script = Script(inp, {**{k: partial(step, vpad) for k, step in steps.items()},
                                   release_at: let_go, release_at + 1: lambda: None})  # fmt: skip
-            views: list[View] = []
+            views: list[Readout] = []
             run(op, script, draw=views.append, finished=lambda: script.finished)
         finally:
             vpad.unplug()
@@ -280,7 +280,7 @@ def test_a_killed_client_leaves_its_robots_stopping_on_their_own(
     # driving only: the right stick alone (Left-Middle) is a pull PackBot's arm lacks, with no
     # stored pull within the substitution limit, so the robot would refuse the whole command
     drive = ControllerState(ly=-0.8, held=frozenset({Action.DEADMAN}))
-    record.save(rec, [(k / 10, drive) for k in range(600)])  # a minute of driving
+    ticks.save(rec, [(k / 10, drive) for k in range(600)])  # a minute of driving
     client = subprocess.Popen(
         [sys.executable, "-m", "kinesphere.cli", "gamepad", "--replay", str(rec), "--headless",
          "--target", PB, "--ttl-ms", str(TTL_MS), "--connect", fleet.endpoint,

@@ -23,7 +23,7 @@ import zenoh
 from kinesphere import zconfig
 from kinesphere.clients import targets as tg
 from kinesphere.clients.gamepad import mapfile
-from kinesphere.clients.gamepad.inputs import input as pad
+from kinesphere.clients.gamepad.inputs import pad
 from kinesphere.clients.gamepad.teleop import Teleop
 from kinesphere.clients.link import RobotLink
 from kinesphere.clients.options import TeleopOptions

@@ -18,11 +18,11 @@ from kinesphere.clients import targets as tg  # noqa: E402
 from kinesphere.clients.gamepad import hud  # noqa: E402
 from kinesphere.clients.gamepad.drive import Steering  # noqa: E402
 from kinesphere.clients.gamepad.mapping import Intent, MapperState, map_controls  # noqa: E402
-from kinesphere.clients.gamepad.readout import View  # noqa: E402
+from kinesphere.clients.gamepad.readout import Readout  # noqa: E402
 from kinesphere.clients.gamepad.state import ControllerState  # noqa: E402
 from kinesphere.clients.gamepad.sticks import Tuning  # noqa: E402
 from kinesphere.clients.gamepad.symbols import draw_symbol  # noqa: E402
-from kinesphere.clients.link import Answer, Seen  # noqa: E402
+from kinesphere.clients.link import AckAnswer, Seen  # noqa: E402
 from kinesphere.laban import Direction, Horizontal, Level  # noqa: E402
 from kinesphere.protocol import Ack, AckStage, Drive, RobotState, Substitution  # noqa: E402
 
@@ -41,13 +41,13 @@ def state(robot_id: str, platform: str, status: str, **kw: object) -> Seen:
     return Seen(st, time.monotonic())
 
 
-def answer(robot_id: str, seq: int, stage: AckStage, **kw: object) -> Answer:
+def answer(robot_id: str, seq: int, stage: AckStage, **kw: object) -> AckAnswer:
     ack = Ack(robot_id=robot_id, sender="gamepad-me", seq=seq, stage=stage,
               stamp_ns=time.time_ns(), **kw)  # type: ignore[arg-type]
-    return Answer(ack, time.monotonic())
+    return AckAnswer(ack, time.monotonic())
 
 
-def view(**kw: object) -> View:
+def view(**kw: object) -> Readout:
     base = dict(
         target=tg.group("sweepers"), members=["packbot-1", "packbot-2"],
         limb="limb_11", origin="distal_11",
@@ -78,7 +78,7 @@ def view(**kw: object) -> View:
                "press Back (take) to take over",
     )  # fmt: skip
     base.update(kw)
-    return View(**base)  # type: ignore[arg-type]
+    return Readout(**base)  # type: ignore[arg-type]
 
 
 def cell_centre(d: Direction) -> tuple[int, int]:

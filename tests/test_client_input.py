@@ -15,7 +15,7 @@ import pytest  # noqa: E402
 from test_client_support import VirtualPad  # noqa: E402
 
 from kinesphere.clients.gamepad import mapfile  # noqa: E402
-from kinesphere.clients.gamepad.inputs import input as pad  # noqa: E402
+from kinesphere.clients.gamepad.inputs import pad  # noqa: E402
 from kinesphere.clients.gamepad.mapping import MapperState, map_controls  # noqa: E402
 from kinesphere.clients.gamepad.state import Action, ControllerState  # noqa: E402
 from kinesphere.errors import KinesphereError  # noqa: E402

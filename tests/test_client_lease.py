@@ -25,7 +25,7 @@ from test_client_support import (
 
 from kinesphere.clients import targets as tg
 from kinesphere.clients.gamepad import mapfile
-from kinesphere.clients.gamepad.inputs import input as pad
+from kinesphere.clients.gamepad.inputs import pad
 from kinesphere.clients.gamepad.lease import KEEPALIVE_S
 from kinesphere.clients.gamepad.teleop import Teleop
 from kinesphere.clients.link import RobotLink

@@ -25,12 +25,11 @@ from kinesphere import zconfig
 from kinesphere.clients import mcaplog
 from kinesphere.clients import targets as tg
 from kinesphere.clients.gamepad import mapfile
-from kinesphere.clients.gamepad.inputs import input as pad
-from kinesphere.clients.gamepad.inputs import record
+from kinesphere.clients.gamepad.inputs import pad, ticks
 from kinesphere.clients.gamepad.state import NEUTRAL, Action, ControllerState
 from kinesphere.clients.gamepad.teleop import Teleop, run
 from kinesphere.clients.options import TeleopOptions
-from kinesphere.clients.recording.taps import replay
+from kinesphere.clients.recording.traffic import replay
 from kinesphere.errors import KinesphereError
 
 __all__ = ["hub", "pygame_up"]  # fixtures
@@ -67,18 +66,18 @@ def test_a_replay_sends_what_the_recorded_session_sent(
     path = tmp_path / "session.mcap"
     with client_link(hub[1]) as link:
         assert link.wait_subscribers([KEYS.command("rec")], WAIT_S) == []
-        with record.Recorder(path, target="rec") as rec:
+        with ticks.TickRecorder(path, target="rec") as rec:
             op = Teleop(link, mapfile.load(), tg.robot("rec"), TeleopOptions(rate_hz=60.0))
             run(op, Spy(), record=rec, finished=lambda: script.finished)
         sentinel(link, [KEYS.command("rec")], [box])
         first = box.commands()
-        header, ticks = record.load(path)
-        assert header["target"] == "rec" and header["version"] == record.VERSION
-        assert [cs for _, cs in ticks] == polled, "every tick is recorded as it was seen"
-        assert any(Action.ORIGIN_NEXT in cs.pressed for _, cs in ticks)
+        header, recorded = ticks.load(path)
+        assert header["target"] == "rec" and header["version"] == ticks.VERSION
+        assert [cs for _, cs in recorded] == polled, "every tick is recorded as it was seen"
+        assert any(Action.ORIGIN_NEXT in cs.pressed for _, cs in recorded)
 
-        times = iter([t for t, _ in ticks] + [ticks[-1][0] + 1.0] * 5)
-        replay = record.Replay(ticks, clock=lambda: next(times))
+        times = iter([t for t, _ in recorded] + [recorded[-1][0] + 1.0] * 5)
+        replay = ticks.TickReplay(recorded, clock=lambda: next(times))
         op = Teleop(link, mapfile.load(), tg.robot("rec"), TeleopOptions(rate_hz=60.0))
         run(op, replay, finished=lambda: replay.finished)
         sentinel(link, [KEYS.command("rec")], [box])
@@ -93,14 +92,14 @@ def test_a_replay_sends_what_the_recorded_session_sent(
 
 
 def test_a_slower_replay_keeps_every_tap() -> None:
-    ticks = [
+    recorded = [
         (0.00, ControllerState(held=frozenset({Action.DEADMAN}))),
         (0.01, ControllerState(pressed=frozenset({Action.LIMB_NEXT}))),
         (0.02, ControllerState(pressed=frozenset({Action.ORIGIN_NEXT}))),
         (0.03, ControllerState(rx=0.5)),
     ]
     times = iter([0.0, 0.025, 0.5, 0.6])
-    replay = record.Replay(ticks, clock=lambda: next(times))
+    replay = ticks.TickReplay(recorded, clock=lambda: next(times))
     assert replay.poll().held == {Action.DEADMAN}
     got = replay.poll()
     assert got.pressed == {Action.LIMB_NEXT, Action.ORIGIN_NEXT}
@@ -117,7 +116,7 @@ def replay_equal(a: ControllerState, b: ControllerState) -> bool:
 def _mcap(path: Path, meta: dict[str, str] | None, data: bytes = b"") -> None:
     with mcaplog.McapWriter(path, meta) as w:
         if data:
-            w.write_json(record.TOPIC, ControllerState, data, 1_000)
+            w.write_json(ticks.TOPIC, ControllerState, data, 1_000)
 
 
 GOOD = {"kinesphere": "gamepad-recording", "version": "2", "start_ns": "0"}
@@ -143,19 +142,19 @@ def test_bad_recordings_are_explained(
     f = tmp_path / "bad.mcap"
     make(f)
     with pytest.raises(KinesphereError, match=match) as info:
-        record.load(f)
+        ticks.load(f)
     assert info.value.code == "malformed"
 
 
 def test_a_recording_keeps_its_header_ticks_and_times(tmp_path: Path) -> None:
-    ticks = [(k / 30, ControllerState(rx=k / 10, held=frozenset({Action.DEADMAN})))
+    recorded = [(k / 30, ControllerState(rx=k / 10, held=frozenset({Action.DEADMAN})))
              for k in range(10)]
-    record.save(tmp_path / "r.mcap", ticks, target="c2", rate_hz=30.0)
-    header, got = record.load(tmp_path / "r.mcap")
+    ticks.save(tmp_path / "r.mcap", recorded, target="c2", rate_hz=30.0)
+    header, got = ticks.load(tmp_path / "r.mcap")
     assert header == {"kinesphere": "gamepad-recording", "version": 2, "target": "c2",
                       "rate_hz": 30.0}
-    assert [cs for _, cs in got] == [cs for _, cs in ticks]
-    assert [round(t, 9) for t, _ in got] == [round(t, 9) for t, _ in ticks]
+    assert [cs for _, cs in got] == [cs for _, cs in recorded]
+    assert [round(t, 9) for t, _ in got] == [round(t, 9) for t, _ in recorded]
     # one format for every recording: the MCAP reader sees a channel with a JSON schema
     (raw, *_) = mcaplog.messages(tmp_path / "r.mcap")
     assert (raw.schema, raw.topic) == ("kinesphere.ControllerState", "gamepad/state")

@@ -27,7 +27,7 @@ import pytest  # noqa: E402
 import zenoh  # noqa: E402
 
 from kinesphere import zconfig  # noqa: E402
-from kinesphere.clients.gamepad.inputs import input as pad  # noqa: E402
+from kinesphere.clients.gamepad.inputs import pad  # noqa: E402
 from kinesphere.clients.gamepad.state import ControllerState  # noqa: E402
 from kinesphere.clients.link import RobotLink  # noqa: E402
 from kinesphere.keyexpr import Keys  # noqa: E402

@@ -31,7 +31,7 @@ from test_client_support import (
 from kinesphere import zconfig
 from kinesphere.clients import targets as tg
 from kinesphere.clients.gamepad import mapfile
-from kinesphere.clients.gamepad.inputs import input as pad
+from kinesphere.clients.gamepad.inputs import pad
 from kinesphere.clients.gamepad.limbs import CatalogueCache, Selection, pairs_of
 from kinesphere.clients.gamepad.teleop import Teleop, run
 from kinesphere.clients.link import RobotLink

@@ -14,7 +14,7 @@ from kinesphere.keyexpr import Keys
 from kinesphere.services.databank.replies import (
     DEFAULT_BUDGET,
     ENTRY_BYTES,
-    Answer,
+    EncodedReply,
     ReplyCache,
     entry_bytes,
     err,
@@ -24,8 +24,8 @@ from kinesphere.services.databank.worker import MAX_JOBS, Worker
 from kinesphere.services.ecl.ecl import Ecl
 
 
-def answer(n: int) -> Answer:
-    return Answer(True, zenoh.ZBytes(b"p" * n))
+def answer(n: int) -> EncodedReply:
+    return EncodedReply(True, zenoh.ZBytes(b"p" * n))
 
 
 def test_entries_are_charged_by_key_and_payload_bytes() -> None:

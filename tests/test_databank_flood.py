@@ -24,7 +24,7 @@ from test_soak_support import MIB, SCALE, Tally, mib, rss
 from kinesphere import protocol as pr
 from kinesphere.errors import ERROR_CODES
 from kinesphere.keyexpr import Keys
-from kinesphere.services.databank.replies import DEFAULT_BUDGET, Answer, entry_bytes
+from kinesphere.services.databank.replies import DEFAULT_BUDGET, EncodedReply, entry_bytes
 from kinesphere.zconfig import LOOPBACK_ANY_PORT, close_session, loopback_hub
 
 KEYS = Keys("kflood")
@@ -129,7 +129,7 @@ def test_flood_of_invented_keys_and_padded_requests_is_bounded(
     n = 3000 * SCALE
     if SCALE > 1:  # fill the answer cache first, so the flood's two halves compare full caches
         per_answer = entry_bytes(KEYS.pose("baxter", *ARM, 2.25),
-                                 Answer(True, zenoh.ZBytes(good)))
+                                 EncodedReply(True, zenoh.ZBytes(good)))
         fill = DEFAULT_BUDGET.answers // per_answer + 1
         for i in range(fill):  # sizes in [2, 2.5): none of the flood's own
             flood.get(KEYS.pose("baxter", *ARM, 2 + i / fill / 2))

@@ -38,7 +38,7 @@ from test_ros2_support import JAZZY, GraphWatch, RosPublisher, StandInRobot, dds
 from kinesphere import zconfig
 from kinesphere.clients import targets as tg
 from kinesphere.clients.gamepad import mapfile
-from kinesphere.clients.gamepad.inputs import input as pad
+from kinesphere.clients.gamepad.inputs import pad
 from kinesphere.clients.gamepad.state import ControllerState
 from kinesphere.clients.gamepad.teleop import Teleop, run
 from kinesphere.clients.link import RobotLink

@@ -22,8 +22,8 @@ from test_ros2_support import JAZZY, WAIT_S, RosPublisher  # noqa: E402
 from kinesphere import zconfig  # noqa: E402
 from kinesphere.clients.gamepad import mapfile  # noqa: E402
 from kinesphere.clients.gamepad.handler import _joy_topic  # noqa: E402
-from kinesphere.clients.gamepad.inputs.input import PygameInput, init_pygame  # noqa: E402
-from kinesphere.clients.gamepad.inputs.ros2joy import JoyInput  # noqa: E402
+from kinesphere.clients.gamepad.inputs.pad import PygameInput, init_pygame  # noqa: E402
+from kinesphere.clients.gamepad.inputs.ros2_joy import JoyInput  # noqa: E402
 from kinesphere.clients.gamepad.state import Action  # noqa: E402
 from kinesphere.clients.options import JoyOptions  # noqa: E402
 from kinesphere.errors import KinesphereError  # noqa: E402

@@ -29,7 +29,7 @@ from test_system_support import (
 )
 
 from kinesphere.cli import main
-from kinesphere.deploy.plan import Robot, UpOptions
+from kinesphere.deploy.plan import PlannedRobot, UpOptions
 from kinesphere.deploy.procs import Supervisor
 from kinesphere.deploy.up import Demo
 from kinesphere.keyexpr import KEYS
@@ -42,7 +42,7 @@ ARM = ("limb_11", "distal_11", "left-high", 2)  # youBot's arm
 
 @pytest.fixture
 def demo(tmp_path: Path) -> Iterator[Demo]:
-    opts = UpOptions(robots=[Robot(p, r) for r, p in ROBOTS.items()], phrases=[],
+    opts = UpOptions(robots=[PlannedRobot(p, r) for r, p in ROBOTS.items()], phrases=[],
                      out=tmp_path / "out", headless=True, start_timeout=WAIT_S * 2,
                      extra_agent_args=["--rate", "250"])
     d = Demo(opts, console=Console(file=open(tmp_path / "up.log", "w"), width=120))

@@ -60,10 +60,10 @@ def test_drawn_joint_frames_match_yourdfpy(net: zenoh.Session, name: str) -> Non
     import yourdfpy
     from viser import transforms as tf
 
-    from kinesphere.clients.view.body import Body
+    from kinesphere.clients.view.body import BodyGeometry
 
     model = get_one(net, KEYS.body(name), pr.BodyModel, timeout=10.0)
-    body = Body(model)
+    body = BodyGeometry(model)
     urdf = yourdfpy.URDF.load(io.StringIO(model.eurdf), build_scene_graph=True,
                               load_meshes=True)
     plat = load_platform(name)

@@ -26,7 +26,7 @@ from test_system_support import (
     until,
 )
 
-from kinesphere.clients.view.app import View
+from kinesphere.clients.view.app import FleetView
 from kinesphere.deploy.procs import Supervisor
 from kinesphere.protocol import Status
 from kinesphere.zconfig import free_port
@@ -58,12 +58,12 @@ def test_the_target_ghost_shows_while_a_robot_moves(sup: Supervisor) -> None:
     endpoint = router_hub(sup)  # the hub: it routes every put
     sup.spawn("databank", ["databank", "serve", "--connect", endpoint, "--platform", "baxter"])
     obs = Observer(mode="peer", connect=[endpoint])
-    view: View | None = None
+    view: FleetView | None = None
     try:
         obs.wait_alive(set(), databank=True, sup=sup)
         sup.spawn(RID, ["agent", "baxter", "--id", RID, "--connect", endpoint])
         obs.wait_alive({RID}, databank=True, sup=sup)
-        view = View(obs.session, KEYS, port=free_port())
+        view = FleetView(obs.session, KEYS, port=free_port())
         v = view
 
         def drawn() -> bool:

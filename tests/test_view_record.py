@@ -20,7 +20,7 @@ from test_databank_support import wait_until
 from kinesphere import protocol as pr
 from kinesphere import zconfig
 from kinesphere.clients.mcaplog import McapWriter, read
-from kinesphere.clients.recording.taps import Recorder, replay, tapped_keys
+from kinesphere.clients.recording.traffic import TrafficRecorder, replay, tapped_keys
 from kinesphere.errors import KinesphereError
 from kinesphere.keyexpr import Keys
 from kinesphere.robots.agent.ordering import Ordering, Received
@@ -57,7 +57,7 @@ def test_record_replay_round_trip(tmp_path: Path) -> None:
     with zconfig.loopback_hub() as (hub, endpoint):
         with zconfig.session(config=zconfig.loopback_config(endpoint)) as pub_s, \
                 zconfig.session(config=zconfig.loopback_config(endpoint)) as rec_s:
-            rec = Recorder(rec_s, KEYS, first)
+            rec = TrafficRecorder(rec_s, KEYS, first)
             pubs = {key: pub_s.declare_publisher(key) for key, _ in sent}
             for pub in pubs.values():
                 assert zconfig.wait_matching(pub, 20.0), "the recorder never subscribed"
@@ -87,7 +87,7 @@ def test_record_replay_round_trip(tmp_path: Path) -> None:
 
             # replay commands and states; a second recorder sees exactly those again (the
             # replay waits until its publishers match the recorder, which has just subscribed)
-            rec2 = Recorder(rec_s, KEYS, second)
+            rec2 = TrafficRecorder(rec_s, KEYS, second)
             put_at: list[float] = []
             done = replay(pub_s, first, "all", wait=20.0,
                           on_put=lambda k, m: put_at.append(time.monotonic()))
@@ -111,7 +111,7 @@ def test_a_burst_over_every_tapped_key_is_recorded_in_the_order_it_was_put(
     burst = [kinds[i % len(kinds)] for i in range(300)]
     with zconfig.loopback_hub() as (hub, endpoint):
         with zconfig.session(config=zconfig.loopback_config(endpoint)) as s:
-            rec = Recorder(s, KEYS, path)
+            rec = TrafficRecorder(s, KEYS, path)
             pubs = {k: hub.declare_publisher(k, congestion_control=zenoh.CongestionControl.BLOCK)
                     for k, _ in kinds}
             assert zconfig.unmatched(pubs, 20.0) == []

@@ -156,7 +156,7 @@ class Sequencer:
 
 
 @dataclass(frozen=True)
-class Answer:
+class AckAnswer:
     """An ack for one of this client's commands and when it arrived (monotonic seconds)."""
 
     ack: Ack
@@ -185,7 +185,7 @@ class RobotLink:
         self._lock = threading.RLock()  # wait_for predicates read states under it
         self._publishers: dict[tuple[str, bool], zenoh.Publisher] = {}
         self._states: OrderedDict[str, Seen] = OrderedDict()
-        self._answers: OrderedDict[str, deque[Answer]] = OrderedDict()
+        self._answers: OrderedDict[str, deque[AckAnswer]] = OrderedDict()
         self._alive: set[str] = set()
         self._catalogues: dict[str, Catalogue] = {}
         self.catalogue_epoch = 0
@@ -243,17 +243,17 @@ class RobotLink:
                 while len(self._answers) > MAX_ROBOTS:
                     self._answers.popitem(last=False)
             self._answers.move_to_end(ack.robot_id)
-            box.append(Answer(ack, time.monotonic()))
+            box.append(AckAnswer(ack, time.monotonic()))
             self.changed.notify_all()
 
-    def answers(self, seq_from: int = 0) -> dict[str, list[Answer]]:
+    def answers(self, seq_from: int = 0) -> dict[str, list[AckAnswer]]:
         """Acks each robot sent for this client's commands with ``seq >= seq_from``."""
         with self._lock:
             out = {rid: [a for a in box if a.ack.seq >= seq_from]
                    for rid, box in self._answers.items()}  # fmt: skip
         return {rid: found for rid, found in out.items() if found}
 
-    def last_answers(self) -> dict[str, Answer]:
+    def last_answers(self) -> dict[str, AckAnswer]:
         """The newest ack of each robot for this client's commands."""
         with self._lock:
             return {rid: box[-1] for rid, box in self._answers.items() if box}

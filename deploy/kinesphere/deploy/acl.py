@@ -36,17 +36,17 @@ class RobotEntry(msgspec.Struct, forbid_unknown_fields=True):
     groups: list[str] = []
 
 
-class Fleet(msgspec.Struct, forbid_unknown_fields=True):
+class FleetFile(msgspec.Struct, forbid_unknown_fields=True):
     """A fleet file: the key prefix and every robot the router admits, by id."""
 
     robots: dict[str, RobotEntry]
     prefix: str = DEFAULT_PREFIX
 
 
-def load_fleet(path: Path) -> Fleet:
+def load_fleet(path: Path) -> FleetFile:
     """Read and check a fleet file (TOML); malformed names the problem."""
     try:
-        fleet = msgspec.convert(tomllib.loads(path.read_text(encoding="utf-8")), Fleet)
+        fleet = msgspec.convert(tomllib.loads(path.read_text(encoding="utf-8")), FleetFile)
     except OSError as exc:
         raise KinesphereError("malformed", f"fleet file {path}: {exc.strerror}") from None
     except (tomllib.TOMLDecodeError, msgspec.ValidationError) as exc:
@@ -55,7 +55,7 @@ def load_fleet(path: Path) -> Fleet:
     return fleet
 
 
-def check_fleet(fleet: Fleet, where: str = "fleet") -> Fleet:
+def check_fleet(fleet: FleetFile, where: str = "fleet") -> FleetFile:
     Keys(fleet.prefix)
     if not fleet.robots:
         raise KinesphereError("malformed", f"{where}: no robots")
@@ -70,7 +70,7 @@ def check_fleet(fleet: Fleet, where: str = "fleet") -> Fleet:
     return fleet
 
 
-def robot_acl(fleet: Fleet) -> dict[str, list[dict[str, Any]]]:
+def robot_acl(fleet: FleetFile) -> dict[str, list[dict[str, Any]]]:
     """The ``rules``, ``subjects`` and ``policies`` that admit each robot of ``fleet``."""
     keys = Keys(fleet.prefix)
     out: dict[str, list[dict[str, Any]]] = {"rules": [], "subjects": [], "policies": []}
@@ -99,7 +99,7 @@ def _get(config: zenoh.Config, key: str) -> Any:
         return None
 
 
-def add_robots(config: zenoh.Config, fleet: Fleet) -> int:
+def add_robots(config: zenoh.Config, fleet: FleetFile) -> int:
     """Append ``fleet``'s rules to ``config``'s access control; returns the robot count.
 
     The config must have access control enabled and define the shared rules; a robot id that

@@ -59,7 +59,7 @@ def render_poses(states: Sequence[RobotState], size: int = TILE) -> list[np.ndar
         return []
     pm = platform_model(states[0].platform)
     try:
-        from kinesphere.services.ecl.render import Camera, View, frame
+        from kinesphere.services.ecl.render import Camera, CameraView, frame
     except ImportError as exc:
         log.info("ECL camera not available (%s): plain camera", exc)
         return [_render_plain(pm, _qpos(pm, st), size) for st in states]
@@ -74,7 +74,7 @@ def render_poses(states: Sequence[RobotState], size: int = TILE) -> list[np.ndar
                     at_origin[pm.qpos_index[name]] = 0.0
             v = frame(pm, [at_origin])
             if cam is None:
-                cam = Camera(pm, size, size, View(v.lookat, v.distance))
+                cam = Camera(pm, size, size, CameraView(v.lookat, v.distance))
             cam.cam.lookat[:] = (v.lookat[0] + st.base_pose[0], v.lookat[1] + st.base_pose[1],
                                  v.lookat[2])
             cam.cam.distance = MARGIN * v.distance  # room for the arm to move in peak poses

@@ -20,21 +20,21 @@ PHRASE_TIMEOUT_S = 90.0
 
 
 @dataclass(frozen=True)
-class Robot:
+class PlannedRobot:
     platform: str
     robot_id: str
 
 
 @dataclass(frozen=True)
-class Phrase:
+class PlannedPhrase:
     path: Path
     target: str  # a robot id, a group, or "all"
 
 
 @dataclass
 class UpOptions:
-    robots: list[Robot]
-    phrases: list[Phrase]
+    robots: list[PlannedRobot]
+    phrases: list[PlannedPhrase]
     out: Path = Path("out")
     headless: bool = False
     keep_running: bool = False
@@ -45,11 +45,11 @@ class UpOptions:
     extra_agent_args: list[str] = field(default_factory=list)
 
 
-def parse_robots(text: str) -> list[Robot]:
+def parse_robots(text: str) -> list[PlannedRobot]:
     """``baxter,nao`` or ``baxter:left,baxter:right``: ids default to the platform name."""
     from kinesphere.platforms.platform import platform_names, platform_spelling
 
-    robots: list[Robot] = []
+    robots: list[PlannedRobot] = []
     seen: dict[str, int] = {}
     for item in (s.strip() for s in text.split(",")):
         if not item:
@@ -59,7 +59,7 @@ def parse_robots(text: str) -> list[Robot]:
         if not rid:
             seen[platform] = seen.get(platform, 0) + 1
             rid = platform if seen[platform] == 1 else f"{platform}-{seen[platform]}"
-        robots.append(Robot(platform, rid))
+        robots.append(PlannedRobot(platform, rid))
     ids = [r.robot_id for r in robots]
     if not robots or len(set(ids)) != len(ids):
         raise KinesphereError("malformed", f"--robots needs distinct robots, got {text!r}")
@@ -73,13 +73,13 @@ def parse_robots(text: str) -> list[Robot]:
     return robots
 
 
-def parse_phrase(spec: str) -> Phrase:
+def parse_phrase(spec: str) -> PlannedPhrase:
     """``FILE`` (played on every robot) or ``FILE@ROBOT``."""
     path, _, target = spec.rpartition("@") if "@" in spec else (spec, "", "all")
     p = Path(path)
     if not p.is_file():
         raise KinesphereError("malformed", f"phrase file {p} does not exist")
-    return Phrase(p, target or "all")
+    return PlannedPhrase(p, target or "all")
 
 
 def shipped_phrases_dir() -> Path:
@@ -92,16 +92,18 @@ def shipped_phrases_dir() -> Path:
         ) from None
 
 
-def default_phrases(robots: list[Robot], phrases_dir: Path | None = None) -> list[Phrase]:
+def default_phrases(
+    robots: list[PlannedRobot], phrases_dir: Path | None = None
+) -> list[PlannedPhrase]:
     """The paper's Left-High example on every robot, then the PackBot sweep on each packbot."""
     phrases_dir = phrases_dir or shipped_phrases_dir()
-    out: list[Phrase] = []
+    out: list[PlannedPhrase] = []
     left_high = sorted(phrases_dir.glob("*left*high*.toml"))
     if left_high:
-        out.append(Phrase(left_high[0], "all"))
+        out.append(PlannedPhrase(left_high[0], "all"))
     sweep = phrases_dir / "packbot_sweep.toml"
     if sweep.is_file():
-        out += [Phrase(sweep, r.robot_id) for r in robots if r.platform == "packbot"]
+        out += [PlannedPhrase(sweep, r.robot_id) for r in robots if r.platform == "packbot"]
     if not out:
         raise KinesphereError("malformed", f"no demo phrases found in {phrases_dir}")
     return out

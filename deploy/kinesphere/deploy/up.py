@@ -25,7 +25,7 @@ from rich.console import Console
 from rich.live import Live
 
 from kinesphere.deploy.hub import client_args, start_hub
-from kinesphere.deploy.plan import Phrase, UpOptions
+from kinesphere.deploy.plan import PlannedPhrase, UpOptions
 from kinesphere.deploy.procs import ChildFailed, Supervisor
 from kinesphere.deploy.table import robot_table, state_dict, wide_console
 from kinesphere.deploy.watch import Alive, StateRecorder, is_settled, watch_alive
@@ -160,7 +160,7 @@ class Demo:
             ) from None
         self._mark(f"{len(ids)} robots and the databank are up")
 
-    def play(self, phrase: Phrase, index: int) -> None:
+    def play(self, phrase: PlannedPhrase, index: int) -> None:
         name = f"play-{index}-{phrase.path.stem}"
         args = ["play", str(phrase.path), "--target", phrase.target,
                 *client_args(self.endpoint)]

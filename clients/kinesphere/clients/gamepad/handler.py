@@ -18,16 +18,16 @@ import zenoh
 
 from kinesphere.clients import targets
 from kinesphere.clients.gamepad import mapfile, teleop
-from kinesphere.clients.gamepad.inputs import record
-from kinesphere.clients.gamepad.readout import View
+from kinesphere.clients.gamepad.inputs import ticks
+from kinesphere.clients.gamepad.readout import Readout
 from kinesphere.clients.link import link_for, signals
 from kinesphere.clients.options import JoyOptions, TeleopOptions
 from kinesphere.errors import KinesphereError
 
 if TYPE_CHECKING:
     from kinesphere.clients.gamepad.hud import Hud
-    from kinesphere.clients.gamepad.inputs.input import PygameInput
-    from kinesphere.clients.gamepad.inputs.ros2joy import JoyInput
+    from kinesphere.clients.gamepad.inputs.pad import PygameInput
+    from kinesphere.clients.gamepad.inputs.ros2_joy import JoyInput
 
 
 def gamepad(args: argparse.Namespace) -> int:
@@ -37,12 +37,12 @@ def gamepad(args: argparse.Namespace) -> int:
     if args.rate <= 0 or ttl < 0:
         raise KinesphereError("malformed", "--rate must be > 0 and --ttl-ms >= 0")
     options = TeleopOptions(args.rate, ttl, not args.no_deadman)
-    replay = record.Replay.from_file(args.replay) if args.replay else None
+    replay = ticks.TickReplay.from_file(args.replay) if args.replay else None
     joy_topic = _joy_topic(args.input)
     hud: Hud | None = None
     use_pygame = replay is None or not args.headless
     if use_pygame:
-        from kinesphere.clients.gamepad.inputs import input as pad
+        from kinesphere.clients.gamepad.inputs import pad
 
         pad.init_pygame(args.headless)
         if args.headless and replay is None and joy_topic is None and pad.controllers() == 0:
@@ -70,7 +70,7 @@ def gamepad(args: argparse.Namespace) -> int:
                     return True
                 return deadline is not None and time.monotonic() >= deadline
 
-            def draw(view: View) -> None:
+            def draw(view: Readout) -> None:
                 if hud is not None:
                     if replay is not None:  # no input reads the queue: watch for a close
                         import pygame
@@ -81,7 +81,7 @@ def gamepad(args: argparse.Namespace) -> int:
                     hud.draw(view)
 
             recorder = (
-                record.Recorder(
+                ticks.TickRecorder(
                     args.record, target=target.name, rate_hz=args.rate, mapping=mapping.source
                 )
                 if args.record
@@ -113,7 +113,7 @@ def _joy_topic(text: str) -> str | None:
         return None
     if not text.startswith("ros2:"):
         raise KinesphereError("malformed", f"--input {text!r}: use pad or ros2:TOPIC")
-    from kinesphere.clients.gamepad.inputs.ros2joy import input_topic
+    from kinesphere.clients.gamepad.inputs.ros2_joy import input_topic
 
     return input_topic(text)
 
@@ -121,7 +121,7 @@ def _joy_topic(text: str) -> str | None:
 def _joy_input(
     args: argparse.Namespace, session: zenoh.Session, pad: PygameInput, topic: str
 ) -> JoyInput:
-    from kinesphere.clients.gamepad.inputs.ros2joy import JoyInput
+    from kinesphere.clients.gamepad.inputs.ros2_joy import JoyInput
 
     options = JoyOptions(args.ros2_domain, args.joy_layout, args.joy_timeout)
     print(f"input: sensor_msgs/Joy on {topic} (ROS domain {options.domain}); nothing moves "

@@ -25,7 +25,7 @@ os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
 import pygame  # noqa: E402
 
 from kinesphere.clients.gamepad.drive import Steering  # noqa: E402
-from kinesphere.clients.gamepad.readout import View  # noqa: E402
+from kinesphere.clients.gamepad.readout import Readout  # noqa: E402
 from kinesphere.clients.gamepad.symbols import draw_symbol  # noqa: E402
 from kinesphere.clients.report import Line, robot_lines  # noqa: E402
 from kinesphere.errors import KinesphereError  # noqa: E402
@@ -122,7 +122,7 @@ def _cross(surf: pygame.Surface, rect: pygame.Rect, colour: tuple[int, int, int]
     pygame.draw.line(surf, colour, rect.topright, rect.bottomleft, 3)
 
 
-def _chart(surf: pygame.Surface, fonts: dict[str, pygame.font.Font], view: View) -> None:
+def _chart(surf: pygame.Surface, fonts: dict[str, pygame.font.Font], view: Readout) -> None:
     active = view.intent.direction
     x0, y0 = CHART
     for b, lvl in enumerate(LEVELS):
@@ -159,7 +159,7 @@ def _chart(surf: pygame.Surface, fonts: dict[str, pygame.font.Font], view: View)
 
 
 def _rings(
-    surf: pygame.Surface, fonts: dict[str, pygame.font.Font], view: View, cx: int, cy: int
+    surf: pygame.Surface, fonts: dict[str, pygame.font.Font], view: Readout, cx: int, cy: int
 ) -> None:
     r0 = 26
     for k, name in enumerate(("near", "mid", "far"), start=1):
@@ -194,7 +194,7 @@ STEERING_WORDS = {
 
 
 def _drive(
-    surf: pygame.Surface, fonts: dict[str, pygame.font.Font], view: View, cx: int, cy: int
+    surf: pygame.Surface, fonts: dict[str, pygame.font.Font], view: Readout, cx: int, cy: int
 ) -> None:
     r = 60
     pygame.draw.circle(surf, DIM, (cx, cy), r, 1)
@@ -227,7 +227,7 @@ def _drive(
     _text(surf, fonts["tiny"], STEERING_WORDS[view.intent.steering], (cx - 110, y), DIM)
 
 
-def _robots(surf: pygame.Surface, fonts: dict[str, pygame.font.Font], view: View, top: int
+def _robots(surf: pygame.Surface, fonts: dict[str, pygame.font.Font], view: Readout, top: int
             ) -> None:  # fmt: skip
     """Every robot, wrapped, in one or two columns; robots that do not fit are counted."""
     x, width, bottom = 16, surf.get_width() - 32, surf.get_height() - 8
@@ -269,12 +269,12 @@ def _robots(surf: pygame.Surface, fonts: dict[str, pygame.font.Font], view: View
               (x + width - 300, bottom - 18), WARN)  # fmt: skip
 
 
-def _alias(view: View, label: str) -> str:
+def _alias(view: Readout, label: str) -> str:
     alias = view.aliases.get(label)
     return f"{label} ({alias})" if alias else label
 
 
-def _banners(surf: pygame.Surface, fonts: dict[str, pygame.font.Font], view: View) -> None:
+def _banners(surf: pygame.Surface, fonts: dict[str, pygame.font.Font], view: Readout) -> None:
     x, w = 700, 384
     if view.estopped or view.remote_estop:
         who = "by you" if view.estopped else ", ".join(view.remote_estop)
@@ -298,7 +298,7 @@ def _banners(surf: pygame.Surface, fonts: dict[str, pygame.font.Font], view: Vie
     _text(surf, fonts["mid"], text, (dm.x + 10, dm.y + 7), BG)
 
 
-def render(surf: pygame.Surface, view: View, fonts: dict[str, pygame.font.Font]) -> None:
+def render(surf: pygame.Surface, view: Readout, fonts: dict[str, pygame.font.Font]) -> None:
     """Draw the whole HUD for ``view``."""
     surf.fill(BG)
     width = 670
@@ -350,7 +350,7 @@ class Hud:
         self.min_dt = 1.0 / fps
         self._last = 0.0
 
-    def draw(self, view: View) -> None:
+    def draw(self, view: Readout) -> None:
         now = time.monotonic()
         if now - self._last < self.min_dt:
             return

@@ -10,12 +10,12 @@ from dataclasses import dataclass, field
 
 from kinesphere.clients import targets as tg
 from kinesphere.clients.gamepad.mapping import Intent
-from kinesphere.clients.link import Answer, Seen
+from kinesphere.clients.link import AckAnswer, Seen
 from kinesphere.laban import Direction
 
 
 @dataclass(frozen=True)
-class View:
+class Readout:
     """Everything the HUD shows after a tick: what the robots are about to do and are doing."""
 
     target: tg.Target
@@ -38,7 +38,7 @@ class View:
     """The robots heard from that the target reaches."""
     sender: str = ""
     """This operator's sender id (robots name it as their lease holder or e-stop latcher)."""
-    answers: dict[str, Answer] = field(default_factory=dict)
+    answers: dict[str, AckAnswer] = field(default_factory=dict)
     """Each robot's newest ack to this operator's commands, and when it came."""
     notice: str = ""
     """A standing problem the operator must see (robots refusing us for another's lease)."""

@@ -47,7 +47,7 @@ from kinesphere.clients.gamepad.mapping import (
     MapperState,
     map_controls,
 )
-from kinesphere.clients.gamepad.readout import View
+from kinesphere.clients.gamepad.readout import Readout
 from kinesphere.clients.gamepad.state import Action, ControllerState
 from kinesphere.clients.link import RobotLink, Seen
 from kinesphere.clients.options import TeleopOptions
@@ -185,7 +185,7 @@ class Teleop:
         if cs.was_pressed(Action.QUIT):
             self.quit = True
 
-    def tick(self, cs: ControllerState, now: float | None = None) -> View:
+    def tick(self, cs: ControllerState, now: float | None = None) -> Readout:
         """Map ``cs``, handle its presses, and put this period's Command (or the final stop)."""
         now = time.monotonic() if now is None else now
         dt = 0.0 if self._last is None else now - self._last
@@ -235,9 +235,9 @@ class Teleop:
             self.lease.idle(self.target, self._targeted(), now)
         return self.view(cs, engaged, remote)
 
-    def view(self, cs: ControllerState, engaged: bool, remote: list[str]) -> View:
+    def view(self, cs: ControllerState, engaged: bool, remote: list[str]) -> Readout:
         targeted = self._targeted()
-        return View(
+        return Readout(
             target=self.target,
             limb=self.selection.limb,
             origin=self.selection.origin,
@@ -281,7 +281,7 @@ def run(
     teleop: Teleop,
     source: Source,
     *,
-    draw: Callable[[View], None] | None = None,
+    draw: Callable[[Readout], None] | None = None,
     record: Callable[[float, ControllerState], None] | None = None,
     finished: Callable[[], bool] | None = None,
 ) -> None:

@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 from typing import TextIO
 
 from kinesphere.clients import targets as tg
-from kinesphere.clients.link import Answer, RobotLink
+from kinesphere.clients.link import AckAnswer, RobotLink
 from kinesphere.protocol import Ack, AckStage, Substitution
 
 FINAL = frozenset({
@@ -96,7 +96,7 @@ class Outcome:
         return bool(self.acks) and not any(a.stage in FAILED for a in self.acks)
 
 
-def outcomes(answers: dict[str, list[Answer]], robots: Iterable[str]) -> dict[str, Outcome]:
+def outcomes(answers: dict[str, list[AckAnswer]], robots: Iterable[str]) -> dict[str, Outcome]:
     """An Outcome for every addressed robot and every robot that answered anyway."""
     out = {rid: Outcome(rid) for rid in robots}
     for rid, found in answers.items():

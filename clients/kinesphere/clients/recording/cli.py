@@ -61,14 +61,14 @@ def register(sub: Any) -> None:
 
 
 def record(args: argparse.Namespace) -> int:
-    from kinesphere.clients.recording.taps import Recorder, summary
+    from kinesphere.clients.recording.traffic import TrafficRecorder, summary
     from kinesphere.zconfig import session_from_args
 
     if not args.max_mb > 0:
         raise KinesphereError("malformed", f"--max-mb must be > 0, got {args.max_mb}")
     stop = threading.Event()
     with handle_signals(lambda signum, frame: stop.set()), session_from_args(args) as session:
-        rec = Recorder(session, Keys(args.prefix), args.output, int(args.max_mb * 1e6))
+        rec = TrafficRecorder(session, Keys(args.prefix), args.output, int(args.max_mb * 1e6))
         try:
             print(f"recording to {args.output}; Ctrl-C to stop", file=sys.stderr, flush=True)
             deadline = None if args.duration is None else time.monotonic() + args.duration
@@ -85,8 +85,8 @@ def record(args: argparse.Namespace) -> int:
 
 
 def replay(args: argparse.Namespace) -> int:
-    from kinesphere.clients.recording.taps import few
-    from kinesphere.clients.recording.taps import replay as put_back
+    from kinesphere.clients.recording.traffic import few
+    from kinesphere.clients.recording.traffic import replay as put_back
     from kinesphere.zconfig import session_from_args
 
     stop = threading.Event()

@@ -59,7 +59,7 @@ class Tally:
     by_type: dict[str, int] = field(default_factory=dict)
 
 
-class Recorder:
+class TrafficRecorder:
     """Records everything under ``keys.prefix`` into ``path`` until :meth:`close`."""
 
     def __init__(self, session: zenoh.Session, keys: Keys, path: str | Path,

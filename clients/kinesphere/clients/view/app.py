@@ -19,7 +19,7 @@ from typing import Any, Final
 import viser
 import zenoh
 
-from kinesphere.clients.view.body import Array, Body
+from kinesphere.clients.view.body import Array, BodyGeometry
 from kinesphere.clients.view.fleet import Fleet, Robot
 from kinesphere.clients.view.resolve import Databank, part_key
 from kinesphere.clients.view.scene import SPACING_M, Drawing
@@ -53,7 +53,7 @@ class FrameStats:
             self.costs_s.append(cost)
 
 
-def describe(robot: Robot, body: Body | None) -> tuple[str, str]:
+def describe(robot: Robot, body: BodyGeometry | None) -> tuple[str, str]:
     """``(status line, command line)`` of a robot in words."""
     st = robot.state
     if st is None:
@@ -75,7 +75,7 @@ def describe(robot: Robot, body: Body | None) -> tuple[str, str]:
     return status, words
 
 
-class View:
+class FleetView:
     """A viser server showing every robot under ``keys.prefix`` seen on ``session``."""
 
     def __init__(self, session: zenoh.Session, keys: Keys, host: str = "127.0.0.1",
@@ -92,7 +92,7 @@ class View:
         self._aim(self.server.initial_camera, 1)
         self.fleet = Fleet(session, keys)
         self.databank = Databank(session, keys)
-        self.bodies: dict[str, Body] = {}
+        self.bodies: dict[str, BodyGeometry] = {}
         self.drawings: dict[str, Drawing] = {}
         self.stats = FrameStats()
         button = self.server.gui.add_button("Frame all robots")
@@ -151,7 +151,7 @@ class View:
             if got is None or isinstance(got, KinesphereError):
                 return None
             try:
-                body = self.bodies[platform] = Body(got)
+                body = self.bodies[platform] = BodyGeometry(got)
             except KinesphereError as exc:
                 log.warning("cannot draw %s: %s", platform, exc)
                 return None
@@ -177,7 +177,7 @@ class View:
         drawing.caption(f"{robot.robot_id}: {status}\n{words}")
         return sent
 
-    def _target(self, robot: Robot, body: Body, q: Array
+    def _target(self, robot: Robot, body: BodyGeometry, q: Array
                 ) -> tuple[Array | None, tuple[float, float]]:
         """The ghost's joints and base displacement while the robot moves to a target."""
         st, motion = robot.state, robot.motion

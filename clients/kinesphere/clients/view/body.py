@@ -68,7 +68,7 @@ def _quat_of(matrix: Array) -> Array:
     return out / np.linalg.norm(out)  # type: ignore[no-any-return]
 
 
-class Body:
+class BodyGeometry:
     """A platform's drawable body: shapes per link, and joint transforms for any ``q``."""
 
     def __init__(self, model: BodyModel) -> None:

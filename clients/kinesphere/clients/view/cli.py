@@ -39,12 +39,12 @@ def register(sub: Any) -> None:
 
 
 def view(args: argparse.Namespace) -> int:
-    from kinesphere.clients.view.app import View
+    from kinesphere.clients.view.app import FleetView
     from kinesphere.zconfig import session_from_args
 
     stop = threading.Event()
     with handle_signals(lambda signum, frame: stop.set()), session_from_args(args) as session:
-        app = View(session, Keys(args.prefix), args.host, args.port, args.fps)
+        app = FleetView(session, Keys(args.prefix), args.host, args.port, args.fps)
         try:
             print(f"kinesphere view on http://{args.host}:{app.port}/", file=sys.stderr,
                   flush=True)

@@ -15,7 +15,7 @@ from typing import Any, Final
 import numpy as np
 import viser
 
-from kinesphere.clients.view.body import Array, Body
+from kinesphere.clients.view.body import Array, BodyGeometry
 
 SPACING_M: Final = 2.0
 """Distance between two robots' slots along the row."""
@@ -32,7 +32,9 @@ def yaw_wxyz(yaw: float) -> tuple[float, float, float, float]:
 class Skeleton:
     """A body's joint frames and meshes under ``root`` (solid, or a translucent ghost)."""
 
-    def __init__(self, server: viser.ViserServer, body: Body, root: str, ghost: bool) -> None:
+    def __init__(
+        self, server: viser.ViserServer, body: BodyGeometry, root: str, ghost: bool
+    ) -> None:
         self.body = body
         scene = server.scene
         self.root = scene.add_frame(root, show_axes=False, position=(0.0, 0.0, body.lift))
@@ -79,7 +81,9 @@ class Skeleton:
 class Drawing:
     """A robot's slot in the scene: body, ghost and label."""
 
-    def __init__(self, server: viser.ViserServer, robot_id: str, body: Body, slot: int) -> None:
+    def __init__(
+        self, server: viser.ViserServer, robot_id: str, body: BodyGeometry, slot: int
+    ) -> None:
         self.robot_id = robot_id
         self.body = body
         self.slot = slot

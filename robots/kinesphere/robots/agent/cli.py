@@ -218,7 +218,7 @@ def _fleet_file(args: argparse.Namespace) -> int:
 
 
 def _run_fleet(args: argparse.Namespace, robots: Sequence[Any], body: str) -> int:
-    from kinesphere.robots.agent.fleet import Fleet
+    from kinesphere.robots.agent.fleet import FleetHost
     from kinesphere.zconfig import close_session, session_from_args
 
     options = AgentOptions(rate=args.rate, state_rate=args.state_rate, speed=args.speed,
@@ -227,9 +227,9 @@ def _run_fleet(args: argparse.Namespace, robots: Sequence[Any], body: str) -> in
                            strict_period=args.strict_period)
     with _until_signal() as stop:
         session = session_from_args(args)
-        fleet: Fleet | None = None
+        fleet: FleetHost | None = None
         try:
-            fleet = Fleet(robots, session, options, helpers=args.physics_threads)
+            fleet = FleetHost(robots, session, options, helpers=args.physics_threads)
             fleet.declare()
             fleet.run(stop)
         finally:

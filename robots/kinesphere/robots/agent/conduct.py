@@ -29,7 +29,7 @@ from kinesphere.robots.agent.inbox import Resolved
 from kinesphere.robots.agent.lease import Lease, holder_name
 from kinesphere.robots.agent.ordering import Ordering, Received
 from kinesphere.robots.agent.pacing import WARN_EVERY_S
-from kinesphere.robots.agent.resolver import Answer, PartsKey, Resolver, parts_key
+from kinesphere.robots.agent.resolver import PartsKey, PoseAnswer, Resolver, parts_key
 from kinesphere.robots.agent.safety import Safety, Verdict
 from kinesphere.robots.agent.status import reported_status
 from kinesphere.robots.agent.trajectory import Aim, Clamp
@@ -49,7 +49,7 @@ class Conduct:
 
     def __init__(
         self, robot_id: str, controller: Controller, resolver: Resolver,
-        on_resolved: Callable[[int, Answer], None], max_translation_m: float,
+        on_resolved: Callable[[int, PoseAnswer], None], max_translation_m: float,
     ) -> None:
         self.robot_id = robot_id
         self.controller = controller

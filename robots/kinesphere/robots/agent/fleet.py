@@ -105,7 +105,7 @@ def check_fleet(robots: Sequence[RobotSpec]) -> None:
         seen.add(r.robot_id)
 
 
-class Fleet:
+class FleetHost:
     """Robots stepped together by one loop (module text); ``options`` apply to every robot
     (each robot's groups come from its :class:`RobotSpec`). ``helpers``: physics threads
     beside the loop's own (None: one per further core)."""
@@ -142,7 +142,7 @@ class Fleet:
         log.info("fleet host up: %d robots, %d physics threads", len(self.agents),
                  self.stepper.threads)
 
-    def start(self) -> Fleet:
+    def start(self) -> FleetHost:
         """Declare and run the loop in a thread; :meth:`close` ends both."""
         self.declare()
         self._thread = threading.Thread(target=self.run, name="fleet", daemon=True)
@@ -213,7 +213,7 @@ class Fleet:
             except Exception:
                 log.exception("fleet host: closing robot %s failed", agent.robot_id)
 
-    def __enter__(self) -> Fleet:
+    def __enter__(self) -> FleetHost:
         return self.start()
 
     def __exit__(self, *exc: object) -> None:

@@ -2,7 +2,7 @@
 
 A new target starts at once along the straight joint-space way (so command latency stays at the
 floor) while a worker thread checks that way against the robot's collision geometry; its
-verdict comes a few milliseconds later, long before the limb is anywhere near the touch it
+finding comes a few milliseconds later, long before the limb is anywhere near the touch it
 predicts. A clear way goes on. A touching one is braked and replaced by the planner's
 waypoints, each leg followed from rest with phase-synchronised Ruckig, so the joints travel
 the straight lines that were checked, still jerk-limited. No route at all brakes, and the
@@ -57,7 +57,7 @@ class Blocked:
     touch: Touch
 
 
-Verdict = Touch | list[np.ndarray] | Blocked
+Finding = Touch | list[np.ndarray] | Blocked
 """On one move: the straight way touches (brake now), then the route (waypoints ending at the
 goal; ``[goal]`` for a clear straight way) or Blocked."""
 
@@ -80,7 +80,7 @@ class Guard:
         """The target of the move under way (every joint), until a halt or stop cancels it."""
         self._generation = 0
         self._asked: tuple[int, np.ndarray, np.ndarray] | None = None
-        self._verdicts: list[tuple[int, Verdict]] = []
+        self._findings: list[tuple[int, Finding]] = []
         self._clear: tuple[np.ndarray, np.ndarray] | None = None
         """The last straight way found clear (worker thread only)."""
         self._start_contacts: frozenset[tuple[str, str]] = frozenset()
@@ -95,10 +95,10 @@ class Guard:
 
     @property
     def pending(self) -> bool:
-        """A move's way is still being checked (or its verdict not yet applied)."""
+        """A move's way is still being checked (or its finding not yet applied)."""
         with self._wake:
             return (self._ask is not None or self._asked is not None or self._busy
-                    or any(g == self._generation for g, _ in self._verdicts))
+                    or any(g == self._generation for g, _ in self._findings))
 
     def settle(self, timeout: float) -> bool:
         """Wait until the way to the newest target is checked (and a route planned when it
@@ -126,13 +126,13 @@ class Guard:
         self._start_contacts = (_pairs(self.body.contacts()) if self.body.touching()
                                 else frozenset())
         # Only this thread writes the generation; the worker reads it under the lock and a
-        # verdict on an older one is dropped either way (_post, _take).
+        # finding on an older one is dropped either way (_post, _take).
         self._generation += 1
         self._ask = (self._generation, start, self._goal)  # handed over after the step
         return clamps
 
     def cancel(self) -> None:
-        """Forget the move under way (a halt, a stop): no verdict or waypoint applies any more,
+        """Forget the move under way (a halt, a stop): no finding or waypoint applies any more,
         and its target, sent again, starts a new move."""
         self._ask = None
         with self._wake:
@@ -142,20 +142,20 @@ class Guard:
         self._goal = None
 
     def before_step(self, joints: JointTrajectory) -> None:
-        """Apply a verdict that arrived; start the next leg once the last one is at rest."""
-        verdict = self._take()
-        if isinstance(verdict, Touch):  # the straight way touches: brake at once
+        """Apply a finding that arrived; start the next leg once the last one is at rest."""
+        finding = self._take()
+        if isinstance(finding, Touch):  # the straight way touches: brake at once
             if not self._braked:
                 joints.stop()
                 self._braked = True
-        elif verdict is not None:  # the route: clear, or waypoints, or none at all
-            if isinstance(verdict, Blocked):
-                self.fault = (f"blocked: no collision-free way to the target ({verdict.touch}); "
+        elif finding is not None:  # the route: clear, or waypoints, or none at all
+            if isinstance(finding, Blocked):
+                self.fault = (f"blocked: no collision-free way to the target ({finding.touch}); "
                               "braked")
                 log.warning("%s", self.fault)
-            elif len(verdict) > 1 or self._braked:
-                self.legs = list(verdict)
-                log.info("way blocked; going via %d waypoint(s)", len(verdict) - 1)
+            elif len(finding) > 1 or self._braked:
+                self.legs = list(finding)
+                log.info("way blocked; going via %d waypoint(s)", len(finding) - 1)
         if self.legs and not joints.moving:
             joints.go_to(self.legs.pop(0))
 
@@ -169,7 +169,7 @@ class Guard:
         new = _pairs(self.body.contacts()) - self._start_contacts
         if new:
             a, b = sorted(new)[0]
-            with self._wake:  # no verdict on this move applies any more; its target stays
+            with self._wake:  # no finding on this move applies any more; its target stays
                 self._generation += 1
                 self._asked = None
             self.legs = []
@@ -192,14 +192,14 @@ class Guard:
             self._wake.notify_all()
         self._thread.join(timeout=5.0)
 
-    def _take(self) -> Verdict | None:
-        """The oldest verdict on the current move, if one has arrived."""
-        if not self._verdicts:  # every step asks: the usual answer without the lock
+    def _take(self) -> Finding | None:
+        """The oldest finding on the current move, if one has arrived."""
+        if not self._findings:  # every step asks: the usual answer without the lock
             return None
         with self._wake:
-            while self._verdicts and self._verdicts[0][0] != self._generation:
-                self._verdicts.pop(0)
-            return self._verdicts.pop(0)[1] if self._verdicts else None
+            while self._findings and self._findings[0][0] != self._generation:
+                self._findings.pop(0)
+            return self._findings.pop(0)[1] if self._findings else None
 
     # --- worker thread -----------------------------------------------------------------------
     def _work(self) -> None:
@@ -245,10 +245,10 @@ class Guard:
         route = self.clearance.route(start, goal)
         self._post(generation, Blocked(route) if isinstance(route, Touch) else route)
 
-    def _post(self, generation: int, verdict: Verdict) -> None:
+    def _post(self, generation: int, finding: Finding) -> None:
         with self._wake:
             if generation == self._generation:
-                self._verdicts.append((generation, verdict))
+                self._findings.append((generation, finding))
 
 
 def make_guard(body: Body, platform: str) -> Guard:

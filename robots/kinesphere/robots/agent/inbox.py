@@ -28,7 +28,7 @@ from kinesphere.errors import KinesphereError
 from kinesphere.protocol import Command, LeaseAction
 from kinesphere.robots.agent.ordering import Received
 from kinesphere.robots.agent.pacing import Wake
-from kinesphere.robots.agent.resolver import Answer
+from kinesphere.robots.agent.resolver import PoseAnswer
 
 MAX_ESTOPS = 64
 """E-stops kept per step (one is enough to latch; the rest only wait for their acks)."""
@@ -58,7 +58,7 @@ class Resolved:
     """The databank's answer for a ticket."""
 
     ticket: int
-    answer: Answer
+    answer: PoseAnswer
 
 
 class Drained(NamedTuple):
@@ -131,7 +131,7 @@ class Inbox:
             self._bad = (self._arrivals, error)
         self.wake.set()
 
-    def put_resolved(self, ticket: int, answer: Answer) -> None:
+    def put_resolved(self, ticket: int, answer: PoseAnswer) -> None:
         with self._lock:
             self._arrivals += 1
             self._other.append((self._arrivals, Resolved(ticket, answer)))

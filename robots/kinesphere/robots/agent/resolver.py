@@ -51,8 +51,8 @@ log = logging.getLogger(__name__)
 T = TypeVar("T")
 
 PartsKey = tuple[tuple[str, str, str, float, bool], ...]
-Answer = Pose | KinesphereError
-Callback = Callable[[int, Answer], None]
+PoseAnswer = Pose | KinesphereError
+Callback = Callable[[int, PoseAnswer], None]
 CACHE_BYTES = 4 * 1024 * 1024
 """Budget of the pose cache (a pose of a 26-joint NAO is ~1 KB encoded: thousands fit)."""
 ENTRY_BYTES = 128
@@ -262,12 +262,12 @@ class Resolver:
         self._reached()
         return True
 
-    def resolve(self, key: PartsKey) -> Answer:
+    def resolve(self, key: PartsKey) -> PoseAnswer:
         """Blocking resolution of ``key`` (cache first); errors are returned, not raised."""
         hit = self.cached(key)
         return hit if hit is not None else self._resolve(key)
 
-    def _resolve(self, key: PartsKey) -> Answer:
+    def _resolve(self, key: PartsKey) -> PoseAnswer:
         if self.version is None:
             self.refresh()  # learn the version first, so the answer is cached under it
         version = self.version

@@ -25,8 +25,8 @@ from kinesphere.protocol import Pose, RecordRequest, decode, encode
 from kinesphere.ratelog import RateLog
 from kinesphere.services.databank.replies import (
     DEFERRED,
-    Answer,
     Deferred,
+    EncodedReply,
     error,
     ok,
     request_bytes,
@@ -58,7 +58,7 @@ def _forbidden(st: Served) -> KinesphereError:
     )
 
 
-class Recorder:
+class PoseRecorder:
     """A databank's writes: record queries and puts, and following other replicas' records.
 
     All SQL runs on one worker thread with a bounded queue, off Zenoh's threads. ``swap``
@@ -89,7 +89,7 @@ class Recorder:
         self._worker.stop()
 
     # -- record queries and puts ---------------------------------------------------------------
-    def on_query(self, st: Served, query: zenoh.Query) -> Answer | Deferred:
+    def on_query(self, st: Served, query: zenoh.Query) -> EncodedReply | Deferred:
         """A record query: refused at once when writes are off, else queued for the worker,
         which answers and drops it (:data:`DEFERRED` tells the caller to keep it)."""
         if not self.writes_enabled:
@@ -101,7 +101,7 @@ class Recorder:
     def _answer(self, st: Served, query: zenoh.Query) -> None:
         with query:
             try:
-                answer: Answer = ok(self.record(st, request_bytes(query, "RecordRequest")))
+                answer: EncodedReply = ok(self.record(st, request_bytes(query, "RecordRequest")))
             except KinesphereError as exc:
                 if exc.code == "malformed":
                     self._refused((st.name, "record"), "%s record refused: %s", st.name, exc)

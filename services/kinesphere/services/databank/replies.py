@@ -43,7 +43,7 @@ class CacheBudget:
 DEFAULT_BUDGET: Final = CacheBudget()
 
 
-class Answer(NamedTuple):
+class EncodedReply(NamedTuple):
     """An encoded reply: ``ok`` goes out with ``query.reply``, otherwise ``reply_err``."""
 
     ok: bool
@@ -57,19 +57,19 @@ class Deferred:
 DEFERRED: Final = Deferred()
 
 
-def ok(msg: msgspec.Struct) -> Answer:
-    return Answer(True, zenoh.ZBytes(encode(msg)))
+def ok(msg: msgspec.Struct) -> EncodedReply:
+    return EncodedReply(True, zenoh.ZBytes(encode(msg)))
 
 
-def err(exc: KinesphereError) -> Answer:
-    return Answer(False, zenoh.ZBytes(encode(Error.from_exception(exc))))
+def err(exc: KinesphereError) -> EncodedReply:
+    return EncodedReply(False, zenoh.ZBytes(encode(Error.from_exception(exc))))
 
 
-def error(code: str, message: str) -> Answer:
+def error(code: str, message: str) -> EncodedReply:
     return err(KinesphereError(code, message))
 
 
-def send(query: zenoh.Query, key: zenoh.KeyExpr | str, answer: Answer) -> None:
+def send(query: zenoh.Query, key: zenoh.KeyExpr | str, answer: EncodedReply) -> None:
     """Reply ``answer`` to ``query`` on ``key`` (errors carry no key)."""
     if answer.ok:
         query.reply(key, answer.payload)
@@ -90,13 +90,13 @@ def request_bytes(query: zenoh.Query, what: str) -> bytes:
 
 
 ENTRY_BYTES: Final = 384
-"""Bytes counted per cached answer on top of its key and payload: the key and Answer objects,
+"""Bytes counted per cached answer on top of its key and payload: the key and EncodedReply objects,
 the ZBytes and its buffer header, the dict slot (with the table's spare room) and the LRU link.
 Measured with real pose answers: ~320 bytes, so a full 32 MiB answer cache costs the process
 ~30 MiB of RSS (tests/test_databank_cache.py); 256 undercounted it (35 MiB)."""
 
 
-def entry_bytes(key: Hashable, answer: Answer) -> int:
+def entry_bytes(key: Hashable, answer: EncodedReply) -> int:
     """What one cache entry is charged: its key's and payload's lengths plus ENTRY_BYTES."""
     parts = key if isinstance(key, tuple) else (key,)
     return ENTRY_BYTES + len(answer.payload) + sum(
@@ -116,7 +116,7 @@ class ReplyCache:
     """
 
     def __init__(self, max_bytes: int) -> None:
-        self._answers: OrderedDict[Hashable, Answer] = OrderedDict()
+        self._answers: OrderedDict[Hashable, EncodedReply] = OrderedDict()
         self.max_bytes = max_bytes
         self.bytes = 0
         """Bytes charged (:func:`entry_bytes`) by the answers held now."""
@@ -126,7 +126,7 @@ class ReplyCache:
     def __len__(self) -> int:
         return len(self._answers)
 
-    def get(self, key: Hashable) -> Answer | None:
+    def get(self, key: Hashable) -> EncodedReply | None:
         answer = self._answers.get(key)
         if answer is not None:
             try:
@@ -135,7 +135,7 @@ class ReplyCache:
                 pass
         return answer
 
-    def put(self, key: Hashable, answer: Answer, generation: int) -> Answer:
+    def put(self, key: Hashable, answer: EncodedReply, generation: int) -> EncodedReply:
         cost = entry_bytes(key, answer)
         if cost > self.max_bytes // 4:
             return answer

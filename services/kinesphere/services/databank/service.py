@@ -17,7 +17,7 @@ routes a query to one complete queryable that covers its key, so a querier gets 
 with its link and the next query goes to another. Replicas must agree on the known set.
 
 Hot path: one dict hit on the key text, then ``query.reply`` with a pre-encoded payload.
-Records (SQL) run on the :class:`~kinesphere.services.databank.records.Recorder`'s worker
+Records (SQL) run on the :class:`~kinesphere.services.databank.records.PoseRecorder`'s worker
 thread. A pose key with the selector parameter ``exact=true`` asks for that direction only: no
 substitution by the nearest one.
 """
@@ -37,13 +37,13 @@ from kinesphere.platforms.platform import platform_names
 from kinesphere.protocol import CompoundRequest, check_spatial, decode
 from kinesphere.ratelog import RateLog
 from kinesphere.services.databank.body import body_model
-from kinesphere.services.databank.records import Recorder, Served
+from kinesphere.services.databank.records import PoseRecorder, Served
 from kinesphere.services.databank.replies import (
     DEFAULT_BUDGET,
     DEFERRED,
-    Answer,
     CacheBudget,
     Deferred,
+    EncodedReply,
     ReplyCache,
     error,
     ok,
@@ -56,7 +56,7 @@ from kinesphere.sizes import parse_size
 log = logging.getLogger(__name__)
 
 
-Routed = Answer | Deferred | None  # None: answered already (wildcards) or silent
+Routed = EncodedReply | Deferred | None  # None: answered already (wildcards) or silent
 EXACT_SUFFIX = EXACT  # the cache key of an exact-only query: the selector itself
 
 
@@ -118,7 +118,7 @@ class DatabankService:
         """One warning line per malformed-request kind and platform every 10 s."""
         self._head = f"{keys.prefix}/ecl/"
         self._entities: list[Any] = []
-        self.recorder = Recorder(session, self.replica_id, writes_enabled, self.swap,
+        self.recorder = PoseRecorder(session, self.replica_id, writes_enabled, self.swap,
                                  self.refused)
         self._started = False
         self._lock = threading.Lock()
@@ -204,7 +204,7 @@ class DatabankService:
                 answer = get(key) or get_error(key)
                 if answer is None:
                     routed = route(scope, query, key)
-                    if not isinstance(routed, Answer):
+                    if not isinstance(routed, EncodedReply):
                         keep = routed is DEFERRED
                         return
                     answer = routed
@@ -257,7 +257,7 @@ class DatabankService:
             return self.answers.put(key, answer, generation)
         return self.errors.put(key, answer, failed)
 
-    def _compound(self, st: Served, query: zenoh.Query, key: str) -> Answer:
+    def _compound(self, st: Served, query: zenoh.Query, key: str) -> EncodedReply:
         generation = self.compounds.generation
         try:
             raw = request_bytes(query, "CompoundRequest")
@@ -281,14 +281,14 @@ class DatabankService:
             if asked.intersects(st.catalogue_key):
                 send(query, st.catalogue_key, ok(st.ecl.catalogue()))
 
-    def _bad_key(self, key: str, platform: str) -> Answer:
+    def _bad_key(self, key: str, platform: str) -> EncodedReply:
         return error(
             "malformed",
             f"{key:.200} is not a databank key; under {self._head}{platform:.64}/ query "
             "pose/<limb>/<origin>/<direction>/<size>, compound, catalogue, body or record",
         )
 
-    def _unknown(self, platform: str) -> Answer:
+    def _unknown(self, platform: str) -> EncodedReply:
         try:
             check_segment(platform, "platform")
         except KinesphereError as exc:  # too long, say: the name is not echoed whole
@@ -309,7 +309,7 @@ class DatabankService:
         finally:
             query.drop()  # type: ignore[no-untyped-call]
 
-    def other_answer(self, key: str) -> Answer | None:
+    def other_answer(self, key: str) -> EncodedReply | None:
         """``unknown_platform`` for a concrete platform outside the known set, else None."""
         if "*" in key or "$" in key:
             return None

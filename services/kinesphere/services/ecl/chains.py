@@ -53,7 +53,7 @@ ROUND_DIGITS = 6
 
 
 @dataclass(frozen=True)
-class Pose:
+class LimbPose:
     """A limb pose and where it puts the tip: offset from the origin (body frame), its
     projection on d and its cosine with d."""
 
@@ -68,19 +68,19 @@ class Beyond:
     """A smaller size reached past far: far was a local optimum and this pose shows better."""
 
     reason: str
-    pose: Pose
+    pose: LimbPose
 
 
 def rounded(x: float) -> float:
     return round(float(x), ROUND_DIGITS) + 0.0  # + 0.0 turns -0.0 into 0.0
 
 
-def measure(solver: LimbSolver, values: np.ndarray, d: np.ndarray) -> Pose:
+def measure(solver: LimbSolver, values: np.ndarray, d: np.ndarray) -> LimbPose:
     """Round and clip limb values and see where they put the tip."""
     values = np.array([rounded(v) for v in np.clip(values, solver.lower, solver.upper)])
     offset = solver.reach(solver.full_q(values)).offset
     proj = float(offset @ d)
-    return Pose(values, offset, proj, cosine(offset, d))
+    return LimbPose(values, offset, proj, cosine(offset, d))
 
 
 def joint_detour(chain: list[np.ndarray]) -> float:
@@ -114,7 +114,7 @@ class Sizes:
         names = solver.pm.platform.joint_names
         self._in_p = np.array([names.index(j) for j in solver.joints], dtype=int)
 
-    def candidates(self, far: Pose, d: np.ndarray) -> Iterator[list[Pose] | str | Beyond]:
+    def candidates(self, far: LimbPose, d: np.ndarray) -> Iterator[list[LimbPose] | str | Beyond]:
         """The IK chain, then segment chains whose near starts where the tip first points at
         d with each of NEAR_COSINES: each a list of poses near..far, or why not, computed
         only when asked for."""
@@ -125,7 +125,7 @@ class Sizes:
         for start in NEAR_COSINES:
             yield self._segment_chain(far, d, start, grid)
 
-    def check(self, chain: list[Pose], d: np.ndarray) -> str | None:
+    def check(self, chain: list[LimbPose], d: np.ndarray) -> str | None:
         """Why a chain (near..far) is not honest, or None; see the module."""
         s = self.solver
         neutral = measure(s, self.neutral_values, d)
@@ -154,7 +154,7 @@ class Sizes:
                     f"(> {STEP_SLACK})")
         return None
 
-    def reachable(self, chain: list[Pose]) -> str | None:
+    def reachable(self, chain: list[LimbPose]) -> str | None:
         """Why a size cannot be reached from neutral without touching anything, or None: the
         agent's own planner (:mod:`kinesphere.platforms.clearance`, waypoints allowed) must find
         a clear way to every stored pose, so no stored pose is blocked from neutral."""
@@ -167,7 +167,7 @@ class Sizes:
                 return f"size {size}: no collision-free way from neutral ({route})"
         return None
 
-    def path(self, chain: list[Pose]) -> str | None:
+    def path(self, chain: list[LimbPose]) -> str | None:
         """What f_SB's straight interpolation neutral -> near -> ... -> far touches, or None."""
         values = [self.neutral_values, *(p.values for p in chain)]
         for i, size in enumerate(self.sizes):
@@ -178,7 +178,7 @@ class Sizes:
         return None
 
     # -- the IK chain -----------------------------------------------------------------------
-    def _ik_chain(self, far: Pose, d: np.ndarray) -> list[Pose] | str | Beyond:
+    def _ik_chain(self, far: LimbPose, d: np.ndarray) -> list[LimbPose] | str | Beyond:
         s, n = self.solver, len(self.sizes)
         world = s.body_rot @ d
         neutral = measure(s, self.neutral_values, d)
@@ -188,7 +188,7 @@ class Sizes:
         ray = probe.cosine >= COS_FAR and lo <= (1.0 - SHORTEN) * far.proj
         arc_start = _honest_start(neutral.offset, far.offset, d)
         p0 = max(float(arc_start @ d), neutral.proj)
-        found: list[Pose] = []
+        found: list[LimbPose] = []
         for i in range(1, n):
             toward = self.neutral_values + (far.values - self.neutral_values) * i / n
             below = found[-1] if found else neutral
@@ -206,8 +206,8 @@ class Sizes:
             found.append(pose)
         return [*found, far]
 
-    def _first(self, below: Pose, far: Pose, targets: list[np.ndarray], toward: np.ndarray,
-               d: np.ndarray) -> Pose | str | Beyond:
+    def _first(self, below: LimbPose, far: LimbPose, targets: list[np.ndarray], toward: np.ndarray,
+               d: np.ndarray) -> LimbPose | str | Beyond:
         """The first target whose solve lands ahead of ``below`` and short of far, cleanly."""
         s = self.solver
         why: str | Beyond = "no target"
@@ -226,7 +226,7 @@ class Sizes:
                 return pose
         return why
 
-    def nudged(self, chain: list[Pose], d: np.ndarray) -> list[Pose] | None:
+    def nudged(self, chain: list[LimbPose], d: np.ndarray) -> list[LimbPose] | None:
         """The smaller sizes of a chain pulled toward d's ray (or the arc to far) at their
         projections, each held near its own posture: the same smoothness, better pointing.
         None when no size points better that way (or a nudged pose touches something)."""
@@ -234,7 +234,7 @@ class Sizes:
         world = s.body_rot @ d
         neutral = measure(s, self.neutral_values, d)
         arc_start = _honest_start(neutral.offset, far.offset, d)
-        out: list[Pose] = []
+        out: list[LimbPose] = []
         for pose in chain[:-1]:
             target = _ray(s, pose.proj, world) if pose.proj > 0 else (
                 s.origin + s.body_rot @ arc_at(arc_start, far.offset, d, pose.proj))
@@ -246,20 +246,20 @@ class Sizes:
         return [*out, far] if any(a is not b for a, b in zip(out, chain, strict=False)) else None
 
     # -- the segment chain ------------------------------------------------------------------
-    def _segment_chain(self, far: Pose, d: np.ndarray, start: float, grid: list[Pose]
-                       ) -> list[Pose] | str:
+    def _segment_chain(self, far: LimbPose, d: np.ndarray, start: float, grid: list[LimbPose]
+                       ) -> list[LimbPose] | str:
         s, n = self.solver, len(self.sizes)
         a, b = self.neutral_values, far.values
         neutral = measure(s, a, d)
 
-        def at(t: float) -> Pose:
+        def at(t: float) -> LimbPose:
             return measure(s, a + t * (b - a), d)
 
         # near: a step of the even spacing from neutral, or where the tip first points
         # toward d with cosine ``start`` if that comes later (``grid``: the segment sampled)
         pointing = next((p.proj for p in grid if p.cosine >= start), far.proj)
         near = max(neutral.proj + (far.proj - neutral.proj) / n, pointing)
-        chain: list[Pose] = []
+        chain: list[LimbPose] = []
         for i in range(n - 1):
             goal = near + (far.proj - near) * i / (n - 1)
             t = _first_reaching(lambda x: at(x).proj, goal, [p.proj for p in grid])

@@ -21,8 +21,8 @@ from kinesphere.laban import Direction
 from kinesphere.platforms.platform import Platform, load_platform
 from kinesphere.protocol import (
     NO_ID,
+    BodyJoint,
     Catalogue,
-    JointLimit,
     LimbEntry,
     Pose,
     Substitution,
@@ -291,7 +291,7 @@ class Ecl:
             platform=self.platform.name,
             core=list(e.C),
             limbs=limbs,
-            joints=[JointLimit(j.name, j.lower, j.upper, j.velocity) for j in e.P],
+            joints=[BodyJoint(j.name, j.lower, j.upper, j.velocity) for j in e.P],
             translation_step=step,
             can_translate=bool(core_dirs) and step is not None,
             directions_for_core=core_dirs,

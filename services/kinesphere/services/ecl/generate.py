@@ -48,7 +48,7 @@ from kinesphere.services.ecl.chains import (
     COS_SIZE,
     ROUND_DIGITS,
     Beyond,
-    Pose,
+    LimbPose,
     Sizes,
     measure,
     rounded,
@@ -141,7 +141,7 @@ def generate_entry(
     solver = LimbSolver(pm, entry.limb, entry.origin)
     sizes = Sizes(solver, Balance(pm), vsam.sizes)
     report = EntryReport(entry.limb, entry.origin)
-    cells: dict[Direction, list[Pose]] = {}
+    cells: dict[Direction, list[LimbPose]] = {}
     todo = pulls(entry)
     for i, d in enumerate(todo, start=1):
         result = _direction(solver, sizes, d)
@@ -173,7 +173,7 @@ def pulls(entry: VsamEntry) -> list[Direction]:
 
 
 def _rows(
-    solver: LimbSolver, entry: VsamEntry, vsam: Vsam, cells: dict[Direction, list[Pose]]
+    solver: LimbSolver, entry: VsamEntry, vsam: Vsam, cells: dict[Direction, list[LimbPose]]
 ) -> list[PoseRow]:
     best = max((p.proj for poses in cells.values() for p in poses), default=1.0)
     out = []
@@ -195,7 +195,7 @@ def _rows(
 
 
 def _direction(solver: LimbSolver, sizes: Sizes, direction: Direction
-               ) -> tuple[list[Pose], str | None] | _Drop:
+               ) -> tuple[list[LimbPose], str | None] | _Drop:
     """All sizes of one pull, smallest first, with what its interpolation path touches (None
     when clear); or why it is dropped."""
     d = np.array(direction.vector)
@@ -236,12 +236,12 @@ def _direction(solver: LimbSolver, sizes: Sizes, direction: Direction
     return _Drop(why)
 
 
-def _chain(solver: LimbSolver, sizes: Sizes, far: Pose, d: np.ndarray
-           ) -> tuple[list[Pose], str | None] | _Drop | Beyond:
+def _chain(solver: LimbSolver, sizes: Sizes, far: LimbPose, d: np.ndarray
+           ) -> tuple[list[LimbPose], str | None] | _Drop | Beyond:
     """The honest chain up to ``far`` that points best (highest mean cosine), among those
     whose path is clear if any (else with what its path touches); a Beyond when the IK chain
     overshot far and nothing else was honest; else why not."""
-    honest: list[list[Pose]] = []
+    honest: list[list[LimbPose]] = []
     whys: list[str] = []
     beyond: Beyond | None = None
     for chain in sizes.candidates(far, d):
@@ -253,7 +253,7 @@ def _chain(solver: LimbSolver, sizes: Sizes, far: Pose, d: np.ndarray
             whys.append(str(why))
             continue
         honest.append(chain)
-    touching: list[tuple[list[Pose], str]] = []
+    touching: list[tuple[list[LimbPose], str]] = []
     for chain in sorted(honest, key=_pointing, reverse=True):  # stable: ties keep their order
         blocked = sizes.reachable(chain)
         if blocked is not None:
@@ -271,8 +271,8 @@ def _chain(solver: LimbSolver, sizes: Sizes, far: Pose, d: np.ndarray
     return _Drop(unstable[0], unstable=True) if unstable else _Drop(whys[0])
 
 
-def _nudge(sizes: Sizes, chain: list[Pose], touched: str | None, d: np.ndarray
-           ) -> tuple[list[Pose], str | None]:
+def _nudge(sizes: Sizes, chain: list[LimbPose], touched: str | None, d: np.ndarray
+           ) -> tuple[list[LimbPose], str | None]:
     """The chosen chain, nudged toward d when that keeps it honest and no worse on its way."""
     better = sizes.nudged(chain, d)
     if better is None or _pointing(better) <= _pointing(chain) or sizes.check(better, d):
@@ -281,12 +281,12 @@ def _nudge(sizes: Sizes, chain: list[Pose], touched: str | None, d: np.ndarray
     return (better, way) if way is None or touched is not None else (chain, touched)
 
 
-def _pointing(chain: list[Pose]) -> float:
+def _pointing(chain: list[LimbPose]) -> float:
     """Mean cosine of a chain's sizes (the first candidate wins ties: max keeps it)."""
     return sum(p.cosine for p in chain) / len(chain)
 
 
-def _far(solver: LimbSolver, start: np.ndarray, d: np.ndarray, world: np.ndarray) -> Pose:
+def _far(solver: LimbSolver, start: np.ndarray, d: np.ndarray, world: np.ndarray) -> LimbPose:
     """The farthest reach toward d from ``start``: pulled toward a point far out on the ray."""
     target = _ray(solver, FAR_TARGET * solver.span, world)
     return measure(solver, solver.solve(start, target, FAR_ITERATIONS), d)

@@ -52,14 +52,14 @@ FADED = (120, 124, 130)
 
 
 @dataclass(frozen=True)
-class View:
+class CameraView:
     """A fixed free camera for one platform."""
 
     lookat: tuple[float, float, float]
     distance: float
 
 
-def frame(pm: PlatformModel, configurations: Sequence[np.ndarray]) -> View:
+def frame(pm: PlatformModel, configurations: Sequence[np.ndarray]) -> CameraView:
     """A camera that fits the robot in every given configuration (the neutral one too), so
     all frames of one picture share a view and compare directly."""
     model = pm.model
@@ -87,7 +87,7 @@ def frame(pm: PlatformModel, configurations: Sequence[np.ndarray]) -> View:
         max(abs(float(p @ right)), abs(float(p @ up))) / fit - float(p @ forward)
         for p in (half * np.array([x, y, z]) for x in (-1, 1) for y in (-1, 1) for z in (-1, 1))
     )
-    return View((float(centre[0]), float(centre[1]), float(centre[2])), distance)
+    return CameraView((float(centre[0]), float(centre[1]), float(centre[2])), distance)
 
 
 def pose_qpos(pm: PlatformModel, pose: Pose | None) -> np.ndarray:
@@ -122,7 +122,7 @@ def _headless_gl() -> None:
 class Camera:
     """An off-screen renderer for one platform, reused for every frame of a picture."""
 
-    def __init__(self, pm: PlatformModel, width: int, height: int, view: View) -> None:
+    def __init__(self, pm: PlatformModel, width: int, height: int, view: CameraView) -> None:
         _headless_gl()
         self.pm = pm
         self.model = copy.deepcopy(pm.model)  # private: the cached model stays untouched

@@ -2,7 +2,7 @@
 
 A ROS user's joystick setup (``ros2 run joy game_controller_node``) publishes Joy messages over
 rmw_zenoh; :class:`JoyInput` subscribes to them and replays each one into the gamepad's
-:class:`~kinesphere.clients.gamepad.inputs.input.PygameInput` as the SDL events a locally
+:class:`~kinesphere.clients.gamepad.inputs.pad.PygameInput` as the SDL events a locally
 plugged pad would have produced, so the mapping file, the deadman, presses and hot-plug rules
 are exactly those of a real pad. game_controller_node reports axes in SDL's GameController order
 with ROS signs (stick up and left positive, a pulled trigger -1), so each value goes in negated:
@@ -30,7 +30,7 @@ import pygame
 import zenoh
 
 from kinesphere import ros2msgs as rm
-from kinesphere.clients.gamepad.inputs.input import PygameInput
+from kinesphere.clients.gamepad.inputs.pad import PygameInput
 from kinesphere.clients.gamepad.state import ControllerState
 from kinesphere.clients.options import JOY_LAYOUTS, JoyOptions
 from kinesphere.errors import KinesphereError

@@ -34,7 +34,7 @@ TOPIC: Final = "gamepad/state"
 SCHEMA: Final = f"{mcaplog.SCHEMA_PREFIX}{ControllerState.__name__}"
 
 
-class Recorder:
+class TickRecorder:
     """Appends ticks to an MCAP file; use as a context manager or call :meth:`close`."""
 
     def __init__(self, path: str | Path, **header: Any) -> None:
@@ -50,7 +50,7 @@ class Recorder:
     def close(self) -> None:
         self._w.close()
 
-    def __enter__(self) -> Recorder:
+    def __enter__(self) -> TickRecorder:
         return self
 
     def __exit__(self, *_: object) -> None:
@@ -59,7 +59,7 @@ class Recorder:
 
 def save(path: str | Path, ticks: list[tuple[float, ControllerState]], **header: Any) -> None:
     """Write ``(t, state)`` ticks as a recording (scenarios made by hand, tests)."""
-    with Recorder(path, **header) as rec:
+    with TickRecorder(path, **header) as rec:
         for t, cs in ticks:
             rec(t, cs)
 
@@ -98,7 +98,7 @@ def load(path: str | Path) -> tuple[dict[str, Any], list[tuple[float, Controller
     return header, ticks
 
 
-class Replay:
+class TickReplay:
     """A :class:`~kinesphere.clients.gamepad.teleop.Source` that plays a recording back in time."""
 
     def __init__(
@@ -114,7 +114,7 @@ class Replay:
         self._t0 = self.ticks[0][0] if self.ticks else 0.0  # replay starts at the first tick
 
     @classmethod
-    def from_file(cls, path: str | Path, clock: Callable[[], float] = time.monotonic) -> Replay:
+    def from_file(cls, path: str | Path, clock: Callable[[], float] = time.monotonic) -> TickReplay:
         return cls(load(path)[1], clock)
 
     @property
