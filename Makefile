@@ -27,8 +27,13 @@ install: $(STAMP)
 demo: $(STAMP)
 	$(BIN)/kinesphere up --headless
 
+# The tests that start no processes run on every core (pytest-xdist); those that do (marked
+# `processes`: the databank, agents, routers, kinesphere commands, pip) then run one at a time, as
+# today. Each run ends with its ten slowest tests.
+PYTEST := $(BIN)/python -m pytest -q --durations=10
 test: lint typecheck layers browser
-	$(BIN)/python -m pytest -q
+	$(PYTEST) -m "not processes" -n auto
+	$(PYTEST) -m processes
 
 # The view's test drives Debian's Chromium (Playwright's own browser download is not used).
 CHROMIUM_INSTALL := apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium
@@ -55,7 +60,7 @@ bench: $(STAMP)
 # The fuzz and flood tests at full size: KINESPHERE_SOAK_SCALE times what `make test` sends,
 # each printing one "SOAK ..." line (sent, named errors, RSS before/after, motion after stop).
 SOAK_SCALE ?= 20
-SOAK_TESTS := $(wildcard tests/test_*_fuzz.py tests/test_*_flood.py tests/test_system_soak.py)
+SOAK_TESTS := $(wildcard tests/*/test_*_fuzz.py tests/*/test_*_flood.py tests/system/test_system_soak.py)
 soak: $(STAMP)
 	KINESPHERE_SOAK_SCALE=$(SOAK_SCALE) $(BIN)/python -m pytest -q -s $(SOAK_TESTS)
 

@@ -13,14 +13,13 @@ from pathlib import Path
 
 import pytest
 import zenoh
-from test_client_support import KEYS, Inbox, Reply, StandIn, hub, usual
 
 from kinesphere.cli import main
 from kinesphere.clients.gamepad.inputs import ticks
 from kinesphere.clients.gamepad.state import Action, ControllerState
 from kinesphere.protocol import AckStage, Command, Substitution
-
-__all__ = ["hub"]  # fixtures
+from support.clients import Inbox, Reply, StandIn, usual
+from support.network import OWN_KEYS
 
 ROBOTS = ("c1", "c2", "c3")
 GROUPS = {"c1": ("pair",), "c2": ("pair",), "c3": ()}
@@ -52,7 +51,7 @@ def refusing(code: str, detail: str, when: Callable[[Command], bool] = lambda c:
 
 
 def cli(endpoint: str, *args: str) -> int:
-    return main([*args, "--connect", endpoint, "--prefix", KEYS.prefix])
+    return main([*args, "--connect", endpoint, "--prefix", OWN_KEYS.prefix])
 
 
 def test_help_lists_the_operator_commands(capsys: pytest.CaptureFixture[str]) -> None:
@@ -132,7 +131,7 @@ def test_send_to_a_group_with_a_drive_held(
         assert moves and let_go.seq == moves[-1].seq + 1 and not let_go.stop
         assert moves[0].drive is not None and moves[0].drive.speed == 0.4
         assert moves[0].ttl_ms == 300
-        assert {g.key for g in boxes[r].got} == {KEYS.group_command("pair")}
+        assert {g.key for g in boxes[r].got} == {OWN_KEYS.group_command("pair")}
     assert boxes["c3"].commands() == [], "robots outside the group hear nothing"
     assert capsys.readouterr().out.splitlines() == [
         "c1: holding: deadman released", "c2: holding: deadman released"]
@@ -141,7 +140,7 @@ def test_send_to_a_group_with_a_drive_held(
 def test_a_group_named_like_a_robot_is_suggested(
     hub: tuple[zenoh.Session, str], capsys: pytest.CaptureFixture[str]
 ) -> None:
-    field = Inbox(hub[0], KEYS.group_command("field"))
+    field = Inbox(hub[0], OWN_KEYS.group_command("field"))
     try:
         assert cli(hub[1], "send", "field", "a", "b", "left", "1", "--wait", "0.5") == 2
     finally:
@@ -154,7 +153,8 @@ def test_a_misspelt_robot_id_is_answered_with_the_nearest_live_one(
 ) -> None:
     assert cli(hub[1], "send", "c11", "a", "b", "left", "1", "--wait", "0.5") == 2
     err = capsys.readouterr().err
-    assert f"no robot listens on {KEYS.command('c11')} (waited 0.5 s) (did you mean 'c1'?)" in err
+    missing = OWN_KEYS.command("c11")
+    assert f"no robot listens on {missing} (waited 0.5 s) (did you mean 'c1'?)" in err
 
 
 def test_estop_reaches_every_robot_and_each_acknowledges(
@@ -162,7 +162,7 @@ def test_estop_reaches_every_robot_and_each_acknowledges(
 ) -> None:
     assert cli(hub[1], "estop") == 0
     for r in ROBOTS:
-        boxes[r].wait(lambda g: g.cmd.estop and g.key == KEYS.command("*"), f"e-stop at {r}")
+        boxes[r].wait(lambda g: g.cmd.estop and g.key == OWN_KEYS.command("*"), f"e-stop at {r}")
     out, err = capsys.readouterr()
     assert out.splitlines() == [f"{r}: estopped" for r in ROBOTS]
     assert "3 of 3 robot(s) accepted the E-STOP" in err
@@ -291,11 +291,12 @@ def test_gamepad_with_its_hud_saves_a_screenshot(
 def _kinesphere(endpoint: str, *args: str, env: dict[str, str]) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
         [sys.executable, "-m", "kinesphere.cli", *args, "--connect", endpoint,
-         "--prefix", KEYS.prefix],
+         "--prefix", OWN_KEYS.prefix],
         env=env, capture_output=True, text=True, timeout=120,
     )  # fmt: skip
 
 
+@pytest.mark.processes
 def test_without_a_display_the_hud_says_use_headless(hub: tuple[zenoh.Session, str]) -> None:
     """SDL would fall back to its offscreen driver and run a HUD nobody sees."""
     env = {k: v for k, v in os.environ.items()
@@ -305,6 +306,7 @@ def test_without_a_display_the_hud_says_use_headless(hub: tuple[zenoh.Session, s
     assert "no display: use --headless" in proc.stderr
 
 
+@pytest.mark.processes
 def test_headless_without_a_controller_says_so(hub: tuple[zenoh.Session, str]) -> None:
     proc = _kinesphere(hub[1], "gamepad", "--headless", "--duration", "0.2", env=dict(os.environ))
     assert proc.returncode == 0

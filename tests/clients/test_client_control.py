@@ -15,8 +15,6 @@ from contextlib import ExitStack
 from pathlib import Path
 
 import pytest
-from test_client_fleet_support import PB, PLATFORMS, ROOT, WAIT_S, Fleet, Heard, fleet, operator
-from test_client_support import pygame_up
 
 from kinesphere import zconfig
 from kinesphere.cli import main
@@ -27,8 +25,11 @@ from kinesphere.clients.gamepad.readout import Readout
 from kinesphere.clients.gamepad.state import Action, ControllerState
 from kinesphere.clients.gamepad.teleop import Teleop
 from kinesphere.protocol import AckStage
+from support.client_fleet import PB, PLATFORMS, Fleet, Heard, operator
+from support.paths import ROOT
+from support.wait import WAIT_S
 
-__all__ = ["fleet", "pygame_up"]  # fixtures
+pytestmark = pytest.mark.processes
 
 PERIOD = 1 / 30
 HELD = frozenset({Action.DEADMAN})

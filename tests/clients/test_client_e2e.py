@@ -19,20 +19,7 @@ from functools import partial
 from pathlib import Path
 
 import pygame
-from test_client_fleet_support import (
-    PB,
-    PLATFORMS,
-    ROOT,
-    TTL_MS,
-    YB,
-    Fleet,
-    Heard,
-    at_rest,
-    fleet,
-    operator,
-    speeds,
-)
-from test_client_support import Pad, Script, VirtualPad, pygame_up
+import pytest
 
 from kinesphere import zconfig
 from kinesphere.clients import targets as tg
@@ -41,8 +28,11 @@ from kinesphere.clients.gamepad.readout import Readout
 from kinesphere.clients.gamepad.state import Action, ControllerState
 from kinesphere.clients.gamepad.teleop import run
 from kinesphere.laban import Direction
+from support.client_fleet import PB, PLATFORMS, TTL_MS, YB, Fleet, Heard, at_rest, operator, speeds
+from support.clients import Pad, Script, VirtualPad
+from support.paths import ROOT
 
-__all__ = ["fleet", "pygame_up"]  # fixtures
+pytestmark = pytest.mark.processes
 
 LEFT, RIGHT = 90, 75
 """Ticks at 30 Hz of the sweep's strokes. The first one unfolds the arm from its stowed neutral

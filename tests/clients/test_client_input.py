@@ -4,7 +4,6 @@ controllers, raw joysticks, hot-plug and the keyboard fallback."""
 from __future__ import annotations
 
 import os
-from collections.abc import Iterator
 from pathlib import Path
 
 os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
@@ -12,7 +11,6 @@ os.environ.setdefault("SDL_AUDIODRIVER", "dummy")
 
 import pygame  # noqa: E402
 import pytest  # noqa: E402
-from test_client_support import VirtualPad  # noqa: E402
 
 from kinesphere.clients.gamepad import mapfile  # noqa: E402
 from kinesphere.clients.gamepad.inputs import pad  # noqa: E402
@@ -20,17 +18,14 @@ from kinesphere.clients.gamepad.mapping import MapperState, map_controls  # noqa
 from kinesphere.clients.gamepad.state import Action, ControllerState  # noqa: E402
 from kinesphere.errors import KinesphereError  # noqa: E402
 from kinesphere.laban import Direction  # noqa: E402
+from support.clients import VirtualPad  # noqa: E402
 
 MAX = 32767
 CTRL = 7  # instance id of the posted "controller"
 JOY = 9  # instance id of the posted raw joystick
 
 
-@pytest.fixture(scope="module", autouse=True)
-def pygame_up() -> Iterator[None]:
-    pad.init_pygame(headless=True)
-    yield
-    pygame.quit()
+pytestmark = pytest.mark.usefixtures("pygame_up")
 
 
 @pytest.fixture

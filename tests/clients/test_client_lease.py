@@ -9,19 +9,6 @@ from collections.abc import Callable, Iterator
 import pygame
 import pytest
 import zenoh
-from test_client_support import (
-    KEYS,
-    WAIT_S,
-    Pad,
-    Reply,
-    StandIn,
-    client_link,
-    hub,
-    kind,
-    pygame_up,
-    sentinel,
-    usual,
-)
 
 from kinesphere.clients import targets as tg
 from kinesphere.clients.gamepad import mapfile
@@ -31,8 +18,9 @@ from kinesphere.clients.gamepad.teleop import Teleop
 from kinesphere.clients.link import RobotLink
 from kinesphere.clients.options import TeleopOptions
 from kinesphere.protocol import AckStage, Command
-
-__all__ = ["hub", "pygame_up"]  # fixtures
+from support.clients import Pad, Reply, StandIn, client_link, kind, sentinel, usual
+from support.network import OWN_KEYS
+from support.wait import WAIT_S
 
 
 @pytest.fixture
@@ -45,7 +33,7 @@ def robot(hub: tuple[zenoh.Session, str]) -> Iterator[StandIn]:
 @pytest.fixture
 def link(hub: tuple[zenoh.Session, str], robot: StandIn) -> Iterator[RobotLink]:
     with client_link(hub[1], sender="carol") as lk:
-        assert lk.wait_subscribers([KEYS.command("l1")], WAIT_S) == []
+        assert lk.wait_subscribers([OWN_KEYS.command("l1")], WAIT_S) == []
         assert lk.wait_for(lambda k: "l1" in k.states(), WAIT_S)
         yield lk
 
@@ -57,7 +45,7 @@ def inp(pygame_up: None) -> pad.PygameInput:
 
 
 def settle(link: RobotLink, robot: StandIn) -> list[str]:
-    sentinel(link, [KEYS.command("l1")], [robot])
+    sentinel(link, [OWN_KEYS.command("l1")], [robot])
     return [kind(c) for c in robot.commands()]
 
 

@@ -9,14 +9,14 @@ from pathlib import Path
 
 import pytest
 import zenoh
-from test_client_support import KEYS, WAIT_S, Inbox, client_link, hub, sentinel
 
 from kinesphere.clients.link import Sequencer
 from kinesphere.clients.orders import phrases
 from kinesphere.errors import KinesphereError
 from kinesphere.laban import Direction
-
-__all__ = ["hub"]  # fixtures
+from support.clients import Inbox, client_link, sentinel
+from support.network import OWN_KEYS
+from support.wait import WAIT_S
 
 
 def test_shipped_phrases_parse() -> None:
@@ -77,7 +77,7 @@ def test_an_unknown_phrase_lists_the_shipped_ones() -> None:
 
 @pytest.fixture
 def boxes(hub: tuple[zenoh.Session, str]) -> Iterator[dict[str, Inbox]]:
-    b = {r: Inbox(hub[0], KEYS.command(r)) for r in ("p1", "p2")}
+    b = {r: Inbox(hub[0], OWN_KEYS.command(r)) for r in ("p1", "p2")}
     yield b
     for x in b.values():
         x.close()
@@ -93,7 +93,7 @@ def test_play_streams_each_step_for_its_duration(
         "direction = 'right low', size = 2.5}]\n"
     )
     phrase = phrases.load_phrase(f)
-    keys = [KEYS.command(r) for r in boxes]
+    keys = [OWN_KEYS.command(r) for r in boxes]
     with client_link(hub[1], watch=False) as link:
         assert link.wait_subscribers(keys, WAIT_S) == []
         sent = phrases.play(link, phrase, keys, Sequencer("play-test", 300), rate_hz=50.0)

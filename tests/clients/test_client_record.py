@@ -9,17 +9,6 @@ from pathlib import Path
 import pygame
 import pytest
 import zenoh
-from test_client_support import (
-    KEYS,
-    WAIT_S,
-    Inbox,
-    Pad,
-    Script,
-    client_link,
-    hub,
-    pygame_up,
-    sentinel,
-)
 
 from kinesphere import zconfig
 from kinesphere.clients import mcaplog
@@ -31,13 +20,14 @@ from kinesphere.clients.gamepad.teleop import Teleop, run
 from kinesphere.clients.options import TeleopOptions
 from kinesphere.clients.recording.traffic import replay
 from kinesphere.errors import KinesphereError
-
-__all__ = ["hub", "pygame_up"]  # fixtures
+from support.clients import Inbox, Pad, Script, client_link, sentinel
+from support.network import OWN_KEYS
+from support.wait import WAIT_S
 
 
 @pytest.fixture
 def box(hub: tuple[zenoh.Session, str]) -> Iterator[Inbox]:
-    inbox = Inbox(hub[0], KEYS.command("rec"))
+    inbox = Inbox(hub[0], OWN_KEYS.command("rec"))
     yield inbox
     inbox.close()
 
@@ -65,11 +55,11 @@ def test_a_replay_sends_what_the_recorded_session_sent(
 
     path = tmp_path / "session.mcap"
     with client_link(hub[1]) as link:
-        assert link.wait_subscribers([KEYS.command("rec")], WAIT_S) == []
+        assert link.wait_subscribers([OWN_KEYS.command("rec")], WAIT_S) == []
         with ticks.TickRecorder(path, target="rec") as rec:
             op = Teleop(link, mapfile.load(), tg.robot("rec"), TeleopOptions(rate_hz=60.0))
             run(op, Spy(), record=rec, finished=lambda: script.finished)
-        sentinel(link, [KEYS.command("rec")], [box])
+        sentinel(link, [OWN_KEYS.command("rec")], [box])
         first = box.commands()
         header, recorded = ticks.load(path)
         assert header["target"] == "rec" and header["version"] == ticks.VERSION
@@ -80,7 +70,7 @@ def test_a_replay_sends_what_the_recorded_session_sent(
         replay = ticks.TickReplay(recorded, clock=lambda: next(times))
         op = Teleop(link, mapfile.load(), tg.robot("rec"), TeleopOptions(rate_hz=60.0))
         run(op, replay, finished=lambda: replay.finished)
-        sentinel(link, [KEYS.command("rec")], [box])
+        sentinel(link, [OWN_KEYS.command("rec")], [box])
     second = box.commands()[len(first) :]
 
     def content(cmds: list) -> list:  # type: ignore[type-arg]

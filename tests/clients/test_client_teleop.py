@@ -11,22 +11,6 @@ import msgspec
 import pygame
 import pytest
 import zenoh
-from test_client_support import (
-    KEYS,
-    WAIT_S,
-    FakeRobot,
-    Inbox,
-    Pad,
-    Script,
-    await_catalogue,
-    client_link,
-    databank,
-    fake_catalogue,
-    hub,
-    kind,
-    pygame_up,
-    sentinel,
-)
 
 from kinesphere import zconfig
 from kinesphere.clients import targets as tg
@@ -38,8 +22,20 @@ from kinesphere.clients.link import RobotLink
 from kinesphere.clients.options import TeleopOptions
 from kinesphere.laban import Direction
 from kinesphere.protocol import Catalogue, LimbEntry, SpatialCommand
-
-__all__ = ["hub", "pygame_up"]  # fixtures
+from support.clients import (
+    FakeRobot,
+    Inbox,
+    Pad,
+    Script,
+    await_catalogue,
+    client_link,
+    databank_service,
+    fake_catalogue,
+    kind,
+    sentinel,
+)
+from support.network import OWN_KEYS
+from support.wait import WAIT_S
 
 ROBOTS = ("r1", "r2", "r3")
 
@@ -47,7 +43,7 @@ ROBOTS = ("r1", "r2", "r3")
 @pytest.fixture
 def inboxes(hub: tuple[zenoh.Session, str]) -> Iterator[dict[str, Inbox]]:
     session, _ = hub
-    boxes = {r: Inbox(session, KEYS.command(r)) for r in ROBOTS}
+    boxes = {r: Inbox(session, OWN_KEYS.command(r)) for r in ROBOTS}
     yield boxes
     for b in boxes.values():
         b.close()
@@ -57,7 +53,7 @@ def inboxes(hub: tuple[zenoh.Session, str]) -> Iterator[dict[str, Inbox]]:
 def link(hub: tuple[zenoh.Session, str], inboxes: dict[str, Inbox]) -> Iterator[RobotLink]:
     _, endpoint = hub
     with client_link(endpoint) as lk:
-        assert lk.wait_subscribers([KEYS.command(r) for r in ROBOTS], WAIT_S) == []
+        assert lk.wait_subscribers([OWN_KEYS.command(r) for r in ROBOTS], WAIT_S) == []
         yield lk
 
 
@@ -73,7 +69,7 @@ def teleop(link: RobotLink, target: tg.Target, **options: object) -> Teleop:
 
 def settle(link: RobotLink, boxes: dict[str, Inbox]) -> None:
     """Everything sent so far has arrived at every robot."""
-    sentinel(link, [KEYS.command(r) for r in boxes], list(boxes.values()))
+    sentinel(link, [OWN_KEYS.command(r) for r in boxes], list(boxes.values()))
 
 
 def test_stream_content_rate_ttl_and_final_stop(
@@ -160,19 +156,20 @@ def test_group_and_all_reach_every_intended_robot_and_no_other(
     inp: pad.PygameInput,
 ) -> None:  # fmt: skip
     session, _ = hub
-    arms = Inbox(session, KEYS.group_command("arms"))  # what r1 and r2, run with --group arms, hear
+    # what r1 and r2, run with --group arms, hear
+    arms = Inbox(session, OWN_KEYS.group_command("arms"))
     try:
-        assert link.wait_subscribers([KEYS.group_command("arms")], WAIT_S) == []
+        assert link.wait_subscribers([OWN_KEYS.group_command("arms")], WAIT_S) == []
         p = Pad()
         op = teleop(link, tg.parse_target("group:arms"))
         engage(op, inp, p)
         p.deadman(False)
         op.tick(inp.poll())
-        sentinel(link, [KEYS.group_command("arms"), *(KEYS.command(r) for r in ROBOTS)],
+        sentinel(link, [OWN_KEYS.group_command("arms"), *(OWN_KEYS.command(r) for r in ROBOTS)],
                  [arms, *inboxes.values()])  # fmt: skip
         cmds = arms.commands()
         assert [kind(c) for c in cmds] == ["move", "move", "let go"]
-        assert {g.key for g in arms.got} == {KEYS.group_command("arms")}
+        assert {g.key for g in arms.got} == {OWN_KEYS.group_command("arms")}
         for r in ROBOTS:
             assert inboxes[r].commands() == [], "robots hear a group only on the group's key"
     finally:
@@ -185,7 +182,7 @@ def test_group_and_all_reach_every_intended_robot_and_no_other(
     settle(link, inboxes)
     for r in ROBOTS:
         last = [g for g in inboxes[r].got if g.cmd.sender != "sentinel"][-3:]
-        assert [g.key for g in last] == [KEYS.command("*")] * 3
+        assert [g.key for g in last] == [OWN_KEYS.command("*")] * 3
         assert [kind(g.cmd) for g in last] == ["move", "move", "let go"]
 
 
@@ -238,7 +235,7 @@ def test_estop_goes_to_all_latches_and_start_releases_only_what_it_latched(
     view = op.tick(inp.poll())
     assert view.estopped and not view.engaged
     for r in ROBOTS:
-        inboxes[r].wait(lambda g: g.cmd.estop and g.key == KEYS.command("*"), f"e-stop at {r}")
+        inboxes[r].wait(lambda g: g.cmd.estop and g.key == OWN_KEYS.command("*"), f"e-stop at {r}")
     robots["r1"].state("estop", estop_by=op.seq.sender)  # latched by this operator
     robots["r2"].state("estop", estop_by="gamepad-someone-else")  # by another one
     robots["r3"].state("estop")  # a robot that does not say who: ours while our e-stop stands
@@ -387,7 +384,7 @@ def packbot_operator(session: zenoh.Session, link: RobotLink, inp: pad.PygameInp
     and its catalogue already fetched."""
     FakeRobot(session, "r2", "packbot").state()
     assert link.wait_for(lambda lk: "r2" in lk.states(), WAIT_S)
-    with databank(session, "packbot"):
+    with databank_service(session, "packbot"):
         await_catalogue(link, "packbot")
         op = teleop(link, tg.robot("r2"))
         op.tick(inp.poll())
@@ -454,7 +451,7 @@ def test_a_recorded_pose_makes_the_client_fetch_catalogues_again(
         cache = CatalogueCache(link)
         cache.get(["fakebot"])
         assert cache.arrived.wait(WAIT_S) and cache.get(["fakebot"]) == [FAKEBOT]
-        pub = session.declare_publisher(KEYS.changed("fakebot"))
+        pub = session.declare_publisher(OWN_KEYS.changed("fakebot"))
         assert zconfig.wait_matching(pub, WAIT_S)
         cache.arrived.clear()
         pub.put(b"")  # the payload (the recorded Pose) does not matter here

@@ -15,22 +15,24 @@ import sys
 import time
 import xml.etree.ElementTree as ET
 from contextlib import ExitStack
-from pathlib import Path
 
 import numpy as np
+import pytest
 import zenoh
-from test_agent_support import KEYS, WAIT_S, StateWatch, databank, hub, running_agent
-from test_ros2_support import JAZZY, GraphWatch, RosTap, dds, graph
 
 from kinesphere import zconfig
 from kinesphere.clients.options import BridgeOptions
 from kinesphere.clients.ros2.bridge import Bridge
 from kinesphere.platforms.platform import load_platform
 from kinesphere.protocol import RobotState, encode
+from support.agents import StateWatch, running_agent
+from support.network import KEYS
+from support.paths import ROOT
+from support.ros2 import JAZZY, GraphWatch, RosTap, dds, graph
+from support.wait import WAIT_S
 
-__all__ = ["databank", "hub"]  # fixtures
+pytestmark = pytest.mark.processes
 
-ROOT = Path(__file__).resolve().parent.parent
 JS = "sensor_msgs/msg/JointState"
 STRING = "std_msgs/msg/String"
 TF = "tf2_msgs/msg/TFMessage"

@@ -17,7 +17,6 @@ os.environ.setdefault("SDL_AUDIODRIVER", "dummy")
 
 import pygame  # noqa: E402
 import pytest  # noqa: E402
-from test_ros2_support import JAZZY, WAIT_S, RosPublisher  # noqa: E402
 
 from kinesphere import zconfig  # noqa: E402
 from kinesphere.clients.gamepad import mapfile  # noqa: E402
@@ -27,6 +26,8 @@ from kinesphere.clients.gamepad.inputs.ros2_joy import JoyInput  # noqa: E402
 from kinesphere.clients.gamepad.state import Action  # noqa: E402
 from kinesphere.clients.options import JoyOptions  # noqa: E402
 from kinesphere.errors import KinesphereError  # noqa: E402
+from support.ros2 import JAZZY, RosPublisher  # noqa: E402
+from support.wait import WAIT_S  # noqa: E402
 
 JOY = "sensor_msgs/msg/Joy"
 # game_controller_node's order (SDL GameController): axes lx ly rx ry lt rt; buttons a b x y

@@ -7,7 +7,6 @@ from collections.abc import Iterator
 
 import pytest
 import zenoh
-from test_databank_support import KEYS, answered, error_code, peer, raw_get
 
 from kinesphere import protocol as pr
 from kinesphere import zconfig
@@ -16,6 +15,8 @@ from kinesphere.platforms.platform import load_platform, platform_names
 from kinesphere.query import get_one
 from kinesphere.services.databank.service import DatabankService
 from kinesphere.services.ecl.ecl import Ecl
+from support.databank import answered, error_code, raw_get
+from support.network import OWN_KEYS, peer
 
 
 @pytest.fixture(scope="module")
@@ -25,8 +26,8 @@ def net() -> Iterator[zenoh.Session]:
         server, client = peer(endpoint), peer(endpoint)
         ecls = {name: Ecl.open(name) for name in platform_names()}
         try:
-            with DatabankService(server, ecls, KEYS, "bodies"):
-                answered(client, KEYS.body("baxter"))
+            with DatabankService(server, ecls, OWN_KEYS, "bodies"):
+                answered(client, OWN_KEYS.body("baxter"))
                 yield client
         finally:
             zconfig.close_session(client)
@@ -35,7 +36,7 @@ def net() -> Iterator[zenoh.Session]:
 
 @pytest.mark.parametrize("name", platform_names())
 def test_every_shipped_body_is_served(net: zenoh.Session, name: str) -> None:
-    body = get_one(net, KEYS.body(name), pr.BodyModel, timeout=10.0)
+    body = get_one(net, OWN_KEYS.body(name), pr.BodyModel, timeout=10.0)
     plat = load_platform(name)
     assert body.platform == name and body.base_kind == plat.base.kind
     assert body.neutral == plat.neutral and body.version == plat.eurdf.sha256
@@ -45,8 +46,8 @@ def test_every_shipped_body_is_served(net: zenoh.Session, name: str) -> None:
 
 
 def test_unknown_platform_and_bad_key(net: zenoh.Session) -> None:
-    assert error_code(answered(net, KEYS.body("nosuchbot"))) == "unknown_platform"
-    (ok, data), = raw_get(net, f"{KEYS.prefix}/ecl/baxter/bodies")
+    assert error_code(answered(net, OWN_KEYS.body("nosuchbot"))) == "unknown_platform"
+    (ok, data), = raw_get(net, f"{OWN_KEYS.prefix}/ecl/baxter/bodies")
     assert not ok and "body" in pr.decode(data, pr.Error).message
 
 
@@ -62,7 +63,7 @@ def test_drawn_joint_frames_match_yourdfpy(net: zenoh.Session, name: str) -> Non
 
     from kinesphere.clients.view.body import BodyGeometry
 
-    model = get_one(net, KEYS.body(name), pr.BodyModel, timeout=10.0)
+    model = get_one(net, OWN_KEYS.body(name), pr.BodyModel, timeout=10.0)
     body = BodyGeometry(model)
     urdf = yourdfpy.URDF.load(io.StringIO(model.eurdf), build_scene_graph=True,
                               load_meshes=True)

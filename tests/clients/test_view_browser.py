@@ -14,33 +14,22 @@ the youBot's stayed as it was.
 from __future__ import annotations
 
 import time
-from collections.abc import Iterator
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
-from test_system_support import (
-    WAIT_S,
-    Observer,
-    at_pose,
-    query_pose,
-    router_hub,
-    supervisor,
-    until,
-)
-from test_view_support import browser_page, coloured, pixels
 
 from kinesphere.deploy.procs import Supervisor
 from kinesphere.zconfig import free_port
+from support.system import Observer, at_pose, query_pose, router_hub
+from support.view import browser_page, coloured, pixels
+from support.wait import WAIT_S, until
+
+pytestmark = pytest.mark.processes
 
 POSE = ("limb_11", "distal_11", "right-high", 3)
 AGENT_HZ = "250"
 
-
-@pytest.fixture
-def sup(tmp_path: Path) -> Iterator[Supervisor]:
-    yield from supervisor(tmp_path / "logs")
 
 
 def canvas_shot(page: Any) -> np.ndarray:

@@ -6,14 +6,12 @@ from __future__ import annotations
 
 import time
 
-from test_databank_support import wait_until
-
 from kinesphere import protocol as pr
 from kinesphere import zconfig
 from kinesphere.clients.view.fleet import Fleet
-from kinesphere.keyexpr import Keys
+from support.network import OWN_KEYS
+from support.wait import until
 
-KEYS = Keys("kstest-fleet")
 PART = pr.SpatialCommand("limb_11", "distal_11", "left-high", 3)
 
 
@@ -36,39 +34,39 @@ def command(seq: int, **kw: object) -> pr.Command:
 def test_commands_reach_the_robots_they_address() -> None:
     with zconfig.loopback_hub() as (hub, endpoint), \
             zconfig.session(config=zconfig.loopback_config(endpoint)) as robots:
-        fleet = Fleet(hub, KEYS)
+        fleet = Fleet(hub, OWN_KEYS)
         try:
-            tokens = {rid: robots.liveliness().declare_token(KEYS.alive_robot(rid))
+            tokens = {rid: robots.liveliness().declare_token(OWN_KEYS.alive_robot(rid))
                       for rid in ("r1", "r2")}
-            assert wait_until(lambda: set(fleet.snapshot()) == {"r1", "r2"}, 20.0)
-            robots.put(KEYS.state("r1"), pr.encode(state("r1", ["arms"])))
-            robots.put(KEYS.state("r2"), pr.encode(state("r2", [])))
-            assert wait_until(lambda: all(r.state for r in fleet.snapshot().values()), 20.0)
-            robots.put(KEYS.state("r1"), pr.encode(state("r2", ["arms"], seq=7)))  # spoofed
-            robots.put(KEYS.state("r2"), pr.encode(state("r2", [], seq=1)))  # after it
-            assert wait_until(lambda: seq_of(fleet, "r2") == 1, 20.0)
+            until(lambda: set(fleet.snapshot()) == {"r1", "r2"}, 20.0, "both robots")
+            robots.put(OWN_KEYS.state("r1"), pr.encode(state("r1", ["arms"])))
+            robots.put(OWN_KEYS.state("r2"), pr.encode(state("r2", [])))
+            until(lambda: all(r.state for r in fleet.snapshot().values()), 20.0, "every state")
+            robots.put(OWN_KEYS.state("r1"), pr.encode(state("r2", ["arms"], seq=7)))  # spoofed
+            robots.put(OWN_KEYS.state("r2"), pr.encode(state("r2", [], seq=1)))  # after it
+            until(lambda: seq_of(fleet, "r2") == 1, 20.0, "r2's command 1")
             assert seq_of(fleet, "r1") == 0, "a state on r1's key claiming to be r2 is ignored"
 
             move = command(1, parts=[PART], deadman=True)
-            robots.put(KEYS.group_command("arms"), pr.encode(move))
+            robots.put(OWN_KEYS.group_command("arms"), pr.encode(move))
             ack = pr.Ack(robot_id="r2", sender="t", seq=1, stage=pr.AckStage.ACCEPTED,
                          stamp_ns=time.time_ns())
-            robots.put(KEYS.ack("r2"), pr.encode(ack))  # after the group command
-            assert wait_until(lambda: fleet.snapshot()["r1"].motion == move, 20.0)
-            assert wait_until(lambda: fleet.snapshot()["r2"].ack == ack, 20.0)
+            robots.put(OWN_KEYS.ack("r2"), pr.encode(ack))  # after the group command
+            until(lambda: fleet.snapshot()["r1"].motion == move, 20.0, "r1's motion")
+            until(lambda: fleet.snapshot()["r2"].ack == ack, 20.0, "r2's ack")
             assert fleet.snapshot()["r2"].command is None, "r2 is not in the group"
             own = command(2, parts=[PART], deadman=True)
-            robots.put(KEYS.command("r2"), pr.encode(own))
-            assert wait_until(lambda: fleet.snapshot()["r2"].motion == own, 20.0)
+            robots.put(OWN_KEYS.command("r2"), pr.encode(own))
+            until(lambda: fleet.snapshot()["r2"].motion == own, 20.0, "r2's own motion")
             assert fleet.snapshot()["r1"].motion == move, "r2's command is not r1's"
 
             stop = command(3, deadman=False, stop=True)
-            robots.put(KEYS.command("*"), pr.encode(stop))
-            assert wait_until(lambda: all(r.command == stop and r.motion is None
-                                          for r in fleet.snapshot().values()), 20.0)
+            robots.put(OWN_KEYS.command("*"), pr.encode(stop))
+            until(lambda: all(r.command == stop and r.motion is None
+                                   for r in fleet.snapshot().values()), 20.0, "the stop everywhere")
 
             tokens.pop("r2").undeclare()
-            assert wait_until(lambda: set(fleet.snapshot()) == {"r1"}, 20.0)
+            until(lambda: set(fleet.snapshot()) == {"r1"}, 20.0, "r2 gone")
             tokens.pop("r1").undeclare()
         finally:
             fleet.close()

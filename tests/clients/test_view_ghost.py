@@ -9,27 +9,20 @@ command (ahead of the body, which is still on its way), and it is hidden at rest
 
 from __future__ import annotations
 
-from collections.abc import Iterator
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 import pytest
-from test_system_support import (
-    KEYS,
-    WAIT_S,
-    Observer,
-    at_pose,
-    query_pose,
-    router_hub,
-    supervisor,
-    until,
-)
 
 from kinesphere.clients.view.app import FleetView
 from kinesphere.deploy.procs import Supervisor
 from kinesphere.protocol import Status
 from kinesphere.zconfig import free_port
+from support.network import KEYS
+from support.system import Observer, at_pose, query_pose, router_hub
+from support.wait import WAIT_S, until
+
+pytestmark = pytest.mark.processes
 
 POSE = ("limb_11", "distal_11", "right-high", 3)
 RID = "baxter-1"
@@ -48,10 +41,6 @@ class Seen:
     ghost_q: np.ndarray | None
     around: tuple[str, str] = ("", "")
 
-
-@pytest.fixture
-def sup(tmp_path: Path) -> Iterator[Supervisor]:
-    yield from supervisor(tmp_path / "logs")
 
 
 def test_the_target_ghost_shows_while_a_robot_moves(sup: Supervisor) -> None:

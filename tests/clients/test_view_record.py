@@ -15,17 +15,16 @@ from pathlib import Path
 import pytest
 import zenoh
 from mcap.reader import make_reader
-from test_databank_support import wait_until
 
 from kinesphere import protocol as pr
 from kinesphere import zconfig
 from kinesphere.clients.mcaplog import McapWriter, read
 from kinesphere.clients.recording.traffic import TrafficRecorder, replay, tapped_keys
 from kinesphere.errors import KinesphereError
-from kinesphere.keyexpr import Keys
 from kinesphere.robots.agent.ordering import Ordering, Received
+from support.network import OWN_KEYS
+from support.wait import until
 
-KEYS = Keys("kstest-rec")
 GAP_S = 0.05
 
 
@@ -33,19 +32,20 @@ def session_messages() -> list[tuple[str, pr.Message]]:
     part = pr.SpatialCommand("limb_11", "distal_11", "left-high", 3)
     out: list[tuple[str, pr.Message]] = []
     for i in range(4):
-        out.append((KEYS.command("r1"), pr.Command(seq=i, sent_ns=time.time_ns(), parts=[part],
+        out.append((OWN_KEYS.command("r1"), pr.Command(seq=i, sent_ns=time.time_ns(), parts=[part],
                                                    deadman=True, ttl_ms=300, sender="t")))
-        out.append((KEYS.state("r1"), pr.RobotState(
+        out.append((OWN_KEYS.state("r1"), pr.RobotState(
             robot_id="r1", platform="baxter", seq=i, stamp_ns=time.time_ns(),
             joint_names=["a", "b"], q=[0.1 * i, -0.25], qd=[0.0, 1.5e-7],
             base_pose=[0.0, 0.0, 0.1], status="moving", last_command_seq=i)))
-    out.append((KEYS.ack("r1"), pr.Ack(robot_id="r1", sender="t", seq=3, stage=pr.AckStage.REACHED,
+    out.append((OWN_KEYS.ack("r1"), pr.Ack(robot_id="r1", sender="t", seq=3,
+                                           stage=pr.AckStage.REACHED,
                                        stamp_ns=time.time_ns())))
-    out.append((KEYS.command("*"), pr.Command(seq=9, sent_ns=time.time_ns(), deadman=False,
+    out.append((OWN_KEYS.command("*"), pr.Command(seq=9, sent_ns=time.time_ns(), deadman=False,
                                               ttl_ms=0, estop=True, stop=True, sender="t")))
-    out.append((KEYS.group_command("arms"), pr.Command(seq=10, sent_ns=time.time_ns(),
+    out.append((OWN_KEYS.group_command("arms"), pr.Command(seq=10, sent_ns=time.time_ns(),
                                                       deadman=False, ttl_ms=0, sender="t")))
-    out.append((KEYS.changed("baxter"), pr.Pose(platform="baxter", limb="limb_11",
+    out.append((OWN_KEYS.changed("baxter"), pr.Pose(platform="baxter", limb="limb_11",
                                                  origin="distal_11", direction="left-high",
                                                  size=3.0, joints={"right_s0": 0.5}, k_id=4)))
     return out
@@ -57,17 +57,18 @@ def test_record_replay_round_trip(tmp_path: Path) -> None:
     with zconfig.loopback_hub() as (hub, endpoint):
         with zconfig.session(config=zconfig.loopback_config(endpoint)) as pub_s, \
                 zconfig.session(config=zconfig.loopback_config(endpoint)) as rec_s:
-            rec = TrafficRecorder(rec_s, KEYS, first)
+            rec = TrafficRecorder(rec_s, OWN_KEYS, first)
             pubs = {key: pub_s.declare_publisher(key) for key, _ in sent}
             for pub in pubs.values():
                 assert zconfig.wait_matching(pub, 20.0), "the recorder never subscribed"
-            pub_s.put(KEYS.state("r1"), b"\xc1 not messagepack")  # counted, not recorded
+            pub_s.put(OWN_KEYS.state("r1"), b"\xc1 not messagepack")  # counted, not recorded
             t_first = time.monotonic()
             for key, msg in sent:
                 pubs[key].put(pr.encode(msg))
                 time.sleep(GAP_S)  # the spacing a replay must keep, not synchronisation
             span = time.monotonic() - t_first
-            assert wait_until(lambda: rec.tally.recorded == len(sent), 20.0), rec.tally
+            until(lambda: rec.tally.recorded == len(sent), 20.0, "every message recorded",
+                  explain=lambda: rec.tally)
             tally = rec.close()
             assert tally.undecodable == 1
             zconfig.undeclare(*pubs.values())
@@ -87,19 +88,20 @@ def test_record_replay_round_trip(tmp_path: Path) -> None:
 
             # replay commands and states; a second recorder sees exactly those again (the
             # replay waits until its publishers match the recorder, which has just subscribed)
-            rec2 = TrafficRecorder(rec_s, KEYS, second)
+            rec2 = TrafficRecorder(rec_s, OWN_KEYS, second)
             put_at: list[float] = []
             done = replay(pub_s, first, "all", wait=20.0,
                           on_put=lambda k, m: put_at.append(time.monotonic()))
             wanted = [(k, m) for k, m in sent if isinstance(m, (pr.Command, pr.RobotState))]
             assert done.sent == len(wanted) and done.unheard == []
-            assert wait_until(lambda: rec2.tally.recorded == done.sent, 20.0), rec2.tally
+            until(lambda: rec2.tally.recorded == done.sent, 20.0, "every replayed message recorded",
+                  explain=lambda: rec2.tally)
             rec2.close()
     again = list(read(second))
     assert [(r.key, r.message) for r in again] == wanted
     replay_span = put_at[-1] - put_at[0]
     assert replay_span >= 0.8 * (span - 4 * GAP_S)  # the original spacing, not a burst
-    assert len(tapped_keys(KEYS)) == 5
+    assert len(tapped_keys(OWN_KEYS)) == 5
 
 
 def test_a_burst_over_every_tapped_key_is_recorded_in_the_order_it_was_put(
@@ -111,13 +113,14 @@ def test_a_burst_over_every_tapped_key_is_recorded_in_the_order_it_was_put(
     burst = [kinds[i % len(kinds)] for i in range(300)]
     with zconfig.loopback_hub() as (hub, endpoint):
         with zconfig.session(config=zconfig.loopback_config(endpoint)) as s:
-            rec = TrafficRecorder(s, KEYS, path)
+            rec = TrafficRecorder(s, OWN_KEYS, path)
             pubs = {k: hub.declare_publisher(k, congestion_control=zenoh.CongestionControl.BLOCK)
                     for k, _ in kinds}
             assert zconfig.unmatched(pubs, 20.0) == []
             for key, msg in burst:
                 pubs[key].put(pr.encode(msg))
-            assert wait_until(lambda: rec.tally.recorded == len(burst), 20.0), rec.tally
+            until(lambda: rec.tally.recorded == len(burst), 20.0, "the burst recorded",
+                  explain=lambda: rec.tally)
             rec.close()
             zconfig.undeclare(*pubs.values())
     assert [(r.key, r.message) for r in read(path)] == burst
@@ -125,7 +128,7 @@ def test_a_burst_over_every_tapped_key_is_recorded_in_the_order_it_was_put(
 
 def test_a_replay_says_which_keys_nobody_heard(tmp_path: Path) -> None:
     path = tmp_path / "two.mcap"
-    cmds = [(KEYS.command(rid), pr.Command(seq=1, sent_ns=time.time_ns(), deadman=False,
+    cmds = [(OWN_KEYS.command(rid), pr.Command(seq=1, sent_ns=time.time_ns(), deadman=False,
                                            ttl_ms=0, stop=True, sender="t"))
             for rid in ("r1", "r2")]
     with McapWriter(path) as w:
@@ -135,17 +138,19 @@ def test_a_replay_says_which_keys_nobody_heard(tmp_path: Path) -> None:
         with pytest.raises(KinesphereError) as err:
             replay(hub, path, wait=0.2)  # nobody at all: nothing is put
         assert err.value.code == "unavailable"
-        assert KEYS.command("r1") in err.value.message and "nothing replayed" in err.value.message
+        message = err.value.message
+        assert OWN_KEYS.command("r1") in message and "nothing replayed" in message
         with zconfig.session(config=zconfig.loopback_config(endpoint)) as s:
             got: list[str] = []
-            sub = s.declare_subscriber(KEYS.command("r1"),
+            sub = s.declare_subscriber(OWN_KEYS.command("r1"),
                                        lambda sample: got.append(str(sample.key_expr)))
-            probe = hub.declare_publisher(KEYS.command("r1"))
+            probe = hub.declare_publisher(OWN_KEYS.command("r1"))
             assert zconfig.wait_matching(probe, 20.0)  # the hub knows r1's subscriber now
             zconfig.undeclare(probe)
             done = replay(hub, path, wait=0.2)  # r1 heard at once, r2 never
-            assert done.sent == 2 and done.unheard == [KEYS.command("r2")]
-            assert wait_until(lambda: got == [KEYS.command("r1")], 20.0), got
+            assert done.sent == 2 and done.unheard == [OWN_KEYS.command("r2")]
+            until(lambda: got == [OWN_KEYS.command("r1")], 20.0, "r1's command",
+                  explain=lambda: got)
             zconfig.undeclare(sub)
 
 
@@ -172,7 +177,7 @@ def test_a_restamped_replay_is_new_to_robots_that_heard_the_original(tmp_path: P
     path = tmp_path / "s.mcap"
     with McapWriter(path) as w:
         for i, cmd in enumerate(original):
-            w.write(KEYS.command("r1"), cmd, t0 + i * 10**6)
+            w.write(OWN_KEYS.command("r1"), cmd, t0 + i * 10**6)
 
     def heard(ordering: Ordering, cmds: list[pr.Command]) -> list[str]:
         out = []
@@ -187,13 +192,13 @@ def test_a_restamped_replay_is_new_to_robots_that_heard_the_original(tmp_path: P
     with zconfig.loopback_hub() as (hub, endpoint):
         with zconfig.session(config=zconfig.loopback_config(endpoint)) as s:
             got: list[pr.Command] = []
-            sub = s.declare_subscriber(KEYS.command("r1"),
+            sub = s.declare_subscriber(OWN_KEYS.command("r1"),
                                        lambda sample: got.append(pr.decode(
                                            sample.payload.to_bytes(), pr.Command)))
             assert replay(hub, path, "commands", speed=100.0, wait=20.0).sent == 6
-            assert wait_until(lambda: len(got) == 6, 20.0)
+            until(lambda: len(got) == 6, 20.0, "six messages")
             assert replay(hub, path, "commands", speed=100.0, restamp=True).sent == 6
-            assert wait_until(lambda: len(got) == 12, 20.0)
+            until(lambda: len(got) == 12, 20.0, "twelve messages")
             zconfig.undeclare(sub)
     as_recorded, restamped = got[:6], got[6:]
     assert as_recorded == original

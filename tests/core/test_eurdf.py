@@ -7,13 +7,13 @@ import pytest
 
 from kinesphere.errors import KinesphereError
 from kinesphere.eurdf import load_eurdf
+from support.paths import TOY_EURDF
 
-TOY = Path(__file__).parent / "data" / "toyarm" / "toyarm.eurdf"
-TEXT = TOY.read_text()
+TEXT = TOY_EURDF.read_text()
 
 
 def test_toy_robot_sets() -> None:
-    e = load_eurdf(TOY)
+    e = load_eurdf(TOY_EURDF)
     assert e.C == ("c_1",)
     assert e.J == ("distal_11", "distal_12", "distal_21")
     assert e.L == ("limb_11", "limb_12", "limb_21")
@@ -23,7 +23,7 @@ def test_toy_robot_sets() -> None:
 
 
 def test_limbs_overlap_and_resolve_aliases() -> None:
-    e = load_eurdf(TOY)
+    e = load_eurdf(TOY_EURDF)
     assert set(e.labels_of_link("hand")) == {"limb_11", "limb_12"}
     assert e.limb("arm").name == "limb_11"
     assert e.origin("shoulder").name == "distal_11"
@@ -35,7 +35,7 @@ def test_limbs_overlap_and_resolve_aliases() -> None:
 
 
 def test_unknown_labels_list_the_valid_ones() -> None:
-    e = load_eurdf(TOY)
+    e = load_eurdf(TOY_EURDF)
     with pytest.raises(KinesphereError) as err:
         e.limb("leg")
     assert err.value.code == "unknown_limb" and "limb_11 (arm)" in err.value.message
@@ -45,7 +45,7 @@ def test_unknown_labels_list_the_valid_ones() -> None:
 
 
 def test_loader_accepts_text_and_hashes_content() -> None:
-    a, b = load_eurdf(TEXT), load_eurdf(TOY)
+    a, b = load_eurdf(TEXT), load_eurdf(TOY_EURDF)
     assert a.sha256 == b.sha256
     assert load_eurdf(TEXT.replace('velocity="3"', 'velocity="4"')).sha256 != a.sha256
 

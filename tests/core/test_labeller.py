@@ -8,8 +8,7 @@ import pytest
 from kinesphere.eurdf import load_eurdf
 from kinesphere.labeller import propose_eurdf
 from kinesphere.platforms.platform import load_platform, platform_names
-
-TOY = Path(__file__).parent / "data" / "toyarm" / "toyarm.eurdf"
+from support.paths import TOY_EURDF
 
 
 def strip_labels(text: str) -> str:
@@ -18,7 +17,7 @@ def strip_labels(text: str) -> str:
 
 def test_toy_proposal_is_valid_and_hierarchical(tmp_path: Path) -> None:
     plain = tmp_path / "toy.urdf"
-    plain.write_text(strip_labels(TOY.read_text()))
+    plain.write_text(strip_labels(TOY_EURDF.read_text()))
     e = load_eurdf(propose_eurdf(plain))
     assert e.C == ("c_1",)
     # the arm (higher, lateral ordering puts it before the central tail) is chain 1:
@@ -31,7 +30,7 @@ def test_toy_proposal_is_valid_and_hierarchical(tmp_path: Path) -> None:
 
 def test_merge_distance_groups_joint_locations(tmp_path: Path) -> None:
     plain = tmp_path / "toy.urdf"
-    plain.write_text(strip_labels(TOY.read_text()))
+    plain.write_text(strip_labels(TOY_EURDF.read_text()))
     e = load_eurdf(propose_eurdf(plain, merge_distance=0.5))
     # every arm joint is within 0.5 m of the previous one: one location, one limb
     assert [p.joints for p in e.distals if p.name == "distal_11"] == [("yaw", "elbow", "wrist")]

@@ -4,13 +4,13 @@ paper's way (torso joints in the core, one chain per arm, leg and head, hands at
 from pathlib import Path
 
 import pytest
-from test_byor_support import PANDA, TALOS, TIAGO, UR5, all_urdfs, robot_data
 
 from kinesphere.errors import KinesphereError
 from kinesphere.eurdf import Eurdf, load_eurdf
 from kinesphere.labeller import propose_eurdf
 from kinesphere.labeller_names import is_finger_name, is_limb_name
 from kinesphere.platforms.cli import describe_dict
+from support.byor import PANDA, TALOS, TIAGO, UR5, all_urdfs, robot_data
 
 EMPTY = {"ur_description/urdf/ur3.urdf"}  # an xacro stub: a <robot> without links
 

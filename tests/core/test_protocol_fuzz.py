@@ -12,11 +12,10 @@ import time
 from collections import Counter
 from typing import Any
 
-from test_protocol import SAMPLES
-from test_soak_support import SCALE, Tally
-
 from kinesphere import protocol as pr
 from kinesphere.errors import ERROR_CODES, KinesphereError
+from support.protocol import SAMPLES
+from support.soak import SCALE, Tally
 
 N = 20_000 * SCALE
 TYPES: list[Any] = [*pr.MESSAGE_TYPES, pr.AnyMessage]

@@ -13,9 +13,7 @@ import zenoh
 from kinesphere import protocol as pr
 from kinesphere import zconfig as zc
 from kinesphere.errors import KinesphereError
-from kinesphere.keyexpr import Keys
-
-KEYS = Keys("kstest")
+from support.network import OWN_KEYS
 
 
 def get(config: zenoh.Config, key: str) -> object:
@@ -102,8 +100,8 @@ def test_put_reaches_subscriber_of_other_session() -> None:
 
     with zc.loopback_pair() as (hub, peer):
         assert [str(z) for z in peer.info.peers_zid()] == [str(hub.zid())]  # nobody else
-        sub = hub.declare_subscriber(KEYS.command("*"), on_sample)
-        pub = peer.declare_publisher(KEYS.command("r1"))
+        sub = hub.declare_subscriber(OWN_KEYS.command("*"), on_sample)
+        pub = peer.declare_publisher(OWN_KEYS.command("r1"))
         assert zc.wait_matching(pub, timeout=5.0)
         cmd = pr.Command(seq=1, sent_ns=5, deadman=True, ttl_ms=200, sender="t")
         pub.put(pr.encode(cmd))
@@ -156,7 +154,7 @@ def test_queryable_answers_ok_and_err() -> None:
 
     def serve(query: zenoh.Query) -> None:
         with query:  # finishes the query, or every get waits for its timeout
-            parsed = KEYS.parse_pose_key(str(query.key_expr))
+            parsed = OWN_KEYS.parse_pose_key(str(query.key_expr))
             if parsed.limb == pose.limb:
                 query.reply(query.key_expr, pr.encode(pose))
             else:
@@ -164,19 +162,20 @@ def test_queryable_answers_ok_and_err() -> None:
                 query.reply_err(pr.encode(err))
 
     with zc.loopback_pair() as (hub, peer):
-        queryable = hub.declare_queryable(KEYS.pose_wildcard("baxter"), serve)
+        queryable = hub.declare_queryable(OWN_KEYS.pose_wildcard("baxter"), serve)
         querier = peer.declare_querier(
-            KEYS.pose_wildcard("baxter"), consolidation=zenoh.ConsolidationMode.NONE, timeout=5.0
+            OWN_KEYS.pose_wildcard("baxter"), consolidation=zenoh.ConsolidationMode.NONE,
+            timeout=5.0
         )
         assert zc.wait_matching(querier, timeout=5.0)
 
-        key = KEYS.pose("baxter", "limb_11", "distal_11", "left-high", 2)
+        key = OWN_KEYS.pose("baxter", "limb_11", "distal_11", "left-high", 2)
         replies = list(peer.get(key, consolidation=zenoh.ConsolidationMode.NONE, timeout=5.0))
         assert len(replies) == 1 and replies[0].ok is not None
         assert str(replies[0].ok.key_expr) == key
         assert pr.decode(replies[0].ok.payload, pr.Pose) == pose
 
-        bad = KEYS.pose("baxter", "tail", "distal_11", "left-high", 2)
+        bad = OWN_KEYS.pose("baxter", "tail", "distal_11", "left-high", 2)
         replies = list(peer.get(bad, consolidation=zenoh.ConsolidationMode.NONE, timeout=5.0))
         assert len(replies) == 1 and replies[0].err is not None and replies[0].ok is None
         exc = pr.error_from_reply(replies[0].err.payload)

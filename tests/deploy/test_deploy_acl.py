@@ -11,8 +11,8 @@ import zenoh
 from kinesphere.deploy.acl import add_robots, load_fleet, robot_acl
 from kinesphere.deploy.router import router_config
 from kinesphere.errors import KinesphereError
+from support.paths import DEPLOY
 
-DEPLOY = Path(__file__).resolve().parents[1] / "deploy"
 SHIPPED = DEPLOY / "robots.toml"
 
 
@@ -80,6 +80,7 @@ def test_print_acl(capsys: pytest.CaptureFixture[str]) -> None:
     assert len(out["access_control"]["policies"]) == 3
 
 
+@pytest.mark.processes
 def test_make_certs_refuses_a_robot_named_like_a_role(tmp_path: Path) -> None:
     import os
     import subprocess

@@ -7,16 +7,18 @@ from pathlib import Path
 
 import imageio_ffmpeg
 import numpy as np
+import pytest
 from PIL import Image
 
 from kinesphere.clients.orders.phrases import load_phrase
 from kinesphere.deploy.film import CAPTION_H, PLATFORMS, render
+from support.paths import ROOT
 
-ROOT = Path(__file__).resolve().parents[1]
 PHRASE = ROOT / "clients" / "phrases" / "left_high.toml"
 W, H, FPS = 96, 80, 6.0
 
 
+@pytest.mark.processes  # ffmpeg encodes the film
 def test_left_high_film(tmp_path: Path) -> None:
     mp4, gif = tmp_path / "left_high.mp4", tmp_path / "left_high.gif"
     n = render(PHRASE, mp4, gif, PLATFORMS, W, H, FPS)

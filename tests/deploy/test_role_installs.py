@@ -17,8 +17,10 @@ from pathlib import Path
 import pytest
 
 from kinesphere.cli import ROLE_COMMANDS, _command_word, build_parser, commands, missing_role
+from support.paths import ROOT
 
-ROOT = Path(__file__).resolve().parents[1]
+pytestmark = pytest.mark.processes
+
 DISTS = {".": "kinesphere", "platforms": "kinesphere-platforms", "robots": "kinesphere-robots",
          "services": "kinesphere-services", "clients": "kinesphere-clients",
          "deploy": "kinesphere-deploy"}

@@ -9,8 +9,9 @@ from pathlib import Path
 import pytest
 
 from kinesphere.cli import main
+from support.paths import TOY_EURDF
 
-TOY = Path(__file__).parent / "data" / "toyarm" / "toyarm.eurdf"
+pytestmark = pytest.mark.processes
 
 
 def run(*args: str) -> subprocess.CompletedProcess[str]:
@@ -20,7 +21,7 @@ def run(*args: str) -> subprocess.CompletedProcess[str]:
 
 
 def test_describe_json_gives_the_sets(capsys: object) -> None:
-    assert main(["describe", str(TOY), "--json"]) == 0
+    assert main(["describe", str(TOY_EURDF), "--json"]) == 0
     info = json.loads(capsys.readouterr().out)  # type: ignore[attr-defined]
     assert info["dof"] == 4
     assert [lb["label"] for lb in info["L"]] == ["limb_11", "limb_12", "limb_21"]
@@ -29,7 +30,7 @@ def test_describe_json_gives_the_sets(capsys: object) -> None:
 
 
 def test_describe_text_lists_limbs_with_links(capsys: object) -> None:
-    assert main(["describe", str(TOY)]) == 0
+    assert main(["describe", str(TOY_EURDF)]) == 0
     out = capsys.readouterr().out  # type: ignore[attr-defined]
     assert "L = {limb_11, limb_12, limb_21}" in out
     assert "links:  lower, hand, tip" in out
@@ -84,7 +85,7 @@ def test_platforms_lists_all_five() -> None:
 
 def test_label_prints_a_loadable_eurdf(tmp_path: Path) -> None:
     out = tmp_path / "proposal.eurdf"
-    assert main(["label", str(TOY), "-o", str(out)]) == 0
+    assert main(["label", str(TOY_EURDF), "-o", str(out)]) == 0
     assert main(["describe", str(out)]) == 0
 
 

@@ -2,7 +2,6 @@
 
 import csv
 import math
-from pathlib import Path
 
 import mujoco
 import numpy as np
@@ -11,8 +10,8 @@ import yourdfpy
 
 from kinesphere.platforms.mjcf import BASE_JOINTS, platform_model
 from kinesphere.platforms.platform import load_platform, platform_names
+from support.paths import REFERENCE
 
-REFERENCE = Path(__file__).resolve().parents[2] / "shared" / "reference" / "robots"
 PLATFORMS = ["baxter", "khepera", "nao", "packbot", "youbot"]
 
 

@@ -9,22 +9,11 @@ from __future__ import annotations
 import math
 
 import zenoh
-from test_agent_support import (
-    AckWatch,
-    Databank,
-    Operator,
-    databank,
-    far,
-    hub,
-    joints_close,
-    running_agent,
-)
 
 from kinesphere.errors import KinesphereError
 from kinesphere.laban import Direction
 from kinesphere.protocol import SpatialCommand
-
-__all__ = ["databank", "hub"]  # fixtures
+from support.agents import AckWatch, Databank, Operator, far, joints_close, running_agent
 
 
 def test_a_command_is_accepted_moves_and_is_reached_or_superseded(

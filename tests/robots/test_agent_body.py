@@ -15,14 +15,6 @@ from collections.abc import Sequence
 import numpy as np
 import pytest
 import zenoh
-from test_agent_support import (
-    Databank,
-    Operator,
-    StateWatch,
-    databank,
-    hub,
-    joints_close,
-)
 
 from kinesphere import zconfig
 from kinesphere.errors import KinesphereError
@@ -34,8 +26,7 @@ from kinesphere.robots.agent.bodies import BODIES, make_body
 from kinesphere.robots.agent.body import Body, Reading
 from kinesphere.robots.agent.options import BODY_KINDS
 from kinesphere.robots.agent.runtime import Agent, AgentOptions
-
-__all__ = ["databank", "hub"]  # fixtures
+from support.agents import Databank, Operator, StateWatch, joints_close
 
 
 class KinematicBody(Body):

@@ -12,7 +12,6 @@ import mujoco
 import numpy as np
 import pytest
 import zenoh
-from test_agent_support import AckWatch, Databank, Operator, databank, hub, running_agent
 
 from kinesphere.platforms.clearance import PATH_STEP, Clearance, Touch
 from kinesphere.platforms.mjcf import platform_model, robot_contacts
@@ -21,11 +20,10 @@ from kinesphere.robots.agent.controller import Controller
 from kinesphere.robots.agent.guard import CHECK_GAP_S, Guard, make_guard
 from kinesphere.robots.agent.mujoco_body import MujocoBody
 from kinesphere.services.ecl.ecl import Ecl
-
-__all__ = ["databank", "hub"]  # fixtures
+from support.agents import AckWatch, Databank, Operator, running_agent
+from support.wait import WAIT_S
 
 DT = 0.002
-WAIT_S = 30.0
 ARTICULATED = ("baxter", "nao", "youbot", "packbot")
 
 

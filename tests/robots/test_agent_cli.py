@@ -7,21 +7,16 @@ import subprocess
 import sys
 import threading
 
+import pytest
 import zenoh
-from test_agent_support import (
-    KEYS,
-    ROOT,
-    WAIT_S,
-    Databank,
-    Operator,
-    StateWatch,
-    databank,
-    hub,
-)
 
 from kinesphere import zconfig
+from support.agents import Databank, Operator, StateWatch
+from support.network import KEYS
+from support.paths import ROOT
+from support.wait import WAIT_S
 
-__all__ = ["databank", "hub"]  # fixtures
+pytestmark = pytest.mark.processes
 
 
 def test_agent_process_obeys_its_group_and_stops_on_sigterm(

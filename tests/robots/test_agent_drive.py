@@ -12,24 +12,21 @@ from collections.abc import Callable
 
 import numpy as np
 import zenoh
-from test_agent_support import (
-    Databank,
-    Operator,
-    StateWatch,
-    Trace,
-    databank,
-    finite_jerk,
-    hub,
-    joints_close,
-    running_agent,
-)
-from test_agent_translation import overlap
 
 from kinesphere.laban import Direction
 from kinesphere.protocol import Drive, RobotState, SpatialCommand
 from kinesphere.robots.agent.base import rotate
+from support.agents import (
+    Databank,
+    Operator,
+    StateWatch,
+    Trace,
+    finite_jerk,
+    joints_close,
+    overlap,
+    running_agent,
+)
 
-__all__ = ["databank", "hub"]  # fixtures
 TTL_MS = 2000
 
 

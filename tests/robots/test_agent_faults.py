@@ -20,28 +20,26 @@ import numpy as np
 import psutil
 import pytest
 import zenoh
-from test_agent_support import (
-    KEYS,
-    ROOT,
-    WAIT_S,
-    AckWatch,
-    Databank,
-    Operator,
-    StateWatch,
-    databank,
-    far,
-    hub,
-    joints_close,
-    running_agent,
-)
 
 from kinesphere import zconfig
 from kinesphere.protocol import MAX_INT, Command, SpatialCommand, encode
 from kinesphere.robots.agent import acks as ack_rules
 from kinesphere.robots.agent.inbox import MAX_PENDING, PER_SENDER
 from kinesphere.robots.agent.ordering import MAX_SENDERS
+from support.agents import (
+    AckWatch,
+    Databank,
+    Operator,
+    StateWatch,
+    far,
+    joints_close,
+    running_agent,
+)
+from support.network import KEYS
+from support.paths import ROOT
+from support.wait import WAIT_S
 
-__all__ = ["databank", "hub"]  # fixtures
+pytestmark = pytest.mark.processes
 
 
 def test_commands_queued_while_the_agent_was_frozen_never_run(

@@ -17,18 +17,6 @@ from pathlib import Path
 
 import pytest
 import zenoh
-from test_agent_support import (
-    KEYS,
-    ROOT,
-    WAIT_S,
-    AckWatch,
-    Databank,
-    Operator,
-    StateWatch,
-    databank,
-    hub,
-    joints_close,
-)
 
 from kinesphere import zconfig
 from kinesphere.cli import main
@@ -44,8 +32,10 @@ from kinesphere.robots.agent.fleet import (
 )
 from kinesphere.robots.agent.mujoco_body import MujocoBody
 from kinesphere.robots.agent.runtime import AgentOptions
-
-__all__ = ["databank", "hub"]  # fixtures
+from support.agents import AckWatch, Databank, Operator, StateWatch, joints_close
+from support.network import KEYS
+from support.paths import ROOT
+from support.wait import WAIT_S
 
 ROBOTS = [RobotSpec("baxter", "f-baxter"), RobotSpec("nao", "f-nao"),
           RobotSpec("youbot", "f-youbot", ("bases",))]
@@ -212,6 +202,7 @@ def test_fleet_file_and_robot_arguments(tmp_path: Path) -> None:
         parse_robot("nao:")
 
 
+@pytest.mark.processes
 def test_fleet_command_runs_every_robot_and_stops_on_sigterm(
     tmp_path: Path, hub: tuple[zenoh.Session, str]
 ) -> None:
@@ -249,6 +240,7 @@ def test_fleet_command_runs_every_robot_and_stops_on_sigterm(
         zconfig.undeclare(sub)
 
 
+@pytest.mark.processes
 def test_fleet_command_line_errors(tmp_path: Path) -> None:
     def run(*argv: str) -> subprocess.CompletedProcess[str]:
         return subprocess.run([sys.executable, "-m", "kinesphere.cli", *argv], cwd=ROOT,

@@ -13,19 +13,20 @@ from __future__ import annotations
 import random
 import threading
 import time
-from collections.abc import Iterator
-from pathlib import Path
 
 import pytest
 import zenoh
-from test_soak_support import MIB, SCALE, Tally, mib, rss
-from test_system_support import WAIT_S, Observer, supervisor, until
 
 from kinesphere import protocol as pr
 from kinesphere.deploy.procs import Supervisor
 from kinesphere.errors import KinesphereError
 from kinesphere.keyexpr import KEYS
 from kinesphere.zconfig import loopback_config, loopback_hub
+from support.soak import MIB, SCALE, Tally, mib, rss
+from support.system import Observer
+from support.wait import WAIT_S, until
+
+pytestmark = pytest.mark.processes
 
 ROBOT = "flood-k"
 MARK_SENDER = "flood-mark"
@@ -123,10 +124,6 @@ class Stream:
     def close(self) -> None:
         self._sub.undeclare()  # type: ignore[no-untyped-call]
 
-
-@pytest.fixture
-def sup(tmp_path: Path) -> Iterator[Supervisor]:
-    yield from supervisor(tmp_path / "logs")
 
 
 def pose(obs: Observer) -> list[float]:

@@ -10,20 +10,11 @@ import time
 
 import numpy as np
 import zenoh
-from test_agent_support import (
-    AckWatch,
-    Databank,
-    Operator,
-    StateWatch,
-    databank,
-    hub,
-    running_agent,
-)
 
 from kinesphere.protocol import Drive
 from kinesphere.robots.agent.lease import LEASE_TIMEOUT_S
+from support.agents import AckWatch, Databank, Operator, StateWatch, running_agent
 
-__all__ = ["databank", "hub"]  # fixtures
 TTL_MS = 500
 
 

@@ -15,7 +15,6 @@ import math
 import numpy as np
 import pytest
 import zenoh
-from test_agent_support import WAIT_S, Databank, databank, hub
 
 from kinesphere import zconfig
 from kinesphere.errors import KinesphereError
@@ -23,8 +22,9 @@ from kinesphere.protocol import SpatialCommand
 from kinesphere.robots.agent.bodies import make_body
 from kinesphere.robots.agent.controller import Controller
 from kinesphere.robots.agent.resolver import Resolver, parts_key
+from support.agents import Databank
+from support.wait import WAIT_S
 
-__all__ = ["databank", "hub"]  # fixtures
 PLATFORMS = ["baxter", "nao", "youbot", "packbot", "khepera"]
 DT = 0.002
 HOLD_S = 0.25

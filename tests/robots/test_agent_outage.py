@@ -12,19 +12,15 @@ from pathlib import Path
 
 import pytest
 import zenoh
-from test_agent_support import (
-    KEYS,
-    WAIT_S,
-    Databank,
-    Operator,
-    joints_close,
-    running_agent,
-)
-from test_system_support import until
 
 from kinesphere import zconfig
 from kinesphere.protocol import RecordRequest, SpatialCommand, encode
 from kinesphere.services.ecl.store import DATA_DIR
+from support.agents import Databank, Operator, joints_close, running_agent
+from support.network import KEYS
+from support.wait import WAIT_S, until
+
+pytestmark = pytest.mark.processes
 
 
 @pytest.fixture

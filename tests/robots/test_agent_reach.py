@@ -10,21 +10,11 @@ from contextlib import ExitStack
 import numpy as np
 import pytest
 import zenoh
-from test_agent_support import (
-    Databank,
-    Operator,
-    Trace,
-    databank,
-    finite_jerk,
-    hub,
-    joints_close,
-    running_agent,
-)
 
 from kinesphere.protocol import Catalogue, Pose, RobotState, SpatialCommand
 from kinesphere.robots.agent.runtime import Agent
+from support.agents import Databank, Operator, Trace, finite_jerk, joints_close, running_agent
 
-__all__ = ["databank", "hub"]  # fixtures
 PLATFORMS = ["baxter", "nao", "youbot", "packbot", "khepera"]
 TOL = 5e-3
 """rad (m): how close the simulated joints come to the (clamped) target once at rest."""

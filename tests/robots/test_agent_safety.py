@@ -10,20 +10,11 @@ from contextlib import ExitStack
 
 import numpy as np
 import zenoh
-from test_agent_support import (
-    Databank,
-    Operator,
-    Trace,
-    databank,
-    hub,
-    running_agent,
-)
 
 from kinesphere.protocol import Command, RobotState, encode
 from kinesphere.robots.agent.runtime import Agent
 from kinesphere.robots.agent.safety import DRIVE_TTL_S
-
-__all__ = ["databank", "hub"]  # fixtures
+from support.agents import Databank, Operator, Trace, running_agent
 
 
 def status(*names: str) -> Callable[[RobotState], bool]:

@@ -5,31 +5,11 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 import zenoh
-from test_agent_support import (
-    Databank,
-    Operator,
-    Trace,
-    databank,
-    hub,
-    joints_close,
-    running_agent,
-)
 
 from kinesphere.laban import Direction
 from kinesphere.protocol import SpatialCommand
-
-__all__ = ["databank", "hub"]  # fixtures
-
-
-def overlap(trace: Trace) -> tuple[float, float]:
-    """Robot-time spans (start, end) where joints and base both move."""
-    t = np.array(trace.t)
-    joints = np.abs(np.array(trace.vel)).max(axis=1) > 1e-3
-    base = np.hypot(*np.array(trace.base_vel)[:, :2].T) > 1e-3
-    both = t[joints & base]
-    return (float(both.min()), float(both.max())) if both.size else (math.nan, math.nan)
+from support.agents import Databank, Operator, Trace, joints_close, overlap, running_agent
 
 
 def test_translation_and_articulation_overlap_in_time(

@@ -14,14 +14,13 @@ from dataclasses import dataclass
 
 import pytest
 import zenoh
-from test_agent_support import WAIT_S, Databank, Operator, databank, hub
 
 from kinesphere import zconfig
 from kinesphere.protocol import Catalogue
 from kinesphere.robots.agent.pacing import LoopStats, Wake, run_paced
 from kinesphere.robots.agent.runtime import Agent, AgentOptions
-
-__all__ = ["databank", "hub"]  # fixtures
+from support.agents import Databank, Operator
+from support.wait import WAIT_S
 
 RATE = 4.0  # Hz: a quarter of a second between scheduled steps makes the order unmistakable
 

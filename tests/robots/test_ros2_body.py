@@ -17,23 +17,11 @@ import threading
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from pathlib import Path
 
 import numpy as np
 import pygame
 import pytest
 import zenoh
-from test_agent_support import (
-    KEYS,
-    WAIT_S,
-    Databank,
-    Operator,
-    databank,
-    hub,
-    running_agent,
-)
-from test_client_support import Pad, pygame_up
-from test_ros2_support import JAZZY, GraphWatch, RosPublisher, StandInRobot, dds
 
 from kinesphere import zconfig
 from kinesphere.clients import targets as tg
@@ -48,10 +36,13 @@ from kinesphere.platforms.platform import load_platform
 from kinesphere.protocol import Pose, SpatialCommand
 from kinesphere.robots.agent.bodies import make_body
 from kinesphere.robots.agent.options import AgentOptions, Ros2BodyOptions
+from support.agents import Databank, Operator, running_agent
+from support.clients import Pad
+from support.network import KEYS
+from support.paths import ROOT
+from support.ros2 import JAZZY, GraphWatch, RosPublisher, StandInRobot, dds
+from support.wait import WAIT_S
 
-__all__ = ["databank", "hub", "pygame_up"]  # fixtures
-
-ROOT = Path(__file__).resolve().parent.parent
 PLATFORM = "baxter"
 LIMB, ORIGIN = "limb_11", "distal_11"  # the right arm from the right shoulder
 TOL = 0.02

@@ -15,24 +15,17 @@ from pathlib import Path
 
 import pytest
 import zenoh
-from test_databank_support import (
-    KEYS,
-    ROOT,
-    TOY,
-    Tokens,
-    build_toy,
-    cli,
-    peer,
-    pose_of,
-    raw_get,
-    serve_process,
-)
 
 from kinesphere import zconfig
 from kinesphere.cli import main
 from kinesphere.errors import KinesphereError
 from kinesphere.services.databank import client
 from kinesphere.services.databank.process import open_ecls
+from support.databank import Tokens, build_toy, cli, pose_of, raw_get, serve_process
+from support.network import OWN_KEYS, peer
+from support.paths import ROOT, TOY
+
+pytestmark = pytest.mark.processes
 
 CMD = ("toyarm", "arm", "shoulder", "left-high", "2")
 
@@ -43,8 +36,9 @@ def db(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 @pytest.fixture
-def hub() -> Iterator[tuple[str, zenoh.Session, Tokens]]:
-    """A hub (no queryables of its own), a querier joined to it, and a token watcher."""
+def watched_hub() -> Iterator[tuple[str, zenoh.Session, Tokens]]:
+    """A hub of the test's own (no queryables, and no databank's token from another test), a
+    querier joined to it, and a token watcher."""
     with zconfig.loopback_hub() as (_hub, endpoint):
         querier = peer(endpoint)
         tokens = Tokens(querier)
@@ -56,7 +50,7 @@ def hub() -> Iterator[tuple[str, zenoh.Session, Tokens]]:
 
 
 def serve_args(endpoint: str, db: Path) -> list[str]:
-    return ["--db", f"{TOY}={db}", "--prefix", KEYS.prefix, "--connect", endpoint,
+    return ["--db", f"{TOY}={db}", "--prefix", OWN_KEYS.prefix, "--connect", endpoint,
             "--listen", zconfig.LOOPBACK_ANY_PORT]
 
 
@@ -86,10 +80,10 @@ class StartLine:
 
 
 def test_query_cli_and_clean_sigterm(
-    hub: tuple[str, zenoh.Session, Tokens], db: Path, capsys: pytest.CaptureFixture[str],
+    watched_hub: tuple[str, zenoh.Session, Tokens], db: Path, capsys: pytest.CaptureFixture[str],
 ) -> None:
-    endpoint, _, tokens = hub
-    zargs = ["--connect", endpoint, "--prefix", KEYS.prefix, "--timeout", "5"]
+    endpoint, _, tokens = watched_hub
+    zargs = ["--connect", endpoint, "--prefix", OWN_KEYS.prefix, "--timeout", "5"]
     with serve_process(serve_args(endpoint, db), "cli1") as proc:
         assert tokens.wait("cli1")
         text = subprocess.run(cli("query", *CMD, *zargs), capture_output=True, text=True,
@@ -136,16 +130,16 @@ def test_query_cli_without_a_databank_is_unavailable(capsys: pytest.CaptureFixtu
 
 
 def test_replicas_one_answer_and_failover_on_sigkill(
-    hub: tuple[str, zenoh.Session, Tokens], db: Path,
+    watched_hub: tuple[str, zenoh.Session, Tokens], db: Path,
 ) -> None:
     """Two replicas serve toyarm: each query gets one answer. The one answering is killed
     (SIGKILL, no goodbye): queries keep succeeding, the client changes nothing."""
-    endpoint, querier, tokens = hub
+    endpoint, querier, tokens = watched_hub
     args = serve_args(endpoint, db)
     with serve_process(args, "r1") as p1, serve_process(args, "r2") as p2:
         procs = {StartLine(p1).zid(): p1, StartLine(p2).zid(): p2}
         assert tokens.wait("r1") and tokens.wait("r2")
-        key = KEYS.pose("toyarm", "limb_11", "distal_11", "left-high", 2)
+        key = OWN_KEYS.pose("toyarm", "limb_11", "distal_11", "left-high", 2)
         answers = []
         for _ in range(30):
             replies = list(querier.get(key, consolidation=zenoh.ConsolidationMode.NONE,
@@ -166,7 +160,7 @@ def test_replicas_one_answer_and_failover_on_sigkill(
             while not stop.is_set():
                 try:
                     assert client.query_pose(querier, "toyarm", "limb_11", "distal_11",
-                                             "left-high", 2, keys=KEYS, timeout=5.0) == expected
+                                             "left-high", 2, keys=OWN_KEYS, timeout=5.0) == expected
                     served += 1
                 except Exception as exc:  # noqa: BLE001 - every failure counts
                     failures.append(exc)

@@ -18,16 +18,17 @@ from pathlib import Path
 import msgspec
 import pytest
 import zenoh
-from test_databank_support import Tokens, peer, serve_process
-from test_soak_support import MIB, SCALE, Tally, mib, rss
 
 from kinesphere import protocol as pr
 from kinesphere.errors import ERROR_CODES
-from kinesphere.keyexpr import Keys
 from kinesphere.services.databank.replies import DEFAULT_BUDGET, EncodedReply, entry_bytes
 from kinesphere.zconfig import LOOPBACK_ANY_PORT, close_session, loopback_hub
+from support.databank import Tokens, serve_process
+from support.network import OWN_KEYS, peer
+from support.soak import MIB, SCALE, Tally, mib, rss
 
-KEYS = Keys("kflood")
+pytestmark = pytest.mark.processes
+
 ARM = ("limb_11", "distal_11", "left-high")  # Baxter's right arm from the shoulder
 BATCH = 16
 OVERHEAD = 24 * MIB
@@ -75,7 +76,7 @@ class Flood:
 
 
 def reference(session: zenoh.Session) -> bytes:
-    replies = list(session.get(KEYS.pose("baxter", *ARM, 2), timeout=10.0))
+    replies = list(session.get(OWN_KEYS.pose("baxter", *ARM, 2), timeout=10.0))
     assert len(replies) == 1 and replies[0].ok is not None, replies
     return replies[0].ok.payload.to_bytes()
 
@@ -95,8 +96,8 @@ def compound(i: int, pad: int) -> bytes:
 def served(tmp_path: Path) -> Iterator[tuple[zenoh.Session, int]]:
     with loopback_hub() as (_hub, endpoint):
         client = peer(endpoint)
-        tokens = Tokens(client, KEYS)
-        args = ["--prefix", KEYS.prefix, "--connect", endpoint, "--listen", LOOPBACK_ANY_PORT]
+        tokens = Tokens(client, OWN_KEYS)
+        args = ["--prefix", OWN_KEYS.prefix, "--connect", endpoint, "--listen", LOOPBACK_ANY_PORT]
         try:
             with serve_process(args, "flood") as proc:
                 assert tokens.wait("flood", timeout=60), "databank did not start"
@@ -121,18 +122,18 @@ def test_flood_of_invented_keys_and_padded_requests_is_bounded(
     tally = Tally("databank flood")
     flood = Flood(client, tally)
     for i in range(200):  # warm up: caches, Zenoh buffers, the allocator
-        flood.get(KEYS.pose("baxter", *ARM, 1 + i / 200))
-        flood.get(KEYS.compound("baxter"), compound(i, 1000))
+        flood.get(OWN_KEYS.pose("baxter", *ARM, 1 + i / 200))
+        flood.get(OWN_KEYS.compound("baxter"), compound(i, 1000))
     flood.drain()
     tally.sent, tally.codes = 0, type(tally.codes)()
     before = rss(pid)
     n = 3000 * SCALE
     if SCALE > 1:  # fill the answer cache first, so the flood's two halves compare full caches
-        per_answer = entry_bytes(KEYS.pose("baxter", *ARM, 2.25),
+        per_answer = entry_bytes(OWN_KEYS.pose("baxter", *ARM, 2.25),
                                  EncodedReply(True, zenoh.ZBytes(good)))
         fill = DEFAULT_BUDGET.answers // per_answer + 1
         for i in range(fill):  # sizes in [2, 2.5): none of the flood's own
-            flood.get(KEYS.pose("baxter", *ARM, 2 + i / fill / 2))
+            flood.get(OWN_KEYS.pose("baxter", *ARM, 2 + i / fill / 2))
         flood.drain()
         tally.sent, tally.codes = 0, type(tally.codes)()
     mid = before
@@ -141,13 +142,13 @@ def test_flood_of_invented_keys_and_padded_requests_is_bounded(
             flood.drain()
             mid = rss(pid)
         # a 30 KB unknown platform name: malformed (too long), never cached whole
-        flood.get(f"{KEYS.prefix}/ecl/{i:08d}{'x' * 30_000}/catalogue")
+        flood.get(f"{OWN_KEYS.prefix}/ecl/{i:08d}{'x' * 30_000}/catalogue")
         # an unknown platform with a legal name: unknown_platform, cached in the error cache
-        flood.get(KEYS.catalogue(f"ghost-{i}-{'g' * 48}"))
+        flood.get(OWN_KEYS.catalogue(f"ghost-{i}-{'g' * 48}"))
         # a well-formed key for a new fractional size: a real answer each time
-        flood.get(KEYS.pose("baxter", *ARM, 1 + i / n))
+        flood.get(OWN_KEYS.pose("baxter", *ARM, 1 + i / n))
         if i % 3 == 0:  # 64 KiB compounds, each distinct
-            flood.get(KEYS.compound("baxter"), compound(i, pr.MAX_PAYLOAD - 16))
+            flood.get(OWN_KEYS.compound("baxter"), compound(i, pr.MAX_PAYLOAD - 16))
         if i % 500 == 0:
             flood.drain()
             assert reference(client) == good  # valid queries still answered, byte-identical
@@ -202,12 +203,12 @@ def test_fuzzed_requests_get_named_errors_and_valid_ones_stay_exact(
     record = pr.RecordRequest(limb="limb_11", origin="distal_11", direction="left-high",
                               size=2, joints={"right_s0": 0.1})
     valid: list[tuple[str, bytes | None]] = [
-        (KEYS.pose("baxter", *ARM, 2), None),
-        (KEYS.pose("youbot", "limb_11", "distal_11", "forward-middle", 4.5), None),
-        (KEYS.catalogue("nao"), None),
-        (KEYS.compound("baxter"), msgspec.msgpack.encode(
+        (OWN_KEYS.pose("baxter", *ARM, 2), None),
+        (OWN_KEYS.pose("youbot", "limb_11", "distal_11", "forward-middle", 4.5), None),
+        (OWN_KEYS.catalogue("nao"), None),
+        (OWN_KEYS.compound("baxter"), msgspec.msgpack.encode(
             {"type": "compound_request", "parts": [part]})),
-        (KEYS.record("baxter"), pr.encode(record)),  # writes are off: forbidden
+        (OWN_KEYS.record("baxter"), pr.encode(record)),  # writes are off: forbidden
     ]
     good = reference(client)
     tally = Tally("databank fuzz")
@@ -215,7 +216,7 @@ def test_fuzzed_requests_get_named_errors_and_valid_ones_stay_exact(
     for _ in range(50):  # warm up: caches, Zenoh buffers, the allocator
         for key, payload in valid:
             flood.get(key, payload)
-        flood.get(KEYS.compound("baxter"), compound(rng.randrange(10**6), 1000))
+        flood.get(OWN_KEYS.compound("baxter"), compound(rng.randrange(10**6), 1000))
     flood.drain()
     tally.sent, tally.codes = 0, type(tally.codes)()
     before = rss(pid)

@@ -10,22 +10,15 @@ from pathlib import Path
 
 import pytest
 import zenoh
-from test_databank_support import (
-    KEYS,
-    TOY,
-    answered,
-    build_toy,
-    error_code,
-    peer,
-    pose_of,
-    raw_get,
-    wait_until,
-)
 
 from kinesphere import protocol as pr
 from kinesphere import zconfig
 from kinesphere.services.databank.service import DatabankService, changed_key
 from kinesphere.services.ecl.ecl import Ecl
+from support.databank import answered, build_toy, error_code, pose_of, raw_get
+from support.network import OWN_KEYS, peer
+from support.paths import TOY
+from support.wait import until
 
 CELL = ("limb_11", "distal_11", "left-high")
 
@@ -47,9 +40,9 @@ class Net:
     def replica(self, name: str, db: Path, writes: bool) -> DatabankService:
         s = peer(self.endpoint)
         self._sessions.append(s)
-        svc = DatabankService(s, {"toyarm": Ecl.open(str(TOY), db)}, KEYS, name, writes).start()
+        svc = DatabankService(s, {"toyarm": Ecl.open(str(TOY), db)}, OWN_KEYS, name, writes).start()
         self.services.append(svc)
-        answered(self.client, KEYS.catalogue("toyarm"))
+        answered(self.client, OWN_KEYS.catalogue("toyarm"))
         return svc
 
     def close(self) -> None:
@@ -73,9 +66,11 @@ def test_record_is_forbidden_by_default_query_and_put(net: Net, tmp_path: Path) 
     db = build_toy(tmp_path / "toy.sqlite")
     before = db.read_bytes()
     svc = net.replica("ro", db, writes=False)
-    assert error_code(raw_get(net.client, KEYS.record("toyarm"), record_request())) == "forbidden"
-    net.client.put(KEYS.record("toyarm"), record_request())
-    assert error_code(raw_get(net.client, KEYS.record("toyarm"), record_request())) == "forbidden"
+    refused = raw_get(net.client, OWN_KEYS.record("toyarm"), record_request())
+    assert error_code(refused) == "forbidden"
+    net.client.put(OWN_KEYS.record("toyarm"), record_request())
+    refused = raw_get(net.client, OWN_KEYS.record("toyarm"), record_request())
+    assert error_code(refused) == "forbidden"
     assert db.read_bytes() == before
     assert svc.ecl("toyarm").query(*CELL, 2).joints["yaw"] != 0.75
 
@@ -85,28 +80,29 @@ def test_record_serves_new_values_at_once_and_announces_them(net: Net, tmp_path:
     svc = net.replica("rw", db, writes=True)
     heard: list[zenoh.Sample] = []
     got = threading.Event()
-    sub = net.client.declare_subscriber(changed_key(KEYS, "toyarm"),
+    sub = net.client.declare_subscriber(changed_key(OWN_KEYS, "toyarm"),
                                         lambda s: (heard.append(s), got.set()))
-    key = KEYS.pose("toyarm", *CELL, 2)
+    key = OWN_KEYS.pose("toyarm", *CELL, 2)
     old = pose_of(raw_get(net.client, key))  # now cached; the subscriber is known by now
     version = svc.ecl("toyarm").version
     try:
-        recorded = pose_of(raw_get(net.client, KEYS.record("toyarm"), record_request()))
+        recorded = pose_of(raw_get(net.client, OWN_KEYS.record("toyarm"), record_request()))
         assert recorded.joints["yaw"] == 0.75 and recorded.p_id == 2
         assert recorded.joints["elbow"] == old.joints["elbow"]  # joints left out are kept
         new = pose_of(raw_get(net.client, key))
         assert new.joints == recorded.joints != old.joints
         assert svc.ecl("toyarm").version != version
-        catalogue = pr.decode(raw_get(net.client, KEYS.catalogue("toyarm"))[0][1], pr.Catalogue)
+        catalogue = pr.decode(raw_get(net.client, OWN_KEYS.catalogue("toyarm"))[0][1], pr.Catalogue)
         assert catalogue.version == svc.ecl("toyarm").version
         assert got.wait(10)
         assert pr.decode(heard[0].payload, pr.Pose) == recorded
         assert heard[0].attachment is not None and heard[0].attachment.to_bytes() == b"rw"
         # a put records too, with nobody to answer
         got.clear()
-        net.client.put(KEYS.record("toyarm"), record_request(3, wrist=-0.5))
+        net.client.put(OWN_KEYS.record("toyarm"), record_request(3, wrist=-0.5))
         assert got.wait(10)
-        assert pose_of(raw_get(net.client, KEYS.pose("toyarm", *CELL, 3))).joints["wrist"] == -0.5
+        stored = pose_of(raw_get(net.client, OWN_KEYS.pose("toyarm", *CELL, 3)))
+        assert stored.joints["wrist"] == -0.5
         assert Ecl.open(str(TOY), db).query(*CELL, 3).joints["wrist"] == -0.5  # on disk
     finally:
         sub.undeclare()  # type: ignore[no-untyped-call]
@@ -137,9 +133,9 @@ def test_bad_records(net: Net, tmp_path: Path, payload: bytes, code: str) -> Non
     db = build_toy(tmp_path / "toy.sqlite")
     before = db.read_bytes()
     net.replica("rw", db, writes=True)
-    assert error_code(raw_get(net.client, KEYS.record("toyarm"), payload)) == code
+    assert error_code(raw_get(net.client, OWN_KEYS.record("toyarm"), payload)) == code
     assert db.read_bytes() == before
-    pose_of(raw_get(net.client, KEYS.pose("toyarm", *CELL, 1)))  # still serving
+    pose_of(raw_get(net.client, OWN_KEYS.pose("toyarm", *CELL, 1)))  # still serving
 
 
 def test_replicas_follow_each_others_records(net: Net, tmp_path: Path) -> None:
@@ -150,20 +146,20 @@ def test_replicas_follow_each_others_records(net: Net, tmp_path: Path) -> None:
     b = net.replica("b", Path(other), writes=True)
     c = net.replica("c", own, writes=False)
     # the default target reaches one replica: a writer records, the others follow it
-    replies = answered(net.client, KEYS.record("toyarm"), record_request(1, yaw=-0.4))
+    replies = answered(net.client, OWN_KEYS.record("toyarm"), record_request(1, yaw=-0.4))
     if replies[0][0]:
         recorded = pose_of(replies)
         for svc in (a, b, c):
-            assert wait_until(lambda s=svc: s.ecl("toyarm").query(*CELL, 1) == recorded), (
-                f"replica {svc.replica_id} did not follow")
+            until(lambda s=svc: s.ecl("toyarm").query(*CELL, 1) == recorded, 10.0,
+                  f"replica {svc.replica_id} to follow")
     else:  # it reached the read-only replica
         assert error_code(replies) == "forbidden"
     # a record sent to every replica (as the docs say) is stored by each writer
-    replies = raw_get(net.client, KEYS.record("toyarm"), record_request(3, yaw=-0.3),
+    replies = raw_get(net.client, OWN_KEYS.record("toyarm"), record_request(3, yaw=-0.3),
                       target=zenoh.QueryTarget.ALL_COMPLETE)
     assert sorted(ok for ok, _ in replies) == [False, True, True]
     recorded = pr.decode(next(data for ok, data in replies if ok), pr.Pose)
     for svc in (a, b, c):
-        assert wait_until(lambda s=svc: s.ecl("toyarm").query(*CELL, 3) == recorded), (
-            f"replica {svc.replica_id} did not follow")
+        until(lambda s=svc: s.ecl("toyarm").query(*CELL, 3) == recorded, 10.0,
+              f"replica {svc.replica_id} to follow")
     assert Ecl.open(str(TOY), other).query(*CELL, 3) == recorded

@@ -10,17 +10,6 @@ from pathlib import Path
 import msgspec
 import pytest
 import zenoh
-from test_databank_support import (
-    KEYS,
-    TOY,
-    Tokens,
-    answered,
-    build_toy,
-    error_code,
-    peer,
-    pose_of,
-    raw_get,
-)
 
 from kinesphere import protocol as pr
 from kinesphere import zconfig
@@ -28,6 +17,9 @@ from kinesphere.errors import KinesphereError
 from kinesphere.ratelog import RateLog
 from kinesphere.services.databank.service import DatabankService, changed_key
 from kinesphere.services.ecl.ecl import Ecl
+from support.databank import Tokens, answered, build_toy, error_code, pose_of, raw_get
+from support.network import OWN_KEYS, peer
+from support.paths import TOY
 
 ARM = ("toyarm", "limb_11", "distal_11")
 
@@ -43,10 +35,10 @@ def net(db: Path) -> Iterator[tuple[DatabankService, zenoh.Session]]:
     a querier joined to the hub."""
     with zconfig.loopback_hub() as (hub, endpoint):
         server, client = peer(endpoint), peer(endpoint)
-        svc = DatabankService(server, {"toyarm": Ecl.open(str(TOY), db)}, KEYS, "solo")
+        svc = DatabankService(server, {"toyarm": Ecl.open(str(TOY), db)}, OWN_KEYS, "solo")
         try:
             with svc:
-                answered(client, KEYS.catalogue("toyarm"))
+                answered(client, OWN_KEYS.catalogue("toyarm"))
                 yield svc, client
         finally:
             zconfig.close_session(client)
@@ -54,14 +46,14 @@ def net(db: Path) -> Iterator[tuple[DatabankService, zenoh.Session]]:
 
 
 def pose_key(direction: str, size: str, limb: str = "limb_11", origin: str = "distal_11") -> str:
-    return f"{KEYS.prefix}/ecl/toyarm/pose/{limb}/{origin}/{direction}/{size}"
+    return f"{OWN_KEYS.prefix}/ecl/toyarm/pose/{limb}/{origin}/{direction}/{size}"
 
 
 # -- every key expression ------------------------------------------------------------------
 def test_pose_queries(net: tuple[DatabankService, zenoh.Session]) -> None:
     svc, c = net
     stored = svc.ecl("toyarm").query("limb_11", "distal_11", "left-high", 2)
-    pose = pose_of(raw_get(c, KEYS.pose(*ARM, "left-high", 2)))
+    pose = pose_of(raw_get(c, OWN_KEYS.pose(*ARM, "left-high", 2)))
     assert pose == stored and pose.p_id == 2 and pose.translation is None
     # aliases, spellings and named sizes are the ECL's; the reply is canonical
     alias = pose_of(raw_get(c, pose_key("Left_High", "mid", "arm", "shoulder")))
@@ -71,7 +63,7 @@ def test_pose_queries(net: tuple[DatabankService, zenoh.Session]) -> None:
     assert half.p_id is None and half.size == 2.5
     beyond = pose_of(raw_get(c, pose_key("left-high", "4")))
     assert beyond.translation is not None and math.isclose(beyond.translation[1], 0.1)
-    core = pose_of(raw_get(c, KEYS.pose("toyarm", "c_1", "c_1", "forward-middle", 2)))
+    core = pose_of(raw_get(c, OWN_KEYS.pose("toyarm", "c_1", "c_1", "forward-middle", 2)))
     assert core.joints == {} and core.translation == pytest.approx([0.2, 0.0, 0.0])
 
 
@@ -82,16 +74,16 @@ def test_compound_catalogue_record_and_liveliness(
     parts = [pr.SpatialCommand("limb_11", "distal_11", "left-high", 1),
              pr.SpatialCommand("limb_21", "distal_21", "left-middle", 2)]
     req = pr.encode(pr.CompoundRequest(parts=parts))
-    pose = pose_of(raw_get(c, KEYS.compound("toyarm"), req))
+    pose = pose_of(raw_get(c, OWN_KEYS.compound("toyarm"), req))
     assert pose.is_compound and pose.joints == svc.ecl("toyarm").compound(parts).joints
-    assert pose_of(raw_get(c, KEYS.compound("toyarm"), req)) == pose  # cached answer
-    (ok, data), = raw_get(c, KEYS.catalogue("toyarm"))
+    assert pose_of(raw_get(c, OWN_KEYS.compound("toyarm"), req)) == pose  # cached answer
+    (ok, data), = raw_get(c, OWN_KEYS.catalogue("toyarm"))
     assert ok and pr.decode(data, pr.Catalogue) == svc.ecl("toyarm").catalogue()
-    (ok, data), = raw_get(c, KEYS.catalogue("*"))  # discovery
+    (ok, data), = raw_get(c, OWN_KEYS.catalogue("*"))  # discovery
     assert ok and pr.decode(data, pr.Catalogue).platform == "toyarm"
     record = pr.RecordRequest(limb="limb_11", origin="distal_11", direction="left-high",
                               size=1, joints={"yaw": 0.5})
-    assert error_code(raw_get(c, KEYS.record("toyarm"), pr.encode(record))) == "forbidden"
+    assert error_code(raw_get(c, OWN_KEYS.record("toyarm"), pr.encode(record))) == "forbidden"
     tokens = Tokens(c)
     try:
         assert tokens.wait("solo")
@@ -103,7 +95,7 @@ def test_repeated_queries_come_from_the_reply_cache(
     net: tuple[DatabankService, zenoh.Session], monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     svc, c = net
-    key = KEYS.pose(*ARM, "right-low", 3)
+    key = OWN_KEYS.pose(*ARM, "right-low", 3)
     first = pose_of(raw_get(c, key))
     calls: list[object] = []
     ecl = svc.ecl("toyarm")
@@ -115,8 +107,8 @@ def test_repeated_queries_come_from_the_reply_cache(
 
 # -- bad input: the right code, and the service keeps serving -------------------------------
 BAD_KEYS = [
-    (f"{KEYS.prefix}/ecl/nosuchbot/pose/limb_11/distal_11/left-high/2", "unknown_platform"),
-    (f"{KEYS.prefix}/ecl/nosuchbot/catalogue", "unknown_platform"),
+    (f"{OWN_KEYS.prefix}/ecl/nosuchbot/pose/limb_11/distal_11/left-high/2", "unknown_platform"),
+    (f"{OWN_KEYS.prefix}/ecl/nosuchbot/catalogue", "unknown_platform"),
     (pose_key("left-high", "2", limb="leg"), "unknown_limb"),
     (pose_key("left-high", "2", origin="distal_21"), "unknown_origin"),
     (pose_key("sideways", "2"), "unknown_direction"),
@@ -126,11 +118,11 @@ BAD_KEYS = [
     (pose_key("left-high", "nan"), "size_out_of_range"),
     (pose_key("left-high", "inf"), "size_out_of_range"),
     (pose_key("left-high", "1e999"), "size_out_of_range"),
-    (f"{KEYS.prefix}/ecl/toyarm/pose/limb_11/distal_11", "malformed"),
-    (f"{KEYS.prefix}/ecl/toyarm/pose/limb_11/distal_11/left-high/2/extra", "malformed"),
-    (f"{KEYS.prefix}/ecl/toyarm/changed", "malformed"),
-    (f"{KEYS.prefix}/ecl/toyarm/nonsense", "malformed"),
-    (f"{KEYS.prefix}/ecl/toyarm/compound", "malformed"),  # no payload
+    (f"{OWN_KEYS.prefix}/ecl/toyarm/pose/limb_11/distal_11", "malformed"),
+    (f"{OWN_KEYS.prefix}/ecl/toyarm/pose/limb_11/distal_11/left-high/2/extra", "malformed"),
+    (f"{OWN_KEYS.prefix}/ecl/toyarm/changed", "malformed"),
+    (f"{OWN_KEYS.prefix}/ecl/toyarm/nonsense", "malformed"),
+    (f"{OWN_KEYS.prefix}/ecl/toyarm/compound", "malformed"),  # no payload
 ]
 
 
@@ -139,7 +131,7 @@ def test_bad_keys(net: tuple[DatabankService, zenoh.Session], key: str, code: st
     _, c = net
     assert error_code(raw_get(c, key)) == code
     assert error_code(raw_get(c, key)) == code  # the cached error is the same
-    pose_of(raw_get(c, KEYS.pose(*ARM, "left-high", 1)))  # still serving
+    pose_of(raw_get(c, OWN_KEYS.pose(*ARM, "left-high", 1)))  # still serving
 
 
 def _msg(**fields: object) -> bytes:
@@ -177,8 +169,8 @@ def test_bad_compound_payloads(
     net: tuple[DatabankService, zenoh.Session], payload: bytes, code: str
 ) -> None:
     _, c = net
-    assert error_code(raw_get(c, KEYS.compound("toyarm"), payload)) == code
-    pose_of(raw_get(c, KEYS.compound("toyarm"), _msg(parts=[PART])))  # still serving
+    assert error_code(raw_get(c, OWN_KEYS.compound("toyarm"), payload)) == code
+    pose_of(raw_get(c, OWN_KEYS.compound("toyarm"), _msg(parts=[PART])))  # still serving
 
 
 def test_known_platform_served_elsewhere_gets_silence(
@@ -186,8 +178,8 @@ def test_known_platform_served_elsewhere_gets_silence(
 ) -> None:
     """baxter is a shipped platform this replica does not serve: another replica may."""
     _, c = net
-    assert raw_get(c, KEYS.pose("baxter", "limb_11", "distal_11", "left-high", 2)) == []
-    assert raw_get(c, KEYS.catalogue("baxter")) == []
+    assert raw_get(c, OWN_KEYS.pose("baxter", "limb_11", "distal_11", "left-high", 2)) == []
+    assert raw_get(c, OWN_KEYS.catalogue("baxter")) == []
 
 
 def test_unknown_platform_once_per_replica_serving_everything(db: Path) -> None:
@@ -196,17 +188,17 @@ def test_unknown_platform_once_per_replica_serving_everything(db: Path) -> None:
     with zconfig.loopback_hub() as (_hub, endpoint):
         sessions = [peer(endpoint) for _ in range(3)]
         services = [
-            DatabankService(s, {"toyarm": Ecl.open(str(TOY), db)}, KEYS, f"r{i}",
+            DatabankService(s, {"toyarm": Ecl.open(str(TOY), db)}, OWN_KEYS, f"r{i}",
                             known_platforms=()).start()
             for i, s in enumerate(sessions[:2])
         ]
         c = sessions[2]
         try:
             assert services[0].serves_all_known
-            answered(c, KEYS.catalogue("toyarm"))
+            answered(c, OWN_KEYS.catalogue("toyarm"))
             for _ in range(20):
-                assert len(raw_get(c, KEYS.pose(*ARM, "left-high", 2))) == 1
-                assert error_code(raw_get(c, f"{KEYS.prefix}/ecl/nao/catalogue")) == (
+                assert len(raw_get(c, OWN_KEYS.pose(*ARM, "left-high", 2))) == 1
+                assert error_code(raw_get(c, f"{OWN_KEYS.prefix}/ecl/nao/catalogue")) == (
                     "unknown_platform")
         finally:
             for svc in services:
@@ -219,9 +211,9 @@ def test_construction_checks(db: Path) -> None:
     with zconfig.loopback_hub() as (hub, _):
         for ecls in ({}, {"x": Ecl.open(str(TOY), db)}):
             with pytest.raises(KinesphereError) as info:
-                DatabankService(hub, ecls, KEYS)
+                DatabankService(hub, ecls, OWN_KEYS)
             assert info.value.code == "malformed"
-    assert changed_key(KEYS, "toyarm") == f"{KEYS.prefix}/ecl/toyarm/changed"
+    assert changed_key(OWN_KEYS, "toyarm") == f"{OWN_KEYS.prefix}/ecl/toyarm/changed"
 
 
 def test_malformed_requests_log_one_line_without_traceback(
@@ -233,7 +225,7 @@ def test_malformed_requests_log_one_line_without_traceback(
     caplog.set_level(logging.DEBUG, logger="kinesphere")
     deep = b"\x82\xa5parts\x90\xa1x" + b"\x91" * 60_000 + b"\xc0"
     for _ in range(20):
-        assert error_code(raw_get(c, KEYS.compound("toyarm"), deep)) == "malformed"
+        assert error_code(raw_get(c, OWN_KEYS.compound("toyarm"), deep)) == "malformed"
     lines = [r for r in caplog.records if r.levelno >= logging.WARNING]
     assert len(lines) == 1, [r.getMessage() for r in lines]
     assert lines[0].exc_info is None and "nested too deeply" in lines[0].getMessage()

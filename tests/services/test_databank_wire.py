@@ -14,7 +14,6 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-from test_databank_support import ROOT, answered
 
 from kinesphere import zconfig
 from kinesphere.keyexpr import Keys
@@ -23,6 +22,10 @@ from kinesphere.services.databank.service import DatabankService
 from kinesphere.services.ecl.ecl import Ecl
 from kinesphere.services.ecl.store import PoseRow, write_databank
 from kinesphere.services.ecl.vsam import load_vsam
+from support.databank import answered
+from support.paths import ROOT
+
+pytestmark = pytest.mark.processes
 
 DOC = ROOT / "docs" / "protocol.md"
 NO_KINESPHERE = "import sys\nsys.modules['kinesphere'] = None  # any kinesphere import fails\n"

@@ -7,11 +7,11 @@ from pathlib import Path
 
 import pytest
 import zenoh
-from test_agent_support import Operator, databank, hub, running_agent  # noqa: F401
 
 from kinesphere.cli import main
 from kinesphere.services.ecl.ecl import Ecl
 from kinesphere.services.ecl.store import default_db_path
+from support.agents import Operator, running_agent  # noqa: F401
 
 LIMB = ("limb_11", "distal_11", "forward-middle", 2)
 

@@ -11,8 +11,6 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 import zenoh
-from test_databank_support import KEYS, answered, error_code, peer, pose_of, raw_get
-from test_ecl_honesty import gaze
 
 from kinesphere import protocol as pr
 from kinesphere import zconfig
@@ -24,6 +22,9 @@ from kinesphere.services.databank.service import DatabankService
 from kinesphere.services.ecl.ecl import Ecl
 from kinesphere.sizes import MAX_TRANSLATION
 from kinesphere.substitution import MAX_ANGLE_DEG, nearest_direction
+from support.databank import answered, error_code, pose_of, raw_get
+from support.ecl import gaze
+from support.network import OWN_KEYS, peer
 
 ARM = ("limb_11", "distal_11")
 
@@ -127,8 +128,8 @@ def net() -> Iterator[tuple[str, zenoh.Session]]:
         server, client = peer(endpoint), peer(endpoint)
         ecls = {"nao": Ecl.open("nao"), "packbot": Ecl.open("packbot")}
         try:
-            with DatabankService(server, ecls, KEYS, "shipped"):
-                answered(client, KEYS.catalogue("nao"))
+            with DatabankService(server, ecls, OWN_KEYS, "shipped"):
+                answered(client, OWN_KEYS.catalogue("nao"))
                 yield endpoint, client
         finally:
             zconfig.close_session(client)
@@ -139,7 +140,7 @@ def test_query_nao_head_left_middle_looks_left(
     net: tuple[str, zenoh.Session], capsys: pytest.CaptureFixture[str],
 ) -> None:
     endpoint, _ = net
-    zargs = ["--connect", endpoint, "--prefix", KEYS.prefix, "--timeout", "5"]
+    zargs = ["--connect", endpoint, "--prefix", OWN_KEYS.prefix, "--timeout", "5"]
     assert main(["query", "nao", "head", "neck", "left-middle", "3", "--json", *zargs]) == 0
     pose = json.loads(capsys.readouterr().out)
     assert (pose["limb"], pose["direction"], pose["substitutions"]) == (
@@ -155,18 +156,19 @@ def test_query_nao_head_left_middle_looks_left(
 
 def test_exact_selector_and_substitution_on_the_wire(net: tuple[str, zenoh.Session]) -> None:
     _, client = net
-    key = KEYS.pose("packbot", *ARM, "left-low", 3)
+    key = OWN_KEYS.pose("packbot", *ARM, "left-low", 3)
     pose = pose_of(raw_get(client, key))
     assert pose.direction == "left-forward-low" and pose.substitutions[0].requested == "left-low"
     assert error_code(raw_get(client, key + EXACT)) == "direction_unavailable"
     assert pose_of(raw_get(client, key)) == pose  # the cached answers stay apart
     assert pose_of(raw_get(client, key + "?other=1")) == pose  # other parameters: ignored
-    exact_hit = pose_of(raw_get(client, KEYS.pose("packbot", *ARM, "left-forward-low", 3) + EXACT))
+    exact_key = OWN_KEYS.pose("packbot", *ARM, "left-forward-low", 3) + EXACT
+    exact_hit = pose_of(raw_get(client, exact_key))
     assert exact_hit.joints == pose.joints and exact_hit.substitutions == []
-    big = KEYS.pose("packbot", "c_1", "c_1", "forward-middle", 1.8e19)
+    big = OWN_KEYS.pose("packbot", "c_1", "c_1", "forward-middle", 1.8e19)
     assert error_code(raw_get(client, big)) == "size_out_of_range"
     request = pr.CompoundRequest(parts=[pr.SpatialCommand("arm", "shoulder", "left-low", 3)])
-    joined = pose_of(raw_get(client, KEYS.compound("packbot"), pr.encode(request)))
+    joined = pose_of(raw_get(client, OWN_KEYS.compound("packbot"), pr.encode(request)))
     assert joined.substitutions[0].served == "left-forward-low"
     assert math.isclose(joined.substitutions[0].angle, 35.264, abs_tol=1e-3)
     assert np.isclose(joined.joints["turret"], pose.joints["turret"])

@@ -4,7 +4,6 @@ Left-High example, and clean poses (no self-contact, nothing under the floor).""
 from __future__ import annotations
 
 import statistics
-from functools import cache
 from pathlib import Path
 
 import mujoco
@@ -13,46 +12,21 @@ import pytest
 
 from kinesphere.cli import main
 from kinesphere.laban import Direction
-from kinesphere.platforms.frames import pivot
-from kinesphere.platforms.mjcf import PlatformModel, platform_model
+from kinesphere.platforms.mjcf import platform_model
 from kinesphere.platforms.platform import load_platform, platform_names
-from kinesphere.services.ecl.constraints import tip_point
 from kinesphere.services.ecl.db import content_digest, read_tables
-from kinesphere.services.ecl.ecl import Ecl
 from kinesphere.services.ecl.generate import COS_FAR, COS_SIZE, GENERATOR_VERSION, generate
 from kinesphere.services.ecl.store import default_db_path
 from kinesphere.services.ecl.vsam import load_vsam
+from support.ecl import configure, origin_of, shipped, tip_world
+from support.paths import TOY
 
-TOY = Path(__file__).parent / "data" / "toyarm"
 SHIPPED = ("baxter", "nao", "youbot", "packbot", "khepera")
 CHEAP = ("youbot", "limb_13", "distal_13")  # two joints: the fastest real entry to regenerate
 
 
-@cache
-def shipped(name: str) -> Ecl:
-    return Ecl.open(name)
-
-
 def generated_rows(name: str) -> list[dict]:
     return [r for r in shipped(name).rows() if r["joints"] and r["direction"] != "place-middle"]
-
-
-def tip_world(pm: PlatformModel, data: mujoco.MjData, limb: str) -> np.ndarray:
-    body = pm.model.body(pm.platform.eurdf.tip_link(limb)).id
-    point = tip_point(pm.model, body)
-    return np.asarray(data.xpos[body] + data.xmat[body].reshape(3, 3) @ point)
-
-
-def configure(pm: PlatformModel, joints: dict[str, float]) -> mujoco.MjData:
-    data = mujoco.MjData(pm.model)
-    data.qpos[:] = pm.qpos(joints)  # neutral elsewhere, mimic joints following their leaders
-    mujoco.mj_kinematics(pm.model, data)
-    return data
-
-
-def origin_of(pm: PlatformModel, neutral: mujoco.MjData, origin: str) -> np.ndarray:
-    """The pivot of a joint location at neutral: where its directions are measured from."""
-    return pivot(pm.model, neutral, pm.platform.eurdf.origin(origin).joints)
 
 
 def test_generation_is_deterministic() -> None:
@@ -169,6 +143,7 @@ def test_paper_example_raises_the_right_arm_up_and_to_the_left(name: str) -> Non
         assert tip[1] - rest[1] > 0.3
 
 
+@pytest.mark.processes  # generation on every core: worker processes
 def test_build_and_report_commands(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     db = tmp_path / "toy.sqlite"
     assert main(["ecl", "build", str(TOY), "--db", str(db), "--reasons"]) == 0
@@ -186,6 +161,7 @@ def test_build_and_report_commands(tmp_path: Path, capsys: pytest.CaptureFixture
         default_db_path(load_platform("khepera"))).pose) > 0
 
 
+@pytest.mark.processes  # generation on every core: worker processes
 def test_parallel_build_gives_the_serial_rows(tmp_path: Path,
                                               capsys: pytest.CaptureFixture[str]) -> None:
     """Two worker processes, one (limb, origin) pair each: the same rows, quality figures and

@@ -8,12 +8,10 @@ from __future__ import annotations
 import copy
 from dataclasses import replace
 from functools import cache
-from pathlib import Path
 
 import mujoco
 import numpy as np
 import pytest
-from test_ecl_generate import configure, origin_of, shipped, tip_world
 
 from kinesphere.cli import main
 from kinesphere.laban import Direction
@@ -25,8 +23,9 @@ from kinesphere.services.ecl.chains import COS_FAR, DETOUR_SLACK, STEP_SLACK
 from kinesphere.services.ecl.coverage import markdown
 from kinesphere.services.ecl.db import read_tables
 from kinesphere.services.ecl.store import default_db_path
+from support.ecl import configure, gaze, origin_of, shipped, tip_world
+from support.paths import ROOT
 
-ROOT = Path(__file__).resolve().parents[1]
 ARTICULATED = ("baxter", "nao", "youbot", "packbot")
 
 
@@ -43,14 +42,6 @@ def chains(name: str) -> dict[tuple[str, str, str], list[np.ndarray]]:
         chain = out.setdefault(key, [np.array([plat.neutral.get(j, 0.0) for j in names])])
         chain.append(np.array([r["joints"][j] for j in names]))
     return out
-
-
-def gaze(name: str, joints: dict[str, float]) -> np.ndarray:
-    """NAO's gaze in the body frame: the head's x axis (the cameras look along it)."""
-    pm = platform_model(name)
-    data = configure(pm, joints)
-    rot = data.xmat[pm.model.body(pm.platform.eurdf.root_link).id].reshape(3, 3)
-    return np.asarray(rot.T @ data.xmat[pm.model.body("Head").id].reshape(3, 3)[:, 0])
 
 
 # -- NAO: one hip motor, the head by gaze, nothing that topples ---------------------------------

@@ -8,7 +8,6 @@ from pathlib import Path
 
 import msgspec
 import pytest
-from test_ecl_store import TOY, build, toy_rows
 
 from kinesphere.cli import main
 from kinesphere.errors import KinesphereError
@@ -19,6 +18,8 @@ from kinesphere.services.ecl.db import content_digest
 from kinesphere.services.ecl.ecl import Ecl
 from kinesphere.services.ecl.store import PoseRow, write_databank
 from kinesphere.services.ecl.vsam import load_vsam
+from support.ecl import build, toy_rows
+from support.paths import TOY
 
 
 @pytest.fixture

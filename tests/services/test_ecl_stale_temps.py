@@ -15,12 +15,15 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 from kinesphere.cli import main
 from kinesphere.services.ecl.db import remove_stale_temps
 from kinesphere.services.ecl.ecl import Ecl
 from kinesphere.services.ecl.store import DATA_DIR
+from support.paths import ROOT
 
-ROOT = Path(__file__).resolve().parents[1]
+pytestmark = pytest.mark.processes
 
 KILLED_AT_COMMIT = """
 import os, signal, sqlite3, sys

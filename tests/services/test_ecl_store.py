@@ -20,29 +20,8 @@ from kinesphere.services.ecl.db import connect, content_digest, quote_ident, rea
 from kinesphere.services.ecl.ecl import Ecl
 from kinesphere.services.ecl.store import PoseRow, write_databank
 from kinesphere.services.ecl.vsam import load_vsam
-
-TOY = Path(__file__).resolve().parent / "data" / "toyarm"
-
-
-def toy_rows(offset: float = 0.0) -> list[PoseRow]:
-    """Hand-made poses: every pull of limb_11 and limb_12, one direction of the tail."""
-    rows = []
-    for i, d in enumerate(Direction.pulls()):
-        for s in (1, 2, 3):
-            rows.append(PoseRow("limb_11", "distal_11", d.slug, s, {
-                "yaw": 0.05 * s * (i % 7 - 3) + offset, "elbow": 0.3 + 0.1 * s + 0.01 * i,
-                "wrist": -0.04 * s * (i % 5 - 2)}, cosine=0.9, reach=s / 3, margin=0.1))
-            rows.append(PoseRow("forearm", "elbow_loc", d.slug, s, {
-                "elbow": 0.3 - 0.1 * s - 0.01 * i, "wrist": 0.03 * s * (i % 3 - 1)}))
-    rows += [PoseRow("limb_21", "distal_21", "left-middle", s, {"tail_joint": 0.5 * s})
-             for s in (1, 2, 3)]
-    return rows
-
-
-def build(path: Path, plat: Platform | None = None, rows: list[PoseRow] | None = None) -> str:
-    plat = plat or load_platform(str(TOY))
-    return write_databank(path, plat, load_vsam(plat), toy_rows() if rows is None else rows,
-                          "test-1")
+from support.ecl import build, toy_rows
+from support.paths import ROOT, TOY
 
 
 def _sql(path: Path, query: str, args: tuple[object, ...] = ()) -> list[tuple[object, ...]]:
@@ -257,7 +236,7 @@ from kinesphere.platforms.platform import load_platform
 from kinesphere.services.ecl import store
 from kinesphere.services.ecl.vsam import load_vsam
 sys.path.insert(0, sys.argv[3])
-from test_ecl_store import toy_rows
+from support.ecl import toy_rows
 
 class Pause:
     def __init__(self, rows):
@@ -280,7 +259,7 @@ print("DONE", flush=True)
 
 def _writer(db: Path) -> subprocess.Popen[str]:
     proc = subprocess.Popen(
-        [sys.executable, "-c", CHILD, str(db), str(TOY), str(Path(__file__).parent)],
+        [sys.executable, "-c", CHILD, str(db), str(TOY), str(ROOT / "tests")],
         stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
     )
     assert proc.stdout is not None
@@ -288,6 +267,7 @@ def _writer(db: Path) -> subprocess.Popen[str]:
     return proc
 
 
+@pytest.mark.processes
 def test_a_writer_killed_mid_build_leaves_the_old_databank_serving(tmp_path: Path) -> None:
     db = tmp_path / "toy.sqlite"
     old = build(db)

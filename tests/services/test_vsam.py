@@ -9,8 +9,8 @@ from kinesphere.errors import KinesphereError
 from kinesphere.laban import Direction
 from kinesphere.platforms.platform import load_platform
 from kinesphere.services.ecl.vsam import load_vsam, vsam_from_dict
+from support.paths import TOY
 
-TOY = Path(__file__).resolve().parent / "data" / "toyarm"
 STEPS = {"baxter": None, "nao": 0.1, "youbot": 0.25, "packbot": 0.5, "khepera": 0.05}
 
 

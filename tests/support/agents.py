@@ -1,13 +1,15 @@
-"""Shared fixtures for the agent tests: a loopback hub, the real databank, agents, state watchers.
+"""For the agent tests: the real databank process, agents, state and ack watchers, an operator.
 
 Everything is real: Zenoh sessions on ``tcp/127.0.0.1:<free port>`` with scouting off, the
 databank service as a subprocess (``kinesphere databank serve``), MuJoCo and Ruckig in the
 agents, which run in this process so tests can record their Ruckig outputs. Tests wait on
-events (a state matching a predicate, a liveliness token), never on sleeps.
+events (a state matching a predicate, a liveliness token), never on sleeps. The shared hub and
+databank are fixtures (``tests/conftest.py``).
 """
 
 from __future__ import annotations
 
+import math
 import os
 import signal
 import subprocess
@@ -20,11 +22,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import pytest
 import zenoh
 
 from kinesphere import zconfig
-from kinesphere.keyexpr import Keys
 from kinesphere.protocol import (
     Ack,
     Catalogue,
@@ -40,12 +40,9 @@ from kinesphere.protocol import (
 )
 from kinesphere.robots.agent.controller import Controller
 from kinesphere.robots.agent.runtime import Agent, AgentOptions
-
-KEYS = Keys()
-ROOT = Path(__file__).resolve().parent.parent
-WAIT_S = 30.0
-"""Generous upper bound for events on a loaded 2-core machine; tests finish far sooner."""
-
+from support.network import KEYS
+from support.paths import ROOT
+from support.wait import WAIT_S
 
 # --- the databank ---------------------------------------------------------------------------
 
@@ -108,34 +105,6 @@ class Databank:
             assert reply.ok is not None, platform
             return decode(reply.ok.payload, Catalogue)
         raise RuntimeError(f"no catalogue for {platform}")
-
-
-_SHARED: dict[str, object] = {}
-"""One hub and one databank for every agent test module (pytest would make one per module
-of a fixture imported from here); closed at the end of the test session."""
-
-
-@pytest.fixture
-def hub(request: pytest.FixtureRequest) -> tuple[zenoh.Session, str]:
-    """A loopback Zenoh hub every test process joins (shared by all agent tests)."""
-    if "hub" not in _SHARED:
-        session, endpoint = zconfig.open_hub()
-        request.config.add_cleanup(lambda: zconfig.close_session(session))
-        _SHARED["hub"] = (session, endpoint)
-    return _SHARED["hub"]  # type: ignore[return-value]
-
-
-@pytest.fixture
-def databank(request: pytest.FixtureRequest, hub: tuple[zenoh.Session, str]) -> Databank:
-    """The real databank serving every shipped platform (shared; stopped before the hub)."""
-    bank = _SHARED.get("databank")
-    if not isinstance(bank, Databank):
-        session, endpoint = hub
-        bank = Databank(endpoint, session)
-        bank.start()
-        request.config.add_cleanup(bank.stop)
-        _SHARED["databank"] = bank
-    return bank
 
 
 # --- robots ------------------------------------------------------------------------------------
@@ -319,3 +288,12 @@ def finite_jerk(trace: Trace) -> tuple[np.ndarray, np.ndarray]:
     t, _, vel, acc = trace.arrays()
     dt = np.diff(t)[:, None]
     return np.abs(np.diff(acc, axis=0) / dt), np.abs(np.diff(vel, axis=0))
+
+
+def overlap(trace: Trace) -> tuple[float, float]:
+    """Robot-time spans (start, end) where joints and base both move."""
+    t = np.array(trace.t)
+    joints = np.abs(np.array(trace.vel)).max(axis=1) > 1e-3
+    base = np.hypot(*np.array(trace.base_vel)[:, :2].T) > 1e-3
+    both = t[joints & base]
+    return (float(both.min()), float(both.max())) if both.size else (math.nan, math.nan)

@@ -1,5 +1,6 @@
-"""Shared by the client tests against real robots: the databank and two agents (a PackBot and
-a youBot) run as processes on loopback; states are tracked with arrival times; a gamepad
+"""For the client tests against real robots: the databank and two agents (a PackBot and a
+youBot) run as processes on a loopback hub of their own (``running_fleet``, the ``fleet``
+fixture of ``tests/clients/conftest.py``); states are tracked with arrival times; a gamepad
 operator runs in this process on its own session.
 """
 
@@ -17,7 +18,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pygame
-import pytest
 import zenoh
 
 from kinesphere import zconfig
@@ -27,13 +27,11 @@ from kinesphere.clients.gamepad.inputs import pad
 from kinesphere.clients.gamepad.teleop import Teleop
 from kinesphere.clients.link import RobotLink
 from kinesphere.clients.options import TeleopOptions
-from kinesphere.keyexpr import Keys
 from kinesphere.protocol import RobotState, decode
+from support.network import KEYS
+from support.paths import ROOT
+from support.wait import WAIT_S
 
-ROOT = Path(__file__).resolve().parent.parent
-KEYS = Keys()
-WAIT_S = 60.0
-"""Upper bound for start-up and events on a loaded 2-core machine; tests finish far sooner."""
 TTL_MS = 300
 PB, YB = "pb-1", "yb-1"
 PLATFORMS = {PB: "packbot", YB: "youbot"}
@@ -157,10 +155,9 @@ class Fleet:
     track: Track
 
 
-@pytest.fixture(scope="module")
-def fleet(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Fleet]:
+def running_fleet(logs: Path) -> Iterator[Fleet]:
+    """The databank and the two agents as processes on a hub of their own, until closed."""
     args = databank_args()
-    logs = tmp_path_factory.mktemp("logs")
     with zconfig.loopback_hub() as (hub, endpoint):
         track = Track(hub)
         children: list[Child] = []

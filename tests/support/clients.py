@@ -23,14 +23,12 @@ os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
 os.environ.setdefault("SDL_AUDIODRIVER", "dummy")
 
 import pygame  # noqa: E402
-import pytest  # noqa: E402
 import zenoh  # noqa: E402
 
 from kinesphere import zconfig  # noqa: E402
 from kinesphere.clients.gamepad.inputs import pad  # noqa: E402
 from kinesphere.clients.gamepad.state import ControllerState  # noqa: E402
 from kinesphere.clients.link import RobotLink  # noqa: E402
-from kinesphere.keyexpr import Keys  # noqa: E402
 from kinesphere.protocol import (  # noqa: E402
     Ack,
     AckStage,
@@ -41,10 +39,9 @@ from kinesphere.protocol import (  # noqa: E402
     decode,
     encode,
 )
+from support.network import OWN_KEYS  # noqa: E402
+from support.wait import WAIT_S  # noqa: E402
 
-KEYS = Keys("kstest")
-WAIT_S = 20.0
-"""Upper bound for events on a loaded 2-core machine; tests finish far sooner."""
 SENTINEL = "sentinel"
 MAX = 32767
 
@@ -201,14 +198,15 @@ class StandIn(Inbox):
 
     def __init__(self, session: zenoh.Session, robot_id: str, groups: Sequence[str] = (),
                  answer: Callable[[Command], list[Reply]] | None = usual) -> None:  # fmt: skip
-        super().__init__(session, KEYS.command(robot_id))
+        super().__init__(session, OWN_KEYS.command(robot_id))
         self.robot_id = robot_id
         self.answer = answer
         self.lease_holder = ""
-        self._subs = [session.declare_subscriber(KEYS.group_command(g), self._on) for g in groups]
-        self._acks = session.declare_publisher(KEYS.ack(robot_id))
+        self._subs = [session.declare_subscriber(OWN_KEYS.group_command(g), self._on)
+                      for g in groups]
+        self._acks = session.declare_publisher(OWN_KEYS.ack(robot_id))
         self._state = FakeRobot(session, robot_id, "fakebot", groups, wait=False)
-        self._token = session.liveliness().declare_token(KEYS.alive_robot(robot_id))
+        self._token = session.liveliness().declare_token(OWN_KEYS.alive_robot(robot_id))
         self._closing = threading.Event()
         self._states = threading.Thread(target=self._publish_states, daemon=True)
         self._states.start()
@@ -264,29 +262,16 @@ def sentinel(link: RobotLink, keys: Sequence[str], inboxes: Sequence[Inbox]) -> 
         box.wait(lambda g: g.cmd.sender == SENTINEL and g.cmd.seq == n, "the sentinel")
 
 
-@pytest.fixture(scope="module")
-def hub() -> Iterator[tuple[zenoh.Session, str]]:
-    with zconfig.loopback_hub() as pair:
-        yield pair
-
-
 @contextmanager
 def client_link(endpoint: str, watch: bool = True, sender: str | None = None
                 ) -> Iterator[RobotLink]:  # fmt: skip
     """A client's own session joined to the hub, and its RobotLink (as ``sender``)."""
     with zconfig.session(config=zconfig.loopback_config(endpoint)) as s:
-        link = RobotLink(s, KEYS, watch=watch, sender=sender)
+        link = RobotLink(s, OWN_KEYS, watch=watch, sender=sender)
         try:
             yield link
         finally:
             link.close()
-
-
-@pytest.fixture(scope="module")
-def pygame_up() -> Iterator[None]:
-    pad.init_pygame(headless=True)
-    yield
-    pygame.quit()
 
 
 def post(kind: int, **attrs: object) -> None:
@@ -361,7 +346,7 @@ class FakeRobot:
         self.platform = platform
         self.groups = list(groups)
         self.seq = 0
-        self.pub = session.declare_publisher(KEYS.state(robot_id))
+        self.pub = session.declare_publisher(OWN_KEYS.state(robot_id))
         assert not wait or zconfig.wait_matching(self.pub, WAIT_S), "no state subscriber"
 
     def state(self, status: str = "idle", **fields: object) -> None:
@@ -377,18 +362,18 @@ class FakeRobot:
 
 
 @contextmanager
-def databank(session: zenoh.Session, *platforms: str) -> Iterator[None]:
+def databank_service(session: zenoh.Session, *platforms: str) -> Iterator[None]:
     """The real databank service with the shipped databanks of ``platforms``, on ``session``."""
     from kinesphere.services.databank.service import DatabankService
     from kinesphere.services.ecl.ecl import Ecl
 
-    with DatabankService(session, {p: Ecl.open(p) for p in platforms}, KEYS, "clients"):
+    with DatabankService(session, {p: Ecl.open(p) for p in platforms}, OWN_KEYS, "clients"):
         yield
 
 
 def await_catalogue(link: RobotLink, platform: str) -> None:
     """Until a catalogue query for ``platform`` from ``link``'s session would reach a server."""
-    querier = link.session.declare_querier(KEYS.catalogue(platform))
+    querier = link.session.declare_querier(OWN_KEYS.catalogue(platform))
     try:
         assert zconfig.wait_matching(querier, WAIT_S), f"no catalogue server for {platform}"
     finally:
@@ -402,9 +387,9 @@ def fake_catalogue(session: zenoh.Session, cat: Catalogue) -> Iterator[None]:
 
     def on_query(query: zenoh.Query) -> None:
         with query:
-            query.reply(KEYS.catalogue(cat.platform), payload)
+            query.reply(OWN_KEYS.catalogue(cat.platform), payload)
 
-    q = session.declare_queryable(KEYS.catalogue(cat.platform), on_query)
+    q = session.declare_queryable(OWN_KEYS.catalogue(cat.platform), on_query)
     try:
         yield
     finally:

@@ -1,4 +1,4 @@
-"""Helpers for the databank tests: small databanks, raw queries, waits with deadlines.
+"""For the databank tests: small databanks, raw queries, liveliness tokens, serve processes.
 
 Everything runs on real Zenoh sessions on ``tcp/127.0.0.1:<free port>`` with multicast
 scouting off. Waits are bounded retries of a real query or liveliness events, never sleeps
@@ -12,7 +12,7 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -23,15 +23,13 @@ from kinesphere.keyexpr import Keys
 from kinesphere.platforms.platform import load_platform
 from kinesphere.services.ecl.store import PoseRow, write_databank
 from kinesphere.services.ecl.vsam import load_vsam
-from kinesphere.zconfig import loopback_config, open_session
+from support.network import OWN_KEYS
+from support.paths import ROOT, TOY
 
-ROOT = Path(__file__).resolve().parents[1]
-TOY = ROOT / "tests" / "data" / "toyarm"
-KEYS = Keys("kstest")
 Raw = list[tuple[bool, bytes]]
 
 
-def toy_rows(offset: float = 0.0) -> list[PoseRow]:
+def sparse_toy_rows(offset: float = 0.0) -> list[PoseRow]:
     """Hand-made toyarm poses: three directions of the arm, one of the tail."""
     rows = []
     for i, d in enumerate(("left-high", "forward-middle", "right-low")):
@@ -45,7 +43,7 @@ def toy_rows(offset: float = 0.0) -> list[PoseRow]:
 
 def build_toy(path: Path, offset: float = 0.0) -> Path:
     plat = load_platform(str(TOY))
-    write_databank(path, plat, load_vsam(plat), toy_rows(offset), "test")
+    write_databank(path, plat, load_vsam(plat), sparse_toy_rows(offset), "test")
     return path
 
 
@@ -60,11 +58,6 @@ def build_baxter(path: Path) -> Path:
     ]
     write_databank(path, plat, load_vsam(plat), rows, "test")
     return path
-
-
-def peer(endpoint: str) -> zenoh.Session:
-    """A peer session joined to the hub at ``endpoint``."""
-    return open_session(config=loopback_config(endpoint))
 
 
 def raw_get(
@@ -113,20 +106,10 @@ def pose_of(replies: Raw) -> pr.Pose:
     return pr.decode(data, pr.Pose)
 
 
-def wait_until(cond: Callable[[], bool], timeout: float = 10.0) -> bool:
-    """Poll ``cond`` until true or the deadline; for state changed by another thread."""
-    deadline = time.monotonic() + timeout
-    while not cond():
-        if time.monotonic() > deadline:
-            return False
-        time.sleep(0.01)
-    return True
-
-
 class Tokens:
     """Databank liveliness tokens seen by a subscriber (with history), as events."""
 
-    def __init__(self, session: zenoh.Session, keys: Keys = KEYS) -> None:
+    def __init__(self, session: zenoh.Session, keys: Keys = OWN_KEYS) -> None:
         self.keys = keys
         self.alive: set[str] = set()
         self._cond = threading.Condition()

@@ -20,9 +20,9 @@ from rosbags.typesys import Stores, get_typestore
 from zenoh.ext import Int64, UInt8, z_deserialize, z_serialize
 
 from kinesphere import zconfig
+from support.wait import WAIT_S
 
 JAZZY = get_typestore(Stores.ROS2_JAZZY)
-WAIT_S = 30.0
 """Upper bound for events on a loaded 2-core machine; tests finish far sooner."""
 GID = tuple[(UInt8,) * 16]  # type: ignore[misc]
 

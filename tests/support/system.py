@@ -8,8 +8,7 @@ from __future__ import annotations
 import os
 import socket
 import subprocess
-import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from pathlib import Path
 
 import psutil
@@ -18,16 +17,14 @@ import zenoh
 
 from kinesphere.deploy.procs import Supervisor
 from kinesphere.deploy.watch import Alive, StateRecorder, watch_alive
-from kinesphere.keyexpr import Keys
 from kinesphere.protocol import Pose, RobotState, decode, error_from_reply
 from kinesphere.services.ecl.store import DATA_DIR
 from kinesphere.zconfig import close_session, free_port, open_session, undeclare
+from support.network import KEYS
+from support.paths import DEPLOY
+from support.wait import WAIT_S, until
 
-ROOT = Path(__file__).resolve().parent.parent
-DEPLOY = ROOT / "deploy"
 SHIPPED_DBS = DATA_DIR
-KEYS = Keys()
-WAIT_S = 60.0
 """Upper bound for start-up events on a loaded 2-core machine; healthy runs take seconds."""
 
 
@@ -40,17 +37,6 @@ def databank_args(platforms: list[str]) -> list[str]:
         return [a for p in platforms for a in ("--db", f"{p}={Path(dev) / p}.sqlite")]
     pytest.fail(f"no {'/'.join(platforms)} databanks in {SHIPPED_DBS} (or $KINESPHERE_TEST_DBS): "
                 "run `kinesphere ecl build --all` or restore them with git")
-
-
-def until(cond: Callable[[], bool], timeout: float, what: str, every: float = 0.05,
-          explain: Callable[[], object] | None = None) -> None:
-    """Poll ``cond`` until it holds; fail naming ``what`` (and ``explain()``) after ``timeout``."""
-    deadline = time.monotonic() + timeout
-    while not cond():
-        if time.monotonic() > deadline:
-            extra = f"\n{explain()}" if explain is not None else ""
-            pytest.fail(f"timed out after {timeout:g} s waiting for {what}{extra}")
-        time.sleep(every)
 
 
 def port_open(port: int, host: str = "127.0.0.1") -> bool:

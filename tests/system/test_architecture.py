@@ -7,9 +7,9 @@ from __future__ import annotations
 import importlib
 import re
 import tomllib
-from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+from support.paths import ROOT
+
 DOC = ROOT / "docs" / "architecture.md"
 LAYERS = ("core", "platforms", "robots", "services", "clients", "deploy")
 

@@ -17,8 +17,6 @@ import mujoco
 import numpy as np
 import pytest
 import zenoh
-from test_agent_support import ROOT, Databank, StateWatch, joints_close
-from test_byor_support import PANDA, TALOS, TIAGO, UR5, robot_data
 
 from kinesphere import zconfig
 from kinesphere.cli import main
@@ -26,6 +24,11 @@ from kinesphere.laban import Direction
 from kinesphere.platforms.mjcf import platform_model
 from kinesphere.platforms.platform import load_platform
 from kinesphere.protocol import SpatialCommand
+from support.agents import Databank, StateWatch, joints_close
+from support.byor import PANDA, TALOS, TIAGO, UR5, robot_data
+from support.paths import ROOT
+
+pytestmark = pytest.mark.processes
 
 # name: (URDF, limb, origin, direction, what the user edits in platform.toml's [neutral])
 ROBOTS = {
@@ -55,17 +58,17 @@ def brought(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 @pytest.fixture(scope="module")
-def hub() -> Iterator[tuple[zenoh.Session, str]]:
-    """This module's loopback Zenoh hub."""
-    session, endpoint = zconfig.open_hub()
-    yield session, endpoint
-    zconfig.close_session(session)
+def own_hub() -> Iterator[tuple[zenoh.Session, str]]:
+    """Not the shared hub: this module's databank serves the brought robots under the default
+    prefix, where the shared databank (complete on ``{p}/ecl/*/**``) would call them unknown."""
+    with zconfig.loopback_hub() as pair:
+        yield pair
 
 
 @pytest.fixture(scope="module")
-def bank(brought: Path, hub: tuple[zenoh.Session, str]) -> Iterator[Databank]:
+def bank(brought: Path, own_hub: tuple[zenoh.Session, str]) -> Iterator[Databank]:
     """One databank process serving the four brought robots, found by name via --platforms."""
-    session, endpoint = hub
+    session, endpoint = own_hub
     args = ["--platforms", str(brought)]
     for name in ROBOTS:
         args += ["--platform", name]
@@ -99,9 +102,9 @@ def test_platforms_are_found_on_the_search_path_only_when_given(brought: Path) -
 
 @pytest.mark.parametrize("name", list(ROBOTS))
 def test_send_up_left_far_moves_the_tip_up_left_of_the_shoulder(
-    name: str, brought: Path, bank: Databank, hub: tuple[zenoh.Session, str]
+    name: str, brought: Path, bank: Databank, own_hub: tuple[zenoh.Session, str]
 ) -> None:
-    session, endpoint = hub
+    session, endpoint = own_hub
     _, limb, origin, direction, _ = ROBOTS[name]
     pull = np.array(Direction.parse(direction).vector, dtype=float)
     pull /= np.linalg.norm(pull)

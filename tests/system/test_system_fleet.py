@@ -10,25 +10,24 @@ works; a streaming ``kinesphere play`` is SIGKILLed and its robot stops within t
 from __future__ import annotations
 
 import time
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-from test_system_support import (
-    WAIT_S,
+
+from kinesphere.deploy.procs import Supervisor
+from kinesphere.keyexpr import KEYS
+from kinesphere.protocol import Command, SpatialCommand, encode
+from support.system import (
     Observer,
     at_pose,
     client_config,
     databank_args,
     query_pose,
     router_hub,
-    supervisor,
-    until,
 )
+from support.wait import WAIT_S, until
 
-from kinesphere.deploy.procs import Supervisor
-from kinesphere.keyexpr import KEYS
-from kinesphere.protocol import Command, SpatialCommand, encode
+pytestmark = pytest.mark.processes
 
 ROBOTS = {"baxter-1": "baxter", "nao-1": "nao", "youbot-1": "youbot"}
 POSE_A = ("limb_11", "distal_11", "right-high", 2)
@@ -36,10 +35,6 @@ POSE_B = ("limb_11", "distal_11", "forward-high", 2)
 TTL_MS = 300
 AGENT_HZ = "250"  # three real-time agents, a databank and a router share two cores in CI
 
-
-@pytest.fixture
-def sup(tmp_path: Path) -> Iterator[Supervisor]:
-    yield from supervisor(tmp_path / "logs")
 
 
 def _send(sup: Supervisor, name: str, cfg: Path, pose: tuple[str, str, str, int]) -> None:

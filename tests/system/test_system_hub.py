@@ -18,15 +18,6 @@ from pathlib import Path
 import pytest
 import zenoh
 from rich.console import Console
-from test_system_support import (
-    WAIT_S,
-    Observer,
-    at_pose,
-    databank_args,
-    port_open,
-    supervisor,
-    until,
-)
 
 from kinesphere.cli import main
 from kinesphere.deploy.plan import PlannedRobot, UpOptions
@@ -35,6 +26,10 @@ from kinesphere.deploy.up import Demo
 from kinesphere.keyexpr import KEYS
 from kinesphere.protocol import Ack, Command, SpatialCommand, decode, encode
 from kinesphere.zconfig import free_port, loopback_config
+from support.system import Observer, at_pose, databank_args, port_open
+from support.wait import WAIT_S, until
+
+pytestmark = pytest.mark.processes
 
 ROBOTS = {"youbot-1": "youbot", "khepera-1": "khepera", "khepera-2": "khepera"}
 ARM = ("limb_11", "distal_11", "left-high", 2)  # youBot's arm
@@ -130,10 +125,6 @@ def test_kill_any_service_and_the_rest_keep_talking(
         acks.close()
     assert status_lists(ep, "client", capsys) == alive
 
-
-@pytest.fixture
-def sup(tmp_path: Path) -> Iterator[Supervisor]:
-    yield from supervisor(tmp_path / "logs")
 
 
 def test_quick_start_topology_peers_around_a_router(

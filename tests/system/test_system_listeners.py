@@ -7,46 +7,31 @@ the router and its access control; ``databank serve --connect`` did the same.
 
 from __future__ import annotations
 
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-from test_system_support import (
-    WAIT_S,
-    Observer,
-    databank_args,
-    listeners,
-    loopback,
-    supervisor,
-    until,
-)
 
 from kinesphere.deploy.procs import Supervisor
-from kinesphere.zconfig import loopback_config, loopback_hub
+from kinesphere.zconfig import loopback_config
+from support.network import Hub
+from support.system import Observer, databank_args, listeners, loopback
+from support.wait import WAIT_S, until
+
+pytestmark = pytest.mark.processes
 
 
-@pytest.fixture(scope="module")
-def hub() -> Iterator[str]:
-    with loopback_hub() as (_session, endpoint):
-        yield endpoint
-
-
-@pytest.fixture(scope="module")
-def sup(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Supervisor]:
-    yield from supervisor(tmp_path_factory.mktemp("listeners") / "logs")
-
-
-def test_connect_only_processes_never_listen_beyond_loopback(hub: str, sup: Supervisor,
+def test_connect_only_processes_never_listen_beyond_loopback(hub: Hub, sup: Supervisor,
                                                              tmp_path: Path) -> None:
+    endpoint = hub.endpoint
     dbs = databank_args(["khepera"])
-    sup.spawn("agent-peer", ["agent", "khepera", "--id", "kpeer", "--connect", hub])
-    sup.spawn("agent-client", ["agent", "khepera", "--id", "kclient", "--connect", hub,
+    sup.spawn("agent-peer", ["agent", "khepera", "--id", "kpeer", "--connect", endpoint])
+    sup.spawn("agent-client", ["agent", "khepera", "--id", "kclient", "--connect", endpoint,
                                "--mode", "client"])
     sup.spawn("databank-peer", ["databank", "serve", *dbs, "--replica", "dpeer",
-                                "--connect", hub])
+                                "--connect", endpoint])
     sup.spawn("databank-client", ["databank", "serve", *dbs, "--replica", "dclient",
-                                  "--connect", hub, "--mode", "client"])
-    obs = Observer(loopback_config(hub))
+                                  "--connect", endpoint, "--mode", "client"])
+    obs = Observer(loopback_config(endpoint))
     try:
         obs.wait_alive({"kpeer", "kclient"}, databank=True, sup=sup)
         until(lambda: {"dpeer", "dclient"} <= obs.alive.databanks, WAIT_S,

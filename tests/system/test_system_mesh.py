@@ -23,8 +23,12 @@ from pathlib import Path
 
 import pytest
 import zenoh
-from test_system_support import (
-    WAIT_S,
+
+from kinesphere.deploy.procs import Supervisor
+from kinesphere.keyexpr import KEYS
+from kinesphere.protocol import Ack, Command, SpatialCommand, decode, encode
+from kinesphere.zconfig import free_port, session, undeclare, wait_matching
+from support.system import (
     Observer,
     at_pose,
     client_config,
@@ -34,13 +38,10 @@ from test_system_support import (
     port_open,
     query_pose,
     supervisor,
-    until,
 )
+from support.wait import WAIT_S, until
 
-from kinesphere.deploy.procs import Supervisor
-from kinesphere.keyexpr import KEYS
-from kinesphere.protocol import Ack, Command, SpatialCommand, decode, encode
-from kinesphere.zconfig import free_port, session, undeclare, wait_matching
+pytestmark = pytest.mark.processes
 
 ROBOTS = {"youbot-1": "youbot", "nao-1": "nao"}
 POSE_A = ("limb_11", "distal_11", "left-high", 2)
@@ -102,10 +103,6 @@ class Mesh:
         code = self.sup.wait(name, WAIT_S)
         assert code == 0, f"{name} exited {code}:\n{child.tail()}"
 
-
-@pytest.fixture
-def sup(tmp_path: Path) -> Iterator[Supervisor]:
-    yield from supervisor(tmp_path / "logs")
 
 
 @pytest.fixture(scope="module")

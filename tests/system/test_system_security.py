@@ -19,22 +19,6 @@ from pathlib import Path
 
 import pytest
 import zenoh
-from test_system_support import (
-    DEPLOY,
-    KEYS,
-    SHIPPED_DBS,
-    WAIT_S,
-    Observer,
-    at_pose,
-    databank_args,
-    listeners,
-    localize,
-    make_certs,
-    port_open,
-    query_pose,
-    supervisor,
-    until,
-)
 
 from kinesphere.deploy.procs import Supervisor
 from kinesphere.errors import KinesphereError
@@ -57,6 +41,23 @@ from kinesphere.zconfig import (
     session_config,
     undeclare,
 )
+from support.network import KEYS
+from support.paths import DEPLOY
+from support.system import (
+    SHIPPED_DBS,
+    Observer,
+    at_pose,
+    databank_args,
+    listeners,
+    localize,
+    make_certs,
+    port_open,
+    query_pose,
+    supervisor,
+)
+from support.wait import WAIT_S, until
+
+pytestmark = pytest.mark.processes
 
 ROBOT = "youbot-1"
 OTHER = "baxter-1"

@@ -18,13 +18,9 @@ import threading
 import time
 import uuid
 from collections import Counter, defaultdict
-from collections.abc import Iterator
-from pathlib import Path
 
 import pytest
 import zenoh
-from test_soak_support import SCALE, Tally
-from test_system_support import WAIT_S, databank_args, supervisor, until
 
 from kinesphere import protocol as pr
 from kinesphere.cli import main
@@ -34,6 +30,11 @@ from kinesphere.deploy.watch import StateRecorder, watch_alive
 from kinesphere.keyexpr import KEYS
 from kinesphere.query import get_one
 from kinesphere.zconfig import close_session, undeclare
+from support.soak import SCALE, Tally
+from support.system import databank_args
+from support.wait import WAIT_S, until
+
+pytestmark = pytest.mark.processes
 
 ROBOTS = {"yb": "youbot", "k1": "khepera", "pb": "packbot", "k2": "khepera"}
 HOLDS = {"A": ("yb", "k1"), "B": ("pb", "k2")}
@@ -114,10 +115,6 @@ def arm_poses(session: zenoh.Session, platform: str) -> list[pr.SpatialCommand]:
     return [pr.SpatialCommand(entry.limb, entry.origin, d, float(s))
             for d in entry.directions[:3] for s in entry.sizes[:2]]
 
-
-@pytest.fixture
-def sup(tmp_path: Path) -> Iterator[Supervisor]:
-    yield from supervisor(tmp_path / "logs")
 
 
 def run_cli(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str]:

@@ -15,7 +15,6 @@ import sys
 from pathlib import Path
 
 import pytest
-from test_system_support import ROOT, SHIPPED_DBS, WAIT_S, until
 
 from kinesphere.deploy.denials import DenialFilter, describe_subject
 from kinesphere.deploy.plan import (
@@ -25,6 +24,11 @@ from kinesphere.deploy.plan import (
     shipped_phrases_dir,
 )
 from kinesphere.errors import KinesphereError
+from support.paths import ROOT
+from support.system import SHIPPED_DBS
+from support.wait import WAIT_S, until
+
+pytestmark = pytest.mark.processes
 
 PHRASE = (
     'name = "short"\n[[step]]\nduration = 1.5\nparts = ["limb_11 distal_11 left-high 2"]\n'

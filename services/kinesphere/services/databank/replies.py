@@ -93,7 +93,7 @@ ENTRY_BYTES: Final = 384
 """Bytes counted per cached answer on top of its key and payload: the key and EncodedReply objects,
 the ZBytes and its buffer header, the dict slot (with the table's spare room) and the LRU link.
 Measured with real pose answers: ~320 bytes, so a full 32 MiB answer cache costs the process
-~30 MiB of RSS (tests/test_databank_cache.py); 256 undercounted it (35 MiB)."""
+~30 MiB of RSS (tests/services/test_databank_cache.py); 256 undercounted it (35 MiB)."""
 
 
 def entry_bytes(key: Hashable, answer: EncodedReply) -> int:

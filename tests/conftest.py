@@ -1,0 +1,74 @@
+"""The fixtures every test folder shares, and the ``processes`` marker.
+
+``hub`` and ``databank`` are one per test session: the agent tests of every folder join one
+loopback hub and ask one real databank process (serving every shipped platform under the
+default prefix), started once. A test that must not meet them (it stops its databank, or serves
+other robots under the same prefix) opens a hub of its own with ``zconfig.loopback_hub``.
+
+A test that starts processes (the databank, agents, routers, ``kinesphere`` commands, pip) is
+marked ``processes``: ``make test`` runs the others on both cores and these one at a time.
+Using a fixture that starts one marks a test; a test that starts one itself is marked in its
+module.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from kinesphere import zconfig
+from kinesphere.deploy.procs import Supervisor
+from support.agents import Databank
+from support.network import Hub
+from support.system import supervisor
+
+PROCESS_FIXTURES = frozenset({"databank", "sup", "fleet"})
+"""Fixtures that start processes: a test using one is marked ``processes``."""
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    for item in items:
+        if PROCESS_FIXTURES & set(getattr(item, "fixturenames", ())):
+            item.add_marker(pytest.mark.processes)
+
+
+@pytest.fixture(scope="session")
+def hub() -> Iterator[Hub]:
+    """The loopback Zenoh hub the tests' sessions and processes join (one per test session)."""
+    with zconfig.loopback_hub() as (session, endpoint):
+        yield Hub(session, endpoint)
+
+
+@pytest.fixture(scope="session")
+def databank(hub: Hub) -> Iterator[Databank]:
+    """The real databank process serving every shipped platform on the hub (one per test
+    session; stopped before the hub)."""
+    bank = Databank(hub.endpoint, hub.session)
+    bank.start()
+    try:
+        yield bank
+    finally:
+        bank.stop()
+
+
+@pytest.fixture
+def sup(tmp_path: Path) -> Iterator[Supervisor]:
+    """Processes started by the test, stopped (and checked for leftovers) after it."""
+    yield from supervisor(tmp_path / "logs")
+
+
+@pytest.fixture(scope="module")
+def pygame_up() -> Iterator[None]:
+    """pygame initialised headless (SDL's dummy drivers) for the module's tests."""
+    os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
+    os.environ.setdefault("SDL_AUDIODRIVER", "dummy")
+    import pygame
+
+    from kinesphere.clients.gamepad.inputs import pad
+
+    pad.init_pygame(headless=True)
+    yield
+    pygame.quit()

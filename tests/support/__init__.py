@@ -1,0 +1,7 @@
+"""What the tests share, one module per concept; fixtures live in ``tests/conftest.py``.
+
+``paths`` (the repository and test data), ``wait`` (the one poller and the upper bound on
+waits), ``network`` (key prefixes, the hub's shape, peer sessions), then one module per role or
+part under test: ``agents``, ``clients``, ``client_fleet``, ``databank``, ``ecl``, ``protocol``,
+``ros2``, ``system``, ``view``, ``soak``, ``byor``.
+"""

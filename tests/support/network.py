@@ -1,0 +1,29 @@
+"""Zenoh on loopback for the tests: key prefixes, the hub's shape, peer sessions."""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import zenoh
+
+from kinesphere.keyexpr import Keys
+from kinesphere.zconfig import loopback_config, open_session
+
+KEYS = Keys()
+"""The default prefix: what every process uses unless told, so what a user's commands use,
+and what the shared databank (``tests/conftest.py``) serves."""
+OWN_KEYS = Keys("kstest")
+"""A prefix of the tests' own: services a test declares itself on the shared hub must not meet
+the shared databank, which answers every platform under the default prefix."""
+
+
+class Hub(NamedTuple):
+    """A loopback Zenoh session every test process joins, and the endpoint to join it at."""
+
+    session: zenoh.Session
+    endpoint: str
+
+
+def peer(endpoint: str) -> zenoh.Session:
+    """A peer session joined to the hub at ``endpoint``."""
+    return open_session(config=loopback_config(endpoint))

@@ -1,0 +1,27 @@
+"""Waiting for what another thread or process does: one upper bound, one poller.
+
+Tests wait on events (a message, a state matching a predicate) wherever one exists; this
+poller is for state that changes without an event to wait on.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+
+import pytest
+
+WAIT_S = 60.0
+"""Upper bound for start-up and events on a loaded 2-core machine; tests finish far sooner
+(a larger bound only makes a failing test fail later)."""
+
+
+def until(cond: Callable[[], bool], timeout: float, what: str, every: float = 0.05,
+          explain: Callable[[], object] | None = None) -> None:
+    """Poll ``cond`` until it holds; fail naming ``what`` (and ``explain()``) after ``timeout``."""
+    deadline = time.monotonic() + timeout
+    while not cond():
+        if time.monotonic() > deadline:
+            extra = f"\n{explain()}" if explain is not None else ""
+            pytest.fail(f"timed out after {timeout:g} s waiting for {what}{extra}")
+        time.sleep(every)
