@@ -63,7 +63,7 @@ class Echo:
 
 
 def _ack_at(link: RobotLink, robot: str, seq: int, stage: AckStage, timeout: float = 2.0
-            ) -> float | None:  # fmt: skip
+            ) -> float | None:
     """When (monotonic) the client holds ``robot``'s ack of ``seq`` at ``stage``."""
     def find(lk: RobotLink) -> float | None:
         for a in lk.answers(seq).get(robot, []):
@@ -138,7 +138,7 @@ def _row(what: str, values: list[float], floor: list[float]) -> None:
 
 
 def _with_agents(n: int, endpoint: str, body: Callable[[list[Agent], zenoh.Session], None]
-                 ) -> None:  # fmt: skip
+                 ) -> None:
     with zconfig.session(config=zconfig.loopback_config(endpoint)) as s:
         agents = [Agent("baxter", f"bench-client-{n}-{i}", s, AgentOptions(speed=1.0)).start()
                   for i in range(n)]

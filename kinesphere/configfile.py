@@ -31,7 +31,7 @@ _SEGMENT = re.compile(r"\.([^.\[]+)|\[(\d+|\.\.\.)\]")
 _WORDS = {
     "int": "an integer", "float": "a number", "str": "a string", "bool": "true or false",
     "array": "a list", "object": "a table", "null": "nothing",
-}  # fmt: skip
+}
 
 
 def _word(name: str) -> str:
@@ -142,7 +142,7 @@ def _explain(
     here = [x for t in types for x in _metas(t)]
     description = next(
         (x.extra_json_schema["description"] for x in here
-         if x.extra_json_schema and "description" in x.extra_json_schema), None)  # fmt: skip
+         if x.extra_json_schema and "description" in x.extra_json_schema), None)
     enum = re.match(r"Invalid enum value (.*)$", problem)
     typed = re.match(r"Expected `[^`]*`, got `([^`]*)`$", problem)
     if enum and not at_key:
@@ -156,7 +156,7 @@ def _explain(
     subject = where or "the file"
     got = "" if value is ... else f", got {value!r}"
     fields = [f for t in types for x in _members(t)
-              if isinstance(x, (mi.StructType, mi.DataclassType)) for f in x.fields]  # fmt: skip
+              if isinstance(x, (mi.StructType, mi.DataclassType)) for f in x.fields]
     keys = list(value) if isinstance(value, Mapping) else []
     if unknown := re.match(r"Object contains unknown field `(.*)`$", problem):
         valid = [f.encode_name for f in fields]
@@ -168,12 +168,12 @@ def _explain(
         names = repr(absent or [missing[1]]) if name_lists else missing[1]
         need = next((d for f in fields if f.encode_name == missing[1] for x in _metas(f.type)
                      if x.extra_json_schema and (d := x.extra_json_schema.get("description"))),
-                    None)  # fmt: skip
+                    None)
         return f"{at}missing {names}" + (f" ({need})" if need else ""), code
     if enum:
         if at_key:
             key_types = [x for t in types for d in _members(t) if isinstance(d, mi.DictType)
-                         for x in _members(d.key_type)]  # fmt: skip
+                         for x in _members(d.key_type)]
             valid = [v for k in key_types for v in _choices(k)]
             return f"{at}unknown {enum[1].strip(chr(39))}; valid: {choices(valid)}", code
         valid = [v for t in types for x in _members(t) for v in _choices(x)]

@@ -36,7 +36,7 @@ def boxes(hub: tuple[zenoh.Session, str]) -> Iterator[dict[str, StandIn]]:
 
 @contextmanager
 def robot(hub: tuple[zenoh.Session, str], robot_id: str,
-          answer: Callable[[Command], list[Reply]] | None) -> Iterator[StandIn]:  # fmt: skip
+          answer: Callable[[Command], list[Reply]] | None) -> Iterator[StandIn]:
     r = StandIn(hub[0], robot_id, answer=answer)
     try:
         yield r
@@ -45,7 +45,7 @@ def robot(hub: tuple[zenoh.Session, str], robot_id: str,
 
 
 def refusing(code: str, detail: str, when: Callable[[Command], bool] = lambda c: True
-             ) -> Callable[[Command], list[Reply]]:  # fmt: skip
+             ) -> Callable[[Command], list[Reply]]:
     """A robot that refuses the commands ``when`` selects with ``code``, and else obeys."""
     return lambda c: [(AckStage.REJECTED, code, detail, [])] if when(c) else usual(c)
 
@@ -66,11 +66,11 @@ def test_send_one_command(
     hub: tuple[zenoh.Session, str], boxes: dict[str, StandIn], capsys: pytest.CaptureFixture[str]
 ) -> None:
     code = cli(hub[1], "send", "c1", "limb_11", "distal_11", "Left-High", "3", "right_arm",
-               "right_shoulder", "forward-low", "near", "--sender", "alice")  # fmt: skip
+               "right_shoulder", "forward-low", "near", "--sender", "alice")
     assert code == 0
     got = boxes["c1"].wait(lambda g: True, "the command").cmd
     assert [(p.limb, p.direction, p.size) for p in got.parts] == [
-        ("limb_11", "left-high", 3.0), ("right_arm", "forward-low", 1.0)]  # fmt: skip
+        ("limb_11", "left-high", 3.0), ("right_arm", "forward-low", 1.0)]
     assert got.deadman and got.ttl_ms == 0 and got.drive is None
     assert got.sender == "alice" and got.session, "robots order per (sender, session)"
     out, err = capsys.readouterr()
@@ -94,7 +94,7 @@ def test_send_that_nobody_acknowledges_exits_1(
     """The robot's subscription is there (the put goes out) but no ack ever comes back."""
     with robot(hub, "mute", None) as mute:
         code = cli(hub[1], "send", "mute", "limb_11", "distal_11", "left-low", "3",
-                   "--timeout", "0.5")  # fmt: skip
+                   "--timeout", "0.5")
         mute.wait(lambda g: True, "the command")
     assert code == 1
     out, err = capsys.readouterr()
@@ -123,7 +123,7 @@ def test_send_to_a_group_with_a_drive_held(
 ) -> None:
     """One put on the group's key; the members are learnt from the robots' states."""
     code = cli(hub[1], "send", "group:pair", "arm", "shoulder", "left-low", "far",
-               "--drive", "forward", "0.4", "--for", "0.2")  # fmt: skip
+               "--drive", "forward", "0.4", "--for", "0.2")
     assert code == 0
     for r in ("c1", "c2"):
         let_go = boxes[r].wait(lambda g: not g.cmd.deadman, "the deadman let go").cmd
@@ -211,14 +211,14 @@ def test_play_reports_a_refusal_once_per_robot_and_code(
     f.write_text(step.format("left-high") + step.format("left-low"))
     why = "(limb_11, distal_11) has no direction left-low"
     lacks = refusing("direction_unavailable", why,
-                     lambda c: any(p.direction == "left-low" for p in c.parts))  # fmt: skip
+                     lambda c: any(p.direction == "left-low" for p in c.parts))
     with robot(hub, "yb", lacks) as yb:
         assert cli(hub[1], "play", str(f), "--target", "yb") == 1
         sent = [c for c in yb.commands() if c.deadman]
     refused = sum(any(p.direction == "left-low" for p in c.parts) for c in sent)
     out = capsys.readouterr().out.splitlines()
     assert out == [f"yb: holding: deadman released; REJECTED {refused} of {len(sent) + 1}: "
-                   f"direction_unavailable: {why}"]  # fmt: skip
+                   f"direction_unavailable: {why}"]
 
 
 def test_lease_acquire_and_a_refusal_naming_the_holder(
@@ -242,7 +242,7 @@ def test_gamepad_replays_a_recording_headless(
     ticks.save(rec, [(k / 30, push) for k in range(10)] + [(10 / 30, ControllerState())])
     again = tmp_path / "again.mcap"
     code = cli(hub[1], "gamepad", "--replay", str(rec), "--headless", "--target", "c2",
-               "--record", str(again))  # fmt: skip
+               "--record", str(again))
     assert code == 0
     header, recorded = ticks.load(again)
     assert header["target"] == "c2" and header["rate_hz"] == 30.0
@@ -274,7 +274,7 @@ def test_gamepad_replays_a_recording_headless(
 def test_user_mistakes_are_explained(
     hub: tuple[zenoh.Session, str], capsys: pytest.CaptureFixture[str],
     args: list[str], message: str,
-) -> None:  # fmt: skip
+) -> None:
     assert cli(hub[1], *args) == 2
     err = capsys.readouterr().err
     assert err.startswith("error: ") and message in err
@@ -293,14 +293,14 @@ def _kinesphere(endpoint: str, *args: str, env: dict[str, str]) -> subprocess.Co
         [sys.executable, "-m", "kinesphere.cli", *args, "--connect", endpoint,
          "--prefix", OWN_KEYS.prefix],
         env=env, capture_output=True, text=True, timeout=120,
-    )  # fmt: skip
+    )
 
 
 @pytest.mark.processes
 def test_without_a_display_the_hud_says_use_headless(hub: tuple[zenoh.Session, str]) -> None:
     """SDL would fall back to its offscreen driver and run a HUD nobody sees."""
     env = {k: v for k, v in os.environ.items()
-           if k not in ("DISPLAY", "WAYLAND_DISPLAY", "SDL_VIDEODRIVER")}  # fmt: skip
+           if k not in ("DISPLAY", "WAYLAND_DISPLAY", "SDL_VIDEODRIVER")}
     proc = _kinesphere(hub[1], "gamepad", "--duration", "0.2", env=env)
     assert proc.returncode == 2
     assert "no display: use --headless" in proc.stderr

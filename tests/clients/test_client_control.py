@@ -64,7 +64,7 @@ def free(fleet: Fleet) -> Iterator[Fleet]:
     """The fleet with no lease held and no e-stop latched before and after the test."""
     assert main(["estop", "--release", "--target", "all", "--connect", fleet.endpoint]) == 0
     fleet.track.wait(PB, lambda h: not h.state.lease_holder and h.state.status != "estop",
-                     "the lease free", after=time.monotonic())  # fmt: skip
+                     "the lease free", after=time.monotonic())
     yield fleet
     assert main(["estop", "--release", "--target", "all", "--connect", fleet.endpoint]) == 0
 
@@ -73,7 +73,7 @@ def test_send_to_a_robot_that_rejects_exits_1_with_the_code(
     free: Fleet, capsys: pytest.CaptureFixture[str]
 ) -> None:
     code = main(["send", PB, "limb_99", "distal_99", "left-high", "3",
-                 "--connect", free.endpoint])  # fmt: skip
+                 "--connect", free.endpoint])
     assert code == 1
     out, err = capsys.readouterr()
     assert out.startswith(f"{PB}: REJECTED: unknown_limb: ")
@@ -105,7 +105,7 @@ def test_two_operators_only_the_lease_holder_moves_the_robot(
         assert lease_of(free, time.monotonic()) == "alice"
         refusal = bob.link.last_answers()[PB].ack
         assert (refusal.stage, refusal.code, refusal.lease_holder) == (
-            AckStage.REJECTED, "lease_held", "alice")  # fmt: skip
+            AckStage.REJECTED, "lease_held", "alice")
         assert "alice" in views[-1].notice and "take over" in views[-1].notice
         mine = alice.link.last_answers()[PB].ack
         assert mine.stage != AckStage.REJECTED, mine
@@ -128,10 +128,10 @@ def test_a_killed_holders_lease_lapses_on_time_and_the_other_operator_gets_it(
          "--target", PB, "--sender", "alice", "--connect", free.endpoint,
          "--listen", zconfig.LOOPBACK_ANY_PORT],
         cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-    )  # fmt: skip
+    )
     try:
         free.track.wait(PB, lambda h: h.state.lease_holder == "alice" and h.state.status
-                        == "moving", "alice in control", after=start)  # fmt: skip
+                        == "moving", "alice in control", after=start)
         with operator(free, tg.robot(PB), sender="bob") as (bob, _):
             tick_together([(bob, RIGHT_LOW)], 0.5)
             assert bob.link.last_answers()[PB].ack.code == "lease_held"
@@ -154,7 +154,7 @@ def test_a_killed_holders_lease_lapses_on_time_and_the_other_operator_gets_it(
     lapse = got - killed
     assert LEASE_TIMEOUT_S - 0.4 < lapse < LEASE_TIMEOUT_S + 1.0, lapse
     assert free.track.wait(PB, lambda h: h.state.lease_holder == "bob", "bob's lease",
-                           after=killed)  # fmt: skip
+                           after=killed)
 
 
 def test_an_estop_from_the_operator_without_the_lease_stops_the_robot_at_once(
@@ -171,7 +171,7 @@ def test_an_estop_from_the_operator_without_the_lease_stops_the_robot_at_once(
         view = bob.tick(ControllerState(pressed=frozenset({Action.ESTOP})))
         assert view.estopped
         halted = free.track.wait(PB, lambda h: h.state.status == "estop", "the e-stop",
-                                 after=pressed)  # fmt: skip
+                                 after=pressed)
         assert halted.at - pressed < 0.3
         assert halted.state.estop_by == "bob"
         tick_together([(alice, LEFT_LOW)], 0.3)  # alice streams on: refused, latched
@@ -181,7 +181,7 @@ def test_an_estop_from_the_operator_without_the_lease_stops_the_robot_at_once(
         view = bob.tick(ControllerState(pressed=frozenset({Action.RELEASE})))
         assert view.message == f"released the e-stop of {', '.join(sorted(PLATFORMS))}"
         free.track.wait(PB, lambda h: h.state.status != "estop", "released",
-                        after=time.monotonic())  # fmt: skip
+                        after=time.monotonic())
         alice.tick(LET_GO)
         alice.shutdown()
         bob.shutdown()

@@ -45,7 +45,7 @@ def assert_sweep(fleet: Fleet, t0: float, released: float) -> None:
     left then right of forward, while the base advances; after the deadman is let go the
     robot holds within the TTL and comes to rest."""
     halted = fleet.track.wait(PB, lambda h: h.state.status in ("stopped", "holding"),
-                              "the stop", after=released)  # fmt: skip
+                              "the stop", after=released)
     assert halted.at - released < TTL_MS / 1000
     rest = at_rest(PB, fleet.track, halted.at)
     hs = [h for h in fleet.track.since(PB, t0) if h.at <= rest.at]
@@ -53,7 +53,7 @@ def assert_sweep(fleet: Fleet, t0: float, released: float) -> None:
     tqd = [h.state.qd[h.state.joint_names.index("turret")] for h in hs]
     v = dict(speeds(hs))
     both = [h.state.stamp_ns / 1e9 for h, w in zip(hs, tqd, strict=True)
-            if abs(w) > 0.05 and v.get(h.state.stamp_ns / 1e9, 0.0) > 0.05]  # fmt: skip
+            if abs(w) > 0.05 and v.get(h.state.stamp_ns / 1e9, 0.0) > 0.05]
     assert both and max(both) - min(both) > 1.0, "base and arm move at the same time"
     peak = max(range(len(turret)), key=lambda i: turret[i])
     assert turret[peak] > 0.5, "the arm swept left of forward (turret positive)"
@@ -89,7 +89,7 @@ def test_sweep_gesture_translates_the_base_while_the_arm_sweeps(
         assert (op.selection.limb, op.selection.origin) == ("limb_11", "distal_11")
         t0 = time.monotonic()
         script = Script(inp, {0: sweep_left, LEFT: lambda: p.right(1.0, 0.0),  # right-low
-                              LEFT + RIGHT: let_go, LEFT + RIGHT + 1: lambda: None})  # fmt: skip
+                              LEFT + RIGHT: let_go, LEFT + RIGHT + 1: lambda: None})
         run(op, script, finished=lambda: script.finished)
     assert_sweep(fleet, t0, released[0])
 
@@ -102,7 +102,7 @@ class SdlRun:
 
 
 def through_sdl(fleet: Fleet, robot: str, steps: dict[int, Callable[[VirtualPad], None]],
-                release_at: int) -> SdlRun:  # fmt: skip
+                release_at: int) -> SdlRun:
     """Play ``steps`` (tick -> what to do on the pad) on an SDL virtual GameController
     driving a gamepad client aimed at ``robot``, let go of the deadman at ``release_at``."""
     released: list[float] = []
@@ -117,7 +117,7 @@ def through_sdl(fleet: Fleet, robot: str, steps: dict[int, Callable[[VirtualPad]
 
             t0 = time.monotonic()
             script = Script(inp, {**{k: partial(step, vpad) for k, step in steps.items()},
-                                  release_at: let_go, release_at + 1: lambda: None})  # fmt: skip
+                                  release_at: let_go, release_at + 1: lambda: None})
             views: list[Readout] = []
             run(op, script, draw=views.append, finished=lambda: script.finished)
         finally:
@@ -136,7 +136,7 @@ def test_sweep_gesture_through_sdls_real_joystick_path(fleet: Fleet, pygame_up: 
         vpad.left(0.0, -0.6)
 
     done = through_sdl(fleet, PB, {0: sweep_left, LEFT: lambda vpad: vpad.right(1.0, 0.0)},
-                       release_at=LEFT + RIGHT)  # fmt: skip
+                       release_at=LEFT + RIGHT)
     engaged = [v for v in done.views if v.engaged]
     assert engaged and {v.source for v in engaged} == {"controller"}, "the SDL device drove it"
     sent = [(v.asked or v.intent.direction, v.intent.direction) for v in engaged]
@@ -161,20 +161,20 @@ def test_a_direction_no_body_has_near_drives_alone_through_sdls_joystick_path(
     done = through_sdl(fleet, PB, {0: push}, release_at=45)
     views = done.views
     pushed = [v for v in views if v.engaged and v.asked is None
-              and v.intent.direction is Direction.LEFT_MIDDLE]  # fmt: skip
+              and v.intent.direction is Direction.LEFT_MIDDLE]
     assert len(pushed) > 30 and {v.source for v in pushed} == {"controller"}
     assert all(v.limb_holds for v in pushed), "no body serves left-middle: the limb holds"
     refused = [v.answers[PB].ack for v in views if PB in v.answers
-               and v.answers[PB].ack.stage == "rejected"]  # fmt: skip
+               and v.answers[PB].ack.stage == "rejected"]
     assert refused == [], "the drive alone is a command the robot obeys"
     halted = fleet.track.wait(PB, lambda h: h.state.status in ("stopped", "holding"),
-                              "the stop", after=done.released)  # fmt: skip
+                              "the stop", after=done.released)
     hs = [h for h in fleet.track.since(PB, done.t0) if h.at <= halted.at]
     forward, _, _ = body_motion(hs, halted)
     assert forward > 0.2, "it drove forward"
     names = hs[0].state.joint_names
     arm = [names.index(j) for j in ("turret", "shoulder", "elbow1", "elbow2", "tilt", "pan",
-                                    "wrist")]  # fmt: skip
+                                    "wrist")]
     assert max(abs(h.state.q[j] - hs[0].state.q[j]) for h in hs for j in arm) < 0.01
 
 
@@ -188,12 +188,12 @@ def test_deadman_release_stops_within_the_ttl(fleet: Fleet, pygame_up: None) -> 
 
     with operator(fleet, tg.robot(PB)) as (op, inp):
         script = Script(inp, {0: lambda: (p.deadman(), p.left(0.0, 1.0)),  # drive back
-                              25: release, 26: lambda: None})  # fmt: skip
+                              25: release, 26: lambda: None})
         run(op, script, finished=lambda: script.finished)
     moving = [h for h in fleet.track.since(PB, released[0] - 0.3) if h.at < released[0]]
     assert moving and moving[-1].state.status == "moving"
     halted = fleet.track.wait(PB, lambda h: h.state.status in ("stopped", "holding"),
-                              "the stop", after=released[0])  # fmt: skip
+                              "the stop", after=released[0])
     assert halted.at - released[0] < TTL_MS / 1000
     rest = at_rest(PB, fleet.track, halted.at)
     (x0, y0, _), (x1, y1, _) = halted.state.base_pose, rest.state.base_pose
@@ -202,7 +202,7 @@ def test_deadman_release_stops_within_the_ttl(fleet: Fleet, pygame_up: None) -> 
 
 
 def gesture(fleet: Fleet, robot: str, press: Callable[[Pad], None], ticks: int
-            ) -> tuple[list[Heard], Heard]:  # fmt: skip
+            ) -> tuple[list[Heard], Heard]:
     """Hold the deadman and ``press`` for ``ticks`` at 30 Hz, let go; the robot's states from
     the first tick to rest, and the state at rest."""
     p = Pad()
@@ -222,7 +222,7 @@ def gesture(fleet: Fleet, robot: str, press: Callable[[Pad], None], ticks: int
         script = Script(inp, {0: start, ticks: let_go, ticks + 1: lambda: None})
         run(op, script, finished=lambda: script.finished)
     halted = fleet.track.wait(robot, lambda h: h.state.status in ("stopped", "holding"),
-                              "the stop", after=t0)  # fmt: skip
+                              "the stop", after=t0)
     rest = at_rest(robot, fleet.track, halted.at)
     return [h for h in fleet.track.since(robot, t0) if h.at <= rest.at], rest
 
@@ -276,18 +276,18 @@ def test_a_killed_client_leaves_its_robots_stopping_on_their_own(
          "--target", PB, "--ttl-ms", str(TTL_MS), "--connect", fleet.endpoint,
          "--listen", zconfig.LOOPBACK_ANY_PORT],
         cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-    )  # fmt: skip
+    )
     try:
         start = time.monotonic()
         driving = fleet.track.wait(PB, lambda h: h.state.status == "moving"
                                    and h.state.last_command_seq >= 10, "the client driving",
-                                   after=start)  # fmt: skip
+                                   after=start)
         client.kill()
         killed = time.monotonic()
         client.wait()
         assert fleet.track.since(PB, driving.at)[-1].state.status == "moving"
         halted = fleet.track.wait(PB, lambda h: h.state.status == "holding",
-                                  "the watchdog", after=killed)  # fmt: skip
+                                  "the watchdog", after=killed)
     finally:
         if client.poll() is None:
             client.kill()
@@ -320,7 +320,7 @@ def test_groups_reach_their_members_only_and_estop_halts_all(fleet: Fleet, pygam
         sent = op.seq.seq - 1
         for rid in PLATFORMS:
             fleet.track.wait(rid, lambda h: h.state.last_command_seq >= sent
-                             and h.state.status == "moving", f"{rid} moving", t)  # fmt: skip
+                             and h.state.status == "moving", f"{rid} moving", t)
         p.tap(pygame.CONTROLLER_BUTTON_B)
         t = time.monotonic()
         assert op.tick(inp.poll()).estopped

@@ -37,7 +37,7 @@ def window() -> Iterator[hud.Hud]:
 def state(robot_id: str, platform: str, status: str, **kw: object) -> Seen:
     st = RobotState(robot_id=robot_id, platform=platform, seq=1, stamp_ns=time.time_ns(),
                     joint_names=["a"], q=[0.0], qd=[0.0], base_pose=[0.0, 0.0, 0.0],
-                    status=status, last_command_seq=7, **kw)  # type: ignore[arg-type]  # fmt: skip
+                    status=status, last_command_seq=7, **kw)  # type: ignore[arg-type]
     return Seen(st, time.monotonic())
 
 
@@ -76,7 +76,7 @@ def view(**kw: object) -> Readout:
         },
         notice="packbot-2 refuses your commands: alice@laptop holds this robot's lease; "
                "press Back (take) to take over",
-    )  # fmt: skip
+    )
     base.update(kw)
     return Readout(**base)  # type: ignore[arg-type]
 
@@ -121,7 +121,7 @@ def test_missing_directions_are_crossed_out(window: hud.Hud) -> None:
     have = frozenset({Direction.LEFT_FORWARD_LOW, Direction.FORWARD_LOW, Direction.PLACE_HIGH})
     hud.render(window.screen, view(available=have, asked=Direction.LEFT_LOW,
                intent=Intent(direction=Direction.LEFT_FORWARD_LOW, size=3.0, deadman=True)),
-               window.fonts)  # fmt: skip
+               window.fonts)
     surf = window.screen
     for d in Direction:
         r = hud.cell_rect(d)
@@ -171,9 +171,9 @@ def test_level_shading_follows_laban(window: hud.Hud) -> None:
     for lvl in Level:
         surf.fill(hud.BG)
         draw_symbol(surf, Direction((Horizontal.PLACE.value, lvl.value)),
-                        pygame.Rect(10, 10, 40, 60), hud.INK)  # fmt: skip
+                        pygame.Rect(10, 10, 40, 60), hud.INK)
         inks[lvl] = sum(surf.get_at((x, y))[:3] == hud.INK for x in range(13, 48)
-                        for y in range(13, 68))  # fmt: skip
+                        for y in range(13, 68))
     assert inks[Level.LOW] > inks[Level.HIGH] > inks[Level.MIDDLE] > 0
 
 

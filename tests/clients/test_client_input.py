@@ -169,7 +169,7 @@ def test_keyboard_offers_the_same_actions(inp: pad.PygameInput) -> None:
         key(k, down=False)
     for k, action in [(pygame.K_ESCAPE, Action.ESTOP), (pygame.K_TAB, Action.LIMB_NEXT),
                       (pygame.K_l, Action.ORIGIN_NEXT), (pygame.K_t, Action.TARGET_NEXT),
-                      (pygame.K_RETURN, Action.RELEASE), (pygame.K_F10, Action.QUIT)]:  # fmt: skip
+                      (pygame.K_RETURN, Action.RELEASE), (pygame.K_F10, Action.QUIT)]:
         key(k)
         assert action in inp.poll().pressed
         key(k, down=False)
@@ -192,7 +192,7 @@ def test_window_close_asks_to_quit(inp: pad.PygameInput) -> None:
 def test_a_custom_mapping_moves_the_deadman(tmp_path: Path) -> None:
     f = tmp_path / "m.toml"
     f.write_text('[controller.buttons]\ndeadman = ["a"]\n[keyboard.buttons]\ndeadman = ["d"]\n'
-                 '[keyboard]\ndrive_right = ["k"]\n')  # fmt: skip
+                 '[keyboard]\ndrive_right = ["k"]\n')
     pygame.event.clear()
     inp = pad.PygameInput(mapfile.load(f))
     button(pygame.CONTROLLER_BUTTON_LEFTSHOULDER)

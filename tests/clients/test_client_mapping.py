@@ -58,7 +58,7 @@ def test_screen_convention_stick_up_is_forward_and_left_is_left() -> None:
     ("lt", "rt", "level"),
     [(0.0, 0.0, "middle"), (1.0, 0.0, "low"), (0.0, 1.0, "high"), (0.2, 0.0, "middle"),
      (0.9, 0.5, "low"), (0.5, 0.9, "high")],
-)  # fmt: skip
+)
 def test_triggers_pick_the_level(lt: float, rt: float, level: str) -> None:
     i = intent(stick(90, lt=lt, rt=rt))
     assert i.direction.slug == f"left-{level}"

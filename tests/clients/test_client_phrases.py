@@ -27,7 +27,7 @@ def test_shipped_phrases_parse() -> None:
     left_high = phrases.load_phrase("left_high.toml")
     first = left_high.steps[0].parts[0]
     assert (first.limb, first.origin, first.direction, first.size) == (
-        "limb_11", "distal_11", "left-high", 3.0)  # fmt: skip
+        "limb_11", "distal_11", "left-high", 3.0)
     assert len(phrases.load_phrase("tour_guide").steps) == 4
 
 
@@ -62,7 +62,7 @@ def test_packbot_retreat_pulls_back_high_while_driving_back() -> None:
         ("[[step]]\nduration = 1\nparts = [{limb = 'a', direction = 'left', size = 1}]",
          "missing ['origin']"),
     ],
-)  # fmt: skip
+)
 def test_bad_phrases_are_explained(tmp_path: Path, text: str, match: str) -> None:
     f = tmp_path / "bad.toml"
     f.write_text(text)

@@ -45,7 +45,7 @@ def test_a_replay_sends_what_the_recorded_session_sent(
         8: lambda: p.right(1.0, 0.0),
         11: lambda: p.deadman(False),
         13: lambda: None,
-    })  # fmt: skip
+    })
     polled: list[ControllerState] = []
 
     class Spy:

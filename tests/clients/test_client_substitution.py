@@ -57,7 +57,7 @@ def pushed(heading_deg: float, level: Level) -> Direction:
 def test_every_articulated_platform_is_covered() -> None:
     assert {c.platform for _, c, _, _ in LIMBS} == {"baxter", "nao", "packbot", "youbot"}
     every = {(c.platform, e.limb, e.origin) for c in CATALOGUES.values() for e in c.limbs
-             if e.limb not in c.core}  # fmt: skip
+             if e.limb not in c.core}
     assert {(c.platform, limb, origin) for _, c, limb, origin in LIMBS} == every
 
 

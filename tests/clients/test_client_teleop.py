@@ -154,7 +154,7 @@ def engage(op: Teleop, inp: pad.PygameInput, p: Pad, ticks: int = 2) -> None:
 def test_group_and_all_reach_every_intended_robot_and_no_other(
     hub: tuple[zenoh.Session, str], link: RobotLink, inboxes: dict[str, Inbox],
     inp: pad.PygameInput,
-) -> None:  # fmt: skip
+) -> None:
     session, _ = hub
     # what r1 and r2, run with --group arms, hear
     arms = Inbox(session, OWN_KEYS.group_command("arms"))
@@ -166,7 +166,7 @@ def test_group_and_all_reach_every_intended_robot_and_no_other(
         p.deadman(False)
         op.tick(inp.poll())
         sentinel(link, [OWN_KEYS.group_command("arms"), *(OWN_KEYS.command(r) for r in ROBOTS)],
-                 [arms, *inboxes.values()])  # fmt: skip
+                 [arms, *inboxes.values()])
         cmds = arms.commands()
         assert [kind(c) for c in cmds] == ["move", "move", "let go"]
         assert {g.key for g in arms.got} == {OWN_KEYS.group_command("arms")}
@@ -203,7 +203,7 @@ def test_target_button_cycles_robots_then_the_groups_they_report_then_all(
     assert seen == [
         ("r2", ["r2"]), ("r3", ["r3"]), ("group:arms", ["r1", "r2", "r3"]),
         ("group:tail", ["r3"]), ("all", ["r1", "r2", "r3"]), ("r1", ["r1"]),
-    ]  # fmt: skip
+    ]
 
 
 def test_switching_target_stops_the_old_one(
@@ -225,7 +225,7 @@ def test_switching_target_stops_the_old_one(
 def test_estop_goes_to_all_latches_and_start_releases_only_what_it_latched(
     hub: tuple[zenoh.Session, str], link: RobotLink, inboxes: dict[str, Inbox],
     inp: pad.PygameInput,
-) -> None:  # fmt: skip
+) -> None:
     session, _ = hub
     robots = {r: FakeRobot(session, r, "fakebot") for r in ROBOTS}
     p = Pad()
@@ -299,7 +299,7 @@ def test_leaving_the_loop_sends_a_final_stop(
 def test_an_estop_reported_by_a_robot_pauses_the_stream(
     hub: tuple[zenoh.Session, str], link: RobotLink, inboxes: dict[str, Inbox],
     inp: pad.PygameInput,
-) -> None:  # fmt: skip
+) -> None:
     """Robots release a latch on any deadman command: never stream into someone's e-stop."""
     session, _ = hub
     robot = FakeRobot(session, "r1", "fakebot")
@@ -334,7 +334,7 @@ FAKEBOT = Catalogue(
 def test_shoulder_cycling_follows_the_robots_catalogue(
     hub: tuple[zenoh.Session, str], link: RobotLink, inboxes: dict[str, Inbox],
     inp: pad.PygameInput,
-) -> None:  # fmt: skip
+) -> None:
     session, _ = hub
     FakeRobot(session, "r1", "fakebot").state()
     assert link.wait_for(lambda lk: "r1" in lk.states(), WAIT_S)
@@ -355,7 +355,7 @@ def test_shoulder_cycling_follows_the_robots_catalogue(
         assert seen == [
             ("limb_12", "distal_11"), ("limb_12", "distal_12"), ("limb_12", "distal_11"),
             ("limb_21", "distal_21"), ("limb_11", "distal_11"), ("limb_21", "distal_21"),
-        ]  # fmt: skip
+        ]
         engage(op, inp, p, ticks=1)
     settle(link, inboxes)
     part = inboxes["r1"].commands()[-1].parts[0]
@@ -395,7 +395,7 @@ def packbot_operator(session: zenoh.Session, link: RobotLink, inp: pad.PygameInp
 def test_a_direction_the_limb_lacks_is_served_in_front(
     hub: tuple[zenoh.Session, str], link: RobotLink, inboxes: dict[str, Inbox],
     inp: pad.PygameInput,
-) -> None:  # fmt: skip
+) -> None:
     """The PackBot arm (real databank) has no left-low: low + stick left sends left-forward-low."""
     with packbot_operator(hub[0], link, inp) as op:
         p = Pad()
@@ -412,13 +412,13 @@ def test_a_direction_the_limb_lacks_is_served_in_front(
     assert left.available is not None and Direction.LEFT_LOW not in left.available
     settle(link, inboxes)
     assert [c.parts[0].direction for c in inboxes["r2"].commands()[-2:]] == [
-        "left-forward-low", "right-forward-low"]  # fmt: skip
+        "left-forward-low", "right-forward-low"]
 
 
 def test_a_direction_no_body_has_near_sends_the_drive_alone(
     hub: tuple[zenoh.Session, str], link: RobotLink, inboxes: dict[str, Inbox],
     inp: pad.PygameInput,
-) -> None:  # fmt: skip
+) -> None:
     """PackBot's arm (shipped databank) has nothing within 45 degrees of plain left-middle:
     stick left while driving forward sends the drive alone (a robot would refuse the whole
     command for the part), the limb holds and the view says so; a servable push sends its

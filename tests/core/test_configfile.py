@@ -46,7 +46,7 @@ class Tree(msgspec.Struct, forbid_unknown_fields=True):
         ({"leaves": 3}, "malformed", "tree.toml: leaves must be a table, got 3"),
         ({}, "malformed", "tree.toml: missing leaves"),
     ],
-)  # fmt: skip
+)
 def test_errors_name_the_file_the_field_and_what_is_valid(
     data: object, code: str, message: str
 ) -> None:

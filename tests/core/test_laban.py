@@ -91,7 +91,7 @@ def test_unknown_direction_lists_valid_names(bad: object) -> None:
 
 @pytest.mark.parametrize(("bad", "near"), [
     ("left-hihg", "left-high"), ("Rigth Forward Low", "right-forward-low"), ("frwd", None),
-    ("left-high" * 20, None)])  # fmt: skip
+    ("left-high" * 20, None)])
 def test_a_misspelt_direction_is_answered_with_the_nearest(bad: str, near: str | None) -> None:
     """Nearest by spelling, any case; none for garbage or a name far longer than any valid."""
     with pytest.raises(KinesphereError) as err:

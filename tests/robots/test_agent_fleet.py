@@ -274,7 +274,7 @@ def test_send_all_moves_every_body_exact_or_substituted(
     acks = AckWatch(session, "*")
     with running_fleet(endpoint, robots) as (_fleet, watches):
         assert main(["send", "all", *map(str, pose), "--connect", endpoint,
-                     "--prefix", KEYS.prefix, "--wait", str(WAIT_S)]) == 0  # fmt: skip
+                     "--prefix", KEYS.prefix, "--wait", str(WAIT_S)]) == 0
         for rid, watch in watches.items():
             want = answers[rid].substitutions
             accepted = acks.wait(lambda a, rid=rid: (a.robot_id, a.stage) == (rid, "accepted"),

@@ -46,7 +46,7 @@ class Child:
     """A kinesphere process joined to the hub; ready once its liveliness token appears."""
 
     def __init__(self, hub: zenoh.Session, endpoint: str, args: list[str], token: str,
-                 log: Path) -> None:  # fmt: skip
+                 log: Path) -> None:
         up = threading.Event()
 
         def on_token(sample: zenoh.Sample) -> None:
@@ -60,7 +60,7 @@ class Child:
              "--connect", endpoint, "--listen", zconfig.LOOPBACK_ANY_PORT],
             cwd=ROOT, env={**os.environ, "PYTHONUNBUFFERED": "1"},
             stdout=self.log, stderr=subprocess.STDOUT,
-        )  # fmt: skip
+        )
         try:
             if not up.wait(WAIT_S):
                 self.stop()
@@ -100,7 +100,7 @@ class Track:
             self._cond.notify_all()
 
     def wait(self, robot: str, pred: Callable[[Heard], bool], what: str,
-             after: float = 0.0) -> Heard:  # fmt: skip
+             after: float = 0.0) -> Heard:
         """The first state of ``robot`` heard after ``after`` that satisfies ``pred``."""
         deadline = time.monotonic() + WAIT_S
         with self._cond:
@@ -143,7 +143,7 @@ def at_rest(robot: str, track: Track, after: float) -> Heard:
         turned = abs(h.state.base_pose[2] - prev[-1].state.base_pose[2]) if prev else 1.0
         prev.append(h)
         return (bool(v) and v[0][1] < 1e-3 and turned < 1e-4
-                and max(map(abs, h.state.qd)) < 1e-3)  # fmt: skip
+                and max(map(abs, h.state.qd)) < 1e-3)
 
     return track.wait(robot, still, "the robot at rest", after)
 
@@ -163,11 +163,11 @@ def running_fleet(logs: Path) -> Iterator[Fleet]:
         children: list[Child] = []
         try:
             children.append(Child(hub, endpoint, ["databank", "serve", *args],
-                                  KEYS.alive_databank_all(), logs / "databank.log"))  # fmt: skip
+                                  KEYS.alive_databank_all(), logs / "databank.log"))
             for rid, platform in PLATFORMS.items():
                 groups = ["--group", "sweepers"] if rid == PB else []
                 children.append(Child(hub, endpoint, ["agent", platform, "--id", rid, *groups],
-                                      KEYS.alive_robot(rid), logs / f"{rid}.log"))  # fmt: skip
+                                      KEYS.alive_robot(rid), logs / f"{rid}.log"))
             for rid in PLATFORMS:
                 track.wait(rid, lambda h: True, "a first state")
             yield Fleet(hub, endpoint, track)
@@ -179,7 +179,7 @@ def running_fleet(logs: Path) -> Iterator[Fleet]:
 
 @contextmanager
 def operator(fleet: Fleet, target: tg.Target, sender: str | None = None, take: bool = False
-             ) -> Iterator[tuple[Teleop, pad.PygameInput]]:  # fmt: skip
+             ) -> Iterator[tuple[Teleop, pad.PygameInput]]:
     """A gamepad client on its own session (as ``sender``), with its catalogues loaded."""
     pygame.event.clear()
     inp = pad.PygameInput(mapfile.load())

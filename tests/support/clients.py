@@ -57,14 +57,14 @@ class _VirtualJoystickDesc(ctypes.Structure):
         ("axis_mask", ctypes.c_uint32), ("name", ctypes.c_char_p), ("userdata", ctypes.c_void_p),
         *((f, ctypes.c_void_p) for f in ("Update", "SetPlayerIndex", "Rumble", "RumbleTriggers",
                                           "SetLED", "SendEffect")),
-    ]  # fmt: skip
+    ]
 
 
 def pygames_sdl() -> ctypes.CDLL:
     """The libSDL2 that pygame loaded into this process (not another copy of it)."""
     with open("/proc/self/maps", encoding="utf-8") as maps:
         paths = sorted({m.group(0) for line in maps
-                        if (m := re.search(r"/\S*libSDL2-2[^/\s]*\.so[^/\s]*", line))})  # fmt: skip
+                        if (m := re.search(r"/\S*libSDL2-2[^/\s]*\.so[^/\s]*", line))})
     assert paths, "pygame's libSDL2 is not loaded: import pygame and init it first"
     lib = ctypes.CDLL(paths[0])
     lib.SDL_JoystickAttachVirtualEx.argtypes = [ctypes.POINTER(_VirtualJoystickDesc)]
@@ -197,7 +197,7 @@ class StandIn(Inbox):
     the acks ``answer`` gives for each (none for a robot that has lost its ack publisher)."""
 
     def __init__(self, session: zenoh.Session, robot_id: str, groups: Sequence[str] = (),
-                 answer: Callable[[Command], list[Reply]] | None = usual) -> None:  # fmt: skip
+                 answer: Callable[[Command], list[Reply]] | None = usual) -> None:
         super().__init__(session, OWN_KEYS.command(robot_id))
         self.robot_id = robot_id
         self.answer = answer
@@ -225,7 +225,7 @@ class StandIn(Inbox):
             self._acks.put(encode(Ack(
                 robot_id=self.robot_id, sender=cmd.sender, session=cmd.session, seq=cmd.seq,
                 stage=stage, code=code, detail=detail, stamp_ns=time.time_ns(),
-                substitutions=subs, lease_holder=self.lease_holder)))  # fmt: skip
+                substitutions=subs, lease_holder=self.lease_holder)))
 
     def close(self) -> None:
         self._closing.set()
@@ -264,7 +264,7 @@ def sentinel(link: RobotLink, keys: Sequence[str], inboxes: Sequence[Inbox]) -> 
 
 @contextmanager
 def client_link(endpoint: str, watch: bool = True, sender: str | None = None
-                ) -> Iterator[RobotLink]:  # fmt: skip
+                ) -> Iterator[RobotLink]:
     """A client's own session joined to the hub, and its RobotLink (as ``sender``)."""
     with zconfig.session(config=zconfig.loopback_config(endpoint)) as s:
         link = RobotLink(s, OWN_KEYS, watch=watch, sender=sender)
@@ -341,7 +341,7 @@ class FakeRobot:
     """
 
     def __init__(self, session: zenoh.Session, robot_id: str, platform: str,
-                 groups: Sequence[str] = (), wait: bool = True) -> None:  # fmt: skip
+                 groups: Sequence[str] = (), wait: bool = True) -> None:
         self.robot_id = robot_id
         self.platform = platform
         self.groups = list(groups)
@@ -357,7 +357,7 @@ class FakeRobot:
             stamp_ns=time.time_ns(), joint_names=[], q=[], qd=[], base_pose=[0.0, 0.0, 0.0],
             status=status, last_command_seq=-1, groups=self.groups,
             **fields,  # type: ignore[arg-type]
-        )  # fmt: skip
+        )
         self.pub.put(encode(st))
 
 

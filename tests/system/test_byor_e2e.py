@@ -49,7 +49,7 @@ def brought(tmp_path_factory: pytest.TempPathFactory) -> Path:
     root = tmp_path_factory.mktemp("platforms")
     for name, (urdf, limb, _, _, neutral) in ROBOTS.items():
         assert main(["platform", "new", name, "--urdf", str(robot_data() / urdf),
-                     "--dir", str(root)]) == 0  # fmt: skip
+                     "--dir", str(root)]) == 0
         if neutral:
             with open(root / name / "platform.toml", "a") as fh:
                 fh.write(neutral)
@@ -117,12 +117,12 @@ def test_send_up_left_far_moves_the_tip_up_left_of_the_shoulder(
          "--listen", zconfig.LOOPBACK_ANY_PORT],
         cwd=ROOT, env={**os.environ, "PYTHONUNBUFFERED": "1"}, stdout=log,
         stderr=subprocess.STDOUT,
-    )  # fmt: skip
+    )
     try:
         first = watch.wait(lambda s: True, f"the first state of {robot}", timeout=90)
         assert first.platform == name
         assert main(["send", robot, limb, origin, direction, "3",
-                     "--connect", endpoint]) == 0  # fmt: skip
+                     "--connect", endpoint]) == 0
         pose = bank.query(name, SpatialCommand(limb, origin, direction, 3))
         assert pose.direction == direction and pose.joints
         done = watch.wait(lambda s: joints_close(s, pose.joints, 0.02),

@@ -250,7 +250,7 @@ class RobotLink:
         """Acks each robot sent for this client's commands with ``seq >= seq_from``."""
         with self._lock:
             out = {rid: [a for a in box if a.ack.seq >= seq_from]
-                   for rid, box in self._answers.items()}  # fmt: skip
+                   for rid, box in self._answers.items()}
         return {rid: found for rid, found in out.items() if found}
 
     def last_answers(self) -> dict[str, AckAnswer]:

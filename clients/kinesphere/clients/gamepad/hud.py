@@ -110,7 +110,7 @@ def wrap(font: pygame.font.Font, text: str, width: int) -> list[str]:
 def _paragraph(
     surf: pygame.Surface, font: pygame.font.Font, text: str, x: int, y: int, width: int,
     colour: tuple[int, int, int] = FG, indent: int = 0,
-) -> int:  # fmt: skip
+) -> int:
     """Draw ``text`` wrapped to ``width``; later lines indented; returns the next y."""
     for i, line in enumerate(wrap(font, text, width - indent)):
         y = _text(surf, font, line, (x + (indent if i else 0), y), colour)
@@ -128,7 +128,7 @@ def _chart(surf: pygame.Surface, fonts: dict[str, pygame.font.Font], view: Reado
     for b, lvl in enumerate(LEVELS):
         _text(surf, fonts["mid"], lvl.value.upper(), (x0 + b * BLOCK_STEP, y0 - 24), DIM)
     _text(surf, fonts["tiny"], "seen from above, robot facing up: stick up = forward row, "
-          "stick left = left column", (x0, y0 - 44), DIM)  # fmt: skip
+          "stick left = left column", (x0, y0 - 44), DIM)
     for d in Direction:
         cell = cell_rect(d)
         lit = d is active
@@ -155,7 +155,7 @@ def _chart(surf: pygame.Surface, fonts: dict[str, pygame.font.Font], view: Reado
     y = y0 + 3 * CELL + 8
     y = _text(surf, fonts["big"], label, (x0, y), LIT if view.engaged else FG)
     _text(surf, fonts["tiny"], "crossed out: no pose stored for this limb; a push there is "
-          "served by the nearest stored direction on the same side", (x0, y), DIM)  # fmt: skip
+          "served by the nearest stored direction on the same side", (x0, y), DIM)
 
 
 def _rings(
@@ -179,7 +179,7 @@ def _rings(
 
 
 def _arrowhead(surf: pygame.Surface, colour: tuple[int, int, int], tip: tuple[float, float],
-               ang: float) -> None:  # fmt: skip
+               ang: float) -> None:
     for s in (-1, 1):
         a = ang + math.pi + s * 0.5
         end = (tip[0] + 12 * math.cos(a), tip[1] + 12 * math.sin(a))
@@ -220,7 +220,7 @@ def _drive(
         text = "base still"
     else:
         text = (f"forward {drive.forward:+.0%}  left {drive.left:+.0%}  "
-                f"turn {drive.yaw:+.0%}")  # fmt: skip
+                f"turn {drive.yaw:+.0%}")
     if view.intent.turbo:
         text += "  TURBO"
     y = _text(surf, fonts["small"], text, (cx - 110, cy + r + 14), FG)
@@ -228,7 +228,7 @@ def _drive(
 
 
 def _robots(surf: pygame.Surface, fonts: dict[str, pygame.font.Font], view: Readout, top: int
-            ) -> None:  # fmt: skip
+            ) -> None:
     """Every robot, wrapped, in one or two columns; robots that do not fit are counted."""
     x, width, bottom = 16, surf.get_width() - 32, surf.get_height() - 8
     y = _text(surf, fonts["mid"], "robots  (> = targeted)", (x, top), DIM)
@@ -242,7 +242,7 @@ def _robots(surf: pygame.Surface, fonts: dict[str, pygame.font.Font], view: Read
         answer = view.answers.get(rid)
         lines = robot_lines(st, now - seen.at, view.sender,
                             answer=answer.ack if answer else None,
-                            answer_age_s=now - answer.at if answer else 0.0)  # fmt: skip
+                            answer_age_s=now - answer.at if answer else 0.0)
         entries.append((f"{rid}  ({st.platform})", lines, view.target.includes(rid, st.groups)))
     columns = 1 if len(entries) <= 3 else 2
     col_w = width // columns - 12
@@ -266,7 +266,7 @@ def _robots(surf: pygame.Surface, fonts: dict[str, pygame.font.Font], view: Read
         shown += 1
     if shown < len(entries):
         _text(surf, fonts["small"], f"... and {len(entries) - shown} more (kinesphere status)",
-              (x + width - 300, bottom - 18), WARN)  # fmt: skip
+              (x + width - 300, bottom - 18), WARN)
 
 
 def _alias(view: Readout, label: str) -> str:
@@ -282,7 +282,7 @@ def _banners(surf: pygame.Surface, fonts: dict[str, pygame.font.Font], view: Rea
         pygame.draw.rect(surf, BAD, banner, border_radius=6)
         lines = wrap(fonts["big"], f"E-STOP ({who})", w - 20)
         _text(surf, fonts["big"], lines[0] + (" ..." if len(lines) > 1 else ""),
-              (banner.x + 10, banner.y + 8), INK)  # fmt: skip
+              (banner.x + 10, banner.y + 8), INK)
     dm = pygame.Rect(x, 60, w, 34)
     if not view.deadman_required:
         colour, text = WARN, "deadman OFF (--no-deadman)"
@@ -310,7 +310,7 @@ def render(surf: pygame.Surface, view: Readout, fonts: dict[str, pygame.font.Fon
               f"limb {_alias(view, view.limb)}  from  {_alias(view, view.origin)}", (16, y))
     src = view.source if view.connected else "DISCONNECTED: plug a controller in"
     y = _text(surf, fonts["small"], f"input: {src}   you: {view.sender}   seq {view.seq}",
-              (16, y), FG if view.connected else BAD)  # fmt: skip
+              (16, y), FG if view.connected else BAD)
     _banners(surf, fonts, view)
     y = MESSAGES_Y
     if view.notice:

@@ -30,7 +30,7 @@ ControllerButton = Literal[
     "a", "b", "x", "y", "back", "guide", "start", "leftstick", "rightstick", "leftshoulder",
     "rightshoulder", "dpup", "dpdown", "dpleft", "dpright", "misc1", "paddle1", "paddle2",
     "paddle3", "paddle4", "touchpad",
-]  # fmt: skip
+]
 """SDL GameController button names, in SDL's order (Xbox names: a = PlayStation cross, ...)."""
 CONTROLLER_BUTTONS = {name: i for i, name in enumerate(get_args(ControllerButton))}
 HAT_DIRECTIONS = ("left", "right", "up", "down")

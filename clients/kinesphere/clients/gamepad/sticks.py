@@ -72,7 +72,7 @@ class Tuning(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
             "beyond_max": self.beyond_max >= 0.0,
             **{k: 0.0 < getattr(self, k) <= 1.0
                for k in ("drive_scale", "turn_scale", "drive_turbo", "turn_turbo")},
-        }  # fmt: skip
+        }
         bad = [k for k, ok in checks.items() if not ok]
         if bad:
             raise KinesphereError(

@@ -105,7 +105,7 @@ class Teleop:
     def _targeted(self) -> dict[str, Seen]:
         """The robots heard from that the current target reaches (by id or their groups)."""
         return {rid: seen for rid, seen in self.link.states().items()
-                if self.target.includes(rid, seen.state.groups)}  # fmt: skip
+                if self.target.includes(rid, seen.state.groups)}
 
     def _platforms(self) -> list[str]:
         return [seen.state.platform for _, seen in sorted(self._targeted().items())]
@@ -132,16 +132,16 @@ class Teleop:
         """Release exactly the robots this operator's e-stop latched, and say which."""
         mine = self.latched_by_me()
         others = sorted(rid for rid, seen in self.link.states().items()
-                        if seen.state.status == Status.ESTOP and rid not in mine)  # fmt: skip
+                        if seen.state.status == Status.ESTOP and rid not in mine)
         cmd = self.seq.release()
         self.link.put([self.link.keys.command(rid) for rid in mine], cmd)
         self.estopped, self.need_fresh = False, True
         self.released_at = time.monotonic()
         said = (f"released the e-stop of {', '.join(mine)}" if mine
-                else "no robot reports an e-stop latched by you")  # fmt: skip
+                else "no robot reports an e-stop latched by you")
         if others:
             said += (f"; still latched by others: {', '.join(others)} (kinesphere estop "
-                     "--release --target ID)")  # fmt: skip
+                     "--release --target ID)")
         self.message = said
 
     def _stop_stream(self) -> None:

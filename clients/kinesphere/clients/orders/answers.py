@@ -25,7 +25,7 @@ from kinesphere.protocol import Ack, AckStage, Substitution
 FINAL = frozenset({
     AckStage.REACHED, AckStage.CLAMPED, AckStage.BLOCKED, AckStage.SUPERSEDED, AckStage.HOLDING,
     AckStage.STOPPED, AckStage.ESTOPPED, AckStage.RELEASED, AckStage.LEASED, AckStage.REJECTED,
-})  # fmt: skip
+})
 """Stages after which a robot says nothing more about a command."""
 FAILED = frozenset({AckStage.REJECTED, AckStage.BLOCKED})
 """Stages that make a command-line client exit non-zero."""
@@ -129,7 +129,7 @@ def line(o: Outcome, timeout: float, sent: int = 1) -> str:
     last = o.last
     if last is None:
         return (f"{o.robot}: NO ACKNOWLEDGEMENT within {timeout:g} s (the command may not have "
-                "arrived: no route, access control, or the robot is down)")  # fmt: skip
+                "arrived: no route, access control, or the robot is down)")
     words: list[str] = []
     refused = o.refused
     for (code, detail), n in refused.items():
@@ -151,7 +151,7 @@ def line(o: Outcome, timeout: float, sent: int = 1) -> str:
 
 
 def report(found: dict[str, Outcome], timeout: float, sent: int = 1,
-           out: TextIO | None = None) -> None:  # fmt: skip
+           out: TextIO | None = None) -> None:
     """One line per robot on ``out`` (stdout)."""
     out = out or sys.stdout
     for o in found.values():

@@ -105,11 +105,11 @@ def play(args: argparse.Namespace) -> int:
         print(f"playing {phrase.name} ({phrase.duration:g} s) on {target.label}", file=sys.stderr)
         with signals(stop):
             phrases.play(link, phrase, keys, seq, rate_hz=args.rate, on_step=on_step,
-                         should_stop=lambda: stop.set)  # fmt: skip
+                         should_stop=lambda: stop.set)
         last = seq.seq - 1
         found = answers.wait(link, first, robots, args.timeout, lambda o: o.final_for(last))
     code = _finish(found, args.timeout, f"the phrase ({seq.seq - first} commands)",
-                   seq.seq - first)  # fmt: skip
+                   seq.seq - first)
     return 130 if stop.set else code
 
 
@@ -118,12 +118,12 @@ def estop(args: argparse.Namespace) -> int:
         if args.target is None:
             raise KinesphereError(
                 "malformed", "--release needs --target ID, group:NAME or all: say whose "
-                "e-stop to release")  # fmt: skip
+                "e-stop to release")
         with _addressing(args, targets.parse_target(args.target), 0) as (link, keys, robots, seq):
             first = seq.seq
             link.put(keys, seq.release())
             found = answers.wait(link, first, robots, args.timeout,
-                                 lambda o: o.answered(first))  # fmt: skip
+                                 lambda o: o.answered(first))
         return _finish(found, args.timeout, "the release")
     with link_for(args) as link:
         seq = link.sequencer(0)
@@ -145,7 +145,7 @@ def estop(args: argparse.Namespace) -> int:
         found = answers.outcomes(link.answers(first), alive)
     if not found:
         print(f"E-STOP REACHED NO ROBOT: nobody acknowledged it within {args.timeout:g} s and "
-              f"no robot is alive under {args.prefix!r}", file=sys.stderr)  # fmt: skip
+              f"no robot is alive under {args.prefix!r}", file=sys.stderr)
         return 1
     return _finish(found, args.timeout, "the E-STOP")
 

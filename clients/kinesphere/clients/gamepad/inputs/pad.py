@@ -131,7 +131,7 @@ class PygameInput:
             dev = self._device(d, "controller")
             self._button(dev, int(d["button"]), t == pygame.CONTROLLERBUTTONDOWN)
         elif t in (pygame.JOYAXISMOTION, pygame.JOYBUTTONDOWN, pygame.JOYBUTTONUP,
-                   pygame.JOYHATMOTION):  # fmt: skip
+                   pygame.JOYHATMOTION):
             self._joystick_event(event)
         elif t == pygame.KEYDOWN:
             self.keys.add(int(d["key"]))
@@ -255,7 +255,7 @@ class PygameInput:
         if dev.kind == "controller":
             cm = self.map.controller
             values = [dev.axes.get(cm.axes[a], 0.0) for a in
-                      ("left_x", "left_y", "right_x", "right_y", "low", "high")]  # fmt: skip
+                      ("left_x", "left_y", "right_x", "right_y", "low", "high")]
             values[4], values[5] = max(0.0, values[4]), max(0.0, values[5])
             held = {a for a, nums in cm.buttons.items() if not dev.buttons.isdisjoint(nums)}
             return values, held, "controller"
@@ -292,7 +292,7 @@ class PygameInput:
             lx=lx, ly=ly, rx=rx, ry=ry, lt=lt, rt=rt,
             held=frozenset(held), pressed=pressed,
             connected=not self.lost, source=source,
-        )  # fmt: skip
+        )
 
 
 def _hat_on(value: tuple[int, int], direction: str) -> bool:
