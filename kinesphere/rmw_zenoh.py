@@ -11,9 +11,10 @@ declares the Zenoh entities that use it. The layout follows rmw_zenoh_cpp's
 - graph token ``@ros2_lv/<domain>/<zid>/<node id>/<entity id>/<NN|MP|MS|SS|SC>/<enclave>/
   <namespace>/<node>[/<topic>/<dds type>/<hash>/<qos>]`` with every ``/`` inside a field
   written ``%`` (so the root namespace ``/`` is ``%``);
-- every sample carries an attachment (zenoh-ext serialisation of i64 sequence number, i64
-  source timestamp in ns, 16 bytes of publisher gid); rmw_zenoh subscribers drop samples
-  without one.
+- every sample carries an attachment: zenoh-ext serialisation of i64 sequence number, i64
+  source timestamp in ns and the 16-byte publisher gid as a sequence (LEB128 length ``0x10``,
+  then the bytes), 33 bytes, as Jazzy writes it since 0.2.4 (rmw_zenoh#605); rmw_zenoh
+  subscribers drop samples without one.
 
 CDR and the RIHS01 type hashes come from ``rosbags`` (its Jazzy type store) and gids from
 ``xxhash``, the optional extra ``kinesphere[ros2]``: only code that talks to ROS 2 imports
@@ -50,7 +51,9 @@ MAX_SEQUENCE: Final = 4096
 """Elements of any sequence field accepted from the wire (joints, axes, trajectory points)."""
 GID_SIZE: Final = 16
 """``RMW_GID_STORAGE_SIZE`` since Jazzy."""
-ATTACHMENT_SIZE: Final = 8 + 8 + GID_SIZE
+GID_LENGTH: Final = bytes([GID_SIZE])
+"""The gid's sequence length as zenoh-ext writes it (LEB128 of 16 is one byte, ``0x10``)."""
+ATTACHMENT_SIZE: Final = 8 + 8 + len(GID_LENGTH) + GID_SIZE
 EXTRA_HINT: Final = "ROS 2 support needs the ros2 extra: pip install 'kinesphere[ros2]'"
 
 _TOKEN = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
@@ -322,32 +325,41 @@ def gid_of(token: str) -> bytes:
 
 @dataclass(frozen=True)
 class Attachment:
-    """What every rmw_zenoh sample carries beside its payload."""
+    """What every rmw_zenoh sample carries beside its payload.
+
+    rmw_zenoh_cpp (``attachment_helpers.cpp``) writes it with zenoh-cpp's serializer: an
+    ``int64_t``, an ``int64_t`` and a ``std::array<uint8_t, 16>``, which zenoh-cpp writes as a
+    sequence (its length, LEB128, then the elements). Its reader checks that length and throws
+    on any other, so the length byte is not optional.
+    """
 
     sequence_number: int
     source_timestamp_ns: int
     gid: bytes
 
     def encode(self) -> bytes:
-        """zenoh-ext's serialisation of (i64, i64, [u8; 16]): two little-endian i64 and the
-        gid's bytes, no lengths (packed directly: 20x quicker than ``z_serialize``, and the
-        test suite checks the two agree)."""
+        """The 33 bytes (packed directly: 20x quicker than ``z_serialize``, and the test suite
+        checks the two agree)."""
         if len(self.gid) != GID_SIZE:
             raise KinesphereError("malformed", f"gid must be {GID_SIZE} bytes")
-        return _I64_PAIR.pack(self.sequence_number, self.source_timestamp_ns) + self.gid
+        return (_I64_PAIR.pack(self.sequence_number, self.source_timestamp_ns) + GID_LENGTH
+                + self.gid)
 
     @classmethod
     def decode(cls, data: ZBytes | bytes | None) -> Attachment:
-        """Read an attachment; missing or wrongly sized ones are ``malformed``."""
+        """Read an attachment as rmw_zenoh does; a missing one, or one of another size or gid
+        length (a peer older than Jazzy 0.2.4 writes another layout), is ``malformed``."""
         if data is None:
             raise KinesphereError("malformed", "sample without the rmw_zenoh attachment")
         raw = data.to_bytes() if isinstance(data, ZBytes) else bytes(data)
-        if len(raw) != ATTACHMENT_SIZE:
+        if len(raw) != ATTACHMENT_SIZE or raw[16:17] != GID_LENGTH:
+            got = f"{len(raw)} bytes" + (f", gid length {raw[16]}" if len(raw) > 16 else "")
             raise KinesphereError(
-                "malformed", f"rmw_zenoh attachment has {len(raw)} bytes, not {ATTACHMENT_SIZE}"
+                "malformed", f"rmw_zenoh attachment has {got}, not {ATTACHMENT_SIZE} bytes with "
+                f"gid length {GID_SIZE} (a peer older than rmw_zenoh 0.2.4?)"
             )
         seq, ts = _I64_PAIR.unpack_from(raw)
-        return cls(seq, ts, raw[16:])
+        return cls(seq, ts, raw[17:])
 
 
 _I64_PAIR: Final = struct.Struct("<qq")

@@ -6,9 +6,10 @@ plus an ``MP`` token, and puts CDR with the attachment rmw_zenoh subscribers req
 transient-local publisher (``robot_description``) is a zenoh-ext AdvancedPublisher with a
 cache, publisher detection and sporadic heartbeats, exactly what rmw_zenoh's transient-local
 subscribers (RViz) query; each subscription is a Zenoh subscriber plus an ``MS`` token, and
-hands decoded messages to a callback (it does not need the attachment, so it also hears
-Zenoh peers that send none). A sample that does not decode is counted and logged
-(the first, then every 100th), never raised into Zenoh's callback thread.
+hands decoded messages to a callback. A subscription reads each sample's attachment as
+rmw_zenoh does and, like it, drops a sample without one (or with another layout, such as that
+of rmw_zenoh before Jazzy 0.2.4). A sample that does not decode is counted and logged (the
+first, then every 100th), never raised into Zenoh's callback thread.
 
 Node and entity ids come from one process-wide counter, so several nodes may share a session.
 The caller owns the session; :meth:`Node.close` undeclares everything the node declared.
@@ -164,6 +165,8 @@ class Subscription:
         self.received = 0
         self.rejected = 0
         self.last_error = ""
+        self.last_attachment: rz.Attachment | None = None
+        """The attachment of the latest sample read (publisher gid, sequence, source time)."""
         self.key = rz.topic_key(node.domain, topic, ros_type, any_hash=any_hash)
         if qos.transient_local:
             self._sub: Any = ext.declare_advanced_subscriber(
@@ -180,6 +183,7 @@ class Subscription:
 
     def _on(self, sample: zenoh.Sample) -> None:
         try:
+            self.last_attachment = rz.Attachment.decode(sample.attachment)
             size = len(sample.payload)
             if size > self.max_bytes:  # before copying it out of Zenoh's buffer
                 raise KinesphereError("malformed", f"{size} bytes exceed {self.max_bytes}")

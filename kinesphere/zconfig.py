@@ -237,13 +237,24 @@ def listen_where_told(config: zenoh.Config) -> zenoh.Config:
     return config
 
 
-def session_from_args(args: argparse.Namespace) -> zenoh.Session:
-    """Open the session a command's ``zenoh`` options ask for (the caller closes it).
+def timestamped(config: zenoh.Config) -> zenoh.Config:
+    """``config`` with Zenoh timestamping on, as rmw_zenoh's session config has it
+    (``DEFAULT_RMW_ZENOH_SESSION_CONFIG.json5``: every sample a ROS node puts carries its
+    session's HLC timestamp); for the sessions that carry a ROS 2 node. Returns ``config``."""
+    _set(config, "timestamping/enabled", True)
+    return config
+
+
+def session_from_args(args: argparse.Namespace, *, ros2: bool = False) -> zenoh.Session:
+    """Open the session a command's ``zenoh`` options ask for (the caller closes it);
+    ``ros2`` when it carries a ROS 2 node (:func:`timestamped`).
 
     The one place the "no endpoint given" rule lives: every role's commands call this with the
     namespace that :func:`kinesphere.cliargs.add_zenoh_arguments` filled.
     """
     configs = configs_from_args(args)
+    if ros2:
+        configs = [timestamped(c) for c in configs]
     for config in configs[:-1]:
         try:
             return open_session(config=config)

@@ -13,7 +13,8 @@ import threading
 import pytest
 import xxhash
 import zenoh
-from zenoh.ext import Int64, UInt8, z_serialize
+from zenoh import ZBytes
+from zenoh.ext import Int64, z_deserialize, z_serialize
 
 from kinesphere import rmw_zenoh as rz
 from kinesphere import ros2msgs, zconfig
@@ -73,16 +74,22 @@ def test_qos_text() -> None:
 
 
 def test_attachment_is_zenoh_ext_serialisation() -> None:
+    """rmw_zenoh (Jazzy >= 0.2.4) serialises (int64, int64, std::array<uint8_t, 16>) with
+    zenoh-cpp, which writes the array as a sequence: zenoh-ext's own serialiser, with the gid
+    as ``bytes`` (a sequence), must produce and read the very same 33 bytes."""
     gid = bytes(range(16))
     data = bytes(rz.Attachment(7, 1_700_000_000_123_456_789, gid).encode())
-    assert data == struct.pack("<qq", 7, 1_700_000_000_123_456_789) + gid
-    assert data == bytes(z_serialize((Int64(7), Int64(1_700_000_000_123_456_789),
-                                      tuple(UInt8(b) for b in gid))))
+    assert len(data) == 33
+    assert data == struct.pack("<qq", 7, 1_700_000_000_123_456_789) + b"\x10" + gid
+    assert data == z_serialize((Int64(7), Int64(1_700_000_000_123_456_789), gid)).to_bytes()
+    seq, ts, back_gid = z_deserialize(tuple[Int64, Int64, bytes], ZBytes(data))
+    assert (seq, ts, back_gid) == (7, 1_700_000_000_123_456_789, gid)
     back = rz.Attachment.decode(data)
     assert (back.sequence_number, back.source_timestamp_ns, back.gid) == (
         7, 1_700_000_000_123_456_789, gid
     )
-    for bad in (None, b"", b"x" * 31, b"x" * 33):
+    pre_0_2_4 = data[:16] + data[17:]  # the gid as 16 loose bytes, as kinesphere once wrote
+    for bad in (None, b"", b"x" * 31, pre_0_2_4, data + b"x", data[:16] + b"\x0f" + data[17:]):
         with pytest.raises(KinesphereError, match="attachment"):
             rz.Attachment.decode(bad)
 

@@ -17,14 +17,13 @@ from typing import Any
 
 import zenoh
 from rosbags.typesys import Stores, get_typestore
-from zenoh.ext import Int64, UInt8, z_deserialize, z_serialize
+from zenoh.ext import Int64, z_deserialize, z_serialize
 
 from kinesphere import zconfig
 from support.wait import WAIT_S
 
 JAZZY = get_typestore(Stores.ROS2_JAZZY)
 """Upper bound for events on a loaded 2-core machine; tests finish far sooner."""
-GID = tuple[(UInt8,) * 16]  # type: ignore[misc]
 
 
 def dds(ros_type: str) -> str:
@@ -38,13 +37,16 @@ def key(domain: int, topic: str, ros_type: str) -> str:
 
 
 def attachment(seq: int, gid: bytes) -> zenoh.ZBytes:
-    return z_serialize((Int64(seq), Int64(time.time_ns()), tuple(UInt8(b) for b in gid)))
+    """rmw_zenoh's attachment (Jazzy >= 0.2.4): the gid is a zenoh-ext sequence (``bytes``)."""
+    return z_serialize((Int64(seq), Int64(time.time_ns()), gid))
 
 
 def read_attachment(sample: zenoh.Sample) -> tuple[int, int, bytes]:
     """(sequence number, source timestamp ns, gid); raises if absent or garbled."""
     assert sample.attachment is not None, "rmw_zenoh subscribers drop samples without one"
-    seq, ts, gid = z_deserialize(tuple[Int64, Int64, GID], sample.attachment)  # type: ignore[misc]
+    seq, ts, gid = z_deserialize(tuple[Int64, Int64, bytes], sample.attachment)
+    assert len(gid) == 16, f"gid of {len(gid)} bytes: not rmw_zenoh's attachment"
+    assert len(sample.attachment) == 33, "rmw_zenoh's attachment is 33 bytes"
     return int(seq), int(ts), bytes(gid)
 
 

@@ -389,10 +389,11 @@ class RobotLink:
 
 
 @contextmanager
-def link_for(args: argparse.Namespace) -> Iterator[RobotLink]:
-    """A watching RobotLink as ``args.sender`` on a session made from the Zenoh options."""
+def link_for(args: argparse.Namespace, *, ros2: bool = False) -> Iterator[RobotLink]:
+    """A watching RobotLink as ``args.sender`` on a session made from the Zenoh options
+    (``ros2``: the session also carries a ROS 2 node)."""
     keys = Keys(args.prefix)
-    with zconfig.session_from_args(args) as session:
+    with zconfig.session_from_args(args, ros2=ros2) as session:
         link = RobotLink(session, keys, sender=args.sender)
         try:
             yield link

@@ -49,7 +49,7 @@ def gamepad(args: argparse.Namespace) -> int:
             print("no game controller found: waiting for one to be plugged in; nothing moves "
                   "until then (--headless has no keyboard)", file=sys.stderr)
     try:
-        with link_for(args) as link, ExitStack() as stack:
+        with link_for(args, ros2=joy_topic is not None) as link, ExitStack() as stack:
             op = teleop.Teleop(link, mapping, target, options, take=args.take)
             source: teleop.Source
             if replay is not None:

@@ -73,7 +73,7 @@ def bridge(args: argparse.Namespace) -> int:
     def on_signal(signum: int, frame: FrameType | None) -> None:
         stop.set()
 
-    with session_from_args(args) as session, handle_signals(on_signal):
+    with session_from_args(args, ros2=True) as session, handle_signals(on_signal):
         br = Bridge(session, Keys(args.prefix), options)
         try:
             print(f"bridging kinesphere robots to ROS 2 domain {options.domain} as node "

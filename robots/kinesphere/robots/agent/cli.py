@@ -159,7 +159,7 @@ def _agent(args: argparse.Namespace) -> int:
                            ros2=ros2, max_translation_m=args.max_translation,
                            strict_period=args.strict_period)
     with _until_signal() as stop:
-        session = session_from_args(args)
+        session = session_from_args(args, ros2=args.body == "ros2")
         agent: Agent | None = None
         viewer = None
         try:
