@@ -16,6 +16,11 @@ declares the Zenoh entities that use it. The layout follows rmw_zenoh_cpp's
   then the bytes), 33 bytes, as Jazzy writes it since 0.2.4 (rmw_zenoh#605); rmw_zenoh
   subscribers drop samples without one.
 
+Humble's rmw_zenoh (0.1.x) writes the same format with ``TypeHashNotSupported`` where Jazzy
+writes the hash (Humble has no type hashes): ``distro="humble"`` makes keys and tokens that way.
+The messages kinesphere uses have the same layout in both distributions (the test suite checks
+rosbags' Humble store against its Jazzy one), so their CDR is the same.
+
 CDR and the RIHS01 type hashes come from ``rosbags`` (its Jazzy type store) and gids from
 ``xxhash``, the optional extra ``kinesphere[ros2]``: only code that talks to ROS 2 imports
 them, through :func:`typestore` and :func:`gid_of`, which name the extra when it is missing.
@@ -55,6 +60,11 @@ GID_LENGTH: Final = bytes([GID_SIZE])
 """The gid's sequence length as zenoh-ext writes it (LEB128 of 16 is one byte, ``0x10``)."""
 ATTACHMENT_SIZE: Final = 8 + 8 + len(GID_LENGTH) + GID_SIZE
 EXTRA_HINT: Final = "ROS 2 support needs the ros2 extra: pip install 'kinesphere[ros2]'"
+ROS_DISTROS: Final = ("jazzy", "humble")
+"""The ROS 2 distributions whose rmw_zenoh this module speaks; the first is the default."""
+HUMBLE_HASH: Final = "TypeHashNotSupported"
+"""What Humble's rmw_zenoh writes where Jazzy writes the RIHS01 hash (``rmw_publisher_data.cpp``
+of the humble branch)."""
 
 _TOKEN = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 _TYPE = re.compile(r"^([A-Za-z][A-Za-z0-9_]*)/(msg|srv|action)/([A-Z][A-Za-z0-9]*)$")
@@ -159,14 +169,22 @@ def typestore() -> Typestore:
     return Typestore(ros2_jazzy, max_sequence_length=MAX_SEQUENCE)
 
 
+def check_distro(distro: str) -> str:
+    if distro not in ROS_DISTROS:
+        raise KinesphereError("malformed", f"ROS 2 distribution {distro!r}; valid: "
+                              f"{', '.join(ROS_DISTROS)}")
+    return distro
+
+
 @cache
-def type_hash(ros_type: str) -> str:
-    """The RIHS01 hash of a type (``RIHS01_`` and 64 hex digits), as rmw_zenoh keys carry it."""
+def type_hash(ros_type: str, distro: str = "jazzy") -> str:
+    """The RIHS01 hash of a type (``RIHS01_`` and 64 hex digits), as rmw_zenoh keys carry it;
+    for Humble, :data:`HUMBLE_HASH`."""
     check_type(ros_type)
     store = typestore()
     if ros_type not in store.fielddefs:
         raise KinesphereError("malformed", f"ROS type {ros_type!r} is not in the Jazzy type store")
-    return store.hash_rihs01(ros_type)
+    return HUMBLE_HASH if check_distro(distro) == "humble" else store.hash_rihs01(ros_type)
 
 
 def message_class(ros_type: str) -> Any:
@@ -199,13 +217,14 @@ def deserialize(payload: bytes | bytearray | memoryview, ros_type: str,
 # --- keys ----------------------------------------------------------------------------------
 
 
-def topic_key(domain: int, topic: str, ros_type: str, *, any_hash: bool = False) -> str:
+def topic_key(domain: int, topic: str, ros_type: str, *, any_hash: bool = False,
+              distro: str = "jazzy") -> str:
     """The data key of an absolute topic; ``any_hash`` puts ``*`` for the hash, which a
     subscriber may use to also hear peers of other distros (Humble writes no hash)."""
     if not topic.startswith("/"):
         raise KinesphereError("malformed", f"topic {topic!r} must be absolute (resolve it)")
     _check_tokens(topic, "topic")
-    h = "*" if any_hash else type_hash(ros_type)
+    h = "*" if any_hash else type_hash(ros_type, distro)
     return f"{check_domain(domain)}/{topic.strip('/')}/{dds_type_name(ros_type)}/{h}"
 
 
@@ -247,7 +266,7 @@ def node_token(domain: int, zid: str, node_id: int, namespace: str, name: str,
 
 def endpoint_token(kind: EntityKind, domain: int, zid: str, node_id: int, entity_id: int,
                    namespace: str, node: str, topic: str, ros_type: str, qos: Qos,
-                   enclave: str = "/") -> str:
+                   enclave: str = "/", distro: str = "jazzy") -> str:
     """The graph token of a publisher (``MP``), subscription (``MS``)... on an absolute topic."""
     if kind is EntityKind.NODE:
         raise KinesphereError("malformed", "an endpoint token needs an endpoint kind")
@@ -255,7 +274,8 @@ def endpoint_token(kind: EntityKind, domain: int, zid: str, node_id: int, entity
         raise KinesphereError("malformed", f"topic {topic!r} must be absolute (resolve it)")
     _check_tokens(topic, "topic")
     fields = _node_fields(domain, zid, node_id, entity_id, kind, namespace, node, enclave)
-    fields += [mangle(topic), mangle(dds_type_name(ros_type)), type_hash(ros_type), qos.keyexpr()]
+    fields += [mangle(topic), mangle(dds_type_name(ros_type)), type_hash(ros_type, distro),
+               qos.keyexpr()]
     return "/".join(fields)
 
 

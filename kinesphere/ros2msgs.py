@@ -22,6 +22,8 @@ TF_MESSAGE: Final = "tf2_msgs/msg/TFMessage"
 STRING: Final = "std_msgs/msg/String"
 JOINT_TRAJECTORY: Final = "trajectory_msgs/msg/JointTrajectory"
 FLOAT64_MULTI_ARRAY: Final = "std_msgs/msg/Float64MultiArray"
+TWIST: Final = "geometry_msgs/msg/Twist"
+ODOMETRY: Final = "nav_msgs/msg/Odometry"
 
 
 def _f64(values: Sequence[float]) -> np.ndarray:
@@ -53,19 +55,60 @@ def joint_state(names: Sequence[str], position: Sequence[float], velocity: Seque
     )
 
 
-def tf_planar(parent: str, child: str, x: float, y: float, yaw: float, stamp_ns: int) -> Any:
-    """A TFMessage with one transform: ``child`` at ``(x, y)`` turned by ``yaw`` in ``parent``."""
+def transform(parent: str, child: str, xyz: Sequence[float], xyzw: Sequence[float],
+              stamp_ns: int) -> Any:
+    """A TransformStamped: ``child`` at ``xyz`` turned by the unit quaternion ``xyzw`` (ROS
+    order) in ``parent``."""
     geo = "geometry_msgs/msg/"
-    transform = message_class(f"{geo}Transform")(
-        translation=message_class(f"{geo}Vector3")(x=float(x), y=float(y), z=0.0),
-        rotation=message_class(f"{geo}Quaternion")(
-            x=0.0, y=0.0, z=math.sin(yaw / 2.0), w=math.cos(yaw / 2.0)
+    x, y, z = (float(v) for v in xyz)
+    qx, qy, qz, qw = (float(v) for v in xyzw)
+    return message_class(f"{geo}TransformStamped")(
+        header=header(stamp_ns, parent), child_frame_id=child,
+        transform=message_class(f"{geo}Transform")(
+            translation=message_class(f"{geo}Vector3")(x=x, y=y, z=z),
+            rotation=message_class(f"{geo}Quaternion")(x=qx, y=qy, z=qz, w=qw),
         ),
     )
-    stamped = message_class(f"{geo}TransformStamped")(
-        header=header(stamp_ns, parent), child_frame_id=child, transform=transform
+
+
+def planar(x: float, y: float, yaw: float) -> tuple[tuple[float, float, float],
+                                                     tuple[float, float, float, float]]:
+    """``(xyz, xyzw)`` of a pose on the floor: at ``(x, y)``, turned by ``yaw`` about z."""
+    return (x, y, 0.0), (0.0, 0.0, math.sin(yaw / 2.0), math.cos(yaw / 2.0))
+
+
+def tf_message(transforms: Sequence[Any]) -> Any:
+    return message_class(TF_MESSAGE)(transforms=list(transforms))
+
+
+def tf_planar(parent: str, child: str, x: float, y: float, yaw: float, stamp_ns: int) -> Any:
+    """A TFMessage with one transform: ``child`` at ``(x, y)`` turned by ``yaw`` in ``parent``."""
+    return tf_message([transform(parent, child, *planar(x, y, yaw), stamp_ns)])
+
+
+def twist(vx: float, vy: float, wz: float) -> Any:
+    """A body-frame Twist (m/s, m/s, rad/s), what a base controller's ``cmd_vel`` takes."""
+    vec = message_class("geometry_msgs/msg/Vector3")
+    return message_class(TWIST)(linear=vec(x=float(vx), y=float(vy), z=0.0),
+                                angular=vec(x=0.0, y=0.0, z=float(wz)))
+
+
+def odometry(frame: str, child: str, pose: Sequence[float], velocity: Sequence[float],
+             stamp_ns: int) -> Any:
+    """An Odometry of a planar base: ``pose`` ``(x, y, yaw)`` in ``frame``, ``velocity``
+    ``(vx, vy, wz)`` in ``child`` (the base's own frame), covariances unknown (zero)."""
+    geo = "geometry_msgs/msg/"
+    xyz, xyzw = planar(*pose)
+    pose_msg = message_class(f"{geo}Pose")(
+        position=message_class(f"{geo}Point")(x=xyz[0], y=xyz[1], z=0.0),
+        orientation=message_class(f"{geo}Quaternion")(x=0.0, y=0.0, z=xyzw[2], w=xyzw[3]),
     )
-    return message_class(TF_MESSAGE)(transforms=[stamped])
+    return message_class(ODOMETRY)(
+        header=header(stamp_ns, frame), child_frame_id=child,
+        pose=message_class(f"{geo}PoseWithCovariance")(pose=pose_msg, covariance=_f64([0.0] * 36)),
+        twist=message_class(f"{geo}TwistWithCovariance")(twist=twist(*velocity),
+                                                         covariance=_f64([0.0] * 36)),
+    )
 
 
 def string(text: str) -> Any:
@@ -123,3 +166,17 @@ def read_joy(msg: Any) -> tuple[tuple[float, ...], tuple[int, ...]]:
     if not all(math.isfinite(v) for v in axes):
         raise KinesphereError("malformed", "Joy carries a non-finite axis")
     return tuple(max(-1.0, min(1.0, v)) for v in axes), tuple(int(b) for b in msg.buttons)
+
+
+def read_odometry(msg: Any) -> tuple[float, float, float]:
+    """The planar pose ``(x, y, yaw)`` of an Odometry (yaw from its orientation), checked."""
+    p = msg.pose.pose.position
+    o = msg.pose.pose.orientation
+    values = (float(p.x), float(p.y), float(o.x), float(o.y), float(o.z), float(o.w))
+    if not all(math.isfinite(v) for v in values):
+        raise KinesphereError("malformed", "Odometry carries a non-finite number")
+    x, y, qx, qy, qz, qw = values
+    if abs(math.sqrt(qx * qx + qy * qy + qz * qz + qw * qw) - 1.0) > 1e-3:
+        raise KinesphereError("malformed", "Odometry orientation is not a unit quaternion")
+    yaw = math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
+    return x, y, yaw

@@ -12,6 +12,7 @@ of rmw_zenoh before Jazzy 0.2.4). A sample that does not decode is counted and l
 first, then every 100th), never raised into Zenoh's callback thread.
 
 Node and entity ids come from one process-wide counter, so several nodes may share a session.
+A node of ``distro="humble"`` writes Humble's keys and tokens (no type hash).
 The caller owns the session; :meth:`Node.close` undeclares everything the node declared.
 """
 
@@ -46,12 +47,13 @@ class Node:
     """One ROS node on ``session``: ``name`` in ``namespace`` (``/`` is the root), ``domain``."""
 
     def __init__(self, session: zenoh.Session, name: str, namespace: str = "/",
-                 domain: int = 0) -> None:
+                 domain: int = 0, distro: str = "jazzy") -> None:
         rz.typestore()  # fail early, naming the extra, when rosbags is missing
         self.session = session
         self.name = rz.check_node_name(name)
         self.namespace = rz.check_namespace(namespace)
         self.domain = rz.check_domain(domain)
+        self.distro = rz.check_distro(distro)
         self.zid = str(session.info.zid())
         self.node_id = next(_ids)
         self._entities: list[Publisher | Subscription] = []
@@ -67,7 +69,8 @@ class Node:
     def token(self, kind: rz.EntityKind, topic: str, ros_type: str, qos: rz.Qos) -> str:
         """A fresh endpoint token of this node (each call takes a new entity id)."""
         return rz.endpoint_token(kind, self.domain, self.zid, self.node_id, next(_ids),
-                                 self.namespace, self.name, topic, ros_type, qos)
+                                 self.namespace, self.name, topic, ros_type, qos,
+                                 distro=self.distro)
 
     def publisher(self, topic: str, ros_type: str, qos: rz.Qos | None = None) -> Publisher:
         """A publisher on ``topic`` (relative names resolve against the namespace)."""
@@ -109,7 +112,7 @@ class Publisher:
         self.node = node
         self.topic = topic
         self.ros_type = ros_type
-        self.key = rz.topic_key(node.domain, topic, ros_type)
+        self.key = rz.topic_key(node.domain, topic, ros_type, distro=node.distro)
         token = node.token(rz.EntityKind.PUBLISHER, topic, ros_type, qos)
         self.gid = rz.gid_of(token)
         self._seq = itertools.count(1)

@@ -14,6 +14,7 @@ from typing import Any
 
 from kinesphere.cliargs import add_zenoh_arguments
 from kinesphere.clients.options import JOY_LAYOUTS, JoyOptions, TeleopOptions
+from kinesphere.rmw_zenoh import ROS_DISTROS
 
 KEYS_HELP = """keys (keyboard fallback, the HUD window needs focus):
   arrows      right stick: the limb's horizontal direction (diagonals: two arrows)
@@ -169,6 +170,8 @@ def register(sub: Any) -> None:
                    "joy_node's device order, read with the mapping's [joystick] numbers")
     g.add_argument("--joy-timeout", type=float, default=joy.timeout_s, metavar="S",
                    help=f"no Joy message for S seconds = pad unplugged (default {joy.timeout_s})")
+    g.add_argument("--ros-distro", choices=ROS_DISTROS, default=joy.distro,
+                   help=f"ROS 2 distribution of the joy node's rmw_zenoh (default {joy.distro})")
     g.add_argument("--duration", type=float, metavar="S", help="quit after S seconds")
     g.add_argument("--screenshot", metavar="PNG", help="save the HUD to PNG when quitting")
     g.add_argument(

@@ -23,12 +23,14 @@ class TeleopOptions:
 @dataclass(frozen=True)
 class BridgeOptions:
     """``kinesphere ros2 bridge``: ROS ``domain`` and ``namespace``, ``node`` name, TF parent
-    frame; how long a BodyModel query may take and the pause before asking again; bounds."""
+    frame, ROS 2 ``distro`` of the keys it writes; how long a BodyModel query may take and the
+    pause before asking again; bounds."""
 
     domain: int = 0
     namespace: str = "/"
     node: str = "kinesphere_bridge"
     odom_frame: str = "odom"
+    distro: str = "jazzy"
     body_timeout_s: float = 2.0
     body_retry_s: float = 5.0
     max_robots: int = 256
@@ -43,8 +45,10 @@ class JoyOptions:
     """The gamepad's ``--input ros2:TOPIC``: ROS ``domain``; ``layout`` ``controller`` (the
     SDL GameController order of ``joy``'s game_controller_node) or ``joystick`` (joy_node's
     raw device order, read with the mapping's ``[joystick]`` numbers); after ``timeout_s``
-    without a message the pad counts as unplugged (everything stops)."""
+    without a message the pad counts as unplugged (everything stops); ``distro`` the ROS 2
+    distribution whose keys its graph token carries."""
 
     domain: int = 0
     layout: str = "controller"
     timeout_s: float = 0.5
+    distro: str = "jazzy"

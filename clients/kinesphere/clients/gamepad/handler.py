@@ -123,7 +123,8 @@ def _joy_input(
 ) -> JoyInput:
     from kinesphere.clients.gamepad.inputs.ros2_joy import JoyInput
 
-    options = JoyOptions(args.ros2_domain, args.joy_layout, args.joy_timeout)
+    options = JoyOptions(args.ros2_domain, args.joy_layout, args.joy_timeout,
+                         args.ros_distro)
     print(f"input: sensor_msgs/Joy on {topic} (ROS domain {options.domain}); nothing moves "
           "until it arrives", file=sys.stderr, flush=True)
     return JoyInput(session, pad, topic, options)

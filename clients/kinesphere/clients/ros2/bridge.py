@@ -8,30 +8,40 @@ see, for robot ``ID`` (``ID`` made a valid ROS name: ``baxter-1`` -> ``baxter_1`
     ID/joint_states       sensor_msgs/msg/JointState  every RobotState (names, q, qd)
     ID/robot_description  std_msgs/msg/String         the URDF (eURDF minus body_part labels),
                                                       reliable + transient local, depth 1
-    tf                    tf2_msgs/msg/TFMessage      odom -> ID/<URDF root link>, base pose
+    ID/odom               nav_msgs/msg/Odometry       the base pose (and its rate of change)
+    tf                    tf2_msgs/msg/TFMessage      odom -> ID/<URDF root link>, and every
+                                                      moving joint's ID/<parent> -> ID/<child>
+    tf_static             tf2_msgs/msg/TFMessage      every robot's fixed joints, one latched
+                                                      message (transient local, depth 1)
 
-Names are relative to ``--namespace`` (``/`` by default, so ``/baxter_1/joint_states`` and
-``/tf``). A robot appears when its first state arrives and disappears (publishers and graph
-tokens undeclared) when its liveliness token goes. Bodies are fetched on a worker thread,
-never in a Zenoh callback; until a platform's body arrives its robots publish joint states
-only (the TF child frame is the URDF's root link, which the body names). Bounded: at most
-``max_robots`` robots, states with more than ``MAX_SEQUENCE`` joints and URDFs larger than
-``max_urdf_bytes`` are refused with one log line.
+That is what robot_state_publisher (with ``frame_prefix`` ``ID/``) and a base's odometry
+would publish, so RViz shows every robot from the bridge alone. Like tf2's static broadcaster,
+the node keeps one /tf_static message holding every fixed transform it knows, sent again when a
+robot comes or goes, so a late joiner's one cached sample describes the whole fleet. Names are relative to
+``--namespace`` (``/`` by default, so ``/baxter_1/joint_states`` and ``/tf``). A robot appears
+when its first state arrives and disappears (publishers and graph tokens undeclared) when its
+liveliness token goes. Bodies are fetched on a worker thread, never in a Zenoh callback; until
+a platform's body arrives its robots publish joint states only (frames and the URDF come from
+the body). Bounded: at most ``max_robots`` robots, states with more than ``MAX_SEQUENCE``
+joints and URDFs larger than ``max_urdf_bytes`` are refused with one log line.
 """
 
 from __future__ import annotations
 
 import logging
+import math
 import queue
 import threading
-import xml.etree.ElementTree as ET
+import time
 from dataclasses import dataclass, field
+from typing import Any
 
 import zenoh
 
 from kinesphere import ros2msgs as rm
 from kinesphere.clients.options import BridgeOptions
 from kinesphere.errors import KinesphereError
+from kinesphere.joint_frames import JointFrames
 from kinesphere.keyexpr import Keys
 from kinesphere.protocol import BodyModel, RobotState, decode
 from kinesphere.query import get_one
@@ -46,6 +56,8 @@ log = logging.getLogger(__name__)
 class _Body:
     urdf: str
     root_link: str
+    frames: JointFrames
+    neutral: dict[str, float]
 
 
 @dataclass
@@ -56,14 +68,28 @@ class _Robot:
     ros_id: str
     platform: str
     joint_states: Publisher
+    body: _Body | None = None
     description: Publisher | None = None
-    root_link: str = ""
+    odom: Publisher | None = None
+    last_base: tuple[int, float, float, float] | None = None
+    """(stamp ns, x, y, yaw) of the last state, for the odometry's velocity."""
     published: int = 0
+    lock: threading.Lock = field(default_factory=threading.Lock)
+    """Held while its messages go out and while it closes: a publisher undeclared during a
+    put on another thread raises in Zenoh."""
+    closed: bool = False
 
     def close(self) -> None:
-        self.joint_states.close()
-        if self.description is not None:
-            self.description.close()
+        with self.lock:
+            self.closed = True
+            for pub in (self.joint_states, self.description, self.odom):
+                if pub is not None:
+                    pub.close()
+
+    def frame(self, link: str) -> str:
+        """A link's TF frame: prefixed with the robot's ROS name, as robot_state_publisher's
+        ``frame_prefix`` does."""
+        return f"{self.ros_id}/{link}"
 
 
 @dataclass
@@ -81,8 +107,11 @@ class Bridge:
         self.session = session
         self.keys = keys or Keys()
         self.options = options or BridgeOptions()
-        self.node = Node(session, self.options.node, self.options.namespace, self.options.domain)
+        self.node = Node(session, self.options.node, self.options.namespace, self.options.domain,
+                         self.options.distro)
         self.tf = self.node.publisher("tf", rm.TF_MESSAGE)
+        self.tf_static = self.node.publisher("tf_static", rm.TF_MESSAGE, LATCHED)
+        self._static: dict[str, list[Any]] = {}
         self.stats = BridgeStats()
         self._robots: dict[str, _Robot] = {}
         self._bodies: dict[str, _Body] = {}
@@ -140,11 +169,66 @@ class Bridge:
         return robot
 
     def _describe(self, robot: _Robot, body: _Body) -> None:
-        """Publish the robot's URDF (latched) once its body is known; called with the lock."""
-        robot.root_link = body.root_link
-        robot.description = self.node.publisher(f"{robot.ros_id}/robot_description",
-                                                 rm.STRING, LATCHED)
-        robot.description.put(rm.string(body.urdf))
+        """Publish the robot's URDF and fixed joints (latched) once its body is known, and
+        start its odometry; called with the bridge's lock."""
+        with robot.lock:
+            if robot.closed:
+                return
+            robot.description = self.node.publisher(f"{robot.ros_id}/robot_description",
+                                                     rm.STRING, LATCHED)
+            robot.description.put(rm.string(body.urdf))
+            frames = body.frames
+            wxyz, xyz = frames.transforms(frames.vector(body.neutral))
+            now = time.time_ns()
+            fixed = [self._joint_tf(robot, body, i, wxyz, xyz, now)
+                     for i in range(len(frames.names)) if not frames.moving[i]]
+            if fixed:
+                self._static[robot.robot_id] = fixed
+                self._put_static()
+            robot.odom = self.node.publisher(f"{robot.ros_id}/odom", rm.ODOMETRY)
+            robot.body = body  # last: a state published from now on has every publisher
+
+    def _put_static(self) -> None:
+        """The one /tf_static message: every robot's fixed transforms (with the lock)."""
+        self.tf_static.put(rm.tf_message([t for ts in self._static.values() for t in ts]))
+
+    @staticmethod
+    def _joint_tf(robot: _Robot, body: _Body, i: int, wxyz: Any, xyz: Any, stamp_ns: int
+                  ) -> Any:
+        frames = body.frames
+        w, x, y, z = wxyz[i].tolist()
+        return rm.transform(robot.frame(frames.parents[i]), robot.frame(frames.children[i]),
+                            xyz[i].tolist(), (x, y, z, w), stamp_ns)
+
+    def _publish_body(self, robot: _Robot, state: RobotState) -> None:
+        """TF (base pose and moving joints) and odometry of a robot whose body is known."""
+        body = robot.body
+        assert body is not None and robot.odom is not None
+        frames = body.frames
+        try:
+            q = frames.q_from(state.joint_names, state.q, body.neutral)
+        except ValueError:
+            raise KinesphereError("malformed", f"state of {state.robot_id!r} has "
+                                  f"{len(state.joint_names)} names and {len(state.q)} "
+                                  "positions") from None
+        stamp = state.stamp_ns
+        x, y, yaw = state.base_pose
+        root = robot.frame(body.root_link)
+        wxyz, xyz = frames.transforms(q)
+        transforms = [rm.transform(self.options.odom_frame, root, *rm.planar(x, y, yaw), stamp)]
+        transforms += [self._joint_tf(robot, body, i, wxyz, xyz, stamp)
+                       for i in range(len(frames.names)) if frames.moving[i]]
+        self.tf.put(rm.tf_message(transforms))
+        velocity = (0.0, 0.0, 0.0)
+        last = robot.last_base
+        if last is not None and 0 < stamp - last[0] < 1_000_000_000:
+            dt = (stamp - last[0]) * 1e-9
+            dx, dy = x - last[1], y - last[2]
+            c, s = math.cos(yaw), math.sin(yaw)  # world to the base's frame
+            velocity = ((c * dx + s * dy) / dt, (-s * dx + c * dy) / dt,
+                        math.remainder(yaw - last[3], math.tau) / dt)
+        robot.last_base = (stamp, x, y, yaw)
+        robot.odom.put(rm.odometry(self.options.odom_frame, root, (x, y, yaw), velocity, stamp))
 
     def _on_state(self, sample: zenoh.Sample) -> None:
         try:
@@ -159,19 +243,22 @@ class Bridge:
         robot = self._robot(state)
         if robot is None:
             return
-        try:
-            robot.joint_states.put(
-                rm.joint_state(state.joint_names, state.q, state.qd, state.stamp_ns)
-            )
-            if robot.root_link:
-                x, y, yaw = state.base_pose
-                self.tf.put(rm.tf_planar(self.options.odom_frame,
-                                         f"{robot.ros_id}/{robot.root_link}", x, y, yaw,
-                                         state.stamp_ns))
-        except zenoh.ZError as exc:  # the session is closing
-            log.debug("state of %s not republished: %s", state.robot_id, exc)
-            return
-        robot.published += 1
+        with robot.lock:
+            if robot.closed:
+                return
+            try:
+                robot.joint_states.put(
+                    rm.joint_state(state.joint_names, state.q, state.qd, state.stamp_ns)
+                )
+                if robot.body is not None:
+                    self._publish_body(robot, state)
+            except KinesphereError as exc:
+                self._refuse("malformed", exc.message)
+                return
+            except zenoh.ZError as exc:  # the session is closing
+                log.debug("state of %s not republished: %s", state.robot_id, exc)
+                return
+            robot.published += 1
         self.stats.states += 1
 
     def _on_alive(self, sample: zenoh.Sample) -> None:
@@ -184,6 +271,8 @@ class Bridge:
         with self._lock:
             robot = self._robots.pop(robot_id, None)
             self.stats.robots = len(self._robots)
+            if self._static.pop(robot_id, None) is not None and not self._closed.is_set():
+                self._put_static()
         if robot is not None:
             robot.close()
             log.info("robot %s left; %s no longer published", robot_id, robot.ros_id)
@@ -213,15 +302,16 @@ class Bridge:
                         self._describe(robot, body)
 
     def _fetch(self, platform: str) -> _Body:
-        from kinesphere.eurdf import plain_urdf  # yourdfpy: slow to import, not for --help
+        from kinesphere.eurdf import load_eurdf, plain_urdf  # yourdfpy: slow to import
 
         model = get_one(self.session, self.keys.body(platform), BodyModel,
                         timeout=self.options.body_timeout_s, every_replica=True)
         if len(model.eurdf.encode()) > self.options.max_urdf_bytes:
             raise KinesphereError("malformed", f"body of {platform} exceeds "
                                   f"{self.options.max_urdf_bytes} bytes")
+        eurdf = load_eurdf(model.eurdf)  # validated: a malformed body is refused here
         urdf = plain_urdf(model.eurdf)
-        return _Body(urdf, _root_link(urdf))
+        return _Body(urdf, eurdf.root_link, JointFrames(eurdf), dict(model.neutral))
 
     def close(self) -> None:
         """Stop listening, undeclare every publisher and graph token."""
@@ -235,16 +325,3 @@ class Bridge:
             robot.close()
         self.node.close()
 
-
-def _root_link(urdf: str) -> str:
-    """The link no joint has as its child (the tree's root)."""
-    root = ET.fromstring(urdf)
-    children = set()
-    for joint in root.findall("joint"):
-        child = joint.find("child")
-        if child is not None:
-            children.add(child.get("link"))
-    roots = [str(ln.get("name")) for ln in root.findall("link") if ln.get("name") not in children]
-    if len(roots) != 1:
-        raise KinesphereError("invalid_eurdf", f"URDF has {len(roots)} root links, need 1")
-    return roots[0]

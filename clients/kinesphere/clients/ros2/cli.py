@@ -14,11 +14,16 @@ from typing import Any
 
 from kinesphere.cliargs import ZenohDefaults, add_zenoh_arguments
 from kinesphere.clients.options import BridgeOptions
+from kinesphere.rmw_zenoh import ROS_DISTROS
 
 BRIDGE_EPILOG = """topics, for robot ID (made a ROS name: baxter-1 -> baxter_1), relative to NS:
   ID/joint_states       sensor_msgs/msg/JointState   at the robot's state rate
   ID/robot_description  std_msgs/msg/String          the URDF, transient local (RViz)
-  tf                    tf2_msgs/msg/TFMessage       ODOM -> ID/<URDF root link>
+  ID/odom               nav_msgs/msg/Odometry        the base pose in ODOM
+  tf                    tf2_msgs/msg/TFMessage       ODOM -> ID/<root link>, moving joints
+  tf_static             tf2_msgs/msg/TFMessage       fixed joints, transient local
+Frames are the URDF's links prefixed ID/, as robot_state_publisher with frame_prefix ID/
+makes them: rviz2 with Fixed Frame ODOM shows every robot from the bridge alone.
 ROS 2 side: RMW_IMPLEMENTATION=rmw_zenoh_cpp, both sides connected to the same Zenoh router
 (ros2 run rmw_zenoh_cpp rmw_zenohd); see docs/ros2.md."""
 
@@ -42,7 +47,7 @@ def register(sub: Any) -> None:
     b = rsub.add_parser(
         "bridge",
         formatter_class=argparse.RawDescriptionHelpFormatter,
-        help="publish every live robot's joint states, URDF and base pose to ROS 2",
+        help="publish every live robot's joint states, URDF, frames and odometry to ROS 2",
         description="Run one ROS node that republishes every live kinesphere robot for ROS 2 "
         "tools (ros2 topic, RViz, Foxglove, ros2 bag) until SIGINT/SIGTERM.",
         epilog=BRIDGE_EPILOG,
@@ -54,6 +59,9 @@ def register(sub: Any) -> None:
     b.add_argument("--node", default=d.node, help=f"ROS node name (default {d.node})")
     b.add_argument("--odom-frame", default=d.odom_frame, metavar="ODOM",
                    help=f"TF parent frame of every robot's base (default {d.odom_frame})")
+    b.add_argument("--ros-distro", choices=ROS_DISTROS, default=d.distro,
+                   help="ROS 2 distribution whose rmw_zenoh keys to write: humble's carry no "
+                   f"type hash (default {d.distro})")
     add_zenoh_arguments(b, BRIDGE_ZENOH)
     b.set_defaults(func=bridge)
 
@@ -67,7 +75,8 @@ def bridge(args: argparse.Namespace) -> int:
     from kinesphere.zconfig import session_from_args
 
     options = dataclasses.replace(BridgeOptions(), domain=args.domain, namespace=args.namespace,
-                                  node=args.node, odom_frame=args.odom_frame)
+                                  node=args.node, odom_frame=args.odom_frame,
+                                  distro=args.ros_distro)
     stop = threading.Event()
 
     def on_signal(signum: int, frame: FrameType | None) -> None:

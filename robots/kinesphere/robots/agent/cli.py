@@ -17,6 +17,7 @@ from typing import Any
 
 from kinesphere.cliargs import AGENT, add_zenoh_arguments
 from kinesphere.errors import KinesphereError
+from kinesphere.rmw_zenoh import ROS_DISTROS
 from kinesphere.robots.agent.bodies import BODIES
 from kinesphere.robots.agent.options import ROS2_INTERFACES, AgentOptions, Ros2BodyOptions
 from kinesphere.signals import handle_signals
@@ -69,6 +70,12 @@ def register(sub: Any) -> None:
                       help="the forward controller's joint order (default: the eURDF's)")
     ros2.add_argument("--ros2-timeout", type=float, default=r.timeout_s, metavar="S",
                       help=f"no joint state for S seconds = error, hold (default {r.timeout_s:g})")
+    ros2.add_argument("--ros2-cmd-vel", default=r.cmd_vel, metavar="TOPIC",
+                      help=f"a mobile base's geometry_msgs/Twist topic (default {r.cmd_vel})")
+    ros2.add_argument("--ros2-odom", default=r.odom, metavar="TOPIC",
+                      help=f"a mobile base's nav_msgs/Odometry topic (default {r.odom})")
+    ros2.add_argument("--ros-distro", choices=ROS_DISTROS, default=r.distro,
+                      help=f"the ROS 2 distribution of the robot's rmw_zenoh (default {r.distro})")
     add_zenoh_arguments(p, AGENT)
     p.set_defaults(func=_agent)
 
@@ -153,6 +160,7 @@ def _agent(args: argparse.Namespace) -> int:
         namespace=args.ros2_namespace, domain=args.ros2_domain, interface=args.ros2_interface,
         controller=args.ros2_controller, timeout_s=args.ros2_timeout,
         joints=tuple(j.strip() for j in args.ros2_joints.split(",") if j.strip()),
+        cmd_vel=args.ros2_cmd_vel, odom=args.ros2_odom, distro=args.ros_distro,
     )
     options = AgentOptions(rate=args.rate, state_rate=args.state_rate, speed=args.speed,
                            prefix=args.prefix, groups=tuple(args.group), body=args.body,

@@ -8,6 +8,7 @@ from typing import Final
 
 from kinesphere.errors import KinesphereError
 from kinesphere.keyexpr import DEFAULT_PREFIX
+from kinesphere.rmw_zenoh import check_distro
 from kinesphere.robots.agent.trajectory import DEFAULT_MARGIN
 
 ROS2_INTERFACES = ("trajectory", "forward")
@@ -23,8 +24,11 @@ class Ros2BodyOptions:
     joint_trajectory_controller: JointTrajectory on ``<controller>/joint_trajectory``) or
     ``forward`` (a forward position controller: Float64MultiArray on ``<controller>/commands``
     in ``joints`` order, default P's); ``controller`` defaults to joint_trajectory_controller or
-    forward_position_controller. No joint state for ``timeout_s`` is an error; the first must
-    come within ``start_timeout_s``. The setpoint stream runs at ``publish_rate`` Hz.
+    forward_position_controller. A mobile platform's base takes ``geometry_msgs/msg/Twist`` on
+    ``cmd_vel`` and reports ``nav_msgs/msg/Odometry`` on ``odom`` (both relative to the
+    namespace). No joint state (or, for a mobile base, odometry) for ``timeout_s`` is an error;
+    the first must come within ``start_timeout_s``. The setpoint stream runs at
+    ``publish_rate`` Hz. ``distro`` is the ROS 2 distribution whose rmw_zenoh keys it writes.
     """
 
     namespace: str = "/"
@@ -35,8 +39,12 @@ class Ros2BodyOptions:
     timeout_s: float = 0.5
     start_timeout_s: float = 10.0
     publish_rate: float = 100.0
+    cmd_vel: str = "cmd_vel"
+    odom: str = "odom"
+    distro: str = "jazzy"
 
     def __post_init__(self) -> None:
+        check_distro(self.distro)
         if self.interface not in ROS2_INTERFACES:
             raise KinesphereError("malformed", f"ROS 2 interface {self.interface!r}; valid: "
                                   f"{', '.join(ROS2_INTERFACES)}")

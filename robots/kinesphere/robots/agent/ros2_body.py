@@ -12,13 +12,19 @@ e-stop — and this body only carries it to a real robot and back:
   joint_trajectory_controller, or a ``std_msgs/msg/Float64MultiArray`` of positions in the
   controller's joint order on ``<NS>/<controller>/commands`` for a forward position controller.
 
+A mobile platform's base is driven as a ROS base is: the body-frame velocity the agent
+commands goes out as ``geometry_msgs/msg/Twist`` on ``<NS>/cmd_vel`` with every setpoint
+(clamped to the platform's top speed and yaw rate; no sideways speed for a diff or skid
+base), and ``nav_msgs/msg/Odometry`` from ``<NS>/odom`` is the base pose the agent reads.
+
 Every target is clamped again to the eURDF's hard limits before it leaves. Faults are raised
-from :meth:`Ros2Body.step` as ``KinesphereError`` naming the problem — joint states that stop
-arriving for ``timeout_s``, or that lack an eURDF joint — so the agent reports ``error`` with
-that text and holds; while they last, nothing is streamed (a joint_trajectory_controller holds
-the end of its last point, a forward controller its last command). The first joint state must
+from :meth:`Ros2Body.step` as ``KinesphereError`` naming the problem — joint states (or a
+mobile base's odometry) that stop arriving for ``timeout_s``, or that lack an eURDF joint — so
+the agent reports ``error`` with that text and holds; while they last, no joint setpoint is
+streamed (a joint_trajectory_controller holds the end of its last point, a forward controller
+its last command) and the base is sent a zero Twist. The first joint state (and odometry) must
 arrive within ``start_timeout_s`` of start-up and name every joint of P, or the agent does not
-start. The base is not driven (no ``cmd_vel``): its odometry reads as zero.
+start.
 """
 
 from __future__ import annotations
@@ -66,7 +72,7 @@ class Ros2Body(Body):
                                   f"unknown or repeated: {', '.join(unknown) or 'repeats'}")
         self._out = np.array([names.index(j) for j in self.order], dtype=int)
         self.every = max(1, round(1.0 / (o.publish_rate * dt)))
-        self.node = Node(session, node_name, o.namespace, o.domain)
+        self.node = Node(session, node_name, o.namespace, o.domain, o.distro)
         controller = o.controller or DEFAULT_CONTROLLERS[o.interface]
         self._lock = threading.Condition()
         self._latest: tuple[float, np.ndarray, np.ndarray] | None = None
@@ -83,6 +89,17 @@ class Ros2Body(Body):
         self._target: np.ndarray | None = None
         self._sent: np.ndarray | None = None
         self._steps = 0
+        base = platform.base
+        self.mobile = base.mobile
+        self._twist = (0.0, 0.0, 0.0)
+        self._odom: tuple[float, tuple[float, float, float]] | None = None
+        self._max_speed = base.max_speed
+        self._max_yaw_rate = base.max_yaw_rate
+        self._lateral = base.holonomic
+        if self.mobile:
+            self.odom_topic = self.node.resolve(o.odom)
+            self.node.subscription(o.odom, rm.ODOMETRY, self._on_odom)
+            self.cmd_vel = self.node.publisher(o.cmd_vel, rm.TWIST)
         try:
             first = self._wait_first()
         except KinesphereError:
@@ -119,17 +136,30 @@ class Ros2Body(Body):
             self.states += 1
             self._lock.notify_all()
 
-    def _wait_first(self) -> np.ndarray:
+    def _on_odom(self, msg: object) -> None:
+        x, y, yaw = rm.read_odometry(msg)
         with self._lock:
-            self._lock.wait_for(lambda: self._latest is not None or bool(self._mismatch),
-                                self.options.start_timeout_s)
+            self._odom = (self._clock(), (x, y, yaw))
+            self._lock.notify_all()
+
+    def _wait_first(self) -> np.ndarray:
+        o = self.options
+        with self._lock:
+            self._lock.wait_for(lambda: (self._latest is not None and (
+                not self.mobile or self._odom is not None)) or bool(self._mismatch),
+                o.start_timeout_s)
             if self._latest is None:
                 raise KinesphereError(
                     "unavailable" if not self._mismatch else "malformed",
                     self._mismatch or f"no joint states on {self.state_topic} (domain "
-                    f"{self.options.domain}) within {self.options.start_timeout_s:g} s: is the "
+                    f"{o.domain}) within {o.start_timeout_s:g} s: is the "
                     "robot's joint_state_broadcaster running and on the same Zenoh router?",
                 )
+            if self.mobile and self._odom is None:
+                raise KinesphereError(
+                    "unavailable", f"no odometry on {self.odom_topic} (domain {o.domain}) "
+                    f"within {o.start_timeout_s:g} s: {self.platform.name} has a mobile base; "
+                    "is its base controller publishing nav_msgs/msg/Odometry there?")
             return self._latest[1].copy()
 
     def _fresh(self) -> tuple[np.ndarray, np.ndarray]:
@@ -139,11 +169,19 @@ class Ros2Body(Body):
         if mismatch:
             raise KinesphereError("malformed", mismatch)
         assert latest is not None
-        age = self._clock() - latest[0]
+        now = self._clock()
+        age = now - latest[0]
         if age > self.options.timeout_s:
             raise KinesphereError(
                 "unavailable", f"no joint states on {self.state_topic} for {age:.1f} s "
                 f"(limit {self.options.timeout_s:g} s)")
+        if self.mobile:
+            assert self._odom is not None
+            age = now - self._odom[0]
+            if age > self.options.timeout_s:
+                raise KinesphereError(
+                    "unavailable", f"no odometry on {self.odom_topic} for {age:.1f} s "
+                    f"(limit {self.options.timeout_s:g} s)")
         return latest[1], latest[2]
 
     # --- the Body seam (control thread) -------------------------------------------------------
@@ -151,21 +189,41 @@ class Ros2Body(Body):
     def read(self) -> Reading:
         with self._lock:
             latest = self._latest
+            odom = self._odom
         if latest is not None:
             self._q, self._qd = latest[1], latest[2]
-        return Reading(self._q.copy(), self._qd.copy(), (0.0, 0.0, 0.0))
+        pose = (0.0, 0.0, 0.0)
+        if odom is not None:
+            x, y, yaw = odom[1]
+            pose = (x, y, math.atan2(math.sin(yaw), math.cos(yaw)))
+        return Reading(self._q.copy(), self._qd.copy(), pose)
 
     def command(self, q: np.ndarray, base_twist: Sequence[float] | np.ndarray) -> None:
         self._target = np.clip(np.asarray(q, dtype=float), self._lower, self._upper)
+        if self.mobile:
+            vx, vy, wz = (float(v) for v in base_twist)
+            if not self._lateral:
+                vy = 0.0
+            speed = math.hypot(vx, vy)
+            if speed > self._max_speed:  # the planner's limit, enforced again on the way out
+                vx, vy = vx * self._max_speed / speed, vy * self._max_speed / speed
+            wz = min(max(wz, -self._max_yaw_rate), self._max_yaw_rate)
+            self._twist = (vx, vy, wz)
 
     def step(self) -> None:
         self._fresh()
         self._steps += 1
         if self._target is not None and self._steps % self.every == 0:
             self._send(self._target)
+            if self.mobile:
+                self.cmd_vel.put(rm.twist(*self._twist))
 
     def halt(self) -> None:
-        """Hold where the robot is now (its latest joint state), streamed at once."""
+        """Hold where the robot is now (its latest joint state, a zero base velocity),
+        streamed at once; the zero Twist goes out even when the data is stale."""
+        if self.mobile:
+            self._twist = (0.0, 0.0, 0.0)
+            self.cmd_vel.put(rm.twist(0.0, 0.0, 0.0))
         with self._lock:
             latest = self._latest
         if latest is None:

@@ -85,7 +85,8 @@ class JoyInput:
         self._up_event = pygame.CONTROLLERBUTTONUP if controller else pygame.JOYBUTTONUP
         self._added = pygame.CONTROLLERDEVICEADDED if controller else pygame.JOYDEVICEADDED
         self._removed = pygame.CONTROLLERDEVICEREMOVED if controller else pygame.JOYDEVICEREMOVED
-        self.node = Node(session, "kinesphere_gamepad", "/", self.options.domain)
+        self.node = Node(session, "kinesphere_gamepad", "/", self.options.domain,
+                         self.options.distro)
         self.subscription = self.node.subscription(topic, rm.JOY, self._on)
 
     def _on(self, msg: Any) -> None:

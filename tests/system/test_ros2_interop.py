@@ -1,0 +1,266 @@
+"""ROS 2 software written by others receives kinesphere, and drives it.
+
+The ROS side is zenoh-ros2-sdk (PyPI, Apache-2.0), an rmw_zenoh client in Python with its own
+keys, graph tokens, type hashes, QoS text and attachment (``sdk_peer.py`` drives it), run as a
+process joined to kinesphere's router: once with the eclipse-zenoh of the test venv, once from
+a venv of its own with the eclipse-zenoh Jazzy's rmw_zenoh 0.2.9 links (1.6.2). Attachments
+are also read with that venv's zenoh-ext serialiser, the robots' frames checked against
+yourdfpy's forward kinematics of the URDF the peer received. Where the SDK cannot (its
+transient-local query does not find publishers of namespaced topics such as
+``/baxter_1/robot_description``: it leaves their ``/`` unmangled), the peer subscribes as
+rmw_zenoh does, with zenoh-ext's AdvancedSubscriber, and decodes with the SDK's type store.
+"""
+
+from __future__ import annotations
+
+import io
+import math
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+import xml.etree.ElementTree as ET
+from collections.abc import Iterator
+from contextlib import ExitStack
+from dataclasses import dataclass
+from importlib.metadata import version
+from typing import Any
+
+import numpy as np
+import pytest
+import xxhash
+import yourdfpy
+import zenoh
+
+from kinesphere import zconfig
+from kinesphere.protocol import RobotState
+from support.agents import Databank, Operator, StateWatch, running_agent
+from support.paths import ROOT
+from support.ros2 import RosTap
+from support.ros2_peer import JAZZY_ZENOH, SdkPeer
+from support.wait import WAIT_S
+
+JS = "sensor_msgs/msg/JointState"
+STRING = "std_msgs/msg/String"
+TF = "tf2_msgs/msg/TFMessage"
+ODOM = "nav_msgs/msg/Odometry"
+ROBOTS = {"baxter-1": "baxter", "packbot": "packbot"}
+"""A fixed arm robot and a tracked base with flippers."""
+
+pytestmark = pytest.mark.processes
+
+
+class Proc:
+    """A kinesphere command in a subprocess, its stderr lines kept (and waited on)."""
+
+    def __init__(self, *args: str) -> None:
+        self.lines: list[str] = []
+        self._cond = threading.Condition()
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "kinesphere.cli", *args], cwd=ROOT,
+            env={**os.environ, "PYTHONUNBUFFERED": "1"}, stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE, text=True)
+        threading.Thread(target=self._read, daemon=True).start()
+
+    def _read(self) -> None:
+        assert self.proc.stderr is not None
+        for line in self.proc.stderr:
+            with self._cond:
+                self.lines.append(line)
+                self._cond.notify_all()
+
+    def wait_line(self, text: str) -> str:
+        with self._cond:
+            if not self._cond.wait_for(lambda: any(text in ln for ln in self.lines), WAIT_S):
+                raise AssertionError(f"no {text!r} from {self.proc.args}: {self.lines[-20:]}")
+            return next(ln for ln in self.lines if text in ln)
+
+    def stop(self) -> int:
+        self.proc.send_signal(signal.SIGTERM)
+        try:
+            return self.proc.wait(timeout=WAIT_S)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            return self.proc.wait()
+
+
+@dataclass
+class Site:
+    """kinesphere's router, the real databank, agents and ``kinesphere ros2 bridge``."""
+
+    endpoint: str
+    watcher: zenoh.Session
+    databank: Databank
+    watches: dict[str, StateWatch]
+    bridge_zid: str
+    graph: list[str]
+
+    def state(self, robot_id: str, stamp_ns: int) -> RobotState:
+        """The robot's own RobotState with this stamp (it may reach the test's watch a
+        moment after the bridge republished it)."""
+        watch = self.watches[robot_id]
+        match = [s for s in list(watch.states) if s.stamp_ns == stamp_ns]
+        if match:
+            return match[0]
+        return watch.wait(lambda s: s.stamp_ns == stamp_ns,
+                          f"the state of {robot_id} stamped {stamp_ns}")
+
+
+@pytest.fixture(scope="module")
+def site() -> Iterator[Site]:
+    with ExitStack() as stack:
+        router_ep = zconfig.loopback_endpoint()
+        router = Proc("router", "--listen", router_ep)
+        stack.callback(router.stop)
+        router.wait_line("up, listening on")
+        watcher = stack.enter_context(zconfig.session(
+            config=zconfig.loopback_config(router_ep)))
+        bank = Databank(router_ep, watcher)
+        bank.start()
+        stack.callback(bank.stop)
+        watches = {}
+        for rid, platform in ROBOTS.items():
+            _, watches[rid] = stack.enter_context(
+                running_agent(router_ep, platform, rid, speed=1.0))
+        bridge = Proc("ros2", "bridge", "--connect", router_ep)
+        stack.callback(bridge.stop)
+        bridge.wait_line("bridging kinesphere robots")
+        # the packbot drives a little (its odometry and base frame move), then holds
+        with zconfig.session(config=zconfig.loopback_config(router_ep)) as s:
+            op = Operator(s, "packbot")
+            seq = op.send(drive=("left-forward", 0.8), ttl_ms=1500)
+            watches["packbot"].after(seq, lambda st: abs(st.base_pose[2]) > 0.2,
+                                     "the packbot turning")
+            op.close()
+        # every latched topic out before any ROS peer joins: the peers are late joiners
+        tokens: list[str] = []
+        deadline = time.monotonic() + WAIT_S
+        while not all(any(f"%{r}%robot_description/" in t for t in tokens)
+                      for r in ("baxter_1", "packbot")):
+            assert time.monotonic() < deadline, f"the bridge never described both: {tokens}"
+            tokens = [str(r.ok.key_expr) for r in watcher.liveliness().get(
+                "@ros2_lv/0/**", timeout=5.0) if r.ok is not None]
+        node = next(t for t in tokens if t.endswith("/NN/%/%/kinesphere_bridge"))
+        static = RosTap(watcher, 0, "/tf_static", TF, history=True)
+        static.wait(lambda m: {t.child_frame_id.split("/")[0] for t in m.transforms}
+                    == {"baxter_1", "packbot"}, "/tf_static of both robots")
+        static.close()
+        yield Site(router_ep, watcher, bank, watches, node.split("/")[2], tokens)
+
+
+def _matrix(t: dict[str, Any]) -> np.ndarray:
+    """The 4x4 matrix of a geometry_msgs/Transform (as the peer's JSON)."""
+    q = t["rotation"]
+    x, y, z, w = q["x"], q["y"], q["z"], q["w"]
+    m = np.eye(4)
+    m[:3, :3] = [[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                 [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                 [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]]
+    p = t["translation"]
+    m[:3, 3] = [p["x"], p["y"], p["z"]]
+    return m
+
+
+def _stamp(header: dict[str, Any]) -> int:
+    return int(header["stamp"]["sec"]) * 1_000_000_000 + int(header["stamp"]["nanosec"])
+
+
+def _check_frames(site: Site, rid: str, tf: dict[str, Any], static: list[dict[str, Any]],
+                  urdf_text: str) -> int:
+    """Every link's pose in ``odom``, chained from the /tf and /tf_static the peer received,
+    equals yourdfpy's forward kinematics of the received URDF at the robot's own state (and
+    its base pose). Returns the number of links checked."""
+    ros_id = rid.replace("-", "_")
+    edges: dict[str, tuple[str, np.ndarray]] = {}
+    for t in tf["transforms"] + [t for m in static for t in m["transforms"]]:
+        if t["child_frame_id"].startswith(f"{ros_id}/"):
+            edges[t["child_frame_id"]] = (t["header"]["frame_id"], _matrix(t["transform"]))
+    state = site.state(rid, _stamp(tf["transforms"][0]["header"]))
+    urdf = yourdfpy.URDF.load(io.StringIO(urdf_text), build_scene_graph=True,
+                              load_meshes=False, build_collision_scene_graph=False)
+    urdf.update_cfg(dict(zip(state.joint_names, state.q, strict=True)))
+    root = urdf.base_link
+    x, y, yaw = state.base_pose
+    base = np.eye(4)
+    base[:3, :3] = [[math.cos(yaw), -math.sin(yaw), 0], [math.sin(yaw), math.cos(yaw), 0],
+                    [0, 0, 1]]
+    base[:3, 3] = [x, y, 0.0]
+    for link in urdf.link_map:
+        frame, chained = f"{ros_id}/{link}", np.eye(4)
+        while frame != "odom":
+            assert frame in edges, f"no transform to {frame} (from {link}) on /tf or /tf_static"
+            parent, m = edges[frame]
+            chained = m @ chained
+            frame = parent
+        expected = base @ urdf.get_transform(link, root)
+        assert np.allclose(chained, expected, atol=1e-9), (link, chained, expected)
+    return len(urdf.link_map)
+
+
+@pytest.mark.parametrize("zenoh_version", [None, JAZZY_ZENOH],
+                         ids=["zenoh-of-the-tests", f"jazzy-zenoh-{JAZZY_ZENOH}"])
+def test_ros2_peer_receives_every_robot_from_the_bridge(site: Site,
+                                                        zenoh_version: str | None) -> None:
+    peer = SdkPeer(site.endpoint, zenoh_version)
+    try:
+        assert peer.ready["zenoh"] == (zenoh_version or version("eclipse-zenoh"))
+        subs = {
+            "js": peer.sub("js", "/baxter_1/joint_states", JS),
+            "tf": peer.sub("tf", "/tf", TF),
+            "odom": peer.sub("odom", "/packbot/odom", ODOM),
+            # late joiners of latched topics: the SDK's own history query where it works ...
+            "static": peer.sub("static", "/tf_static", TF, transient_local=True),
+            # ... and rmw_zenoh's AdvancedSubscriber where it does not (namespaced topics)
+            **{f"desc_{r}": peer.sub(f"desc_{r}", f"/{r}/robot_description", STRING,
+                                     transient_local=True, history=True)
+               for r in ("baxter_1", "packbot")},
+        }
+        # keys: the SDK's own, from its own type hashes; the bridge's match them
+        assert subs["js"]["key"] == ("0/baxter_1/joint_states/sensor_msgs::msg::dds_::"
+                                     "JointState_/RIHS01_a13ee3a330e346c9d87b5aa18d24e11690752bd"
+                                     "33a0350f11c5882bc9179260e")
+
+        # joint states: the robot's own, bit for bit; the attachment read by the SDK and by
+        # this zenoh's zenoh-ext alike; the sample timestamped by the bridge's session
+        js = peer.message("js")
+        state = site.state("baxter-1", _stamp(js["header"]))
+        assert js["name"] == state.joint_names and js["position"] == state.q
+        sample = peer.sample("js")
+        assert sample["attachment_len"] == 33
+        assert sample["zenoh_ext"] == [sample["seq"], sample["source_ns"], sample["gid"]]
+        token = next(t for t in site.graph if "/MP/" in t and "%baxter_1%joint_states/" in t)
+        digest = xxhash.xxh3_128(token.encode()).digest()  # rmw_zenoh: low 64 bits, then high
+        assert sample["gid"] == (digest[8:][::-1] + digest[:8][::-1]).hex()
+        assert sample["timestamp_id"] == site.bridge_zid, "timestamped by the bridge's session"
+
+        # the URDFs, to a late joiner; the frames robot_state_publisher would send, against
+        # yourdfpy's forward kinematics of that URDF
+        urdfs = {}
+        for r, platform in (("baxter_1", "baxter"), ("packbot", "packbot")):
+            urdfs[r] = peer.message(f"desc_{r}")["data"]
+            root = ET.fromstring(urdfs[r])
+            assert root.get("name") == platform and root.findall("body_part") == []
+        # one latched /tf_static for the whole fleet, as tf2's static broadcaster keeps it
+        static = [peer.message("static")]
+        assert {t["child_frame_id"].split("/")[0] for t in static[0]["transforms"]} == {
+            "baxter_1", "packbot"}
+        for rid in ROBOTS:
+            r = rid.replace("-", "_")
+            tf = peer.message("tf", lambda m, r=r: m["transforms"][0]["child_frame_id"]
+                              .startswith(f"{r}/"), f"/tf of {r}")
+            assert _check_frames(site, rid, tf, static, urdfs[r]) > 5
+
+        # odometry of the base that turned: the robot's own base pose
+        odom = peer.message("odom", lambda m: abs(m["pose"]["pose"]["orientation"]["z"]) > 0.05,
+                            "the packbot's odometry, turned")
+        x, y, yaw = site.state("packbot", _stamp(odom["header"])).base_pose
+        p, q = odom["pose"]["pose"]["position"], odom["pose"]["pose"]["orientation"]
+        assert (p["x"], p["y"]) == (x, y) and math.isclose(2 * math.atan2(q["z"], q["w"]), yaw)
+        packbot = ET.fromstring(urdfs["packbot"])
+        children = {c.get("link") for c in packbot.iter("child")}
+        root = next(ln.get("name") for ln in packbot.iter("link") if ln.get("name") not in children)
+        assert (odom["header"]["frame_id"], odom["child_frame_id"]) == ("odom", f"packbot/{root}")
+    finally:
+        peer.close()
