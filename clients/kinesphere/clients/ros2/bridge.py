@@ -17,13 +17,14 @@ see, for robot ``ID`` (``ID`` made a valid ROS name: ``baxter-1`` -> ``baxter_1`
 That is what robot_state_publisher (with ``frame_prefix`` ``ID/``) and a base's odometry
 would publish, so RViz shows every robot from the bridge alone. Like tf2's static broadcaster,
 the node keeps one /tf_static message holding every fixed transform it knows, sent again when a
-robot comes or goes, so a late joiner's one cached sample describes the whole fleet. Names are relative to
-``--namespace`` (``/`` by default, so ``/baxter_1/joint_states`` and ``/tf``). A robot appears
-when its first state arrives and disappears (publishers and graph tokens undeclared) when its
-liveliness token goes. Bodies are fetched on a worker thread, never in a Zenoh callback; until
-a platform's body arrives its robots publish joint states only (frames and the URDF come from
-the body). Bounded: at most ``max_robots`` robots, states with more than ``MAX_SEQUENCE``
-joints and URDFs larger than ``max_urdf_bytes`` are refused with one log line.
+robot comes or goes, so a late joiner's one cached sample describes the whole fleet. Names are
+relative to ``--namespace`` (``/`` by default, so ``/baxter_1/joint_states`` and ``/tf``). A
+robot appears when its first state arrives and disappears (publishers and graph tokens
+undeclared) when its liveliness token goes. Bodies are fetched on a worker thread, never in
+a Zenoh callback; until a platform's body arrives its robots publish joint states only (frames
+and the URDF come from the body). Bounded: at most ``max_robots`` robots, states with more
+than ``MAX_SEQUENCE`` joints and URDFs larger than ``max_urdf_bytes`` are refused with one log
+line.
 """
 
 from __future__ import annotations
