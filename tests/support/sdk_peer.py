@@ -19,6 +19,12 @@ both ways, Zenoh timestamp), ``sent`` and ``error`` events. In, ``op``:
   with the SDK's type store, for topics the SDK's query cannot reach);
 - ``pub``: ``name``, ``topic``, ``type``, ``fields`` (JSON of the message); ``every`` (s,
   optional) repeats it at that period until the next ``pub`` of that name or ``stop``;
+- ``robot``: ``name``, ``namespace``, ``joints`` (name -> position), ``every`` (s), ``base``
+  (bool): a ros2_control robot as simple as can be, made of the SDK's publishers and
+  subscribers: it publishes ``joint_states`` every period, jumps to the last point of each
+  ``joint_trajectory_controller/joint_trajectory`` it hears, and with ``base`` integrates the
+  ``cmd_vel`` Twist it hears into the pose it publishes on ``odom``; what it hears is emitted
+  as ``msg`` events of ``<name>_traj`` and ``<name>_cmd_vel``;
 - ``stop``: ``name``; ``quit``.
 """
 
@@ -26,10 +32,12 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sys
 import tempfile
 import threading
+import time
 from importlib.metadata import version
 from pathlib import Path
 from typing import Any
@@ -124,6 +132,7 @@ class Peer:
         self.subs: dict[str, Any] = {}
         self.pubs: dict[str, Any] = {}
         self.repeats: dict[str, threading.Event] = {}
+        self.robots: dict[str, tuple[list[Any], list[Any]]] = {}
 
     def _kw(self) -> dict[str, Any]:
         kw: dict[str, Any] = {"domain_id": self.domain, "router_ip": self.router[0],
@@ -207,6 +216,70 @@ class Peer:
 
         threading.Thread(target=repeat, daemon=True).start()
 
+    def robot(self, name: str, namespace: str, joints: dict[str, float], every: float,
+              base: bool = False) -> None:
+        from zenoh_ros2_sdk import ROS2Publisher, ROS2Subscriber
+
+        ns = namespace.rstrip("/")
+        q = dict(joints)
+        pose = [0.0, 0.0, 0.0]
+        twist = [0.0, 0.0, 0.0]
+        lock = threading.Lock()
+
+        def on_trajectory(msg: Any) -> None:
+            emit(event="msg", name=f"{name}_traj", msg=to_json(msg))
+            with lock:
+                q.update(zip(msg.joint_names, msg.points[-1].positions.tolist(), strict=True))
+
+        def on_twist(msg: Any) -> None:
+            emit(event="msg", name=f"{name}_cmd_vel", msg=to_json(msg))
+            with lock:
+                twist[:] = [msg.linear.x, msg.linear.y, msg.angular.z]
+
+        kw = self._kw()
+        subs = [ROS2Subscriber(f"{ns}/joint_trajectory_controller/joint_trajectory",
+                               "trajectory_msgs/msg/JointTrajectory", on_trajectory,
+                               node_name=f"{name}_controller", **kw)]
+        js = ROS2Publisher(f"{ns}/joint_states", "sensor_msgs/msg/JointState",
+                           node_name=f"{name}_broadcaster", **kw)
+        odom = None
+        if base:
+            subs.append(ROS2Subscriber(f"{ns}/cmd_vel", "geometry_msgs/msg/Twist", on_twist,
+                                       node_name=f"{name}_base", **kw))
+            odom = ROS2Publisher(f"{ns}/odom", "nav_msgs/msg/Odometry",
+                                 node_name=f"{name}_odometry", **kw)
+        store = self.sdk.store
+        stop = self.repeats[name] = threading.Event()
+
+        def stamp() -> dict[str, Any]:
+            sec, nanosec = divmod(time.time_ns(), 1_000_000_000)
+            return {"stamp": {"sec": sec, "nanosec": nanosec}, "frame_id": ""}
+
+        def cycle() -> None:  # the robot's own control cycle, not a test's wait
+            while not stop.wait(every):
+                with lock:
+                    names, positions = list(q), list(q.values())
+                    vx, vy, wz = twist
+                    yaw = pose[2] + 0.5 * wz * every  # mid-step heading
+                    pose[0] += (math.cos(yaw) * vx - math.sin(yaw) * vy) * every
+                    pose[1] += (math.sin(yaw) * vx + math.cos(yaw) * vy) * every
+                    pose[2] += wz * every
+                    x, y, th = pose
+                state = build(store, "sensor_msgs/msg/JointState",
+                              {"header": stamp(), "name": names, "position": positions})
+                js.publish(**{k: getattr(state, k) for k in state.__dataclass_fields__})
+                if odom is not None:
+                    o = build(store, "nav_msgs/msg/Odometry", {
+                        "header": {**stamp(), "frame_id": "odom"}, "child_frame_id": "base",
+                        "pose": {"pose": {"position": {"x": x, "y": y},
+                                          "orientation": {"z": math.sin(th / 2),
+                                                          "w": math.cos(th / 2)}}}})
+                    odom.publish(**{k: getattr(o, k) for k in o.__dataclass_fields__})
+
+        threading.Thread(target=cycle, daemon=True).start()
+        self.robots[name] = (subs, [p for p in (js, odom) if p is not None])
+        emit(event="robot", name=name)
+
     def stop(self, name: str) -> None:
         event = self.repeats.pop(name, None)
         if event is not None:
@@ -220,6 +293,9 @@ class Peer:
             sdk_sub.close()
         for pub in self.pubs.values():
             pub.close()
+        for subs, pubs in self.robots.values():
+            for entity in (*subs, *pubs):
+                entity.close()
         self.sdk.close()
         self._defs.cleanup()
 

@@ -35,8 +35,10 @@ import yourdfpy
 import zenoh
 
 from kinesphere import zconfig
-from kinesphere.protocol import RobotState
-from support.agents import Databank, Operator, StateWatch, running_agent
+from kinesphere.platforms.platform import load_platform
+from kinesphere.protocol import RobotState, SpatialCommand
+from kinesphere.robots.agent.options import Ros2BodyOptions
+from support.agents import Databank, Operator, StateWatch, joints_close, running_agent
 from support.paths import ROOT
 from support.ros2 import RosTap
 from support.ros2_peer import JAZZY_ZENOH, SdkPeer
@@ -46,6 +48,7 @@ JS = "sensor_msgs/msg/JointState"
 STRING = "std_msgs/msg/String"
 TF = "tf2_msgs/msg/TFMessage"
 ODOM = "nav_msgs/msg/Odometry"
+JOY = "sensor_msgs/msg/Joy"
 ROBOTS = {"baxter-1": "baxter", "packbot": "packbot"}
 """A fixed arm robot and a tracked base with flippers."""
 
@@ -264,3 +267,140 @@ def test_ros2_peer_receives_every_robot_from_the_bridge(site: Site,
         assert (odom["header"]["frame_id"], odom["child_frame_id"]) == ("odom", f"packbot/{root}")
     finally:
         peer.close()
+
+
+def test_ros2_peer_drives_the_gamepad_and_is_driven_by_the_ros2_body(site: Site) -> None:
+    """The SDK's Joy publisher into ``kinesphere gamepad --input ros2:/joy``; the ROS 2 body
+    streaming to the SDK's subscribers and reading joint states and odometry from its
+    publishers (a robot as simple as can be, ``sdk_peer.py``'s ``robot``)."""
+    arm, arm_ns, base, base_ns = "baxter-ros", "/baxter_ros", "packbot-ros", "/packbot_ros"
+    peer = SdkPeer(site.endpoint)
+    with ExitStack() as stack:
+        stack.callback(peer.close)
+        for name, ns, platform, mobile in (("arm", arm_ns, "baxter", False),
+                                           ("base", base_ns, "packbot", True)):
+            p = load_platform(platform)
+            peer.send(op="robot", name=name, namespace=ns, every=0.02, base=mobile,
+                      joints=dict(zip(p.joint_names, p.neutral_vector().tolist(), strict=True)))
+            peer.wait(lambda e, n=name: e["event"] == "robot" and e["name"] == n, f"robot {name}")
+        _, watch = stack.enter_context(running_agent(
+            site.endpoint, "baxter", arm, speed=1.0, rate=200.0, body="ros2",
+            ros2=Ros2BodyOptions(namespace=arm_ns)))
+        _, base_watch = stack.enter_context(running_agent(
+            site.endpoint, "packbot", base, speed=1.0, rate=200.0, body="ros2",
+            ros2=Ros2BodyOptions(namespace=base_ns)))
+
+        # a ROS joystick: the SDK's sensor_msgs/Joy at joy's 20 Hz autorepeat
+        gamepad = Proc("gamepad", "--headless", "--input", "ros2:/joy", "--target", arm,
+                       "--connect", site.endpoint, "--listen", zconfig.LOOPBACK_ANY_PORT)
+        stack.callback(gamepad.stop)
+        gamepad.wait_line("input: sensor_msgs/Joy on /joy")
+        lb = 9  # game_controller_node's LEFTSHOULDER: the deadman of the default mapping
+
+        def joy(axes: list[float], deadman: bool) -> None:
+            buttons = [0] * 15
+            buttons[lb] = int(deadman)
+            peer.pub("joy", "/joy", JOY, {"header": {"frame_id": "joy"}, "axes": axes,
+                                            "buttons": buttons}, every=0.05)
+
+        joy([0.0] * 6, False)
+        gamepad.wait_line("ROS 2 Joy on /joy: receiving")
+        joy([0.0, 0.0, 1.0, 0.0, 0.0, 0.0], True)  # ROS: right stick full left, deadman held
+        goal = site.databank.query("baxter", SpatialCommand("limb_11", "distal_11",
+                                                            "left-middle", 3.0)).joints
+        reached = watch.wait(lambda st: joints_close(st, goal, 0.02),
+                             "the ROS robot at the ECL pose the Joy asked for")
+        joy([0.0] * 6, False)
+        watch.wait(lambda st: st.status in ("holding", "stopped"), "holding after the release")
+        limits = load_platform("baxter").eurdf.limits
+        streamed = peer.messages("arm_traj")
+        assert streamed and reached.q, "the SDK's subscriber heard the trajectory stream"
+        for msg in streamed:
+            for n, v in zip(msg["joint_names"], msg["points"][-1]["positions"], strict=True):
+                assert limits[n].lower <= v <= limits[n].upper, f"{n}={v} outside its limits"
+
+        # a mobile base: cmd_vel out (within the platform's limits), odometry back in
+        spec = load_platform("packbot").base
+        with zconfig.session(config=zconfig.loopback_config(site.endpoint)) as s:
+            op = Operator(s, base)
+            seq = op.send(drive=("forward", 1.0), ttl_ms=1000)
+            moved = base_watch.after(seq, lambda st: st.base_pose[0] > 0.1,
+                                     "the base moved forward by its odometry")
+            op.close()
+        twists = [m for m in peer.messages("base_cmd_vel") if m["linear"]["x"] > 0]
+        assert twists, "the SDK's subscriber heard the base's cmd_vel"
+        for t in peer.messages("base_cmd_vel"):
+            assert abs(t["linear"]["x"]) <= spec.max_speed + 1e-9 and t["linear"]["y"] == 0.0
+            assert abs(t["angular"]["z"]) <= spec.max_yaw_rate + 1e-9
+        assert abs(moved.base_pose[1]) < 0.05, "a skid base driven forward stays on its line"
+        assert gamepad.stop() == 0
+
+
+def test_humble_peer_receives_the_bridge_with_ros_distro_humble(site: Site) -> None:
+    """Humble's rmw_zenoh writes ``TypeHashNotSupported`` where Jazzy writes the hash: the SDK
+    told so subscribes to Humble's keys, and ``--ros-distro humble`` publishes there."""
+    bridge = Proc("ros2", "bridge", "--connect", site.endpoint, "--domain", "3",
+                  "--ros-distro", "humble")
+    peer = SdkPeer(site.endpoint, domain=3, distro="humble")
+    try:
+        bridge.wait_line("bridging kinesphere robots")
+        sub = peer.sub("js", "/baxter_1/joint_states", JS)
+        assert sub["key"] == ("3/baxter_1/joint_states/sensor_msgs::msg::dds_::JointState_/"
+                              "TypeHashNotSupported")
+        js = peer.message("js")
+        state = site.state("baxter-1", _stamp(js["header"]))
+        assert js["name"] == state.joint_names and js["position"] == state.q
+        tokens = [str(r.ok.key_expr) for r in site.watcher.liveliness().get(
+            "@ros2_lv/3/**", timeout=5.0) if r.ok is not None]
+        mine = [t for t in tokens if "/kinesphere_bridge/" in t]
+        assert mine and all(t.split("/")[11] == "TypeHashNotSupported" for t in mine), mine
+    finally:
+        peer.close()
+        assert bridge.stop() == 0
+
+
+def test_humble_messages_are_laid_out_as_jazzy_ones() -> None:
+    """Why one CDR serves both distributions: rosbags' Humble definitions of every message
+    kinesphere sends or reads are the Jazzy ones, field for field."""
+    from rosbags.typesys import Stores, get_typestore
+
+    from kinesphere import ros2msgs as rm
+
+    humble, jazzy = get_typestore(Stores.ROS2_HUMBLE), get_typestore(Stores.ROS2_JAZZY)
+    types = (rm.JOINT_STATE, rm.JOY, rm.TF_MESSAGE, rm.STRING, rm.JOINT_TRAJECTORY,
+             rm.FLOAT64_MULTI_ARRAY, rm.TWIST, rm.ODOMETRY)
+    seen: set[str] = set()
+    todo = list(types)
+    while todo:
+        t = todo.pop()
+        if t in seen:
+            continue
+        seen.add(t)
+        assert humble.fielddefs[t] == jazzy.fielddefs[t], t
+        todo += [d[1] if d[0] == 2 else d[1][0][1] for _, d in jazzy.fielddefs[t][1]
+                 if d[0] == 2 or (d[0] in (3, 4) and d[1][0][0] == 2)]
+    assert len(seen) > len(types)
+
+
+RIHS01 = {
+    # as `ros2 topic info -v` prints them on Jazzy (joint_state_broadcaster, amcl, a
+    # joint_trajectory_controller) and as other rmw_zenoh clients pin them in public code
+    JS: "a13ee3a330e346c9d87b5aa18d24e11690752bd33a0350f11c5882bc9179260e",
+    TF: "e369d0f05a23ae52508854b66f6aa0437f3449d652e8cbf22d5abe85d020f087",
+    "trajectory_msgs/msg/JointTrajectory":
+        "179b33eba59d676f6d967ac71fe35e7ca2f64b2f3928f4a018cec115e213796e",
+    JOY: "0d356c79cad3401e35ffeb75a96a96e08be3ef896b8b83841d73e890989372c5",
+    "std_msgs/msg/Float64MultiArray":
+        "1025ddc6b9552d191f89ef1a8d2f60f3d373e28b283d8891ddcc974e8c55397f",
+    "geometry_msgs/msg/Twist": "9c45bf16fe0983d80e3cfe750d6835843d265a9a6c46bd2e609fcddde6fb8d2a",
+    ODOM: "3cc97dc7fb7502f8714462c526d369e35b603cfc34d946e3f2eda2766dfec6e0",
+    STRING: "df668c740482bbd48fb39d76a70dfd4bd59db1288021743503259e948f6b1a18",
+}
+
+
+def test_type_hashes_are_the_ones_ros_prints() -> None:
+    from kinesphere import rmw_zenoh as rz
+
+    for ros_type, digest in RIHS01.items():
+        assert rz.type_hash(ros_type) == f"RIHS01_{digest}", ros_type
+        assert rz.type_hash(ros_type, "humble") == "TypeHashNotSupported"
