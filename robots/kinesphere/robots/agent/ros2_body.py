@@ -142,6 +142,11 @@ class Ros2Body(Body):
             self._odom = (self._clock(), (x, y, yaw))
             self._lock.notify_all()
 
+    def wait_states(self, count: int, timeout: float) -> bool:
+        """Wait until ``count`` joint states have arrived in total (tests)."""
+        with self._lock:
+            return self._lock.wait_for(lambda: self.states >= count, timeout)
+
     def _wait_first(self) -> np.ndarray:
         o = self.options
         with self._lock:
