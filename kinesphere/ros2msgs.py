@@ -23,6 +23,7 @@ STRING: Final = "std_msgs/msg/String"
 JOINT_TRAJECTORY: Final = "trajectory_msgs/msg/JointTrajectory"
 FLOAT64_MULTI_ARRAY: Final = "std_msgs/msg/Float64MultiArray"
 TWIST: Final = "geometry_msgs/msg/Twist"
+TWIST_STAMPED: Final = "geometry_msgs/msg/TwistStamped"
 ODOMETRY: Final = "nav_msgs/msg/Odometry"
 
 
@@ -91,6 +92,12 @@ def twist(vx: float, vy: float, wz: float) -> Any:
     vec = message_class("geometry_msgs/msg/Vector3")
     return message_class(TWIST)(linear=vec(x=float(vx), y=float(vy), z=0.0),
                                 angular=vec(x=0.0, y=0.0, z=float(wz)))
+
+
+def twist_stamped(vx: float, vy: float, wz: float, stamp_ns: int, frame_id: str = "") -> Any:
+    """A TwistStamped, what Jazzy's diff_drive_controller requires on ``cmd_vel``."""
+    return message_class(TWIST_STAMPED)(header=header(stamp_ns, frame_id),
+                                        twist=twist(vx, vy, wz))
 
 
 def odometry(frame: str, child: str, pose: Sequence[float], velocity: Sequence[float],

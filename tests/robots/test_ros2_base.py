@@ -24,6 +24,7 @@ from support.ros2 import JAZZY, RosPublisher, RosTap
 
 NS = "/pk"
 TWIST = "geometry_msgs/msg/Twist"
+TWIST_STAMPED = "geometry_msgs/msg/TwistStamped"
 
 
 def _joint_state(names: list[str], q: list[float]) -> object:
@@ -107,6 +108,23 @@ def test_mobile_base_over_ros2() -> None:
             zero = cmd_vel.wait(lambda m: m.linear.x == 0.0, "the zero Twist").msg
             assert (zero.linear.x, zero.linear.y, zero.angular.z) == (0.0, 0.0, 0.0)
             body.close()
+            # Jazzy's diff_drive_controller takes TwistStamped, stamped now, in the base frame
+            stamped = RosTap(ros, 0, f"{NS}/cmd_vel", TWIST_STAMPED)
+            ot = threading.Thread(target=base_controller, daemon=True)
+            odom_thread_stop.clear()
+            ot.start()
+            body = Ros2Body(platform, 0.01, ours, Ros2BodyOptions(
+                namespace=NS, start_timeout_s=5.0, cmd_vel_stamped=True))
+            body.command(np.array(q), (0.2, 0.0, 0.1))
+            body.step()
+            t = stamped.wait(lambda m: m.twist.linear.x > 0, "a TwistStamped").msg
+            assert (t.twist.linear.x, t.twist.angular.z) == (0.2, 0.1)
+            assert t.header.frame_id == platform.eurdf.root_link
+            assert abs(t.header.stamp.sec - time.time()) < 60
+            body.close()
+            odom_thread_stop.set()
+            ot.join(timeout=5)
+            stamped.close()
         finally:
             stop.set()
             thread.join(timeout=5)

@@ -368,7 +368,7 @@ def test_humble_messages_are_laid_out_as_jazzy_ones() -> None:
 
     humble, jazzy = get_typestore(Stores.ROS2_HUMBLE), get_typestore(Stores.ROS2_JAZZY)
     types = (rm.JOINT_STATE, rm.JOY, rm.TF_MESSAGE, rm.STRING, rm.JOINT_TRAJECTORY,
-             rm.FLOAT64_MULTI_ARRAY, rm.TWIST, rm.ODOMETRY)
+             rm.FLOAT64_MULTI_ARRAY, rm.TWIST, rm.TWIST_STAMPED, rm.ODOMETRY)
     seen: set[str] = set()
     todo = list(types)
     while todo:
@@ -393,6 +393,8 @@ RIHS01 = {
     "std_msgs/msg/Float64MultiArray":
         "1025ddc6b9552d191f89ef1a8d2f60f3d373e28b283d8891ddcc974e8c55397f",
     "geometry_msgs/msg/Twist": "9c45bf16fe0983d80e3cfe750d6835843d265a9a6c46bd2e609fcddde6fb8d2a",
+    "geometry_msgs/msg/TwistStamped":
+        "5f0fcd4f81d5d06ad9b4c4c63e3ea51b82d6ae4d0558f1d475229b1121db6f64",
     ODOM: "3cc97dc7fb7502f8714462c526d369e35b603cfc34d946e3f2eda2766dfec6e0",
     STRING: "df668c740482bbd48fb39d76a70dfd4bd59db1288021743503259e948f6b1a18",
 }

@@ -72,6 +72,9 @@ def register(sub: Any) -> None:
                       help=f"no joint state for S seconds = error, hold (default {r.timeout_s:g})")
     ros2.add_argument("--ros2-cmd-vel", default=r.cmd_vel, metavar="TOPIC",
                       help=f"a mobile base's geometry_msgs/Twist topic (default {r.cmd_vel})")
+    ros2.add_argument("--ros2-cmd-vel-stamped", action="store_true",
+                      help="send geometry_msgs/TwistStamped (Jazzy's diff_drive_controller "
+                      "requires it) instead of Twist")
     ros2.add_argument("--ros2-odom", default=r.odom, metavar="TOPIC",
                       help=f"a mobile base's nav_msgs/Odometry topic (default {r.odom})")
     ros2.add_argument("--ros-distro", choices=ROS_DISTROS, default=r.distro,
@@ -160,7 +163,8 @@ def _agent(args: argparse.Namespace) -> int:
         namespace=args.ros2_namespace, domain=args.ros2_domain, interface=args.ros2_interface,
         controller=args.ros2_controller, timeout_s=args.ros2_timeout,
         joints=tuple(j.strip() for j in args.ros2_joints.split(",") if j.strip()),
-        cmd_vel=args.ros2_cmd_vel, odom=args.ros2_odom, distro=args.ros_distro,
+        cmd_vel=args.ros2_cmd_vel, cmd_vel_stamped=args.ros2_cmd_vel_stamped,
+        odom=args.ros2_odom, distro=args.ros_distro,
     )
     options = AgentOptions(rate=args.rate, state_rate=args.state_rate, speed=args.speed,
                            prefix=args.prefix, groups=tuple(args.group), body=args.body,

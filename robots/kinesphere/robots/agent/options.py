@@ -40,6 +40,8 @@ class Ros2BodyOptions:
     start_timeout_s: float = 10.0
     publish_rate: float = 100.0
     cmd_vel: str = "cmd_vel"
+    cmd_vel_stamped: bool = False
+    """Send ``geometry_msgs/msg/TwistStamped`` instead (Jazzy's diff_drive_controller)."""
     odom: str = "odom"
     distro: str = "jazzy"
 

@@ -15,7 +15,8 @@ e-stop — and this body only carries it to a real robot and back:
 A mobile platform's base is driven as a ROS base is: the body-frame velocity the agent
 commands goes out as ``geometry_msgs/msg/Twist`` on ``<NS>/cmd_vel`` with every setpoint
 (clamped to the platform's top speed and yaw rate; no sideways speed for a diff or skid
-base), and ``nav_msgs/msg/Odometry`` from ``<NS>/odom`` is the base pose the agent reads.
+base; ``TwistStamped`` with ``cmd_vel_stamped``, as Jazzy's diff_drive_controller wants),
+and ``nav_msgs/msg/Odometry`` from ``<NS>/odom`` is the base pose the agent reads.
 
 Every target is clamped again to the eURDF's hard limits before it leaves. Faults are raised
 from :meth:`Ros2Body.step` as ``KinesphereError`` naming the problem — joint states (or a
@@ -99,7 +100,8 @@ class Ros2Body(Body):
         if self.mobile:
             self.odom_topic = self.node.resolve(o.odom)
             self.node.subscription(o.odom, rm.ODOMETRY, self._on_odom)
-            self.cmd_vel = self.node.publisher(o.cmd_vel, rm.TWIST)
+            self.cmd_vel = self.node.publisher(
+                o.cmd_vel, rm.TWIST_STAMPED if o.cmd_vel_stamped else rm.TWIST)
         try:
             first = self._wait_first()
         except KinesphereError:
@@ -221,14 +223,14 @@ class Ros2Body(Body):
         if self._target is not None and self._steps % self.every == 0:
             self._send(self._target)
             if self.mobile:
-                self.cmd_vel.put(rm.twist(*self._twist))
+                self._send_twist(*self._twist)
 
     def halt(self) -> None:
         """Hold where the robot is now (its latest joint state, a zero base velocity),
         streamed at once; the zero Twist goes out even when the data is stale."""
         if self.mobile:
             self._twist = (0.0, 0.0, 0.0)
-            self.cmd_vel.put(rm.twist(0.0, 0.0, 0.0))
+            self._send_twist(0.0, 0.0, 0.0)
         with self._lock:
             latest = self._latest
         if latest is None:
@@ -240,6 +242,13 @@ class Ros2Body(Body):
         except KinesphereError:
             return  # stale or mismatched: do not stream from old data
         self._send(self._target)
+
+    def _send_twist(self, vx: float, vy: float, wz: float) -> None:
+        if self.options.cmd_vel_stamped:
+            self.cmd_vel.put(rm.twist_stamped(vx, vy, wz, time.time_ns(),
+                                              self.platform.eurdf.root_link))
+        else:
+            self.cmd_vel.put(rm.twist(vx, vy, wz))
 
     def _send(self, target: np.ndarray) -> None:
         period = self.every * self.dt
