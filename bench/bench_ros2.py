@@ -1,7 +1,9 @@
 """ROS 2 over rmw_zenoh: what speaking ROS costs, against baselines measured in the same run.
 
 1. Encoding one JointState (rosbags CDR + the rmw_zenoh attachment) beside encoding the
-   RobotState it comes from (msgspec, what every agent already does per state).
+   RobotState it comes from (msgspec, what every agent already does per state); and the
+   frames the bridge adds per state (the joint transforms, /tf's TFMessage and the Odometry,
+   CDR) against the same baseline.
 2. The bridge's relay latency, RobotState put -> JointState delivered on its ROS key, beside
    a bare relay in the same process that republishes the same bytes unchanged (the floor any
    relay pays: two Zenoh hops and a callback).
@@ -19,6 +21,7 @@ import zenoh
 from kinesphere import rmw_zenoh as rz
 from kinesphere import ros2msgs as rm
 from kinesphere import zconfig
+from kinesphere.joint_frames import JointFrames
 from kinesphere.keyexpr import Keys
 from kinesphere.platforms.platform import load_platform
 from kinesphere.protocol import RobotState, encode
@@ -61,6 +64,23 @@ def bench_encode() -> None:
     print(f"  RobotState (msgspec)             p50 {mb:7.1f} us  p99 {pct(base, 99):7.1f} us")
     print(f"  JointState CDR + attachment      p50 {mo:7.1f} us  p99 {pct(ours, 99):7.1f} us"
           f"  ({mo / mb:.0f}x the msgspec encode)")
+    frames = JointFrames(load_platform("baxter").eurdf)
+    moving = [i for i in range(len(frames.names)) if frames.moving[i]]
+    tf = []
+    for _ in range(ENCODES // 5):
+        t0 = time.perf_counter_ns()
+        wxyz, xyz = frames.transforms(frames.q_from(st.joint_names, st.q))
+        out = [rm.transform("odom", "b/base", *rm.planar(0.0, 0.0, 0.0), st.stamp_ns)]
+        out += [rm.transform(f"b/{frames.parents[i]}", f"b/{frames.children[i]}",
+                             xyz[i].tolist(), (*wxyz[i, 1:].tolist(), float(wxyz[i, 0])),
+                             st.stamp_ns) for i in moving]
+        rz.serialize(rm.tf_message(out), rm.TF_MESSAGE)
+        rz.serialize(rm.odometry("odom", "b/base", (0.0, 0.0, 0.0), (0.0, 0.0, 0.0),
+                                 st.stamp_ns), rm.ODOMETRY)
+        tf.append((time.perf_counter_ns() - t0) / 1e3)
+    mt = pct(tf, 50)
+    print(f"  frames: /tf ({len(moving) + 1}) + Odometry   p50 {mt:7.1f} us  "
+          f"p99 {pct(tf, 99):7.1f} us  ({mt / mb:.0f}x the msgspec encode)")
 
 
 def relay(hub: zenoh.Session, endpoint: str, key_in: str, key_out: str,
