@@ -37,6 +37,7 @@ import time
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
 import zenoh
 
 from kinesphere import ros2msgs as rm
@@ -72,6 +73,8 @@ class _Robot:
     body: _Body | None = None
     description: Publisher | None = None
     odom: Publisher | None = None
+    tf: rm.TfTemplate | None = None
+    """Its /tf message (odom -> root, then the moving joints), numbers written per state."""
     last_base: tuple[int, float, float, float] | None = None
     """(stamp ns, x, y, yaw) of the last state, for the odometry's velocity."""
     published: int = 0
@@ -187,6 +190,10 @@ class Bridge:
                 self._static[robot.robot_id] = fixed
                 self._put_static()
             robot.odom = self.node.publisher(f"{robot.ros_id}/odom", rm.ODOMETRY)
+            robot.tf = rm.TfTemplate(
+                [(self.options.odom_frame, robot.frame(body.root_link))]
+                + [(robot.frame(frames.parents[i]), robot.frame(frames.children[i]))
+                   for i in range(len(frames.names)) if frames.moving[i]])
             robot.body = body  # last: a state published from now on has every publisher
 
     def _put_static(self) -> None:
@@ -216,10 +223,12 @@ class Bridge:
         x, y, yaw = state.base_pose
         root = robot.frame(body.root_link)
         wxyz, xyz = frames.transforms(q)
-        transforms = [rm.transform(self.options.odom_frame, root, *rm.planar(x, y, yaw), stamp)]
-        transforms += [self._joint_tf(robot, body, i, wxyz, xyz, stamp)
-                       for i in range(len(frames.names)) if frames.moving[i]]
-        self.tf.put(rm.tf_message(transforms))
+        base_xyz, base_xyzw = rm.planar(x, y, yaw)
+        moving = frames.moving
+        assert robot.tf is not None
+        self.tf.put_cdr(robot.tf.encode(
+            stamp, np.vstack([base_xyz, xyz[moving]]),
+            np.vstack([base_xyzw, wxyz[moving][:, [1, 2, 3, 0]]])))
         velocity = (0.0, 0.0, 0.0)
         last = robot.last_base
         if last is not None and 0 < stamp - last[0] < 1_000_000_000:
