@@ -163,15 +163,15 @@ class Peer:
             zenoh-ext (which must agree on a 16-byte gid), its Zenoh timestamp."""
             raw = None if sample.attachment is None else sample.attachment.to_bytes()
             info: dict[str, Any] = {"attachment_len": None if raw is None else len(raw)}
-            if raw is not None:
+            if raw is not None and sample.attachment is not None:
                 a = Attachment.from_bytes(raw)
                 info.update(seq=a.sequence_id, gid=a.gid.hex(), source_ns=a.timestamp_ns)
                 from zenoh.ext import Int64, z_deserialize
 
                 seq, ts, gid = z_deserialize(tuple[Int64, Int64, bytes], sample.attachment)
                 info["zenoh_ext"] = [int(seq), int(ts), bytes(gid).hex()]
-            ts = sample.timestamp
-            info["timestamp_id"] = None if ts is None else str(ts.get_id())
+            stamp = sample.timestamp
+            info["timestamp_id"] = None if stamp is None else str(stamp.get_id())
             emit(event="sample", name=name, key=str(sample.key_expr), **info)
             if history:
                 msg = store.deserialize_cdr(sample.payload.to_bytes(), ros_type)

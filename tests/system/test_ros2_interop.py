@@ -20,7 +20,6 @@ import signal
 import subprocess
 import sys
 import threading
-import time
 import xml.etree.ElementTree as ET
 from collections.abc import Iterator
 from contextlib import ExitStack
@@ -40,7 +39,7 @@ from kinesphere.protocol import RobotState, SpatialCommand
 from kinesphere.robots.agent.options import Ros2BodyOptions
 from support.agents import Databank, Operator, StateWatch, joints_close, running_agent
 from support.paths import ROOT
-from support.ros2 import RosTap
+from support.ros2 import GraphWatch, RosTap
 from support.ros2_peer import JAZZY_ZENOH, SdkPeer
 from support.wait import WAIT_S
 
@@ -77,7 +76,7 @@ class Proc:
     def wait_line(self, text: str) -> str:
         with self._cond:
             if not self._cond.wait_for(lambda: any(text in ln for ln in self.lines), WAIT_S):
-                raise AssertionError(f"no {text!r} from {self.proc.args}: {self.lines[-20:]}")
+                raise AssertionError(f"no {text!r} from {self.proc.args!r}: {self.lines[-20:]}")
             return next(ln for ln in self.lines if text in ln)
 
     def stop(self) -> int:
@@ -138,13 +137,11 @@ def site() -> Iterator[Site]:
                                      "the packbot turning")
             op.close()
         # every latched topic out before any ROS peer joins: the peers are late joiners
-        tokens: list[str] = []
-        deadline = time.monotonic() + WAIT_S
-        while not all(any(f"%{r}%robot_description/" in t for t in tokens)
-                      for r in ("baxter_1", "packbot")):
-            assert time.monotonic() < deadline, f"the bridge never described both: {tokens}"
-            tokens = [str(r.ok.key_expr) for r in watcher.liveliness().get(
-                "@ros2_lv/0/**", timeout=5.0) if r.ok is not None]
+        graph = GraphWatch(watcher, 0)
+        tokens = sorted(graph.wait(lambda ts: all(any(f"%{r}%robot_description/" in t for t in ts)
+                                                  for r in ("baxter_1", "packbot")),
+                                   "the bridge describing both robots"))
+        graph.close()
         node = next(t for t in tokens if t.endswith("/NN/%/%/kinesphere_bridge"))
         static = RosTap(watcher, 0, "/tf_static", TF, history=True)
         static.wait(lambda m: {t.child_frame_id.split("/")[0] for t in m.transforms}
@@ -263,8 +260,10 @@ def test_ros2_peer_receives_every_robot_from_the_bridge(site: Site,
         assert (p["x"], p["y"]) == (x, y) and math.isclose(2 * math.atan2(q["z"], q["w"]), yaw)
         packbot = ET.fromstring(urdfs["packbot"])
         children = {c.get("link") for c in packbot.iter("child")}
-        root = next(ln.get("name") for ln in packbot.iter("link") if ln.get("name") not in children)
-        assert (odom["header"]["frame_id"], odom["child_frame_id"]) == ("odom", f"packbot/{root}")
+        root_link = next(str(ln.get("name")) for ln in packbot.iter("link")
+                         if ln.get("name") not in children)
+        assert (odom["header"]["frame_id"], odom["child_frame_id"]) == (
+            "odom", f"packbot/{root_link}")
     finally:
         peer.close()
 
@@ -362,6 +361,7 @@ def test_humble_peer_receives_the_bridge_with_ros_distro_humble(site: Site) -> N
 def test_humble_messages_are_laid_out_as_jazzy_ones() -> None:
     """Why one CDR serves both distributions: rosbags' Humble definitions of every message
     kinesphere sends or reads are the Jazzy ones, field for field."""
+    from rosbags.interfaces import Nodetype
     from rosbags.typesys import Stores, get_typestore
 
     from kinesphere import ros2msgs as rm
@@ -377,8 +377,11 @@ def test_humble_messages_are_laid_out_as_jazzy_ones() -> None:
             continue
         seen.add(t)
         assert humble.fielddefs[t] == jazzy.fielddefs[t], t
-        todo += [d[1] if d[0] == 2 else d[1][0][1] for _, d in jazzy.fielddefs[t][1]
-                 if d[0] == 2 or (d[0] in (3, 4) and d[1][0][0] == 2)]
+        for _, (node, details) in jazzy.fielddefs[t][1]:
+            if node == Nodetype.NAME:
+                todo.append(str(details))
+            elif node in (Nodetype.ARRAY, Nodetype.SEQUENCE) and details[0][0] == Nodetype.NAME:
+                todo.append(str(details[0][1]))
     assert len(seen) > len(types)
 
 
