@@ -16,6 +16,7 @@ import math
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Final
 
 import yourdfpy
 
@@ -23,6 +24,27 @@ from kinesphere.errors import KinesphereError
 from kinesphere.labels import BodyPart, invalid, label_order, parse_part, validate
 
 ACTUATED_TYPES = ("revolute", "prismatic", "continuous")
+
+# Bounds on a description, so that text from the wire (a databank's body answer) or a file
+# costs every reader a bounded amount of work: the largest of example-robot-data's 60+
+# robots (tiago_dual) has 130 links, a chain 21 deep, 223 shapes and 3,851 XML elements.
+MAX_LINKS: Final = 512
+"""Links in one description."""
+MAX_DEPTH: Final = 64
+"""Joints from the root link to the deepest one (a viewer names each link's scene node by
+its whole chain, and walks it)."""
+MAX_SHAPES: Final = 2048
+"""``<visual>`` and ``<collision>`` elements in all."""
+MAX_ELEMENTS: Final = 32_768
+"""XML elements in all."""
+MAX_NESTING: Final = 32
+"""XML elements inside each other (a URDF nests 7 deep; serialisers recurse per level)."""
+MAX_METRES: Final = 100.0
+"""Largest offset or size in metres (robots are a few metres across)."""
+MAX_RADIANS: Final = 100.0
+"""Largest ``rpy`` angle."""
+MAX_SCALE: Final = 1000.0
+"""Largest mesh scale factor (meshes drawn in millimetres use 0.001)."""
 
 
 @dataclass(frozen=True)
@@ -220,6 +242,8 @@ def _check_urdf_elements(root: ET.Element) -> None:
     links = [el.get("name") for el in root.findall("link")]
     if not links:
         raise invalid("<robot> has no <link>")
+    if len(links) > MAX_LINKS:
+        raise invalid(f"<robot> has {len(links)} links; at most {MAX_LINKS} are allowed")
     for i, link_name in enumerate(links):
         if not link_name:
             raise invalid(f"<link> number {i + 1} has no name")
@@ -228,10 +252,12 @@ def _check_urdf_elements(root: ET.Element) -> None:
         if link_name in seen:
             raise invalid(f"<link name={link_name!r}> appears twice")
         seen.add(str(link_name))
+    parent_of: dict[str, str] = {}
     for el in root.findall("joint"):
         jn = el.get("name")
         if not jn:
             raise invalid("a <joint> has no name")
+        ends = {}
         for tag in ("parent", "child"):
             ref = el.find(tag)
             target = ref.get("link") if ref is not None else None
@@ -239,6 +265,15 @@ def _check_urdf_elements(root: ET.Element) -> None:
                 raise invalid(f"<joint name={jn!r}> has no <{tag} link=...>")
             if target not in seen:
                 raise invalid(f"<joint name={jn!r}> {tag} link {target!r} does not exist")
+            ends[tag] = target
+        if ends["child"] in parent_of:
+            raise invalid(f"link {ends['child']!r} is the child of two joints; a URDF must be "
+                          "a tree")
+        parent_of[ends["child"]] = ends["parent"]
+    _check_depth(parent_of)
+    _check_numbers(root)
+    for el in root.findall("joint"):
+        jn = el.get("name")
         jtype = el.get("type")
         if jtype in ("revolute", "prismatic") and el.find("mimic") is None:
             lim = el.find("limit")
@@ -246,6 +281,108 @@ def _check_urdf_elements(root: ET.Element) -> None:
                 raise invalid(f"<joint name={jn!r}> ({jtype}) needs <limit lower upper>")
             if float(lim.get("lower", "0")) > float(lim.get("upper", "0")):
                 raise invalid(f"<joint name={jn!r}> has lower limit above upper limit")
+
+
+def _check_depth(parent_of: dict[str, str]) -> None:
+    """Every chain from the root at most :data:`MAX_DEPTH` joints long, and no cycle."""
+    depth: dict[str, int] = {}
+    for start in parent_of:
+        chain = []
+        link = start
+        while link in parent_of and link not in depth:
+            chain.append(link)
+            if len(chain) > MAX_DEPTH + 1:
+                break
+            link = parent_of[link]
+        if link in chain or (link in parent_of and link not in depth):
+            raise invalid(f"the joints around link {start!r} form a cycle or a chain deeper "
+                          f"than {MAX_DEPTH} joints")
+        base = depth.get(link, 0)
+        for i, member in enumerate(reversed(chain), start=1):
+            depth[member] = base + i
+        if depth[start] > MAX_DEPTH:
+            raise invalid(f"link {start!r} is {depth[start]} joints below the root; at most "
+                          f"{MAX_DEPTH} are allowed")
+
+
+def _floats(el: ET.Element, attr: str, where: str, count: tuple[int, ...] = (1,),
+            low: float = -math.inf, high: float = math.inf, nonzero: bool = False
+            ) -> list[float]:
+    """The numbers of ``el``'s attribute (empty when absent): finite, ``count`` of them,
+    each within ``[low, high]`` (and not 0 when ``nonzero``), else ``invalid_eurdf``."""
+    text = el.get(attr)
+    if text is None:
+        return []
+    what = f"<{el.tag} {attr}={text!r:.60}> of {where}"
+    try:
+        values = [float(x) for x in text.split()]
+    except ValueError:
+        raise invalid(f"{what} is not a list of numbers") from None
+    if len(values) not in count:
+        raise invalid(f"{what} has {len(values)} numbers; "
+                      f"{' or '.join(map(str, count))} expected")
+    for x in values:
+        if not low <= x <= high:  # also false for NaN
+            raise invalid(f"{what}: {x} is not a number in [{low:g}, {high:g}]")
+        if nonzero and x == 0.0:
+            raise invalid(f"{what}: 0 is not allowed")
+    return values
+
+
+def _check_numbers(root: ET.Element) -> None:
+    """Every number a URDF reader uses is finite and in range, and every shape has its
+    arity (``<box size>`` three numbers, a cylinder a radius and a length...)."""
+    big = MAX_METRES
+    shapes = 0
+    for link in root.findall("link"):
+        where = f"link {link.get('name')!r}"
+        parts = link.findall("visual") + link.findall("collision")
+        shapes += len(parts)
+        if shapes > MAX_SHAPES:
+            raise invalid(f"more than {MAX_SHAPES} <visual> and <collision> elements")
+        for part in (*parts, *link.findall("inertial")):
+            for origin in part.findall("origin"):
+                _floats(origin, "xyz", where, (3,), -big, big)
+                _floats(origin, "rpy", where, (3,), -MAX_RADIANS, MAX_RADIANS)
+        for part in parts:
+            for geometry in part.findall("geometry"):
+                for box in geometry.findall("box"):
+                    if not _floats(box, "size", where, (3,), 0.0, big):
+                        raise invalid(f"<box> of {where} has no size")
+                for cyl in geometry.findall("cylinder"):
+                    for attr in ("radius", "length"):
+                        if not _floats(cyl, attr, where, (1,), 0.0, big):
+                            raise invalid(f"<cylinder> of {where} has no {attr}")
+                for sphere in geometry.findall("sphere"):
+                    if not _floats(sphere, "radius", where, (1,), 0.0, big):
+                        raise invalid(f"<sphere> of {where} has no radius")
+                for mesh in geometry.findall("mesh"):
+                    _floats(mesh, "scale", where, (1, 3), -MAX_SCALE, MAX_SCALE, nonzero=True)
+        for inertial in link.findall("inertial"):
+            for mass in inertial.findall("mass"):
+                _floats(mass, "value", where, (1,), 0.0)
+            for inertia in inertial.findall("inertia"):
+                for attr in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz"):
+                    _floats(inertia, attr, where)
+    for joint in root.findall("joint"):
+        where = f"joint {joint.get('name')!r}"
+        for origin in joint.findall("origin"):
+            _floats(origin, "xyz", where, (3,), -big, big)
+            _floats(origin, "rpy", where, (3,), -MAX_RADIANS, MAX_RADIANS)
+        for axis in joint.findall("axis"):
+            xyz = _floats(axis, "xyz", where, (3,))
+            if xyz and joint.get("type") in ACTUATED_TYPES and math.hypot(*xyz) < 1e-9:
+                raise invalid(f"<axis> of {where} has no direction (0 0 0)")
+        for limit in joint.findall("limit"):
+            _floats(limit, "lower", where)
+            _floats(limit, "upper", where)
+            _floats(limit, "velocity", where, (1,), 0.0)
+            _floats(limit, "effort", where)
+        for mimic in joint.findall("mimic"):
+            _floats(mimic, "multiplier", where)
+            _floats(mimic, "offset", where)
+    for color in root.iter("color"):
+        _floats(color, "rgba", "a <material>", (4,), 0.0, 1.0)
 
 
 def _check_tree(urdf: yourdfpy.URDF) -> None:
@@ -304,11 +441,28 @@ def plain_urdf(text: str) -> str:
 
 
 def _robot_element(text: str, source: str) -> ET.Element:
-    """The ``<robot>`` root of eURDF text, or ``invalid_eurdf`` naming ``source``."""
+    """The ``<robot>`` root of eURDF text, or ``invalid_eurdf`` naming ``source``.
+
+    Bounded before anything walks the tree: no document type (entity declarations expand),
+    at most :data:`MAX_ELEMENTS` elements nested at most :data:`MAX_NESTING` deep (the
+    standard library's serialiser recurses once per level)."""
+    if "<!DOCTYPE" in text or "<!ENTITY" in text:
+        raise invalid(f"{source}: a document type declaration is not allowed in a URDF")
     try:
         root = ET.fromstring(text)
     except ET.ParseError as exc:
         raise invalid(f"{source}: not well-formed XML ({exc})") from None
     if root.tag != "robot":
         raise invalid(f"root element must be <robot>, found <{root.tag}>")
+    count = 0
+    stack = [(root, 1)]
+    while stack:
+        el, depth = stack.pop()
+        count += 1
+        if depth > MAX_NESTING:
+            raise invalid(f"{source}: XML elements nested more than {MAX_NESTING} deep "
+                          f"(at <{el.tag:.40}>)")
+        if count > MAX_ELEMENTS:
+            raise invalid(f"{source}: more than {MAX_ELEMENTS} XML elements")
+        stack.extend((child, depth + 1) for child in el)
     return root

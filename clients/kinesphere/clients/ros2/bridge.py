@@ -24,7 +24,8 @@ undeclared) when its liveliness token goes. Bodies are fetched on a worker threa
 a Zenoh callback; until a platform's body arrives its robots publish joint states only (frames
 and the URDF come from the body). Bounded: at most ``max_robots`` robots, states with more
 than ``MAX_SEQUENCE`` joints and URDFs larger than ``max_urdf_bytes`` are refused with one log
-line.
+line, and so is a body that fails the eURDF's checks (its robots keep their joint states; the
+other platforms are not held up).
 """
 
 from __future__ import annotations
@@ -297,11 +298,18 @@ class Bridge:
             try:
                 body = self._fetch(platform)
             except KinesphereError as exc:
+                if exc.code in ("invalid_eurdf", "malformed"):  # asking again gets the same
+                    self._refuse("body", f"body of platform {platform} refused ({exc.message});"
+                                 " its robots get joint states only")
+                    continue
                 log.warning("no body for platform %s (%s); robot_description and tf wait for "
                             "it, asking again in %g s", platform, exc.message,
                             self.options.body_retry_s)
                 if not self._closed.wait(self.options.body_retry_s):
                     self._wanted.put(platform)
+                continue
+            except Exception as exc:  # a bug must not end the thread every platform waits on
+                self._refuse("body", f"body of platform {platform} not bridged: {exc!r}")
                 continue
             with self._lock:
                 if self._closed.is_set():
