@@ -39,7 +39,13 @@ MAX_INT: Final = 2**63 - 1
 MAX_PAYLOAD: Final = 64 * 1024
 """Bytes in one message; a larger payload is ``malformed`` before anything decodes it."""
 MAX_LARGE_PAYLOAD: Final = 1024 * 1024
-"""Bytes in a :class:`Catalogue` or :class:`BodyModel` (a body's eURDF text may be tens of KiB)."""
+"""Bytes in a :class:`Catalogue`, and characters of a body's eURDF text (tens of KiB)."""
+MAX_MESHES: Final = 256
+"""Mesh files one :class:`BodyModel` carries."""
+MAX_MESH_BYTES: Final = 4 * 1024 * 1024
+"""Bytes of one mesh file in a :class:`BodyModel`."""
+MAX_BODY_PAYLOAD: Final = 16 * 1024 * 1024
+"""Bytes in a :class:`BodyModel`: its text and the mesh files it carries."""
 
 Vec3 = Annotated[list[float], msgspec.Meta(min_length=3, max_length=3)]
 Fraction = Annotated[float, msgspec.Meta(ge=0.0, le=1.0)]
@@ -368,8 +374,10 @@ class Ack(Message, tag="ack", kw_only=True):
 class BodyModel(Message, tag="body_model", kw_only=True):
     """A platform's body, enough for a client to draw it without local platform files.
 
-    ``eurdf`` is the eURDF text (primitive shapes only, so it is small); ``neutral`` the
-    Place-Middle pose; ``base_kind`` as in :class:`Catalogue`; ``version`` a hash of the text.
+    ``eurdf`` is the eURDF text; ``neutral`` the Place-Middle pose; ``base_kind`` as in
+    :class:`Catalogue`; ``version`` a hash of the text. ``meshes`` carries the mesh files the
+    text names (``<mesh filename>`` as written there -> the file's bytes; a brought robot's
+    ``meshes/*.stl``), so a reader never opens a file of its own machine for them.
     """
 
     platform: Name
@@ -377,6 +385,11 @@ class BodyModel(Message, tag="body_model", kw_only=True):
     base_kind: Name
     neutral: JointMap
     version: Name
+    meshes: Annotated[
+        dict[Annotated[str, msgspec.Meta(max_length=256)],
+             Annotated[bytes, msgspec.Meta(max_length=MAX_MESH_BYTES)]],
+        msgspec.Meta(max_length=MAX_MESHES),
+    ] = {}
 
 
 AnyMessage = (
@@ -405,7 +418,7 @@ class _Envelope(msgspec.Struct):
 
 
 _ENVELOPE: Final = msgspec.msgpack.Decoder(_Envelope)
-_LARGE: Final = frozenset({Catalogue, BodyModel, AnyMessage})
+_LARGE: Final = frozenset({Catalogue, AnyMessage})
 
 
 def encode(msg: msgspec.Struct) -> bytes:
@@ -461,8 +474,11 @@ def _explain(buf: bytes | bytearray | memoryview, type_: Any, exc: Exception) ->
 
 
 def max_payload(type_: Any) -> int:
-    """Largest payload :func:`decode` reads as ``type_`` (:data:`MAX_PAYLOAD`, or
-    :data:`MAX_LARGE_PAYLOAD` for catalogues, body models and any-message taps)."""
+    """Largest payload :func:`decode` reads as ``type_`` (:data:`MAX_PAYLOAD`,
+    :data:`MAX_LARGE_PAYLOAD` for catalogues and any-message taps, :data:`MAX_BODY_PAYLOAD`
+    for body models and their meshes)."""
+    if type_ is BodyModel:
+        return MAX_BODY_PAYLOAD
     return MAX_LARGE_PAYLOAD if type_ in _LARGE else MAX_PAYLOAD
 
 

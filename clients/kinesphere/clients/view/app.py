@@ -92,7 +92,6 @@ class FleetView:
         self._aim(self.server.initial_camera, 1)
         self.fleet = Fleet(session, keys)
         self.databank = Databank(session, keys)
-        self.bodies: dict[str, BodyGeometry] = {}
         self.drawings: dict[str, Drawing] = {}
         self.stats = FrameStats()
         button = self.server.gui.add_button("Frame all robots")
@@ -145,16 +144,9 @@ class FleetView:
         if robot.state is None:
             return None
         platform = robot.state.platform
-        body = self.bodies.get(platform)
-        if body is None:
-            got = self.databank.bodies.get(platform)
-            if got is None or isinstance(got, KinesphereError):
-                return None
-            try:
-                body = self.bodies[platform] = BodyGeometry(got)
-            except KinesphereError as exc:
-                log.warning("cannot draw %s: %s", platform, exc)
-                return None
+        body = self.databank.bodies.get(platform)  # checked and built on the worker, once
+        if body is None or isinstance(body, KinesphereError):
+            return None
         used = {d.slot for d in self.drawings.values()}
         slot = next(i for i in range(len(used) + 1) if i not in used)
         drawing = self.drawings[robot.robot_id] = Drawing(self.server, robot.robot_id, body, slot)
@@ -203,10 +195,10 @@ class FleetView:
         lines = [f"**{len(robots)} robot(s)**", ""]
         for rid in sorted(robots):
             robot = robots[rid]
-            body = self.bodies.get(robot.state.platform) if robot.state else None
-            status, words = describe(robot, body)
-            drawn = "" if rid in self.drawings else " (no body yet)"
+            drawing = self.drawings.get(rid)
+            status, words = describe(robot, drawing.body if drawing else None)
             platform = robot.state.platform if robot.state else "?"
+            drawn = "" if drawing else f" ({self._why_undrawn(platform)})"
             lines.append(f"- **{rid}** ({platform}){drawn}: {status}  \n  {words}")
             if robot.state is not None and robot.state.detail:
                 lines.append(f"  \n  *{robot.state.detail}*")
@@ -214,6 +206,12 @@ class FleetView:
         if text != self._panel_text:
             self._panel.content = text
             self._panel_text = text
+
+    def _why_undrawn(self, platform: str) -> str:
+        got = self.databank.bodies.peek(platform)
+        if isinstance(got, KinesphereError) and got.code == "invalid_eurdf":
+            return got.message
+        return "no body yet"
 
     def _row(self) -> int:
         return max((d.slot for d in self.drawings.values()), default=0) + 1

@@ -5,10 +5,16 @@ or a target pose (the pose or compound query a robot itself makes for a command)
 once on a worker thread, and the frame loop picks the answer up on a later frame. Answers are
 cached per request, in a bounded table; failures are remembered (with the error, for the
 panel) and retried after :data:`RETRY_S`.
+
+A body is checked and built into a :class:`BodyGeometry` on the worker too, once per content (the
+digest of its text and meshes, computed here: a sender's ``version`` could name another
+body's): the same body under another platform name, or fetched again after a retry, is not
+parsed again, and a refused one is logged once and remembered (:data:`MAX_BODIES`).
 """
 
 from __future__ import annotations
 
+import hashlib
 import logging
 import queue
 import threading
@@ -19,6 +25,7 @@ from typing import Final, Generic, TypeVar
 
 import zenoh
 
+from kinesphere.clients.view.body import BodyGeometry
 from kinesphere.errors import KinesphereError
 from kinesphere.keyexpr import Keys
 from kinesphere.protocol import BodyModel, CompoundRequest, Pose, SpatialCommand, encode
@@ -29,6 +36,8 @@ T = TypeVar("T")
 RETRY_S: Final = 2.0
 MAX_ANSWERS: Final = 512
 TIMEOUT_S: Final = 2.0
+MAX_BODIES: Final = 64
+"""Bodies (built or refused) remembered by content."""
 
 
 class Answers(Generic[T]):
@@ -55,6 +64,11 @@ class Answers(Generic[T]):
             if done is None:
                 self._ask(request)
             return done
+
+    def peek(self, request: Hashable) -> T | KinesphereError | None:
+        """What :meth:`get` would return, without asking for anything."""
+        with self._lock:
+            return self._done.get(request)
 
     def _ask(self, request: Hashable) -> None:
         if request not in self._asked:
@@ -102,21 +116,68 @@ def pose_request(session: zenoh.Session, keys: Keys, platform: str, parts: Seque
     return get_one(session, keys.compound(platform), Pose, payload, timeout=TIMEOUT_S)
 
 
+def digest(model: BodyModel) -> str:
+    """What identifies a body's content: its text and every mesh file it carries."""
+    h = hashlib.sha256(model.eurdf.encode())
+    for name in sorted(model.meshes):
+        h.update(b"\0" + name.encode() + b"\0")
+        h.update(hashlib.sha256(model.meshes[name]).digest())
+    return h.hexdigest()
+
+
+class Bodies:
+    """:class:`BodyGeometry` by content, built once; refusals remembered and logged once."""
+
+    def __init__(self, most: int = MAX_BODIES) -> None:
+        self.most = most
+        self._known: OrderedDict[str, BodyGeometry | KinesphereError] = OrderedDict()
+        self.built = 0
+        """Bodies parsed (accepted or refused) since start."""
+
+    def body(self, model: BodyModel) -> BodyGeometry:
+        key = digest(model)
+        known = self._known.get(key)
+        if known is None:
+            self.built += 1
+            try:
+                known = BodyGeometry(model)
+            except KinesphereError as exc:
+                known = KinesphereError(exc.code, f"body of {model.platform} refused: "
+                                        f"{exc.message}")
+                log.warning("%s", known.message)
+            else:
+                if known.missing:
+                    log.warning("body of %s: %d mesh(es) not sent with it, not drawn (%s)",
+                                model.platform, len(known.missing), ", ".join(known.missing[:3]))
+            self._known[key] = known
+            while len(self._known) > self.most:
+                self._known.popitem(last=False)
+        self._known.move_to_end(key)
+        if isinstance(known, KinesphereError):
+            raise known
+        if known.platform != model.platform:  # the same content under another name
+            known = known.renamed(model.platform)
+        return known
+
+
 class Databank:
     """Bodies by platform and target poses by ``(platform, parts)``, fetched in the background."""
 
     def __init__(self, session: zenoh.Session, keys: Keys) -> None:
-        def body(platform: Hashable) -> BodyModel:
+        self.built = Bodies()
+
+        def body(platform: Hashable) -> BodyGeometry:
             assert isinstance(platform, str)
-            return get_one(session, keys.body(platform), BodyModel, timeout=TIMEOUT_S,
-                           no_answer=f"no databank sends the body of {platform!r}")
+            model = get_one(session, keys.body(platform), BodyModel, timeout=TIMEOUT_S,
+                            no_answer=f"no databank sends the body of {platform!r}")
+            return self.built.body(model)
 
         def pose(request: Hashable) -> Pose:
             assert isinstance(request, tuple)
             platform, parts = request
             return pose_request(session, keys, platform, [SpatialCommand(*p) for p in parts])
 
-        self.bodies: Answers[BodyModel] = Answers(body, "view-bodies")
+        self.bodies: Answers[BodyGeometry] = Answers(body, "view-bodies")
         self.poses: Answers[Pose] = Answers(pose, "view-poses")
 
     def close(self) -> None:
