@@ -5,12 +5,16 @@ has arrived, removes those whose liveliness went away, poses every body at its l
 (only joints that moved are sent) and the ghost at its target while it moves, and refreshes
 the captions. States arrive at 50 Hz or more per robot; the frame rate (30 Hz by default)
 bounds what goes to the browsers whatever the size of the fleet. The side panel lists every
-robot in words, a few times per second.
+robot in words, a few times per second. The panel is Markdown, which viser renders with raw
+HTML: every piece of text from the network (ids, names, statuses, details, a command's words)
+goes in as literal text (:func:`literal`), so a name like ``<iframe srcdoc=...>`` shows as
+written and runs nothing.
 """
 
 from __future__ import annotations
 
 import logging
+import re
 import threading
 import time
 from dataclasses import dataclass, field
@@ -51,6 +55,18 @@ class FrameStats:
         self.robot_updates += robots
         if len(self.costs_s) < 100_000:
             self.costs_s.append(cost)
+
+
+_PUNCTUATION = re.compile(r"([!-%'-/:;=?@\[-`{-~])")
+"""ASCII punctuation but ``& < >``, which become entities instead."""
+
+
+def literal(text: str) -> str:
+    """``text`` as literal Markdown: every ASCII punctuation mark backslash-escaped (no
+    emphasis, link, image, autolink or heading), ``& < >`` as HTML entities (no tag or
+    entity of the sender's), whitespace runs as one space (no block structure)."""
+    text = _PUNCTUATION.sub(r"\\\1", " ".join(text.split()))
+    return text.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;")
 
 
 def describe(robot: Robot, body: BodyGeometry | None) -> tuple[str, str]:
@@ -199,9 +215,10 @@ class FleetView:
             status, words = describe(robot, drawing.body if drawing else None)
             platform = robot.state.platform if robot.state else "?"
             drawn = "" if drawing else f" ({self._why_undrawn(platform)})"
-            lines.append(f"- **{rid}** ({platform}){drawn}: {status}  \n  {words}")
+            lines.append(f"- **{literal(rid)}** ({literal(platform)}){literal(drawn)}: "
+                         f"{literal(status)}  \n  {literal(words)}")
             if robot.state is not None and robot.state.detail:
-                lines.append(f"  \n  *{robot.state.detail}*")
+                lines.append(f"  \n  *{literal(robot.state.detail)}*")
         text = "\n".join(lines)
         if text != self._panel_text:
             self._panel.content = text
