@@ -17,6 +17,7 @@ import logging
 import re
 import threading
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any, Final
 
@@ -25,6 +26,7 @@ import zenoh
 
 from kinesphere.clients.view.body import Array, BodyGeometry
 from kinesphere.clients.view.fleet import Fleet, Robot
+from kinesphere.clients.view.gate import Gate, guarding
 from kinesphere.clients.view.resolve import Databank, part_key
 from kinesphere.clients.view.scene import SPACING_M, Drawing
 from kinesphere.errors import KinesphereError
@@ -95,11 +97,14 @@ class FleetView:
     """A viser server showing every robot under ``keys.prefix`` seen on ``session``."""
 
     def __init__(self, session: zenoh.Session, keys: Keys, host: str = "127.0.0.1",
-                 port: int = 8080, fps: float = 30.0) -> None:
+                 port: int = 8080, fps: float = 30.0, allow_origins: Sequence[str] = ()
+                 ) -> None:
         if not fps > 0:
             raise KinesphereError("malformed", f"--fps must be > 0, got {fps}")
         self.period = 1.0 / fps
-        self.server = viser.ViserServer(host=host, port=port, verbose=False)
+        self.gate = Gate(host, allow_origins, f"viser-v{viser.__version__}")
+        with guarding(self.gate):
+            self.server = viser.ViserServer(host=host, port=port, verbose=False)
         self.server.scene.set_up_direction("+z")
         self.server.gui.configure_theme(control_width="large", show_share_button=False)
         self.server.gui.main_panel.dock_right()  # beside the robots, never over them

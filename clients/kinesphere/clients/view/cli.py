@@ -33,6 +33,11 @@ def register(sub: Any) -> None:
     v.add_argument("--port", type=int, default=8080, help="HTTP/websocket port (default 8080)")
     v.add_argument("--fps", type=float, default=30.0,
                    help="scene updates per second sent to browsers (default 30)")
+    v.add_argument("--allow-origin", action="append", default=[], metavar="ORIGIN",
+                   help="a web origin (http://lab-pc:8080) whose pages may open the view's "
+                   "websocket, and whose host name the view answers to; repeatable. By "
+                   "default only the view's own page may, reached by a loopback name, the "
+                   "--host address, or (with --host 0.0.0.0) this machine's names")
     v.add_argument("--duration", type=float, metavar="S", help="quit after S seconds")
     add_zenoh_arguments(v, WATCHER)
     v.set_defaults(func=view)
@@ -44,7 +49,8 @@ def view(args: argparse.Namespace) -> int:
 
     stop = threading.Event()
     with handle_signals(lambda signum, frame: stop.set()), session_from_args(args) as session:
-        app = FleetView(session, Keys(args.prefix), args.host, args.port, args.fps)
+        app = FleetView(session, Keys(args.prefix), args.host, args.port, args.fps,
+                        args.allow_origin)
         try:
             print(f"kinesphere view on http://{args.host}:{app.port}/", file=sys.stderr,
                   flush=True)
