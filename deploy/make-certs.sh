@@ -3,8 +3,10 @@
 # TLS configs.
 #
 # Why: the router and every service authenticate each other with mutual TLS, and the
-# router's access control tells roles apart by certificate common name (CN = role name) and
-# robots by theirs (CN = robot id: a robot may speak only for itself; see robots.toml).
+# router's access control tells roles apart by certificate common name (CN = role name),
+# robots by theirs (CN = robot id: a robot may speak only for itself) and operators by
+# theirs (CN = the operator's name: robots lease to it and take e-stop releases from it, so
+# nobody may command under another's name); see robots.toml.
 # This is a test/lab PKI: for production, issue the same CNs from your own CA.
 #
 # usage: deploy/make-certs.sh [OUT_DIR] [EXTRA_ROUTER_NAME ...]
@@ -12,12 +14,14 @@
 #   EXTRA_ROUTER_NAME  host names or IP addresses the router is reached by, besides
 #                      localhost and 127.0.0.1 (clients verify the router's name)
 # env: DAYS (validity, default 825), ROLES (default "router databank operator superuser"),
-#      ROBOTS (robot ids, e.g. "baxter-1 nao-1": the ids of robots.toml; default none)
+#      ROBOTS (robot ids, e.g. "baxter-1 nao-1": the ids of robots.toml; default none),
+#      OPERATORS (operators' names, e.g. "alice bob": the [operators] of robots.toml)
 #
 # Writes OUT_DIR/ca.pem (the CA certificate every config trusts), ca.key (keep it
-# offline), <role>.pem + <role>.key for each role and robots/<id>.pem + robots/<id>.key for
-# each robot. Existing files are kept, so re-running only adds what is missing (a new robot:
-# ROBOTS=arm-7 deploy/make-certs.sh certs); delete OUT_DIR to start over.
+# offline), <role>.pem + <role>.key for each role, robots/<id>.pem + robots/<id>.key for
+# each robot and operators/<name>.pem + .key for each operator. Existing files are kept, so
+# re-running only adds what is missing (a new robot: ROBOTS=arm-7 deploy/make-certs.sh
+# certs); delete OUT_DIR to start over.
 set -euo pipefail
 
 out=${1:-"$(dirname "$0")/certs"}
@@ -25,11 +29,13 @@ shift || true
 days=${DAYS:-825}
 roles=${ROLES:-"router databank operator superuser"}
 robots=${ROBOTS:-}
-reserved=" router databank agent operator superuser "
-for id in $robots; do
-    # a robot id is a key segment of at most 64 characters, and never a role's name
+operators=${OPERATORS:-}
+reserved=" router databank agent operator superuser anonymous "
+for id in $robots $operators; do
+    # a name is a key segment of at most 64 characters, and never a role's name
     if [[ ! $id =~ ^[A-Za-z0-9_.-]{1,64}$ || $reserved == *" $id "* ]]; then
-        echo "make-certs: bad robot id '$id' (letters, digits, _ . -, at most 64, not a role)" >&2
+        echo "make-certs: bad robot id or operator name '$id' (letters, digits, _ . -, at" \
+            "most 64, not a role)" >&2
         exit 2
     fi
 done
@@ -71,23 +77,27 @@ for role in $roles; do
     rm -f "$out/$role.csr" "$ext"
     echo "made $role: $out/$role.pem (CN=$role)"
 done
-if [[ -n $robots ]]; then mkdir -p "$out/robots"; fi
-for id in $robots; do
-    [[ -s "$out/robots/$id.pem" ]] && continue
+# client_cert DIR KIND NAME: a certificate for one robot or operator (CN = NAME), which
+# only connects (to the router), so client authentication is all it needs
+client_cert() {
+    local dir=$1 kind=$2 id=$3 ext
+    mkdir -p "$out/$dir"
+    [[ -s "$out/$dir/$id.pem" ]] && return 0
     ext=$(mktemp)
-    # a robot only connects (to the router), so client authentication is all it needs
     {
         echo "basicConstraints=critical,CA:FALSE"
         echo "keyUsage=critical,digitalSignature,keyEncipherment"
         echo "extendedKeyUsage=clientAuth"
     } >"$ext"
-    openssl genpkey -algorithm EC -pkeyopt ec_paramgen_curve:P-256 -out "$out/robots/$id.key" 2>/dev/null
-    openssl req -new -key "$out/robots/$id.key" -subj "/O=kinesphere/OU=robot/CN=$id" -out "$out/robots/$id.csr"
-    openssl x509 -req -in "$out/robots/$id.csr" -CA "$out/ca.pem" -CAkey "$out/ca.key" \
-        -CAcreateserial -days "$days" -sha256 -extfile "$ext" -out "$out/robots/$id.pem" 2>/dev/null
-    rm -f "$out/robots/$id.csr" "$ext"
-    echo "made robot $id: $out/robots/$id.pem (CN=$id)"
-done
+    openssl genpkey -algorithm EC -pkeyopt ec_paramgen_curve:P-256 -out "$out/$dir/$id.key" 2>/dev/null
+    openssl req -new -key "$out/$dir/$id.key" -subj "/O=kinesphere/OU=$kind/CN=$id" -out "$out/$dir/$id.csr"
+    openssl x509 -req -in "$out/$dir/$id.csr" -CA "$out/ca.pem" -CAkey "$out/ca.key" \
+        -CAcreateserial -days "$days" -sha256 -extfile "$ext" -out "$out/$dir/$id.pem" 2>/dev/null
+    rm -f "$out/$dir/$id.csr" "$ext"
+    chmod 644 "$out/$dir/$id.pem"
+    echo "made $kind $id: $out/$dir/$id.pem (CN=$id)"
+}
+for id in $robots; do client_cert robots robot "$id"; done
+for id in $operators; do client_cert operators operator "$id"; done
 rm -f "$out/ca.srl"
 chmod 644 "$out"/*.pem
-if [[ -n $robots ]]; then chmod 644 "$out"/robots/*.pem; fi

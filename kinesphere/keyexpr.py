@@ -154,6 +154,34 @@ class Keys:
         """
         return f"{self.prefix}/group/{check_segment(group, 'group')}/command"
 
+    @staticmethod
+    def signed(command_key: str, sender: str) -> str:
+        """A command key with its sender's name appended: ``{command key}/{sender}``.
+
+        Clients put every command so; the deploy's access control lets each operator's
+        certificate put only under its own name, so the robot takes the sender from the key
+        (:meth:`sender_of`), a name the router vouches for, not from the payload."""
+        return f"{command_key}/{check_segment(sender, 'sender')}"
+
+    @staticmethod
+    def subscribed(command_key: str) -> str:
+        """What an agent subscribes to for ``command_key``: the key itself (a command without
+        a name in its key) and every signed form, ``{command key}/**``."""
+        return f"{command_key}/**"
+
+    def sender_of(self, key: str) -> str:
+        """The sender named by a robot or group command key: ``""`` for an unsigned one
+        (``{p}/robot/{id}/command``), else its last segment; malformed for anything else."""
+        key = str(key)
+        n = self.prefix.count("/") + 1
+        parts = key.split("/")
+        rest = parts[n:]
+        if "/".join(parts[:n]) == self.prefix and len(rest) in (3, 4) and \
+                rest[0] in ("robot", "group") and rest[2] == "command":
+            return check_segment(rest[3], "sender") if len(rest) == 4 else ""
+        raise KinesphereError("malformed", f"{key!r:.200} is not a command key under "
+                              f"{self.prefix!r} (.../command or .../command/<sender>)")
+
     # --- parsing ----------------------------------------------------------------------------
 
     def parse_pose_key(self, key: str) -> PoseKey:
@@ -184,6 +212,8 @@ class Keys:
         if "/".join(parts[:n]) == self.prefix:
             rest = parts[n:]
             if len(rest) == 3 and rest[0] == "robot" and rest[2] in ("command", "state", "ack"):
+                return check_segment(rest[1], "robot id")
+            if len(rest) == 4 and rest[0] == "robot" and rest[2] == "command":  # signed
                 return check_segment(rest[1], "robot id")
             if len(rest) == 3 and rest[:2] == ["alive", "robot"]:
                 return check_segment(rest[2], "robot id")

@@ -275,6 +275,10 @@ class Command(Message, tag="command", kw_only=True):
     sender: Name = ""
     session: Name = ""
     lease: LeaseAction = LeaseAction.NONE
+    clock: Name = ""
+    """Names the clock ``sent_ns`` is read from (the sender's host, until it reboots): a
+    robot learns each clock's offset from its first command and times every later one by it,
+    whichever session it belongs to."""
 
 
 class RobotState(Message, tag="robot_state", kw_only=True):

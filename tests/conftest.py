@@ -25,7 +25,7 @@ from support.agents import Databank
 from support.network import Hub
 from support.system import supervisor
 
-PROCESS_FIXTURES = frozenset({"databank", "sup", "fleet"})
+PROCESS_FIXTURES = frozenset({"databank", "sup", "fleet", "secured"})
 """Fixtures that start processes: a test using one is marked ``processes``."""
 
 

@@ -89,7 +89,13 @@ def test_estop_is_acknowledged_by_every_robot_and_released_by_target(
     for rid in PLATFORMS:
         h = free.track.wait(rid, lambda h: h.state.status == "estop", "the e-stop", after=start)
         assert h.state.estop_by == "carol", "the state says who latched it"
-    assert main(["estop", "--release", "--target", "all", "--connect", free.endpoint]) == 0
+    # carol's latch: another operator's release clears nothing (exit 1: nothing released)
+    assert main(["estop", "--release", "--target", "all", "--connect", free.endpoint]) == 1
+    assert all(line.endswith(": REJECTED: estopped: e-stop still latched by carol: each latch "
+                             "clears only with its own sender's release (or by restarting the "
+                             "agent)") for line in capsys.readouterr().out.splitlines())
+    assert main(["estop", "--release", "--target", "all", "--connect", free.endpoint,
+                 "--sender", "carol"]) == 0
     assert capsys.readouterr().out.splitlines() == [f"{r}: released" for r in sorted(PLATFORMS)]
 
 

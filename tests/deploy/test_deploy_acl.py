@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from kinesphere.deploy.acl import add_robots, load_fleet, robot_acl
+from kinesphere.deploy.acl import add_fleet, fleet_acl, load_fleet
 from kinesphere.deploy.router import router_config
 from kinesphere.errors import KinesphereError
 from support.paths import DEPLOY
@@ -19,23 +19,23 @@ SHIPPED = DEPLOY / "robots.toml"
 def test_the_shipped_fleet_gives_each_robot_its_own_keys_only() -> None:
     fleet = load_fleet(SHIPPED)
     assert set(fleet.robots) == {"baxter-1", "nao-1", "youbot-1"}
-    acl = robot_acl(fleet)
+    acl = fleet_acl(fleet)
     rules = {r["id"]: r for r in acl["rules"]}
     assert rules["robot:youbot-1:put"]["key_exprs"] == [
         "kinesphere/robot/youbot-1/state", "kinesphere/robot/youbot-1/ack"]
     assert rules["robot:youbot-1:liveliness_token"]["key_exprs"] == [
         "kinesphere/alive/robot/youbot-1"]
     assert rules["robot:baxter-1:declare_subscriber"]["key_exprs"] == [
-        "kinesphere/robot/baxter-1/command", "kinesphere/ecl/*/changed",
-        "kinesphere/group/arms/command"]
-    every_key = [k for r in acl["rules"] for k in r["key_exprs"]]
-    assert not any("robot/*" in k or "alive/robot/*" in k for k in every_key)
+        "kinesphere/robot/baxter-1/command/**", "kinesphere/group/arms/command/**",
+        "kinesphere/ecl/*/changed"]
+    robots = [k for r in acl["rules"] if r["id"].startswith("robot:") for k in r["key_exprs"]]
+    assert not any("robot/*" in k or "alive/robot/*" in k for k in robots)
     assert {"id": "robot:nao-1", "cert_common_names": ["nao-1"]} in acl["subjects"]
 
 
 def test_the_router_config_admits_the_fleet() -> None:
     config, admitted = router_config(DEPLOY / "router.json5", None, SHIPPED)
-    assert admitted == 3
+    assert admitted == 5  # three robots, two operators
     subjects = json.loads(config.get_json("access_control/subjects"))
     assert {s["id"] for s in subjects} >= {"operator", "robot:baxter-1", "robot:youbot-1"}
     assert not any(s.get("cert_common_names") == ["agent"] for s in subjects)
@@ -65,10 +65,10 @@ def test_bad_fleet_files_are_malformed(tmp_path: Path, text: str, what: str) -> 
 def test_robots_need_access_control_and_unique_subjects(tmp_path: Path) -> None:
     fleet = load_fleet(SHIPPED)
     with pytest.raises(KinesphereError, match="access_control enabled"):
-        add_robots(zenoh.Config(), fleet)
+        add_fleet(zenoh.Config(), fleet)
     config, _ = router_config(DEPLOY / "router.json5", None, SHIPPED)
     with pytest.raises(KinesphereError) as info:
-        add_robots(config, fleet)  # admitted twice
+        add_fleet(config, fleet)  # admitted twice
     assert info.value.code == "conflict"
 
 
@@ -77,7 +77,7 @@ def test_print_acl(capsys: pytest.CaptureFixture[str]) -> None:
 
     assert main(["router", "--robots", str(SHIPPED), "--print-acl"]) == 0
     out = json.loads(capsys.readouterr().out)
-    assert len(out["access_control"]["policies"]) == 3
+    assert len(out["access_control"]["policies"]) == 5
 
 
 @pytest.mark.processes
@@ -88,5 +88,5 @@ def test_make_certs_refuses_a_robot_named_like_a_role(tmp_path: Path) -> None:
     done = subprocess.run([str(DEPLOY / "make-certs.sh"), str(tmp_path / "c")],
                           env=dict(os.environ, ROBOTS="arm-1 operator"), capture_output=True,
                           text=True, timeout=60)
-    assert done.returncode == 2 and "bad robot id 'operator'" in done.stderr
+    assert done.returncode == 2 and "bad robot id or operator name 'operator'" in done.stderr
     assert not (tmp_path / "c").exists()

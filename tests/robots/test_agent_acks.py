@@ -83,8 +83,10 @@ def test_commands_that_move_nothing_get_one_ack_and_the_state_names_who(
         seq = op.send(far(cat), ttl_ms=1000)
         latched = acks.of("ann", seq, "rejected")
         assert latched.code == "estopped" and "bob" in latched.detail
-        seq = op.send(release=True)
-        acks.of("ann", seq, "released")
+        seq = op.send(release=True)  # bob's latch: ann's release clears nothing
+        assert acks.of("ann", seq, "rejected").code == "estopped"
+        seq = panic.send(release=True)
+        acks.of("bob", seq, "released")
         watch.wait(lambda s: s.status != "estop" and s.estop_by == "", "released")
 
         seq = op.send(lease="release")

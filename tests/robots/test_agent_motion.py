@@ -208,14 +208,14 @@ def cmd(**kw: object) -> Command:
 def test_safety_estop_latches_until_an_explicit_release() -> None:
     s = Safety()
     assert s.on_command(cmd(), 0.0) is Verdict.MOVE
-    assert s.on_command(cmd(estop=True), 0.1) is Verdict.ESTOP
-    assert s.on_command(cmd(), 0.2) is Verdict.LATCHED  # a deadman stream never releases
-    assert s.on_command(cmd(release=True), 0.25) is Verdict.RELEASE
-    s.on_command(cmd(estop=True), 0.3)
-    assert s.on_command(cmd(deadman=False), 0.4) is Verdict.LATCHED
-    assert s.on_command(cmd(stop=True), 0.5) is Verdict.LATCHED
+    assert s.on_command(cmd(estop=True, sender="ann"), 0.1) is Verdict.ESTOP
+    assert s.on_command(cmd(sender="ann"), 0.2) is Verdict.LATCHED  # a deadman stream never
+    assert s.on_command(cmd(release=True, sender="ann"), 0.25) is Verdict.RELEASE  # releases
+    s.on_command(cmd(estop=True, sender="ann"), 0.3)
+    assert s.on_command(cmd(deadman=False, sender="ann"), 0.4) is Verdict.LATCHED
+    assert s.on_command(cmd(stop=True, sender="ann"), 0.5) is Verdict.LATCHED
     assert s.estopped
-    assert s.on_command(cmd(release=True), 0.6) is Verdict.RELEASE
+    assert s.on_command(cmd(release=True, sender="ann"), 0.6) is Verdict.RELEASE
     assert not s.estopped
 
 

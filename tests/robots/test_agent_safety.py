@@ -122,14 +122,18 @@ def test_estop_halts_every_robot_latches_and_releases(
         seq = base.send(drive=("forward", 1.0), ttl_ms=10_000)
         yw.after(seq, status("estop"), "youbot still latched under a deadman stream")
         assert not youbot.controller.moving
-        # release=True clears the latch and moves nothing
+        # a release from anyone but the e-stop's own sender clears nothing: the latch is panic's
         seq = base.send(drive=("forward", 1.0), ttl_ms=10_000, release=True)
+        yw.after(seq, status("estop"), "youbot still latched: base cannot release panic's")
+        # panic's release (to the youBot alone) clears its latch and moves nothing
+        panic = Operator(session, "youbot", sender="panic")
+        seq = panic.send(drive=("forward", 1.0), ttl_ms=10_000, release=True, seq=seq + 1)
         yw.after(seq, status("idle"), "youbot released")
         assert not youbot.controller.moving
-        seq = base.send(drive=("forward", 1.0), ttl_ms=10_000)
+        seq = base.send(drive=("forward", 1.0), ttl_ms=10_000, seq=seq + 1)
         yw.after(seq, driving(0.05), "youbot drives again after the release")
         bw.wait(status("estop"), "baxter still latched (released separately)")
-        for op in (arm, base, everyone):
+        for op in (arm, base, everyone, panic):
             op.close()
 
 

@@ -29,6 +29,7 @@ from kinesphere import zconfig  # noqa: E402
 from kinesphere.clients.gamepad.inputs import pad  # noqa: E402
 from kinesphere.clients.gamepad.state import ControllerState  # noqa: E402
 from kinesphere.clients.link import RobotLink  # noqa: E402
+from kinesphere.keyexpr import Keys  # noqa: E402
 from kinesphere.protocol import (  # noqa: E402
     Ack,
     AckStage,
@@ -131,25 +132,31 @@ class VirtualPad:
 
 @dataclass(frozen=True)
 class Got:
-    """A command as a robot received it."""
+    """A command as a robot received it: ``key`` without the sender a client signs it with
+    (``signer``, the last segment of the key it was put on)."""
 
     at: float
     key: str
     cmd: Command
+    signer: str = ""
 
 
 class Inbox:
-    """Every Command put on ``key`` (may be a wildcard), with arrival times."""
+    """Every Command put on ``key`` (may be a wildcard), signed or not, with arrival times."""
 
     def __init__(self, session: zenoh.Session, key: str) -> None:
         self.got: list[Got] = []
         self._cond = threading.Condition()
-        self._sub = session.declare_subscriber(key, self._on)
+        self._sub = session.declare_subscriber(Keys.subscribed(key), self._on)
 
     def _on(self, sample: zenoh.Sample) -> None:
         cmd = decode(sample.payload, Command)
+        key = str(sample.key_expr)
+        signer = OWN_KEYS.sender_of(key)
+        if signer:
+            key = key.rsplit("/", 1)[0]
         with self._cond:
-            self.got.append(Got(time.monotonic(), str(sample.key_expr), cmd))
+            self.got.append(Got(time.monotonic(), key, cmd, signer))
             self._cond.notify_all()
 
     def wait(self, pred: Callable[[Got], bool], what: str, timeout: float = WAIT_S) -> Got:
@@ -202,8 +209,8 @@ class StandIn(Inbox):
         self.robot_id = robot_id
         self.answer = answer
         self.lease_holder = ""
-        self._subs = [session.declare_subscriber(OWN_KEYS.group_command(g), self._on)
-                      for g in groups]
+        self._subs = [session.declare_subscriber(Keys.subscribed(OWN_KEYS.group_command(g)),
+                                                 self._on) for g in groups]
         self._acks = session.declare_publisher(OWN_KEYS.ack(robot_id))
         self._state = FakeRobot(session, robot_id, "fakebot", groups, wait=False)
         self._token = session.liveliness().declare_token(OWN_KEYS.alive_robot(robot_id))

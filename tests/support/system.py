@@ -6,9 +6,11 @@ Not a test module itself (pytest collects nothing here); the system tests import
 from __future__ import annotations
 
 import os
+import shutil
 import socket
 import subprocess
 from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
 
 import psutil
@@ -19,7 +21,13 @@ from kinesphere.deploy.procs import Supervisor
 from kinesphere.deploy.watch import Alive, StateRecorder, watch_alive
 from kinesphere.protocol import Pose, RobotState, decode, error_from_reply
 from kinesphere.services.ecl.store import DATA_DIR
-from kinesphere.zconfig import close_session, free_port, open_session, undeclare
+from kinesphere.zconfig import (
+    close_session,
+    free_port,
+    open_session,
+    session_config,
+    undeclare,
+)
 from support.network import KEYS
 from support.paths import DEPLOY
 from support.wait import WAIT_S, until
@@ -58,8 +66,9 @@ def loopback(addresses: list[str]) -> bool:
     return all(a.startswith(("127.", "::1:", "::ffff:127.")) for a in addresses)
 
 
-def make_certs(out: Path, *extra: str, roles: str | None = None, robots: str = "") -> Path:
-    env = dict(os.environ, ROBOTS=robots)
+def make_certs(out: Path, *extra: str, roles: str | None = None, robots: str = "",
+               operators: str = "") -> Path:
+    env = dict(os.environ, ROBOTS=robots, OPERATORS=operators)
     if roles is not None:
         env["ROLES"] = roles
     subprocess.run([str(DEPLOY / "make-certs.sh"), str(out), *extra], check=True, env=env,
@@ -157,3 +166,80 @@ def supervisor(log_dir: Path) -> Iterator[Supervisor]:
         sup.stop_all()
         left = sup.leftovers()
         assert not left, f"processes left behind: {left}"
+
+
+# --- the deploy's own files, secured --------------------------------------------------------
+
+SECURED_ROBOT = "youbot-1"
+"""The robot of deploy/robots.toml that runs behind the secured router (its own
+certificate)."""
+SECURED_OTHER = "baxter-1"
+"""Another robot of deploy/robots.toml (not running): youbot-1's certificate may not speak
+for it."""
+
+
+@dataclass
+class Secured:
+    """The deploy/ configs as shipped, running: a TLS router with ``--robots
+    deploy/robots.toml``, a databank (writes on a copy) and a youBot agent as TLS clients, the
+    certificates of make-certs.sh (roles, both robots, operators alice and bob)."""
+
+    sup: Supervisor
+    configs: dict[str, Path]
+    certs: Path
+    port: int
+    router_log: Path
+    obs: Observer
+
+    def denied(self, text: str) -> bool:
+        return any("access denied" in line and text in line
+                   for line in self.router_log.read_text(errors="replace").splitlines())
+
+    def robot_config(self, robot_id: str) -> zenoh.Config:
+        """deploy/agent.json5 with ``robot_id``'s own certificate, as the agent unit runs it."""
+        config = session_config(config_file=self.configs["agent"])
+        for option in robot_cert(self.certs, robot_id)[1::2]:
+            key, _, value = option.partition(":")
+            config.insert_json5(key, value)
+        return config
+
+
+def robot_cert(certs: Path, robot_id: str, folder: str = "robots") -> list[str]:
+    """The --cfg options that give an agent its robot's own certificate (CN = robot id), or
+    (``folder="operators"``) an operator's own."""
+    tls = "transport/link/tls"
+    return ["--cfg", f'{tls}/connect_certificate:"{certs}/{folder}/{robot_id}.pem"',
+            "--cfg", f'{tls}/connect_private_key:"{certs}/{folder}/{robot_id}.key"']
+
+
+def _db_copy(tmp: Path) -> str:
+    """A private copy of the youBot databank, so an ECL write never touches shipped data."""
+    args = databank_args(["youbot"])
+    src = SHIPPED_DBS / "youbot.sqlite" if args[0] == "--platform" else Path(args[1].split("=")[1])
+    dst = tmp / "youbot.sqlite"
+    shutil.copy(src, dst)
+    return f"youbot={dst}"
+
+
+def secured_system(tmp: Path) -> Iterator[Secured]:
+    """:class:`Secured` running in ``tmp`` until the generator is closed."""
+    db = _db_copy(tmp)
+    certs = make_certs(tmp / "certs", robots=f"{SECURED_ROBOT} {SECURED_OTHER}",
+                       operators="alice bob")
+    port = free_port()
+    configs = localize(tmp / "conf", certs, port)
+    for sup in supervisor(tmp / "logs"):
+        router = sup.spawn("router", ["router", "--config", str(configs["router"]),
+                                      "--robots", str(DEPLOY / "robots.toml")])
+        until(lambda s=sup: s.check() or port_open(port), WAIT_S, "the TLS router to listen")
+        sup.spawn("databank", ["databank", "serve", "--db", db, "--allow-writes", "--replica",
+                               "db-1", "--zenoh-config", str(configs["databank"])])
+        sup.spawn("agent", ["agent", "youbot", "--id", SECURED_ROBOT, "--rate", "250",
+                            "--zenoh-config", str(configs["agent"]),
+                            *robot_cert(certs, SECURED_ROBOT)])
+        obs = Observer(session_config(config_file=configs["operator"]))
+        try:
+            obs.wait_alive({SECURED_ROBOT}, databank=True, sup=sup)
+            yield Secured(sup, configs, certs, port, router.log_path, obs)
+        finally:
+            obs.close()

@@ -11,17 +11,15 @@ against the services' real traffic, not a stand-in.
 from __future__ import annotations
 
 import re
-import shutil
 import time
-from collections.abc import Iterator
-from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
 import zenoh
 
-from kinesphere.deploy.procs import Supervisor
+from kinesphere.clients.link import operator_id
 from kinesphere.errors import KinesphereError
+from kinesphere.keyexpr import Keys
 from kinesphere.protocol import (
     Ack,
     AckStage,
@@ -35,7 +33,6 @@ from kinesphere.protocol import (
 )
 from kinesphere.zconfig import (
     close_session,
-    free_port,
     open_session,
     session,
     session_config,
@@ -44,88 +41,23 @@ from kinesphere.zconfig import (
 from support.network import KEYS
 from support.paths import DEPLOY
 from support.system import (
-    SHIPPED_DBS,
-    Observer,
+    SECURED_OTHER,
+    SECURED_ROBOT,
+    Secured,
     at_pose,
-    databank_args,
     listeners,
-    localize,
     make_certs,
-    port_open,
     query_pose,
-    supervisor,
+    robot_cert,
 )
 from support.wait import WAIT_S, until
 
 pytestmark = pytest.mark.processes
 
-ROBOT = "youbot-1"
-OTHER = "baxter-1"
-"""Another robot of deploy/robots.toml (not running): youbot-1's certificate may not speak
-for it."""
+ROBOT = SECURED_ROBOT
+OTHER = SECURED_OTHER
 POSE_A = ("limb_11", "distal_11", "left-high", 2)
 POSE_B = ("limb_11", "distal_11", "right-high", 2)
-
-
-@dataclass
-class Secured:
-    sup: Supervisor
-    configs: dict[str, Path]
-    certs: Path
-    port: int
-    router_log: Path
-    obs: Observer
-
-    def denied(self, text: str) -> bool:
-        return any("access denied" in line and text in line
-                   for line in self.router_log.read_text(errors="replace").splitlines())
-
-    def robot_config(self, robot_id: str) -> zenoh.Config:
-        """deploy/agent.json5 with ``robot_id``'s own certificate, as the agent unit runs it."""
-        config = session_config(config_file=self.configs["agent"])
-        for option in robot_cert(self.certs, robot_id)[1::2]:
-            key, _, value = option.partition(":")
-            config.insert_json5(key, value)
-        return config
-
-
-def robot_cert(certs: Path, robot_id: str) -> list[str]:
-    """The --cfg options that give an agent its robot's own certificate (CN = robot id)."""
-    tls = "transport/link/tls"
-    return ["--cfg", f'{tls}/connect_certificate:"{certs}/robots/{robot_id}.pem"',
-            "--cfg", f'{tls}/connect_private_key:"{certs}/robots/{robot_id}.key"']
-
-
-def _db_copy(tmp: Path) -> str:
-    """A private copy of the youBot databank, so an ECL write never touches shipped data."""
-    args = databank_args(["youbot"])
-    src = SHIPPED_DBS / "youbot.sqlite" if args[0] == "--platform" else Path(args[1].split("=")[1])
-    dst = tmp / "youbot.sqlite"
-    shutil.copy(src, dst)
-    return f"youbot={dst}"
-
-
-@pytest.fixture(scope="module")
-def secured(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Secured]:
-    tmp = tmp_path_factory.mktemp("secured")
-    db = _db_copy(tmp)
-    certs = make_certs(tmp / "certs", robots=f"{ROBOT} {OTHER}")
-    port = free_port()
-    configs = localize(tmp / "conf", certs, port)
-    for sup in supervisor(tmp / "logs"):
-        router = sup.spawn("router", ["router", "--config", str(configs["router"]),
-                                      "--robots", str(DEPLOY / "robots.toml")])
-        until(lambda s=sup: s.check() or port_open(port), WAIT_S, "the TLS router to listen")
-        sup.spawn("databank", ["databank", "serve", "--db", db, "--allow-writes", "--replica",
-                               "db-1", "--zenoh-config", str(configs["databank"])])
-        sup.spawn("agent", ["agent", "youbot", "--id", ROBOT, "--rate", "250",
-                            "--zenoh-config", str(configs["agent"]), *robot_cert(certs, ROBOT)])
-        obs = Observer(session_config(config_file=configs["operator"]))
-        try:
-            obs.wait_alive({ROBOT}, databank=True, sup=sup)
-            yield Secured(sup, configs, certs, port, router.log_path, obs)
-        finally:
-            obs.close()
 
 
 def test_every_deploy_config_loads() -> None:
@@ -149,27 +81,33 @@ def test_only_the_router_listens(secured: Secured) -> None:
     assert found["databank"] == [] and found["agent"] == [], found
 
 
-def _send(s: Secured, role: str, pose: tuple[str, str, str, int]) -> tuple[int, str]:
-    """``kinesphere send`` with a role's deploy config, as an operator would run it: its exit
-    status and output."""
-    name = f"send-{role}-{pose[2]}"
+def _send(s: Secured, role: str, pose: tuple[str, str, str, int],
+          operator: str = "") -> tuple[int, str]:
+    """``kinesphere send`` with a role's deploy config (and an operator's own certificate
+    and name), as an operator would run it: its exit status and output."""
+    name = f"send-{role}-{operator}-{pose[2]}"
+    own = [*robot_cert(s.certs, operator, "operators"), "--sender", operator] if operator \
+        else []
     child = s.sup.spawn(name, ["send", ROBOT, *map(str, pose), "--zenoh-config",
-                               str(s.configs[role]), "--wait", "20"], expect_exit=True)
+                               str(s.configs[role]), *own, "--wait", "20"], expect_exit=True)
     return s.sup.wait(name, WAIT_S), child.tail()
 
 
 def test_only_the_operator_moves_robots(secured: Secured) -> None:
+    """An admitted operator, by its own certificate and name; the shared CN=operator
+    certificate only watches."""
     s, obs = secured, secured.obs
     a = query_pose(obs.session, "youbot", *POSE_A).joints
     b = query_pose(obs.session, "youbot", *POSE_B).joints
-    code, out = _send(s, "operator", POSE_A)
+    code, out = _send(s, "operator", POSE_A, operator="alice")
     assert code == 0 and f"{ROBOT}: reached" in out, out
     until(lambda: at_pose(obs.states.last(ROBOT), a), WAIT_S, "the operator's pose")
     before = obs.states.last(ROBOT)
     assert before is not None
 
-    code, out = _send(s, "superuser", POSE_B)  # the router drops it: the client must say so
-    assert code == 1 and f"{ROBOT}: NO ACKNOWLEDGEMENT" in out, out
+    for role in ("superuser", "operator"):  # the router drops it: the client must say so
+        code, out = _send(s, role, POSE_B)
+        assert code == 1 and f"{ROBOT}: NO ACKNOWLEDGEMENT" in out, out
     for role, config in (("robot", s.robot_config(ROBOT)),
                          ("databank", session_config(config_file=s.configs["databank"]))):
         cmd = Command(seq=0, sent_ns=time.time_ns(), parts=[SpatialCommand(*POSE_B)],
@@ -177,7 +115,8 @@ def test_only_the_operator_moves_robots(secured: Secured) -> None:
         with session(config=config) as intruder:
             intruder.put(KEYS.command(ROBOT), encode(cmd))
             intruder.put(KEYS.command("*"), encode(cmd))
-    for cn, key in (("superuser", KEYS.command(ROBOT)), (ROBOT, KEYS.command("*")),
+    signed = Keys.signed(KEYS.command(ROBOT), operator_id())  # what `send` puts on
+    for cn, key in (("superuser", signed), ("operator", signed), (ROBOT, KEYS.command("*")),
                     (ROBOT, KEYS.command(ROBOT)), ("databank", KEYS.command(ROBOT))):
         until(lambda cn=cn, key=key: s.denied(f"Put (ingress) on {key} by CN={cn}"), WAIT_S,
               f"the router to log the denied command of CN={cn}")

@@ -92,12 +92,15 @@ def _targeting(
         )
 
 
-def _identity(p: argparse.ArgumentParser) -> None:
+def add_identity(p: argparse.ArgumentParser) -> None:
+    """``--sender``: who a command-line client is to the robots."""
     p.add_argument(
         "--sender",
         metavar="NAME",
-        help="who you are to the robots (default USER@HOST): they lease control to a sender, "
-        "so your commands from several terminals count as one operator",
+        help="who you are to the robots (default $KINESPHERE_SENDER, else USER@HOST): they "
+        "lease control to a sender and only its own release clears its e-stop, so your "
+        "commands from several terminals count as one operator; behind the deploy's access "
+        "control it must be the name in your certificate",
     )
 
 
@@ -181,7 +184,7 @@ def register(sub: Any) -> None:
         "instead of being refused while they hold it",
     )
     _targeting(g, wait=False)
-    _identity(g)
+    add_identity(g)
     add_zenoh_arguments(g)
     g.set_defaults(func=_gamepad)
 
@@ -223,7 +226,7 @@ def register(sub: Any) -> None:
     )
     _targeting(s, f"0: the pose is reached whatever happens next; {STREAM.ttl_ms} with --for")
     _answers(s, 5.0, "(the last command's final stage: reached, clamped, blocked...)")
-    _identity(s)
+    add_identity(s)
     add_zenoh_arguments(s)
     s.set_defaults(func=_send)
 
@@ -242,7 +245,7 @@ def register(sub: Any) -> None:
                    help=f"default {STREAM.rate_hz:g}")
     _targeting(p, f"the phrase's ttl_ms, else {STREAM.ttl_ms}")
     _answers(p, 5.0, "after the phrase")
-    _identity(p)
+    add_identity(p)
     add_zenoh_arguments(p)
     p.set_defaults(func=_play)
 
@@ -260,7 +263,7 @@ def register(sub: Any) -> None:
     )
     _targeting(e)
     _answers(e, 2.0, "(estopped, released)")
-    _identity(e)
+    add_identity(e)
     add_zenoh_arguments(e)
     e.set_defaults(func=_estop)
 
@@ -280,6 +283,6 @@ def register(sub: Any) -> None:
                     help="keep the lease alive for S seconds (Ctrl-C ends it), then release")
     _targeting(ls)
     _answers(ls, 2.0, "(leased, or refused naming the holder)")
-    _identity(ls)
+    add_identity(ls)
     add_zenoh_arguments(ls)
     ls.set_defaults(func=_lease)

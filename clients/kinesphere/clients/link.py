@@ -9,9 +9,15 @@ congestion control: a stop or an e-stop must never be dropped to make room. Robo
 liveliness and the acks robots send for this client's commands arrive on Zenoh's threads and
 are kept behind a lock, bounded, for the loop and the HUD.
 
-Who the client is: ``sender`` names the operator (``user@host`` unless given: robots lease
-control to a sender, so every process of one operator shares it) and ``session`` this process
-(robots order commands per ``(sender, session)``, so a restarted client starts afresh).
+Who the client is: ``sender`` names the operator (``$KINESPHERE_SENDER``, else ``user@host``,
+unless given: robots lease control to a sender, so every process of one operator shares it;
+with the deploy's access control it must be the name in the operator's certificate) and
+``session`` this process (robots order commands per ``(sender, session)``, so a restarted
+client starts afresh; told ``stale``, the link starts a fresh session, since someone or
+something put its session's order past its own). Every command is put under a key that ends
+with the sender's name (:meth:`Keys.signed`): the router lets a certificate put only under its
+own name, and robots take the sender from the key. ``clock`` names this host's clock until
+it reboots, so robots time a new session by what they learnt of its offset.
 
 Zenoh's link lease is 10 s, so liveliness only tells who exists; safety comes from each
 command's ``ttl_ms``, which the robot enforces itself.
@@ -21,7 +27,9 @@ from __future__ import annotations
 
 import argparse
 import getpass
+import hashlib
 import logging
+import os
 import re
 import signal
 import socket
@@ -74,13 +82,33 @@ def _segment(text: str) -> str:
     return clean[:MAX_NAME] or "operator"
 
 
+SENDER_ENV = "KINESPHERE_SENDER"
+"""The default sender, when set (an operator's certificate name)."""
+SESSIONS_KEPT = 8
+"""Earlier sessions of a link whose acks still count (commands in flight when it renewed)."""
+
+
 def operator_id() -> str:
-    """This operator's default sender: ``user@host``."""
+    """This operator's default sender: ``$KINESPHERE_SENDER``, else ``user@host``."""
+    named = os.environ.get(SENDER_ENV, "").strip()
+    if named:
+        return _segment(named)
     try:
         user = getpass.getuser()
     except (KeyError, OSError):  # no passwd entry (containers)
         user = "operator"
     return _segment(f"{user}@{socket.gethostname().split('.')[0]}")
+
+
+def host_clock() -> str:
+    """This host's clock until it reboots (the kernel's boot id, else the host name), as a
+    short digest: ``Command.clock``."""
+    try:
+        with open("/proc/sys/kernel/random/boot_id", encoding="ascii") as f:
+            boot = f.read(64).strip()
+    except OSError:
+        boot = ""
+    return hashlib.sha256(f"{socket.gethostname()}/{boot}".encode()).hexdigest()[:16]
 
 
 def new_sender(kind: str) -> str:
@@ -96,10 +124,11 @@ def new_session() -> str:
 class Sequencer:
     """Builds Commands with a growing ``seq``, this sender's id and this process's session."""
 
-    def __init__(self, sender: str, ttl_ms: int, session: str = "") -> None:
+    def __init__(self, sender: str, ttl_ms: int, session: str = "", clock: str = "") -> None:
         self.sender = sender
         self.session = session
         self.ttl_ms = ttl_ms
+        self.clock = clock
         self.seq = 0
 
     def command(
@@ -126,6 +155,7 @@ class Sequencer:
             sender=self.sender,
             session=self.session,
             lease=lease,
+            clock=self.clock,
         )
         self.seq += 1
         return cmd
@@ -181,6 +211,10 @@ class RobotLink:
         self.keys = keys
         self.sender = sender or operator_id()
         self.session_id = new_session()
+        self.clock = host_clock()
+        self.renewed = 0
+        """Fresh sessions started because a robot answered ``stale``."""
+        self._sessions: deque[str] = deque([self.session_id], maxlen=SESSIONS_KEPT)
         self._sequencer: Sequencer | None = None
         self._lock = threading.RLock()  # wait_for predicates read states under it
         self._publishers: dict[tuple[str, bool], zenoh.Publisher] = {}
@@ -206,9 +240,23 @@ class RobotLink:
         """The one Sequencer of this link's sender and session, with ``ttl_ms`` from now on (a
         second one would restart ``seq``, and robots would drop its commands as stale)."""
         if self._sequencer is None:
-            self._sequencer = Sequencer(self.sender, ttl_ms, self.session_id)
+            self._sequencer = Sequencer(self.sender, ttl_ms, self.session_id, self.clock)
         self._sequencer.ttl_ms = ttl_ms
         return self._sequencer
+
+    def _renew(self, stale: Ack) -> None:
+        """A robot says this session's order is past this link's ``seq`` (someone pushed it,
+        or the robot restarted deep into a long session): go on in a fresh session, with
+        ``seq`` still growing, so acks of either still tell commands apart. Under the lock."""
+        if stale.session != self.session_id:
+            return  # an older session's: renewed already
+        self.session_id = new_session()
+        self._sessions.append(self.session_id)
+        self.renewed += 1
+        if self._sequencer is not None:
+            self._sequencer.session = self.session_id
+        log.info("%s answered stale (%s): commands go on in a fresh session", stale.robot_id,
+                 stale.detail)
 
     # --- watching -----------------------------------------------------------------------
 
@@ -234,9 +282,13 @@ class RobotLink:
 
     def _on_ack(self, sample: zenoh.Sample) -> None:
         ack = self._decoded(sample, Ack)
-        if ack is None or ack.sender != self.sender or ack.session != self.session_id:
+        if ack is None or ack.sender != self.sender:
             return  # undecodable, or another client's
         with self.changed:
+            if ack.session not in self._sessions:
+                return  # another process of this sender's
+            if ack.code == "stale":
+                self._renew(ack)
             box = self._answers.get(ack.robot_id)
             if box is None:
                 box = self._answers[ack.robot_id] = deque(maxlen=ACKS_PER_ROBOT)
@@ -345,14 +397,17 @@ class RobotLink:
             return pub
 
     def wait_subscribers(self, keys: Iterable[str], timeout: float) -> list[str]:
-        """Declare publishers for ``keys`` and wait until each has a subscriber; the unmatched."""
-        return zconfig.unmatched({key: self.publisher(key) for key in keys}, timeout)
+        """Declare publishers for the command ``keys`` (signed with this link's sender) and
+        wait until each has a subscriber; the unmatched, as given."""
+        return zconfig.unmatched(
+            {key: self.publisher(Keys.signed(key, self.sender)) for key in keys}, timeout)
 
     def put(self, keys: Iterable[str], cmd: Command) -> None:
-        """Put ``cmd`` on every key (the same seq: each robot sees it once)."""
+        """Put ``cmd`` on every command key, signed with its sender (the same seq: each robot
+        sees it once)."""
         payload = encode(cmd)
         for key in keys:
-            self.publisher(key, urgent=cmd.estop).put(payload)
+            self.publisher(Keys.signed(key, cmd.sender), urgent=cmd.estop).put(payload)
 
     def alive_robots(self, timeout: float = 2.0) -> list[str]:
         """Every robot whose liveliness token exists now, by a liveliness query (complete

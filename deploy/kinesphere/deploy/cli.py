@@ -82,7 +82,8 @@ def register(sub: Any) -> None:
                     "to serve other machines)")
     rt.add_argument("--robots", type=Path, metavar="FILE",
                     help="fleet file (deploy/robots.toml): admit each robot by its own "
-                    "certificate (CN = robot id) to its own keys only")
+                    "certificate (CN = robot id) to its own keys only, and each operator "
+                    "(CN = name) to put commands only under its own name")
     rt.add_argument("--print-acl", action="store_true",
                     help="print the access-control rules --robots generates, and exit")
     rt.add_argument("--link", action="append", metavar="EP",

@@ -25,7 +25,7 @@ from typing import IO
 
 import zenoh
 
-from kinesphere.deploy.acl import add_robots, load_fleet, robot_acl
+from kinesphere.deploy.acl import add_fleet, fleet_acl, load_fleet
 from kinesphere.deploy.denials import INTERCEPTOR, DenialFilter
 from kinesphere.deploy.sockets import ClosedPeers
 from kinesphere.errors import KinesphereError
@@ -80,8 +80,8 @@ def router_config(
     links: Sequence[str] | None = None,
 ) -> tuple[zenoh.Config, int]:
     """The router's config (the file, ``listen`` and ``links`` over it, loopback when neither
-    says where to listen) with the fleet file's robots admitted (:mod:`kinesphere.deploy.acl`),
-    and the robot count.
+    says where to listen) with the fleet file's robots and operators admitted
+    (:mod:`kinesphere.deploy.acl`), and how many it admits.
 
     ``links`` (other routers, over the file's ``connect/endpoints``) joins sites: a router
     keeps retrying a link that is down, so sites may start in any order.
@@ -91,13 +91,13 @@ def router_config(
     config = session_config("router", listen=listen or None, connect=links or None,
                             config_file=config_file)
     listen_where_told(config)
-    admitted = 0 if robots is None else add_robots(config, load_fleet(robots))
+    admitted = 0 if robots is None else add_fleet(config, load_fleet(robots))
     return config, admitted
 
 
 def print_acl(robots: Path) -> int:
-    """``--print-acl``: the generated per-robot rules, subjects and policies as JSON."""
-    print(json.dumps({"access_control": robot_acl(load_fleet(robots))}, indent=2))
+    """``--print-acl``: the generated per-robot and per-operator rules, subjects and policies."""
+    print(json.dumps({"access_control": fleet_acl(load_fleet(robots))}, indent=2))
     return 0
 
 
@@ -138,7 +138,7 @@ def run_router(
                 session.zid(),
                 endpoints,
                 "on" if acl else "off",
-                f" ({admitted} robots admitted by id)" if admitted else "",
+                f" ({admitted} robots and operators admitted by name)" if admitted else "",
                 "logged" if log_denials else "not logged",
             )
             while not stop.wait(0.5):

@@ -48,7 +48,8 @@ WAIT_S: Final = 5.0
 
 def tapped_keys(keys: Keys) -> list[str]:
     """Every key expression the recorder records."""
-    return [keys.command(WILDCARD), f"{keys.prefix}/group/*/command", keys.state(WILDCARD),
+    return [Keys.subscribed(keys.command(WILDCARD)),
+            Keys.subscribed(f"{keys.prefix}/group/*/command"), keys.state(WILDCARD),
             keys.ack(WILDCARD), keys.changed(WILDCARD)]
 
 

@@ -61,8 +61,10 @@ class Fleet:
         self._entities: list[Any] = [
             session.declare_subscriber(keys.state(WILDCARD), self._on_state),
             session.declare_subscriber(keys.ack(WILDCARD), self._on_ack),
-            session.declare_subscriber(keys.command(WILDCARD), self._on_command),
-            session.declare_subscriber(f"{keys.prefix}/group/*/command", self._on_command),
+            session.declare_subscriber(Keys.subscribed(keys.command(WILDCARD)),
+                                       self._on_command),
+            session.declare_subscriber(Keys.subscribed(f"{keys.prefix}/group/*/command"),
+                                       self._on_command),
             session.liveliness().declare_subscriber(keys.alive_robot(WILDCARD), self._on_alive,
                                                     history=True),
         ]
@@ -135,12 +137,12 @@ class Fleet:
 
     def _addressed(self, key: str) -> list[str]:
         """Robot ids a command key reaches (only robots already known)."""
-        rest = key.split("/")[self._n:]
+        rest = key.split("/")[self._n:]  # .../command, or .../command/<sender>
         with self._lock:
             robots = self._table.robots
-            if len(rest) == 3 and rest[0] == "robot":
+            if len(rest) in (3, 4) and rest[0] == "robot" and rest[2] == "command":
                 return list(robots) if rest[1] == WILDCARD else [rest[1]]
-            if len(rest) == 3 and rest[0] == "group":
+            if len(rest) in (3, 4) and rest[0] == "group" and rest[2] == "command":
                 return [rid for rid, r in robots.items()
                         if r.state is not None and rest[1] in r.state.groups]
         return []

@@ -214,19 +214,18 @@ class Conduct:
             self.ordering.acted(cmd.seq)  # acted on now; poses count once resolved
         if verdict is Verdict.ESTOP:
             self.estop_lag.append(self.ticks - item.tick)
-            self.halt(Status.ESTOP, f"e-stop from {self.safety.estop_by}; release with a "
+            self.halt(Status.ESTOP, f"e-stop from {self.safety.holders()}; release with a "
                        "command with release=true (kinesphere estop --release)",
                        AckStage.SUPERSEDED)
             log.warning("agent %s: e-stop by %s (seq %d)", self.robot_id, self.safety.estop_by,
                         cmd.seq)
             self.acks.send(cmd, AckStage.ESTOPPED)
         elif verdict is Verdict.LATCHED:
-            self.acks.send(cmd, AckStage.REJECTED, f"e-stop latched by {self.safety.estop_by}; "
-                           "only a release is obeyed", code="estopped")
+            self.acks.send(cmd, AckStage.REJECTED, self._latched(cmd), code="estopped")
         elif verdict is Verdict.RELEASE:
             self.set(Status.IDLE, "e-stop released; send a command to move")
             log.warning("agent %s: e-stop released by %s (seq %d)", self.robot_id,
-                        cmd.sender or "?", cmd.seq)
+                        cmd.sender, cmd.seq)
             self.acks.send(cmd, AckStage.RELEASED)
         elif verdict is Verdict.STOP:
             self.halt(Status.STOPPED, "stop command", AckStage.SUPERSEDED)
@@ -240,6 +239,16 @@ class Conduct:
                            f"lease {cmd.lease}: " + (f"held by {holder}" if holder else "free"))
         else:
             self._move(cmd)
+
+    def _latched(self, cmd: Command) -> str:
+        """Why ``cmd`` is refused while an e-stop is latched."""
+        holders = self.safety.holders()
+        if not cmd.release:
+            return f"e-stop latched by {holders}; only a release is obeyed"
+        if not cmd.sender:
+            return f"e-stop latched by {holders}; a release must name its sender"
+        return (f"e-stop still latched by {holders}: each latch clears only with its own "
+                "sender's release (or by restarting the agent)")
 
     def _taken(self, previous: str, cmd: Command) -> None:
         """Remember the holder's last command; tell a holder whose lease was taken over."""

@@ -5,16 +5,24 @@
 2. **Stale.** Per ``(sender, session)``, a command whose ``seq`` is not above the newest seen
    from that pair is stale: dropped, acknowledged ``stale``. A fresh session starts a new
    order. Version-1 senders send no session: for them a command is stale only if it is also
-   no later by ``sent_ns``, so a restarted client (seq from 0, a newer clock) counts.
+   no later by ``sent_ns``, so a restarted client (seq from 0, a newer clock) counts. A
+   ``seq`` more than :data:`SEQ_WINDOW` past the pair's newest (or past it for a pair's first
+   command) is stale too and is not remembered: nobody can push a session's order to the end
+   of the numbers and silence it (a client told ``stale`` starts a new session).
 3. **Expired.** A command whose TTL (``ttl_ms``; 0.5 s for a drive without one; none for
    ``ttl_ms: 0``) ran out before the robot acts on it is dropped, acknowledged ``expired``.
    Its age is the time since receipt on the robot's monotonic clock, plus how much later than
-   its pair's quickest command it arrived: ``(received - sent_ns)`` minus the smallest such
-   difference seen from the pair. That needs no synchronised clocks (a constant offset
-   between sender and robot cancels) and catches commands that queued up while the robot
-   was frozen (SIGSTOP, a stalled host), which Zenoh delivers only when it runs again, so
-   their receipt time alone looks fresh. The first command of a pair is judged by receipt
-   alone; a sender whose clock steps back by more than a TTL starts a new session.
+   the quickest command of its sender's clock it arrived: ``(received - sent_ns)`` minus the
+   smallest such difference seen from that ``(sender, clock)`` (``Command.clock`` names the
+   sender's host clock; without it, the session's). That needs no synchronised clocks (a
+   constant offset between sender and robot cancels) and catches commands that queued up
+   while the robot was frozen (SIGSTOP, a stalled host), which Zenoh delivers only when it
+   runs again, so their receipt time alone looks fresh, whichever session they belong to:
+   the offset is the clock's, learnt from its first command. A clock heard for the first
+   time has no offset yet: if its command arrived during (or just after) a stall of the
+   control loop, the stall counts as its age. A clock that steps back by more than a TTL
+   has its commands expire until they have been late for :data:`REBASE_S`, then the robot
+   takes its new offset (a backlog after a stall arrives at once, never for that long).
 4. Rules 2 and 3 never drop an e-stop, a stop or a deadman release: those only stop motion.
    Stale and expired commands are counted (``RobotState.dropped``).
 5. **Waiting.** A command whose pose is not cached waits for the databank under a ticket. Any
@@ -23,24 +31,35 @@
 6. **Acted on.** ``last_seq`` (``RobotState.last_command_seq``) is the last command acted on:
    at once for commands that need no pose, on resolution for those that do.
 
-The pair table is bounded by count, and each entry by the protocol's name lengths, so by
-bytes too (least recently heard pairs are forgotten first).
+The pair and clock tables are bounded by count, and each entry by the protocol's name
+lengths, so by bytes too (least recently heard entries are forgotten first).
 """
 
 from __future__ import annotations
 
+import logging
 from collections import OrderedDict
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import NamedTuple, TypeVar
 
 from kinesphere.errors import KinesphereError
 from kinesphere.protocol import Command
 from kinesphere.robots.agent.safety import DRIVE_TTL_S
 
+T = TypeVar("T")
 MAX_SENDERS = 1024
 """``(sender, session)`` pairs remembered (each at most 2 x 64 characters: ~0.3 MB in all)."""
 MAX_CLOCK_AHEAD_S = 60.0
 """How far a command's ``sent_ns`` may lie ahead of the robot's clock."""
+SEQ_WINDOW = 1 << 20
+"""How far past its session's newest a ``seq`` may jump (9.7 h of a 30 Hz stream)."""
+REBASE_S = 2.0
+"""How long a clock's commands must all arrive late before the robot takes its new offset."""
+STALL_GRACE_S = 0.25
+"""After a stall of the control loop, how long a command of an unknown clock may still have
+queued during it (the network thread and the loop wake in either order)."""
+
+log = logging.getLogger(__name__)
 
 
 class Received(NamedTuple):
@@ -81,8 +100,16 @@ def _exempt(cmd: Command) -> bool:
 class _Pair:
     seq: int
     sent_ns: int
+
+
+@dataclass
+class _Clock:
+    """What the robot knows of one sender's clock."""
+
     transit_ns: int
-    """The smallest ``received - sent_ns`` seen from this pair (rule 3)."""
+    """The smallest ``received - sent_ns`` seen from it (rule 3)."""
+    late_since_ns: int | None = None
+    """Receipt (monotonic) of the first of an unbroken run of commands expired by it."""
 
 
 class Ordering:
@@ -94,11 +121,18 @@ class Ordering:
         """Commands dropped as stale or expired since start."""
         self.max_senders = max_senders
         self._pairs: OrderedDict[tuple[str, str], _Pair] = OrderedDict()
+        self._clocks: OrderedDict[tuple[str, str], _Clock] = OrderedDict()
+        self._stall: tuple[int, int] | None = None
         self._ticket = 0
         self._waiting: Waiting | None = None
 
     def __len__(self) -> int:
         return len(self._pairs)
+
+    def stalled(self, start_ns: int, end_ns: int) -> None:
+        """The control loop did not run from ``start_ns`` to ``end_ns`` (monotonic): what
+        arrived meanwhile from a clock never heard may be that old (rule 3)."""
+        self._stall = (start_ns, end_ns)
 
     def admit(self, item: Received, now_ns: int) -> KinesphereError | None:
         """Rules 1 to 4 for a command processed at ``now_ns`` (monotonic): None to act on it,
@@ -110,15 +144,17 @@ class Ordering:
             return None if exempt else KinesphereError(
                 "malformed", f"sent_ns lies {ahead:.0f} s ahead of the robot's clock (at most "
                 f"{MAX_CLOCK_AHEAD_S:g} s): check the sender's clock")
-        key = (cmd.sender, cmd.session)
-        transit = item.wall_ns - cmd.sent_ns
-        pair = self._pairs.get(key)
+        pair = self._remember(self._pairs, (cmd.sender, cmd.session), None)
+        newest = -1 if pair is None else pair.seq
+        if cmd.seq > newest + SEQ_WINDOW:  # obeyed if it only stops, never remembered
+            if exempt:
+                return None
+            self.dropped += 1
+            return KinesphereError("stale", f"seq {cmd.seq} jumps more than {SEQ_WINDOW} past "
+                                   f"{newest} in this session: start a new session")
         if pair is None:
-            pair = self._pairs[key] = _Pair(-1, 0, transit)
-            while len(self._pairs) > self.max_senders:
-                self._pairs.popitem(last=False)
-        self._pairs.move_to_end(key)
-        pair.transit_ns = min(pair.transit_ns, transit)
+            pair = self._remember(self._pairs, (cmd.sender, cmd.session), _Pair(-1, 0))
+        assert pair is not None
         if cmd.seq <= pair.seq and (cmd.session or cmd.sent_ns <= pair.sent_ns):
             if not exempt:
                 self.dropped += 1
@@ -126,12 +162,55 @@ class Ordering:
                                        f"from {cmd.sender or 'this sender'}")
         else:
             pair.seq, pair.sent_ns = cmd.seq, cmd.sent_ns
+        age_ns = (now_ns - item.mono_ns) + self._lateness(item)
         ttl = ttl_s(cmd)
-        age = ((now_ns - item.mono_ns) + (transit - pair.transit_ns)) / 1e9
-        if ttl > 0.0 and age > ttl and not exempt:
+        if ttl > 0.0 and age_ns / 1e9 > ttl and not exempt:
             self.dropped += 1
-            return KinesphereError("expired", f"{age * 1e3:.0f} ms old, ttl {ttl * 1e3:.0f} ms")
+            return KinesphereError("expired", f"{age_ns / 1e6:.0f} ms old, ttl "
+                                   f"{ttl * 1e3:.0f} ms")
         return None
+
+    def _lateness(self, item: Received) -> int:
+        """How much later than its clock's quickest command ``item`` arrived, in ns (rule 3)."""
+        cmd = item.cmd
+        transit = item.wall_ns - cmd.sent_ns
+        key = (cmd.sender, cmd.clock or f"session:{cmd.session}")
+        clock = self._remember(self._clocks, key, None)
+        if clock is None:
+            self._remember(self._clocks, key, _Clock(transit))
+            stall = self._stall
+            if stall is not None and stall[0] < item.mono_ns <= stall[1] + STALL_GRACE_S * 1e9:
+                return stall[1] - stall[0]
+            return 0
+        clock.transit_ns = min(clock.transit_ns, transit)
+        late = transit - clock.transit_ns
+        ttl = ttl_s(cmd)
+        if ttl <= 0.0 or _exempt(cmd):
+            return late
+        if late / 1e9 <= ttl:
+            clock.late_since_ns = None
+        elif clock.late_since_ns is None:
+            clock.late_since_ns = item.mono_ns
+        elif (item.mono_ns - clock.late_since_ns) / 1e9 >= REBASE_S:
+            log.info("the clock of %s stepped back by %.1f s: its commands are timed from its "
+                     "new offset", cmd.sender or "a sender", late / 1e9)
+            clock.transit_ns, clock.late_since_ns = transit, None
+            return 0
+        return late
+
+    def _remember(self, table: OrderedDict[tuple[str, str], T], key: tuple[str, str],
+                  new: T | None) -> T | None:
+        """``table[key]`` made the most recent (or ``new`` stored there, the least recent
+        entry forgotten past :attr:`max_senders`); None when absent and ``new`` is None."""
+        entry = table.get(key)
+        if entry is None:
+            if new is None:
+                return None
+            entry = table[key] = new
+            while len(table) > self.max_senders:
+                table.popitem(last=False)
+        table.move_to_end(key)
+        return entry
 
     def acted(self, seq: int) -> None:
         """Rule 6: ``seq`` was acted on (moved, halted, or rejected with an error)."""

@@ -25,6 +25,7 @@ from collections import deque
 from collections.abc import Callable
 from typing import Any
 
+import msgspec
 import numpy as np
 import zenoh
 
@@ -55,6 +56,8 @@ from kinesphere.robots.agent.resolver import Resolver
 from kinesphere.zconfig import undeclare
 
 log = logging.getLogger(__name__)
+STALL_NS = 100_000_000
+"""A gap between two steps' starts longer than this is a stall (ordering.py, rule 3)."""
 
 
 
@@ -89,6 +92,8 @@ class Agent:
         self.last_state: RobotState | None = None
         self._ratelog = RateLog(log)
         self._ticks = 0
+        self._tick_ns = 0
+        """Monotonic ns when the last step began."""
         self._state_seq = 0
         self._publish_every = max(1, round(self.options.rate / self.options.state_rate))
         self._phase = phase
@@ -106,7 +111,8 @@ class Agent:
         s = self.session
         keys = [self.keys.command(self.robot_id)]
         keys += [self.keys.group_command(g) for g in self.options.groups]
-        self._entities = [s.declare_subscriber(k, self._on_sample) for k in keys]
+        self._entities = [s.declare_subscriber(Keys.subscribed(k), self._on_sample)
+                          for k in keys]
         drop = zenoh.CongestionControl.DROP
         self._publisher = s.declare_publisher(self.keys.state(self.robot_id),
                                               congestion_control=drop)
@@ -155,14 +161,28 @@ class Agent:
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
         try:
-            self.receive(sample.payload)
+            self.receive(sample.payload, self.keys.sender_of(str(sample.key_expr)))
+        except KinesphereError as exc:  # a key below .../command that names no sender
+            self._ratelog(exc.code, "agent %s: command refused: %s", self.robot_id, exc)
+            self.inbox.put_bad(exc)
         except Exception as exc:  # never a traceback in Zenoh's callback thread
             self._ratelog("receive", "agent %s: command not queued: %r", self.robot_id, exc)
 
-    def receive(self, payload: Payload) -> None:
-        """Queue an encoded Command for the next control step (any thread; never blocks)."""
+    def receive(self, payload: Payload, signer: str = "") -> None:
+        """Queue an encoded Command for the next control step (any thread; never blocks).
+
+        ``signer`` is the sender the command's key names (:meth:`Keys.sender_of`): with the
+        deploy's access control only that operator's certificate may put there, so it is who
+        sent it, and a payload naming anyone else is refused. A command without a signer
+        (the plain key, a lab machine without access control) is who its payload says."""
         try:
             cmd = decode(payload, Command)
+            if signer and cmd.sender != signer:
+                if cmd.sender:
+                    raise KinesphereError(
+                        "malformed", f"command says sender {cmd.sender!r} on the key of "
+                        f"{signer!r}: a sender speaks only for itself")
+                cmd = msgspec.structs.replace(cmd, sender=signer)
         except KinesphereError as exc:
             self._ratelog(exc.code, "agent %s: command refused: %s", self.robot_id, exc)
             self.inbox.put_bad(exc)
@@ -210,6 +230,9 @@ class Agent:
         conduct = self.conduct
         self._ticks = conduct.ticks = self._ticks + 1
         now_ns = clocks()[0]
+        if now_ns - self._tick_ns > STALL_NS and self._tick_ns:  # frozen, or a step hung
+            conduct.ordering.stalled(self._tick_ns, now_ns)
+        self._tick_ns = now_ns
         drained = self.inbox.drain()
         for item in drained.estops:
             conduct.handle(item, now_ns)

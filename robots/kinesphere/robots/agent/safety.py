@@ -7,12 +7,18 @@ process was frozen (robot time would have stopped with it).
 The rules (also in ``docs/protocol.md`` terms):
 
 * ``estop=True`` halts everything in place — joints and base brake with the fastest
-  jerk-limited stop — and **latches**. Wildcard puts on ``{prefix}/robot/*/command`` reach
-  every robot, so one message stops the fleet. While latched every command is ignored except
-  the release: a Command with ``release=True`` (and ``estop=False``). Ordinary commands, even
-  with the deadman held, never release it, so a client that keeps streaming cannot undo an
-  e-stop somebody else pressed. The release only clears the latch; its parts and drive are
-  *not* executed, so the robot moves again only on the next command.
+  jerk-limited stop — and **latches**, in the name of its sender. Wildcard puts on
+  ``{prefix}/robot/*/command`` reach every robot, so one message stops the fleet. While
+  latched every command is ignored except a release: a Command with ``release=True`` (and
+  ``estop=False``). Ordinary commands, even with the deadman held, never release it, so a
+  client that keeps streaming cannot undo an e-stop somebody else pressed.
+* **A latch is its sender's.** Like the buttons of a cell's e-stop circuit, each sender's
+  e-stop is a latch of its own, and only that sender's release clears it; the robot moves
+  again when no latch is left. A release without a sender clears nothing. An e-stop without
+  a sender (which a deployment with access control never delivers: the router vouches for
+  every sender) is nobody's, so any named sender may release it. A latch whose sender is
+  gone is cleared by restarting the agent, at the robot. The release only clears latches;
+  its parts and drive are *not* executed, so the robot moves again only on the next command.
 * ``stop=True`` halts everything in place the same way, without latching.
 * ``deadman=False`` means the operator let go: everything brakes to rest and holds; the
   command's parts and drive are ignored.
@@ -26,7 +32,7 @@ The rules (also in ``docs/protocol.md`` terms):
 from __future__ import annotations
 
 import enum
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from kinesphere.protocol import Command
 
@@ -35,6 +41,8 @@ ANONYMOUS = "anonymous"
 
 DRIVE_TTL_S = 0.5
 """Watchdog for a Drive sent with ``ttl_ms=0``: a base never drives on a single message."""
+MAX_LATCHES = 16
+"""Senders whose e-stops are latched at once (more e-stop a robot already latched)."""
 
 
 class Verdict(enum.Enum):
@@ -50,25 +58,40 @@ class Verdict(enum.Enum):
 
 @dataclass
 class Safety:
-    """E-stop latch (and who latched it) and command watchdog; times are seconds."""
+    """E-stop latches (and who latched each) and command watchdog; times are seconds."""
 
-    estopped: bool = False
     deadline: float | None = None
-    estop_by: str = ""
-    """The sender whose e-stop is latched ("" when not latched)."""
+    latches: list[str] = field(default_factory=list)
+    """The senders whose e-stops are latched, first first."""
+
+    @property
+    def estopped(self) -> bool:
+        return bool(self.latches)
+
+    @property
+    def estop_by(self) -> str:
+        """Who latched the e-stop ("" when not latched; the first of several)."""
+        return self.latches[0] if self.latches else ""
+
+    def holders(self) -> str:
+        """Every latch's sender, for people."""
+        return ", ".join(self.latches)
 
     def on_command(self, cmd: Command, now: float) -> Verdict:
         """Classify ``cmd`` received at ``now`` and arm or disarm the watchdog."""
         if cmd.estop:
-            self.estopped = True
-            self.estop_by = cmd.sender or ANONYMOUS
+            who = cmd.sender or ANONYMOUS
+            if who not in self.latches and len(self.latches) < MAX_LATCHES:
+                self.latches.append(who)
             self.deadline = None
             return Verdict.ESTOP
         if self.estopped:
-            if cmd.release:
-                self.estopped = False
-                self.estop_by = ""
-                return Verdict.RELEASE
+            if cmd.release and cmd.sender:
+                for latch in (cmd.sender, ANONYMOUS):  # nobody's latch: any named sender
+                    if latch in self.latches:
+                        self.latches.remove(latch)
+                if not self.latches:
+                    return Verdict.RELEASE
             return Verdict.LATCHED
         if cmd.stop:
             self.deadline = None
