@@ -21,6 +21,7 @@ from kinesphere import zconfig
 from kinesphere.clients.mcaplog import McapWriter, read
 from kinesphere.clients.recording.traffic import TrafficRecorder, replay, tapped_keys
 from kinesphere.errors import KinesphereError
+from kinesphere.keyexpr import Keys
 from kinesphere.robots.agent.ordering import Ordering, Received
 from support.network import OWN_KEYS
 from support.wait import until
@@ -90,7 +91,7 @@ def test_record_replay_round_trip(tmp_path: Path) -> None:
             # replay waits until its publishers match the recorder, which has just subscribed)
             rec2 = TrafficRecorder(rec_s, OWN_KEYS, second)
             put_at: list[float] = []
-            done = replay(pub_s, first, "all", wait=20.0,
+            done = replay(pub_s, first, "all", wait=20.0, keys=OWN_KEYS,
                           on_put=lambda k, m: put_at.append(time.monotonic()))
             wanted = [(k, m) for k, m in sent if isinstance(m, (pr.Command, pr.RobotState))]
             assert done.sent == len(wanted) and done.unheard == []
@@ -136,7 +137,7 @@ def test_a_replay_says_which_keys_nobody_heard(tmp_path: Path) -> None:
             w.write(key, cmd, time.time_ns() + i)
     with zconfig.loopback_hub() as (hub, endpoint):
         with pytest.raises(KinesphereError) as err:
-            replay(hub, path, wait=0.2)  # nobody at all: nothing is put
+            replay(hub, path, wait=0.2, keys=OWN_KEYS)  # nobody at all: nothing is put
         assert err.value.code == "unavailable"
         message = err.value.message
         assert OWN_KEYS.command("r1") in message and "nothing replayed" in message
@@ -147,7 +148,7 @@ def test_a_replay_says_which_keys_nobody_heard(tmp_path: Path) -> None:
             probe = hub.declare_publisher(OWN_KEYS.command("r1"))
             assert zconfig.wait_matching(probe, 20.0)  # the hub knows r1's subscriber now
             zconfig.undeclare(probe)
-            done = replay(hub, path, wait=0.2)  # r1 heard at once, r2 never
+            done = replay(hub, path, wait=0.2, keys=OWN_KEYS)  # r1 heard at once, r2 never
             assert done.sent == 2 and done.unheard == [OWN_KEYS.command("r2")]
             until(lambda: got == [OWN_KEYS.command("r1")], 20.0, "r1's command",
                   explain=lambda: got)
@@ -162,13 +163,13 @@ def test_bad_recordings(tmp_path: Path) -> None:
     assert err.value.code == "malformed" and "MCAP" in err.value.message
     with pytest.raises(KinesphereError, match="choose one of"):
         with zconfig.loopback_hub() as (hub, _):
-            replay(hub, bad, "everything")
+            replay(hub, bad, "everything", keys=OWN_KEYS)
 
 
 def test_a_restamped_replay_is_new_to_robots_that_heard_the_original(tmp_path: Path) -> None:
     """As recorded, a replay is stale to a robot that heard the session (the agent's own
-    ordering rules decide); restamped, each recorded session comes back as a fresh one with
-    the same order, sent now."""
+    ordering rules decide); restamped, each recorded session comes back as a fresh one of the
+    replaying operator's, signed with its name, with the same order, sent now."""
     part = pr.SpatialCommand("limb_11", "distal_11", "left-high", 3)
     t0 = time.time_ns() - 3_600 * 10**9  # recorded an hour ago
     original = [pr.Command(seq=i, sent_ns=t0 + i * 10**7, parts=[part], deadman=True, ttl_ms=0,
@@ -191,21 +192,24 @@ def test_a_restamped_replay_is_new_to_robots_that_heard_the_original(tmp_path: P
     assert heard(robot, original) == ["ok"] * 6
     with zconfig.loopback_hub() as (hub, endpoint):
         with zconfig.session(config=zconfig.loopback_config(endpoint)) as s:
-            got: list[pr.Command] = []
-            sub = s.declare_subscriber(OWN_KEYS.command("r1"),
-                                       lambda sample: got.append(pr.decode(
-                                           sample.payload.to_bytes(), pr.Command)))
-            assert replay(hub, path, "commands", speed=100.0, wait=20.0).sent == 6
+            got: list[tuple[str, pr.Command]] = []
+            sub = s.declare_subscriber(Keys.subscribed(OWN_KEYS.command("r1")),
+                                       lambda sample: got.append((str(sample.key_expr), pr.decode(
+                                           sample.payload.to_bytes(), pr.Command))))
+            assert replay(hub, path, "commands", speed=100.0, wait=20.0,
+                          keys=OWN_KEYS).sent == 6
             until(lambda: len(got) == 6, 20.0, "six messages")
-            assert replay(hub, path, "commands", speed=100.0, restamp=True).sent == 6
+            assert replay(hub, path, "commands", speed=100.0, restamp=True, keys=OWN_KEYS,
+                          sender="carol").sent == 6
             until(lambda: len(got) == 12, 20.0, "twelve messages")
             zconfig.undeclare(sub)
-    as_recorded, restamped = got[:6], got[6:]
-    assert as_recorded == original
+    as_recorded, restamped = [c for _, c in got[:6]], [c for _, c in got[6:]]
+    assert as_recorded == original and {k for k, _ in got[:6]} == {OWN_KEYS.command("r1")}
     assert heard(robot, as_recorded) == ["stale"] * 6
     assert heard(robot, restamped) == ["ok"] * 6
     sessions = {c.session for c in restamped}
-    assert "" in sessions and len(sessions) == 2 and "s-1" not in sessions
+    assert len(sessions) == 2 and not sessions & {"s-1", ""}
+    assert {k for k, _ in got[6:]} == {Keys.signed(OWN_KEYS.command("r1"), "carol")}
     assert [(c.sender, c.seq, c.parts) for c in restamped] == \
-        [(c.sender, c.seq, c.parts) for c in original]
+        [("carol", c.seq, c.parts) for c in original]
     assert all(c.sent_ns > original[-1].sent_ns + 3_000 * 10**9 for c in restamped)

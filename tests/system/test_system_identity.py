@@ -13,16 +13,18 @@ rules generated from the same fleet file.
 from __future__ import annotations
 
 import time
+from pathlib import Path
 
 import pytest
 import zenoh
 
+from kinesphere.clients.recording.traffic import TrafficRecorder
 from kinesphere.keyexpr import Keys
 from kinesphere.protocol import Command, LeaseAction, SpatialCommand, encode
 from kinesphere.zconfig import session, session_config, undeclare
 from support.network import KEYS
 from support.system import SECURED_ROBOT as ROBOT
-from support.system import Secured, at_pose, robot_cert
+from support.system import Secured, at_pose, query_pose, robot_cert
 from support.wait import WAIT_S, until
 
 pytestmark = pytest.mark.processes
@@ -103,3 +105,30 @@ def test_only_the_latching_operator_releases_its_estop(secured: Secured) -> None
     code, out = _cli(s, "release-alice", "alice", "estop", "--release", "--target", ROBOT,
                      "--timeout", "20")
     assert code == 0 and f"{ROBOT}: released" in out, out
+
+
+def test_a_restamped_replay_sends_as_the_replaying_operator(secured: Secured,
+                                                              tmp_path: Path) -> None:
+    s, obs = secured, secured.obs
+    recording = tmp_path / "alice.mcap"
+    with session(config=session_config(config_file=s.configs["operator"])) as watcher:
+        rec = TrafficRecorder(watcher, KEYS, recording)  # the shared certificate watches
+
+        def recording_states() -> bool:  # its subscription has reached the router
+            return rec.tally.by_type.get("RobotState", 0) > 0
+
+        until(recording_states, WAIT_S, "the recorder to hear the robot")
+        code, out = _cli(s, "send-alice", "alice", "send", ROBOT, *map(str, POSE), "--wait",
+                         "20")
+        assert code == 0, out
+        until(lambda: rec.tally.by_type.get("Command", 0) >= 1, WAIT_S, "alice's command")
+        rec.close()
+    target = query_pose(obs.session, "youbot", *POSE).joints
+    until(lambda: at_pose(obs.states.last(ROBOT), target), WAIT_S, "alice's pose")
+    until(lambda: not obs.states.last(ROBOT).lease_holder,  # type: ignore[union-attr]
+          WAIT_S * 2, "alice's lease to expire")
+    code, out = _cli(s, "replay-bob", "bob", "replay", str(recording), "--restamp",
+                     "--wait", "20")
+    assert code == 0 and "replayed" in out, out
+    until(lambda: obs.states.last(ROBOT).lease_holder == "bob",  # type: ignore[union-attr]
+          WAIT_S, "bob's replayed commands leasing the robot to bob")

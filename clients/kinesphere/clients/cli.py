@@ -13,7 +13,7 @@ import argparse
 from typing import Any
 
 from kinesphere.cliargs import add_zenoh_arguments
-from kinesphere.clients.options import JOY_LAYOUTS, JoyOptions, TeleopOptions
+from kinesphere.clients.options import JOY_LAYOUTS, JoyOptions, TeleopOptions, add_identity
 from kinesphere.rmw_zenoh import ROS_DISTROS
 
 KEYS_HELP = """keys (keyboard fallback, the HUD window needs focus):
@@ -90,18 +90,6 @@ def _targeting(
             metavar="S",
             help="wait up to S seconds for the target robots to be reachable (default 5)",
         )
-
-
-def add_identity(p: argparse.ArgumentParser) -> None:
-    """``--sender``: who a command-line client is to the robots."""
-    p.add_argument(
-        "--sender",
-        metavar="NAME",
-        help="who you are to the robots (default $KINESPHERE_SENDER, else USER@HOST): they "
-        "lease control to a sender and only its own release clears its e-stop, so your "
-        "commands from several terminals count as one operator; behind the deploy's access "
-        "control it must be the name in your certificate",
-    )
 
 
 def _answers(p: argparse.ArgumentParser, default: float, what: str) -> None:

@@ -1,12 +1,14 @@
 """How the operator's command streams run: the defaults every client command reads.
 
 ``gamepad``, ``send --for`` and ``play`` stream Commands; their command-line defaults and help
-texts come from :class:`TeleopOptions`, so a changed default changes every command at once.
+texts come from :class:`TeleopOptions`, so a changed default changes every command at once;
+every command that sends names its sender with the one ``--sender`` of :func:`add_identity`.
 Cheap to import: the CLI builds its parsers from it before any handler runs.
 """
 
 from __future__ import annotations
 
+import argparse
 from dataclasses import dataclass
 
 
@@ -52,3 +54,15 @@ class JoyOptions:
     layout: str = "controller"
     timeout_s: float = 0.5
     distro: str = "jazzy"
+
+
+def add_identity(p: argparse.ArgumentParser) -> None:
+    """``--sender``: who a command-line client is to the robots."""
+    p.add_argument(
+        "--sender",
+        metavar="NAME",
+        help="who you are to the robots (default $KINESPHERE_SENDER, else USER@HOST): they "
+        "lease control to a sender and only its own release clears its e-stop, so your "
+        "commands from several terminals count as one operator; behind the deploy's access "
+        "control it must be the name in your certificate",
+    )

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from kinesphere.cliargs import OPERATOR, WATCHER, add_zenoh_arguments
+from kinesphere.clients.options import add_identity
 from kinesphere.errors import KinesphereError
 from kinesphere.keyexpr import Keys
 from kinesphere.signals import handle_signals
@@ -43,19 +44,28 @@ def register(sub: Any) -> None:
         "they were recorded: 'commands' drive running robots again; 'states' replay what "
         "the robots did, to watch it in 'kinesphere view' with no robot running. Commands "
         "keep their recorded sender, session, seq and sent_ns, so robots that heard the "
-        "original session drop them as stale; --restamp sends them as new. Waits first "
-        "for a subscriber on each recorded key (--wait); fails when nobody listens on any.",
+        "original session drop them as stale; --restamp sends them as new, as yours "
+        "(--sender). Only command and state keys under --prefix are replayed (another key "
+        "refuses the whole file before anything is put), silences longer than --max-gap are "
+        "shortened, and the file is read a chunk at a time, with every size bounded. Waits "
+        "first for a subscriber on each recorded key (--wait); fails when nobody listens on "
+        "any.",
     )
     p.add_argument("recording", metavar="FILE", help="MCAP file written by kinesphere record")
     p.add_argument("--what", choices=("commands", "states", "all"), default="commands",
                    help="which messages to put back (default commands)")
     p.add_argument("--speed", type=float, default=1.0, help="time scale (default 1 = as recorded)")
     p.add_argument("--restamp", action="store_true",
-                   help="send commands now, each recorded session as a fresh one (seq and "
-                   "sender kept), so robots that heard the original do not drop them as stale")
+                   help="send commands now and as yours (--sender), each recorded session as "
+                   "a fresh one (seq kept), so robots that heard the original do not drop "
+                   "them as stale and lease to you")
+    p.add_argument("--max-gap", type=float, default=10.0, metavar="S",
+                   help="shorten a silence in the recording longer than S seconds to S "
+                   "(default 10)")
     p.add_argument("--wait", type=float, default=5.0, metavar="S",
                    help="wait up to S seconds for a subscriber on each recorded key before "
                    "the first put (default 5)")
+    add_identity(p)
     add_zenoh_arguments(p, OPERATOR)
     p.set_defaults(func=replay)
 
@@ -92,7 +102,11 @@ def replay(args: argparse.Namespace) -> int:
     stop = threading.Event()
     with handle_signals(lambda signum, frame: stop.set()), session_from_args(args) as session:
         done = put_back(session, args.recording, args.what, args.speed, stop.is_set,
-                        restamp=args.restamp, wait=args.wait)
+                        restamp=args.restamp, wait=args.wait, keys=Keys(args.prefix),
+                        sender=args.sender, max_gap=args.max_gap)
+    if done.shortened:
+        print(f"shortened {done.shortened} silence(s) longer than {args.max_gap:g} s",
+              file=sys.stderr)
     if done.unheard:
         print(f"nobody listened on {len(done.unheard)} recorded key(s): "
               f"{few(done.unheard, 10)}", file=sys.stderr)

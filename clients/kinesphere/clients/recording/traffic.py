@@ -9,14 +9,21 @@ it could be written (and replayed) the wrong way round. The file is bounded by `
 
 A replay re-puts recorded messages on their keys with the original spacing (``speed`` scales
 it): commands to drive robots again, or states to watch a session in ``kinesphere view``
-without any robot running. It declares a publisher per key and waits until each has a
-subscriber before the first put: a put made before the subscribers' declarations reached this
-session goes nowhere, so the first messages of a replay would be lost. Commands go out as
-recorded, with their sender, session, ``seq`` and ``sent_ns``: a robot that already heard that
-session drops them as stale (that is its ordering rule, not a fault). ``restamp`` makes them
-new: ``sent_ns`` becomes the time of the put, and each recorded session is replaced by a fresh
-one (``seq`` and sender are kept, so the order within a session holds), which every robot takes
-as a new order.
+without any robot running. A recording is any file someone hands over, so a replay first
+surveys it (channels only, one chunk at a time, bounded: ``mcaplog``) and refuses it, before
+anything is put, when a command or state channel is not one of the project's own keys under
+the replay's prefix (``{p}/robot/{id|*}/command[/sender]``, ``{p}/group/{g}/command[/sender]``,
+``{p}/robot/{id}/state``): no ``**``, no databank key, nothing Zenoh cannot parse. Then it
+streams the messages, so memory stays bounded whatever their number, and a silence in the
+recording longer than ``max_gap`` is shortened to it. It declares a publisher per key and
+waits until each has a subscriber before the first put: a put made before the subscribers'
+declarations reached this session goes nowhere, so the first messages of a replay would be
+lost. Commands go out as recorded, with their sender, session, ``seq`` and ``sent_ns``, on
+their recorded key: a robot that already heard that session drops them as stale (that is its
+ordering rule, not a fault), and behind the deploy's access control only the recorded sender
+may put them. ``restamp`` makes them the replaying operator's: sent now by ``sender`` on keys
+signed with that name, each recorded session replaced by a fresh one (``seq`` kept, so the
+order within a session holds), which every robot takes as a new order.
 """
 
 from __future__ import annotations
@@ -31,9 +38,19 @@ from typing import Any, Final
 
 import msgspec
 import zenoh
+from mcap.records import Channel, Metadata
+from mcap.records import Schema as McapSchema
 
-from kinesphere.clients.link import new_session
-from kinesphere.clients.mcaplog import GAMEPAD_RECORDING, McapWriter, metadata, read
+from kinesphere.clients.link import host_clock, new_session, operator_id
+from kinesphere.clients.mcaplog import (
+    BY_NAME,
+    GAMEPAD_RECORDING,
+    MAX_CHANNELS,
+    McapWriter,
+    decode_recorded,
+    messages,
+    records,
+)
 from kinesphere.errors import KinesphereError
 from kinesphere.keyexpr import WILDCARD, Keys
 from kinesphere.protocol import Command, Message, RobotState, decode_any, encode
@@ -44,6 +61,8 @@ MAX_BYTES: Final = 1 << 30
 KINDS: Final = ("commands", "states", "all")
 WAIT_S: Final = 5.0
 """How long a replay waits for a subscriber on each recorded key before its first put."""
+MAX_GAP_S: Final = 10.0
+"""The longest silence a replay keeps; longer ones are shortened to it."""
 
 
 def tapped_keys(keys: Keys) -> list[str]:
@@ -105,73 +124,158 @@ class TrafficRecorder:
         return self.tally
 
 
-def wanted(kind: str) -> Callable[[Message], bool]:
+def wanted(kind: str) -> tuple[type[Message], ...]:
     """Which recorded messages a replay of ``kind`` puts back."""
     if kind == "commands":
-        return lambda m: isinstance(m, Command)
+        return (Command,)
     if kind == "states":
-        return lambda m: isinstance(m, RobotState)
+        return (RobotState,)
     if kind == "all":
-        return lambda m: isinstance(m, (Command, RobotState))
+        return (Command, RobotState)
     raise KinesphereError("malformed", f"replay {kind!r}? choose one of {', '.join(KINDS)}")
 
 
 @dataclass(frozen=True)
 class Replayed:
-    """What a replay did: how many messages it put, and the recorded keys nobody subscribed
-    to when it began (their messages went out to no one)."""
+    """What a replay did: how many messages it put, the recorded keys nobody subscribed to
+    when it began (their messages went out to no one), and how many silences it shortened."""
 
     sent: int
     unheard: list[str]
+    shortened: int = 0
+
+
+def replay_key(keys: Keys, topic: str, kind: type[Message]) -> str:
+    """``topic`` if it is a key a replay may put ``kind`` on (module text); malformed
+    naming it otherwise."""
+    rest = topic.split("/")
+    n = keys.prefix.count("/") + 1
+    ok = "/".join(rest[:n]) == keys.prefix and topic.count("/") < 16
+    rest = rest[n:]
+    try:
+        if ok and kind is Command and len(rest) in (3, 4) and rest[2] == "command":
+            base = keys.command(rest[1]) if rest[0] == "robot" else (
+                keys.group_command(rest[1]) if rest[0] == "group" else "")
+            signer = keys.sender_of(topic) if base else ""
+            if base and (Keys.signed(base, signer) if signer else base) == topic:
+                return topic
+        if ok and kind is RobotState and len(rest) == 3 and rest[0] == "robot" and \
+                rest[2] == "state" and keys.state(keys.robot_id_of(topic)) == topic:
+            return topic
+    except KinesphereError:
+        pass
+    what = "command" if kind is Command else "state"
+    raise KinesphereError(
+        "malformed", f"the recording puts {what}s on {topic!r:.120}, which is not a {what} key "
+        f"of kinesphere under {keys.prefix!r}: nothing replayed")
+
+
+@dataclass(frozen=True)
+class Survey:
+    """What a recording would put, read before anything is: the type of each channel to
+    replay (by topic, in order of first appearance) and whether it is a gamepad's."""
+
+    topics: dict[str, type[Message]]
+    gamepad: bool
+
+
+def survey(path: str | Path, keys: Keys, kinds: tuple[type[Message], ...]) -> Survey:
+    """The channels of ``kinds`` in the recording, each checked by :func:`replay_key`."""
+    schemas: dict[int, str] = {}
+    topics: dict[str, type[Message]] = {}
+    gamepad = False
+    for record in records(path):
+        if isinstance(record, McapSchema):
+            schemas[record.id] = record.name
+        elif isinstance(record, Channel):
+            kind = BY_NAME.get(schemas.get(record.schema_id, ""))
+            if kind in kinds and record.topic not in topics:
+                assert kind is not None
+                topics[replay_key(keys, record.topic, kind)] = kind
+                if len(topics) > MAX_CHANNELS:
+                    raise KinesphereError("malformed", f"{path}: more than {MAX_CHANNELS} keys")
+        elif isinstance(record, Metadata) and record.name == "kinesphere":
+            gamepad = record.metadata.get("kinesphere") == GAMEPAD_RECORDING
+    return Survey(topics, gamepad)
 
 
 def replay(session: zenoh.Session, path: str | Path, kind: str = "commands",
            speed: float = 1.0, should_stop: Callable[[], bool] = lambda: False,
            on_put: Callable[[str, Message], None] | None = None, restamp: bool = False,
-           wait: float = WAIT_S) -> Replayed:
+           wait: float = WAIT_S, *, keys: Keys | None = None, sender: str | None = None,
+           max_gap: float = MAX_GAP_S) -> Replayed:
     """Put the recording's ``kind`` messages back on their keys with the original timing
-    (commands as new ones with ``restamp``), once each key has a subscriber or ``wait``
-    seconds have passed; unavailable when no key has one by then."""
+    (commands as ``sender``'s new ones with ``restamp``), once each key has a subscriber or
+    ``wait`` seconds have passed; unavailable when no key has one by then."""
     if not speed > 0:
         raise KinesphereError("malformed", f"--speed must be > 0, got {speed}")
     if not wait >= 0:
         raise KinesphereError("malformed", f"--wait must be >= 0, got {wait}")
-    keep = wanted(kind)
-    items = [r for r in read(path) if keep(r.message)]
-    if not items:
-        if metadata(path).get("kinesphere") == GAMEPAD_RECORDING:
+    if not max_gap >= 0:
+        raise KinesphereError("malformed", f"--max-gap must be >= 0, got {max_gap}")
+    keys = keys or Keys()
+    kinds = wanted(kind)
+    found = survey(path, keys, kinds)
+    if not found.topics:
+        if found.gamepad:
             raise KinesphereError(
                 "malformed", f"{path} holds a gamepad's controller ticks, not messages: play "
                 f"it with 'kinesphere gamepad --replay {path}'")
         return Replayed(0, [])
-    publishers: dict[str, Any] = {}
+    me = sender or operator_id()
     sessions: dict[tuple[str, str], str] = {}
-    sent = 0
+    clock = host_clock()
+
+    put_on = {topic: topic for topic in found.topics}
+    if restamp:  # the replaying operator's commands: keys signed with its name
+        put_on.update({topic: Keys.signed(topic.rsplit("/", 1)[0] if keys.sender_of(topic)
+                                          else topic, me)
+                       for topic, type_ in found.topics.items() if type_ is Command})
+    publishers: dict[str, Any] = {}
+    sent = shortened = 0
     try:
-        for key in dict.fromkeys(r.key for r in items):
-            publishers[key] = session.declare_publisher(
-                key, congestion_control=zenoh.CongestionControl.BLOCK, express=True)
+        for key in dict.fromkeys(put_on.values()):
+            publishers[key] = _publisher(session, key)
         unheard = unmatched(publishers, wait)
         if len(unheard) == len(publishers):
             raise KinesphereError("unavailable", f"nobody listens on {few(unheard)} (waited "
                                   f"{wait:g} s): nothing replayed")
-        start, t0 = time.monotonic(), items[0].log_ns
-        for rec in items:
-            due = start + (rec.log_ns - t0) / 1e9 / speed
+        due, last_ns = time.monotonic(), None
+        for raw in messages(path):
+            kind_of = found.topics.get(raw.topic)
+            if kind_of is None or BY_NAME.get(raw.schema) is not kind_of:
+                continue  # not replayed (acks, poses), or not the type its channel said
+            msg = decode_recorded(raw, path)
+            gap = 0.0 if last_ns is None else max(0.0, (raw.log_ns - last_ns) / 1e9)
+            last_ns = raw.log_ns
+            if gap > max_gap:
+                gap, shortened = max_gap, shortened + 1
+            due += gap / speed
             while (left := due - time.monotonic()) > 0:
                 if should_stop():
-                    return Replayed(sent, unheard)
+                    return Replayed(sent, unheard, shortened)
                 time.sleep(min(left, 0.05))
-            msg = rec.message
             if restamp and isinstance(msg, Command):
-                msg = _restamped(msg, sessions)
-            publishers[rec.key].put(encode(msg))
+                msg = _restamped(msg, me, clock, sessions)
+            key = put_on[raw.topic]
+            try:
+                publishers[key].put(encode(msg))
+            except zenoh.ZError as exc:
+                raise KinesphereError("unavailable", f"put on {key!r:.120}: {exc}") from None
             sent += 1
             if on_put is not None:
-                on_put(rec.key, msg)
+                on_put(key, msg)
     finally:
         undeclare(*publishers.values())
-    return Replayed(sent, unheard)
+    return Replayed(sent, unheard, shortened)
+
+
+def _publisher(session: zenoh.Session, key: str) -> Any:
+    try:
+        return session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK,
+                                         express=True)
+    except zenoh.ZError as exc:  # the keys are checked first: this is a session closing
+        raise KinesphereError("malformed", f"cannot put on {key!r:.120}: {exc}") from None
 
 
 def few(keys: list[str], most: int = 3) -> str:
@@ -180,13 +284,12 @@ def few(keys: list[str], most: int = 3) -> str:
     return ", ".join(keys[:most]) + more
 
 
-def _restamped(cmd: Command, sessions: dict[tuple[str, str], str]) -> Command:
-    """``cmd`` sent now, in a fresh session standing for its recorded one (a sender without a
-    session keeps none: a later ``sent_ns`` is what makes its commands new)."""
-    session = cmd.session
-    if session:
-        session = sessions.setdefault((cmd.sender, session), new_session())
-    return msgspec.structs.replace(cmd, sent_ns=time.time_ns(), session=session)
+def _restamped(cmd: Command, sender: str, clock: str, sessions: dict[tuple[str, str], str]
+               ) -> Command:
+    """``cmd`` sent now by ``sender``, in a fresh session standing for its recorded one."""
+    session = sessions.setdefault((cmd.sender, cmd.session), new_session())
+    return msgspec.structs.replace(cmd, sent_ns=time.time_ns(), sender=sender, session=session,
+                                   clock=clock)
 
 
 def summary(tally: Tally, path: Path) -> str:
