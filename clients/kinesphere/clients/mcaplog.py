@@ -29,7 +29,7 @@ from typing import IO, Any, Final
 import msgspec
 from mcap.data_stream import ReadDataStream
 from mcap.opcode import Opcode
-from mcap.records import Channel, Chunk, McapRecord, Metadata, Schema
+from mcap.records import Channel, Chunk, McapRecord, Metadata, MetadataIndex, Schema
 from mcap.records import Message as McapMessage
 from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
@@ -52,6 +52,7 @@ MAX_MESSAGE_BYTES: Final = 4 * 1024 * 1024
 """Bytes of one message's JSON (a wire message is at most 1 MiB of MessagePack)."""
 MAX_CHANNELS: Final = 4096
 """Channels (and schemas) of one recording."""
+MAGIC: Final = b"\x89MCAP0\r\n"
 LIBRARY: Final = f"kinesphere (protocol {PROTOCOL_VERSION})"
 BY_NAME: Final[dict[str, type[Message]]] = {
     f"{SCHEMA_PREFIX}{t.__name__}": t for t in MESSAGE_TYPES
@@ -164,6 +165,57 @@ def records(path: str | Path, inflate: bool = True) -> Iterator[McapRecord]:
         except Exception as exc:  # the mcap library and the codecs raise assorted types
             raise KinesphereError("malformed", f"{path} is not a readable MCAP file: "
                                   f"{type(exc).__name__}: {exc}"[:300]) from None
+
+
+def described(path: str | Path) -> Iterator[McapRecord]:
+    """The schema, channel and metadata records of a recording: read from its summary when it
+    has one (the recorder always writes it: a seek and a few records, however long the file),
+    else from a pass over the whole file (a recording cut short). A summary that leaves a
+    channel out only makes its messages unknown to a reader that trusts it."""
+    try:
+        summary = _summary(Path(path))
+    except Exception:  # a broken summary: the full pass reads the file and names its fault
+        summary = None
+    if summary is None:
+        yield from (r for r in records(path) if isinstance(r, (Schema, Channel, Metadata)))
+    else:
+        yield from summary
+
+
+def _summary(path: Path) -> list[McapRecord] | None:
+    """The records :func:`described` wants from the summary section; None without one."""
+    size = path.stat().st_size
+    with path.open("rb") as f:
+        if size < 2 * len(MAGIC) + 29:
+            return None
+        f.seek(size - len(MAGIC) - 29)
+        tail = f.read(29 + len(MAGIC))
+        if tail[-len(MAGIC):] != MAGIC or tail[0] != Opcode.FOOTER or \
+                int.from_bytes(tail[1:9], "little") != 20:
+            return None
+        start = int.from_bytes(tail[9:17], "little")
+        if not 0 < start < size - len(MAGIC) - 29:
+            return None
+        f.seek(start)
+        out: list[McapRecord] = []
+        wanted: list[int] = []
+        reader = StreamReader(f, skip_magic=True, emit_chunks=True,
+                              record_size_limit=MAX_RECORD_BYTES)
+        for n, record in enumerate(reader.records):
+            if n > 4 * MAX_CHANNELS + 100_000:
+                return None  # no summary of ours is that long: read the file instead
+            if isinstance(record, (Schema, Channel)):
+                out.append(record)
+            elif isinstance(record, MetadataIndex) and record.name == "kinesphere":
+                wanted.append(record.offset)
+        for offset in wanted[:1]:
+            f.seek(offset)
+            for record in StreamReader(f, skip_magic=True, emit_chunks=True,
+                                       record_size_limit=MAX_RECORD_BYTES).records:
+                if isinstance(record, Metadata):
+                    out.append(record)
+                break
+        return out
 
 
 def _inflate(chunk: Chunk, path: str | Path) -> bytes:

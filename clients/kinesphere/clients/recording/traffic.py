@@ -10,10 +10,12 @@ it could be written (and replayed) the wrong way round. The file is bounded by `
 A replay re-puts recorded messages on their keys with the original spacing (``speed`` scales
 it): commands to drive robots again, or states to watch a session in ``kinesphere view``
 without any robot running. A recording is any file someone hands over, so a replay first
-surveys it (channels only, one chunk at a time, bounded: ``mcaplog``) and refuses it, before
+surveys its channels (``mcaplog``, bounded) and refuses it, before
 anything is put, when a command or state channel is not one of the project's own keys under
 the replay's prefix (``{p}/robot/{id|*}/command[/sender]``, ``{p}/group/{g}/command[/sender]``,
-``{p}/robot/{id}/state``): no ``**``, no databank key, nothing Zenoh cannot parse. Then it
+``{p}/robot/{id}/state``): no ``**``, no databank key, nothing Zenoh cannot parse (the
+channels come from the file's summary, so the first put does not wait for a pass over a long
+file; a channel the summary leaves out is not replayed). Then it
 streams the messages, so memory stays bounded whatever their number, and a silence in the
 recording longer than ``max_gap`` is shortened to it. It declares a publisher per key and
 waits until each has a subscriber before the first put: a put made before the subscribers'
@@ -48,8 +50,8 @@ from kinesphere.clients.mcaplog import (
     MAX_CHANNELS,
     McapWriter,
     decode_recorded,
+    described,
     messages,
-    records,
 )
 from kinesphere.errors import KinesphereError
 from kinesphere.keyexpr import WILDCARD, Keys
@@ -184,7 +186,7 @@ def survey(path: str | Path, keys: Keys, kinds: tuple[type[Message], ...]) -> Su
     schemas: dict[int, str] = {}
     topics: dict[str, type[Message]] = {}
     gamepad = False
-    for record in records(path):
+    for record in described(path):
         if isinstance(record, McapSchema):
             schemas[record.id] = record.name
         elif isinstance(record, Channel):
