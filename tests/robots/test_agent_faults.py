@@ -10,8 +10,6 @@ from __future__ import annotations
 import logging
 import os
 import signal
-import subprocess
-import sys
 import threading
 import time
 
@@ -31,12 +29,12 @@ from support.agents import (
     Databank,
     Operator,
     StateWatch,
+    agent_process,
     far,
     joints_close,
     running_agent,
 )
 from support.network import KEYS
-from support.paths import ROOT
 from support.wait import WAIT_S
 
 pytestmark = pytest.mark.processes
@@ -54,48 +52,37 @@ def test_commands_queued_while_the_agent_was_frozen_never_run(
     pose = databank.query("baxter", SpatialCommand(*here))
     watch = StateWatch(session, "frozen")
     acks = AckWatch(session, "frozen")
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "kinesphere.cli", "agent", "baxter", "--id", "frozen",
-         "--connect", endpoint, "--listen", zconfig.LOOPBACK_ANY_PORT],
-        cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     op = Operator(session, "frozen", sender="ann", client_session="a")
     try:
-        watch.wait(lambda s: True, "the agent is up")
-        while True:  # stream the first target until the robot is there
-            seq = op.send(here, ttl_ms=300)
-            state = watch.after(seq, lambda s: True, "a state")
-            if "reached" in acks.stages("ann", seq):
-                break
-        assert joints_close(state, pose.joints, 0.02)
-        before = np.array(state.q)
-        goal = databank.query("baxter", SpatialCommand(*there)).joints
-        index = [state.joint_names.index(j) for j in goal]
-        gap = np.abs(before[index] - np.array(list(goal.values()))).max()
-        assert gap > 0.3, "the second target is a real motion away"
-        proc.send_signal(signal.SIGSTOP)
-        frozen = [op.send(there, ttl_ms=300) for _ in range(30) if not time.sleep(1 / 30)]
-        time.sleep(1.0)  # the operator stopped: a freeze that outlasts the ttl
-        seen = len(watch.states)
-        proc.send_signal(signal.SIGCONT)
-        for seq in frozen[-3:]:
-            ack = acks.wait(lambda a, seq=seq: a.seq == seq and a.stage in (
-                "rejected", "superseded", "accepted"), "a verdict on a frozen command")
-            assert ack.stage != "accepted", ack
-        assert any(a.code == "expired" for a in acks.acks if a.seq in frozen)
-        after = watch.wait(lambda s: len(watch.states) > seen + 75, "1.5 s of states after")
-        moved = max(float(np.abs(np.array(s.q) - before).max())
-                    for s in watch.states[seen:])
-        assert moved < 5e-3, f"the robot moved {moved:.4f} rad after SIGCONT (of {gap:.2f})"
-        assert after.dropped >= 1 and after.last_command_seq < frozen[0]
-    finally:
-        if proc.poll() is None:
+        with agent_process(endpoint, "baxter", "frozen") as proc:
+            watch.wait(lambda s: True, "the agent is up")
+            while True:  # stream the first target until the robot is there
+                seq = op.send(here, ttl_ms=300)
+                state = watch.after(seq, lambda s: True, "a state")
+                if "reached" in acks.stages("ann", seq):
+                    break
+            assert joints_close(state, pose.joints, 0.02)
+            before = np.array(state.q)
+            goal = databank.query("baxter", SpatialCommand(*there)).joints
+            index = [state.joint_names.index(j) for j in goal]
+            gap = np.abs(before[index] - np.array(list(goal.values()))).max()
+            assert gap > 0.3, "the second target is a real motion away"
+            proc.send_signal(signal.SIGSTOP)
+            frozen = [op.send(there, ttl_ms=300) for _ in range(30) if not time.sleep(1 / 30)]
+            time.sleep(1.0)  # the operator stopped: a freeze that outlasts the ttl
+            seen = len(watch.states)
             proc.send_signal(signal.SIGCONT)
-            proc.send_signal(signal.SIGTERM)
-            try:
-                proc.wait(timeout=WAIT_S)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
+            for seq in frozen[-3:]:
+                ack = acks.wait(lambda a, seq=seq: a.seq == seq and a.stage in (
+                    "rejected", "superseded", "accepted"), "a verdict on a frozen command")
+                assert ack.stage != "accepted", ack
+            assert any(a.code == "expired" for a in acks.acks if a.seq in frozen)
+            after = watch.wait(lambda s: len(watch.states) > seen + 75, "1.5 s of states after")
+            moved = max(float(np.abs(np.array(s.q) - before).max())
+                        for s in watch.states[seen:])
+            assert moved < 5e-3, f"the robot moved {moved:.4f} rad after SIGCONT (of {gap:.2f})"
+            assert after.dropped >= 1 and after.last_command_seq < frozen[0]
+    finally:
         op.close()
         watch.close()
         acks.close()

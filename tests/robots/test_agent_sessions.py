@@ -13,8 +13,6 @@ freeze with a real agent process.
 from __future__ import annotations
 
 import signal
-import subprocess
-import sys
 import time
 
 import numpy as np
@@ -26,9 +24,16 @@ from kinesphere.keyexpr import Keys
 from kinesphere.protocol import MAX_INT, Command, Drive, LeaseAction, SpatialCommand, encode
 from kinesphere.robots.agent.ordering import REBASE_S, SEQ_WINDOW, Ordering, Received
 from kinesphere.robots.agent.safety import Safety, Verdict
-from support.agents import AckWatch, Databank, StateWatch, far, joints_close, running_agent
+from support.agents import (
+    AckWatch,
+    Databank,
+    StateWatch,
+    agent_process,
+    far,
+    joints_close,
+    running_agent,
+)
 from support.network import KEYS
-from support.paths import ROOT
 from support.wait import WAIT_S
 
 S = 1_000_000_000
@@ -230,53 +235,43 @@ def test_a_new_sessions_command_queued_while_the_robot_was_frozen_never_runs(
     pose = databank.query("baxter", SpatialCommand(*here))
     watch = StateWatch(session, "thawed")
     acks = AckWatch(session, "thawed")
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "kinesphere.cli", "agent", "baxter", "--id", "thawed",
-         "--connect", endpoint, "--listen", zconfig.LOOPBACK_ANY_PORT],
-        cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     pub = session.declare_publisher(Keys.signed(KEYS.command("thawed"), "ann"),
                                     congestion_control=zenoh.CongestionControl.BLOCK)
     stranger = session.declare_publisher(Keys.signed(KEYS.command("thawed"), "zed"),
                                          congestion_control=zenoh.CongestionControl.BLOCK)
     try:
-        watch.wait(lambda s: True, "the agent is up")
-        zconfig.wait_matching(pub)
-        zconfig.wait_matching(stranger)
-        k = 0
-        while True:  # session "one" takes the robot to the first target
-            k += 1
-            pub.put(encode(cmd(k, time.time_ns(), session="one", clock="ann-host", ttl_ms=300,
-                               drive=None, parts=[SpatialCommand(*here)])))
-            state = watch.after(k, lambda s: True, "a state")
-            if "reached" in acks.stages("ann", k):
-                break
-        assert joints_close(state, pose.joints, 0.02)
-        before = np.array(state.q)
-        proc.send_signal(signal.SIGSTOP)
-        pub.put(encode(cmd(0, time.time_ns(), session="two", clock="ann-host", ttl_ms=1000,
-                           drive=None, parts=[SpatialCommand(*there)])))
-        stranger.put(encode(cmd(0, time.time_ns(), sender="zed", session="z", clock="zed-host",
-                                ttl_ms=1000, drive=None, parts=[SpatialCommand(*there)])))
-        time.sleep(1.5)  # the freeze outlasts both ttls (what the test is about, not a wait)
-        seen = len(watch.states)
-        proc.send_signal(signal.SIGCONT)
-        for who in ("ann", "zed"):
-            ack = acks.wait(lambda a, w=who: a.sender == w and a.seq == 0,
-                            f"the verdict on {who}'s frozen command")
-            assert ack.stage == "rejected" and ack.code == "expired", ack
-        after = watch.wait(lambda s: len(watch.states) > seen + 75, "1.5 s of states after")
-        moved = max(float(np.abs(np.array(s.q) - before).max()) for s in watch.states[seen:])
-        assert moved < 5e-3, f"the robot moved {moved:.4f} rad after SIGCONT"
-        assert after.dropped >= 2
-    finally:
-        if proc.poll() is None:
+        with agent_process(endpoint, "baxter", "thawed") as proc:
+            watch.wait(lambda s: True, "the agent is up")
+            zconfig.wait_matching(pub)
+            zconfig.wait_matching(stranger)
+            k = 0
+            while True:  # session "one" takes the robot to the first target
+                k += 1
+                pub.put(encode(cmd(k, time.time_ns(), session="one", clock="ann-host", ttl_ms=300,
+                                   drive=None, parts=[SpatialCommand(*here)])))
+                state = watch.after(k, lambda s: True, "a state")
+                if "reached" in acks.stages("ann", k):
+                    break
+            assert joints_close(state, pose.joints, 0.02)
+            before = np.array(state.q)
+            proc.send_signal(signal.SIGSTOP)
+            pub.put(encode(cmd(0, time.time_ns(), session="two", clock="ann-host", ttl_ms=1000,
+                               drive=None, parts=[SpatialCommand(*there)])))
+            stranger.put(encode(cmd(0, time.time_ns(), sender="zed", session="z",
+                                    clock="zed-host", ttl_ms=1000, drive=None,
+                                    parts=[SpatialCommand(*there)])))
+            time.sleep(1.5)  # the freeze outlasts both ttls (the test's subject, not a wait)
+            seen = len(watch.states)
             proc.send_signal(signal.SIGCONT)
-            proc.send_signal(signal.SIGTERM)
-            try:
-                proc.wait(timeout=WAIT_S)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
+            for who in ("ann", "zed"):
+                ack = acks.wait(lambda a, w=who: a.sender == w and a.seq == 0,
+                                f"the verdict on {who}'s frozen command")
+                assert ack.stage == "rejected" and ack.code == "expired", ack
+            after = watch.wait(lambda s: len(watch.states) > seen + 75, "1.5 s of states after")
+            moved = max(float(np.abs(np.array(s.q) - before).max()) for s in watch.states[seen:])
+            assert moved < 5e-3, f"the robot moved {moved:.4f} rad after SIGCONT"
+            assert after.dropped >= 2
+    finally:
         zconfig.undeclare(pub, stranger)
         watch.close()
         acks.close()

@@ -194,6 +194,27 @@ def running_agent(
             watch.close()
 
 
+@contextmanager
+def agent_process(endpoint: str, platform: str, robot_id: str) -> Iterator[subprocess.Popen[bytes]]:
+    """``kinesphere agent`` as a process of its own joined to the hub (a test may freeze it
+    with SIGSTOP); thawed and stopped on exit, killed if it does not stop."""
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "kinesphere.cli", "agent", platform, "--id", robot_id,
+         "--connect", endpoint, "--listen", zconfig.LOOPBACK_ANY_PORT],
+        cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    try:
+        yield proc
+    finally:
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGCONT)
+            proc.send_signal(signal.SIGTERM)
+            try:
+                proc.wait(timeout=WAIT_S)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+
+
 class Operator:
     """A client putting Commands, as the gamepad client would (``session`` "" is a version-1
     client's): on publishers like ``RobotLink.publisher``'s, never dropped under congestion
