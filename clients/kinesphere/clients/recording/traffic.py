@@ -33,6 +33,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -65,6 +66,8 @@ WAIT_S: Final = 5.0
 """How long a replay waits for a subscriber on each recorded key before its first put."""
 MAX_GAP_S: Final = 10.0
 """The longest silence a replay keeps; longer ones are shortened to it."""
+MAX_SESSIONS: Final = 1024
+"""Recorded sessions a restamped replay keeps a fresh session for at once."""
 
 
 def tapped_keys(keys: Keys) -> list[str]:
@@ -225,7 +228,7 @@ def replay(session: zenoh.Session, path: str | Path, kind: str = "commands",
                 f"it with 'kinesphere gamepad --replay {path}'")
         return Replayed(0, [])
     me = sender or operator_id()
-    sessions: dict[tuple[str, str], str] = {}
+    sessions: OrderedDict[tuple[str, str], str] = OrderedDict()
     clock = host_clock()
 
     put_on = {topic: topic for topic in found.topics}
@@ -286,10 +289,17 @@ def few(keys: list[str], most: int = 3) -> str:
     return ", ".join(keys[:most]) + more
 
 
-def _restamped(cmd: Command, sender: str, clock: str, sessions: dict[tuple[str, str], str]
-               ) -> Command:
-    """``cmd`` sent now by ``sender``, in a fresh session standing for its recorded one."""
-    session = sessions.setdefault((cmd.sender, cmd.session), new_session())
+def _restamped(cmd: Command, sender: str, clock: str,
+               sessions: OrderedDict[tuple[str, str], str]) -> Command:
+    """``cmd`` sent now by ``sender``, in a fresh session standing for its recorded one (the
+    :data:`MAX_SESSIONS` most recent are remembered)."""
+    key = (cmd.sender, cmd.session)
+    session = sessions.get(key)
+    if session is None:
+        session = sessions[key] = new_session()
+        while len(sessions) > MAX_SESSIONS:
+            sessions.popitem(last=False)
+    sessions.move_to_end(key)
     return msgspec.structs.replace(cmd, sent_ns=time.time_ns(), sender=sender, session=session,
                                    clock=clock)
 
