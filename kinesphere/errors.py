@@ -15,6 +15,7 @@ ERROR_CODES: frozenset[str] = frozenset(
         "unknown_platform",
         "unknown_limb",
         "unknown_origin",
+        "absent_part",
         "unknown_direction",
         "direction_unavailable",
         "size_out_of_range",

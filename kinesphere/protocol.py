@@ -144,6 +144,28 @@ class Substitution(msgspec.Struct, forbid_unknown_fields=False):
     angle: float
 
 
+class BodyWord(msgspec.Struct, forbid_unknown_fields=False):
+    """A word of the body vocabulary (``right_arm``, ``right_elbow``, ``left_leg``) as one
+    body answers it (:mod:`kinesphere.vocabulary`).
+
+    ``label`` is the eURDF label that answers (``limb_11``, ``distal_12``, ``c_1``), ``""``
+    when the body has no such part; ``end`` a joint location where the part ends when it is
+    a cut limb (the upper arm: ``limb_11`` up to ``distal_12``); ``note`` says why, for
+    people (``the only arm``, ``no left leg``), ``""`` when the word is the body's own name.
+    """
+
+    word: Name
+    label: Name
+    end: Name = ""
+    note: Text = ""
+
+
+Words = Annotated[list[BodyWord], msgspec.Meta(max_length=2 * MAX_PARTS)]
+"""The words of one command answered through the vocabulary (a limb and an origin per part)."""
+MAX_VOCABULARY: Final = 64
+"""Words in a catalogue's vocabulary (kinesphere's has 36)."""
+
+
 class BodyJoint(msgspec.Struct, forbid_unknown_fields=False):
     """An actuated joint: limits in rad (m if prismatic), velocity limit in rad/s (m/s)."""
 
@@ -213,6 +235,9 @@ class Pose(Message, tag="pose", kw_only=True):
     parts: Annotated[list[SpatialCommand], msgspec.Meta(max_length=MAX_PARTS)] = []
     substitutions: list[Substitution] = []
     """Parts served with the nearest direction the limb has; ``direction`` is the served one."""
+    words: Words = []
+    """Body-vocabulary words of the request this body answered with another name (a one-armed
+    robot's ``right_arm``, any ``upper_arm``), and how."""
 
     @property
     def is_compound(self) -> bool:
@@ -228,7 +253,8 @@ class Catalogue(Message, tag="catalogue", kw_only=True):
     ``sizes`` every stored size, ``aliases`` maps aliases (``right_arm``) to label names, and
     ``version`` identifies the ECL contents (changes when poses are recorded). ``max_size`` is
     the largest size the ECL answers (``size_out_of_range`` past it; None from older
-    databanks), ``base_kind`` the base (``fixed``, ``omni``, ``diff``, ``skid``; "" if unknown).
+    databanks), ``base_kind`` the base (``fixed``, ``omni``, ``diff``, ``skid``; "" if unknown),
+    ``vocabulary`` how the body answers the words of the body vocabulary.
     """
 
     platform: str
@@ -243,6 +269,9 @@ class Catalogue(Message, tag="catalogue", kw_only=True):
     version: str
     max_size: float | None = None
     base_kind: str = ""
+    vocabulary: Annotated[list[BodyWord], msgspec.Meta(max_length=MAX_VOCABULARY)] = []
+    """Every word of the body vocabulary as this body answers it (empty from older
+    databanks)."""
 
     def __post_init__(self) -> None:
         if self.can_translate and not (self.translation_step and self.translation_step > 0):
@@ -360,7 +389,8 @@ class Ack(Message, tag="ack", kw_only=True):
 
     ``(sender, session, seq)`` name the command; ``stage`` is an :class:`AckStage`; ``code``
     an error code when ``rejected`` (``lease_held``, ``estopped``, ``stale``, ``expired``,
-    ``direction_unavailable``...). ``lease_holder`` is who holds the robot's lease now.
+    ``direction_unavailable``...). ``lease_holder`` is who holds the robot's lease now;
+    ``substitutions`` and ``words`` what the command meant on this body.
     """
 
     robot_id: Name
@@ -373,6 +403,8 @@ class Ack(Message, tag="ack", kw_only=True):
     stamp_ns: Int
     substitutions: Annotated[list[Substitution], msgspec.Meta(max_length=MAX_PARTS)] = []
     lease_holder: Name = ""
+    words: Words = []
+    """Body-vocabulary words of the command this robot answered with another name, and how."""
 
 
 class BodyModel(Message, tag="body_model", kw_only=True):
@@ -410,7 +442,7 @@ ENCODER: Final = msgspec.msgpack.Encoder()
 _DECODERS: dict[Any, msgspec.msgpack.Decoder[Any]] = {
     t: msgspec.msgpack.Decoder(t)
     for t in (*MESSAGE_TYPES, AnyMessage, SpatialCommand, BodyJoint, LimbEntry, Drive,
-              Substitution)
+              Substitution, BodyWord)
 }
 
 

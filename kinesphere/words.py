@@ -7,9 +7,9 @@ one command reads naturally on every body.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 
-from kinesphere.protocol import Command, Drive, SpatialCommand
+from kinesphere.protocol import BodyWord, Command, Drive, SpatialCommand
 from kinesphere.sizes import size_name
 
 
@@ -49,3 +49,14 @@ def command_words(cmd: Command, names: Mapping[str, str] | None = None) -> str:
     if cmd.drive is not None:
         words.append(drive_words(cmd.drive))
     return " + ".join(words) or (f"lease {cmd.lease}" if cmd.lease else "nothing")
+
+
+def body_words(said: Iterable[BodyWord]) -> str:
+    """How a body answered body-vocabulary words: ``right_arm -> limb_11 (the only arm)``,
+    ``right_upper_arm -> limb_11 up to distal_12 (the right arm up to right_elbow)``."""
+    out = []
+    for w in said:
+        end = f" up to {w.end}" if w.end else ""
+        note = f" ({w.note})" if w.note else ""
+        out.append(f"{w.word} -> {w.label or 'nothing'}{end}{note}")
+    return ", ".join(out)
