@@ -12,9 +12,10 @@ import bisect
 import json
 import logging
 import math
+import threading
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from kinesphere.errors import KinesphereError, did_you_mean
 from kinesphere.laban import Direction
@@ -22,20 +23,26 @@ from kinesphere.platforms.platform import Platform, load_platform
 from kinesphere.protocol import (
     NO_ID,
     BodyJoint,
+    BodyWord,
     Catalogue,
     LimbEntry,
     Pose,
+    SpatialCommand,
     Substitution,
 )
 from kinesphere.services.ecl import transfer
-from kinesphere.services.ecl.cells import Cell, build_cells
+from kinesphere.services.ecl.cells import Cell, build_cells, unit_horizontal
+from kinesphere.services.ecl.compound import Answered, Part, groups, join, unpack
 from kinesphere.services.ecl.compound import PartLike as PartLike
-from kinesphere.services.ecl.compound import join
 from kinesphere.services.ecl.db import Tables, read_tables, upsert_pose, write_tables
 from kinesphere.services.ecl.fallback import nearest_cell
 from kinesphere.services.ecl.store import check_record, default_db_path, limb_neutral, size_value
 from kinesphere.services.ecl.vsam import Vsam, vsam_from_dict
 from kinesphere.sizes import MAX_TRANSLATION
+from kinesphere.vocabulary import CORE_WORDS, LOCATION_WORDS, vocabulary
+
+if TYPE_CHECKING:  # imported when first needed: mink and the model cost a second
+    from kinesphere.services.ecl.nested import Nested
 
 log = logging.getLogger(__name__)
 _DB_SUFFIXES = (".sqlite", ".sqlite3", ".db")
@@ -52,6 +59,8 @@ class Ecl:
         self._name = platform.name
         self._slugs: dict[object, str] = {d.slug: d.slug for d in Direction}
         self._slugs.update({d: d.slug for d in Direction})
+        self._nested: Nested | None = None
+        self._nested_lock = threading.Lock()
         self._index(tables)
 
     # -- loading -----------------------------------------------------------------------------
@@ -114,11 +123,37 @@ class Ecl:
         self._limb_origins = limb_origins
         self._limbs = _names(e.limbs, served) | _names(e.core, served)
         self._origins = _names(e.distals, set(e.J)) | _names(e.core, set(e.C))
+        self._vocabulary = vocabulary(e)
+        self._read_words(served)
+        self._chains = {p.name: p.index for p in e.limbs}
         self._neutral = {li: limb_neutral(plat, li) for li in e.L}
         self._quality = {(p, k): (c, r, m) for p, k, c, r, m in t.quality}
         self._max_size = vsam.max_size
         self._core = frozenset(e.C)
         self._catalogue: Catalogue | None = None
+        if self._nested is not None and self._nested.k_smax != vsam.k_smax:
+            self._nested = None
+
+    def _read_words(self, served: set[str]) -> None:
+        """The body vocabulary's words as names of this ECL: whole limbs and locations join
+        the labels and aliases, cut limbs (the upper arm) are answered by the nested solver,
+        missing parts are refused with ``absent_part``. ``_said``: the words worth telling
+        (not the body's own names)."""
+        e = self.platform.eurdf
+        own = set(e.aliases) | set(e.L) | set(e.J) | set(e.C)
+        self._words = {w.word: w for w in self._vocabulary}
+        self._said: dict[str, BodyWord] = {}
+        self._cuts: dict[str, BodyWord] = {}
+        for w in self._vocabulary:
+            if w.word in own or not w.label:
+                continue
+            if w.word in LOCATION_WORDS or w.word in CORE_WORDS:
+                self._origins[w.word] = w.label
+            if w.end:
+                self._cuts[w.word] = w
+            elif w.word not in LOCATION_WORDS and w.label in served:
+                self._limbs[w.word] = w.label
+            self._said[w.word] = w
 
     # -- f_SB --------------------------------------------------------------------------------
     def query(self, limb: str, origin: str, direction: str | Direction, size: object,
@@ -134,11 +169,15 @@ class Ecl:
         try:
             lname = self._limbs[limb]
         except (KeyError, TypeError):
+            if isinstance(limb, str) and limb.strip() in self._cuts:
+                return self._solved((self._part(0, (limb, origin, direction, size, exact)),))
             lname = self._bad_limb(limb)
         try:
             oname = self._origins[origin]
         except (KeyError, TypeError):
             oname = self._bad_origin(origin, lname)
+        said = self._said
+        words = [said[n] for n in (limb, origin) if n in said] if said else []
         cells = self._cells.get((lname, oname))
         if cells is None:
             raise self._unpaired(lname, origin)
@@ -154,7 +193,7 @@ class Ecl:
         if slug == _PLACE_MIDDLE and lname in self._neutral:
             return Pose(platform=self._name, limb=lname, origin=oname, direction=slug, size=s,
                         joints=dict(self._neutral[lname]),
-                        k_id=cell.k_id if cell is not None else NO_ID)
+                        k_id=cell.k_id if cell is not None else NO_ID, words=words)
         substitutions: list[Substitution] = []
         if cell is None:
             cell, sub = nearest_cell(lname, oname, cells, slug, exact or lname in self._core)
@@ -165,7 +204,7 @@ class Ecl:
         i = bisect.bisect_right(knots, s) - 1
         if not cell.joints:  # core cell: the base translates s steps, no joints move
             joints: dict[str, float] = {}
-            translation = self._translate(cell, s)
+            translation = self._translate(cell.slug, s)
             if s == knots[i] and i:
                 p_id = cell.sizes[i - 1]
         elif s == knots[i]:
@@ -177,23 +216,23 @@ class Ecl:
             joints = {n: x + t * (y - x) for n, x, y in zip(cell.joints, a, b, strict=True)}
         else:
             joints = dict(cell.stored[-1])
-            translation = self._translate(cell, s - knots[-1])
+            translation = self._translate(cell.slug, s - knots[-1])
         return Pose(platform=self._name, limb=lname, origin=oname, direction=cell.slug, size=s,
                     joints=joints, translation=translation, k_id=cell.k_id, p_id=p_id,
-                    substitutions=substitutions)
+                    substitutions=substitutions, words=words)
 
-    def _translate(self, cell: Cell, units: float) -> list[float]:
-        """``units`` translation steps along the cell's unit horizontal, body frame."""
-        h, step = cell.horizontal, self.vsam.translation_step
+    def _translate(self, slug: str, units: float) -> list[float]:
+        """``units`` translation steps along the direction's unit horizontal, body frame."""
+        h, step = unit_horizontal(Direction.parse(slug)), self.vsam.translation_step
         if step is None or not self.platform.base.mobile:
             raise KinesphereError(
                 "cannot_translate", f"{self._name} has a fixed base: sizes above the largest "
-                f"stored size ({cell.sizes[-1]}) would need the base to move",
+                f"stored size ({self.vsam.k_smax}) would need the base to move",
             )
         if h is None:
             raise KinesphereError(
-                "cannot_translate", f"{cell.slug} is purely vertical; the base cannot translate "
-                f"along it, so sizes above {cell.sizes[-1]} are not available",
+                "cannot_translate", f"{slug} is purely vertical; the base cannot translate "
+                f"along it, so sizes above {self.vsam.k_smax} are not available",
             )
         k = units * step
         if not math.isfinite(k) or k > MAX_TRANSLATION:
@@ -213,12 +252,103 @@ class Ecl:
         return s
 
     def compound(self, parts: Sequence[PartLike], last_wins: bool = False) -> Pose:
-        """Join several parts joint-wise; translations add (see :func:`compound.join`).
+        """Several parts in one pose (:mod:`kinesphere.services.ecl.compound`): parts of one
+        chain (an upper arm and its forearm) are pointed together by the nested solver,
+        the others answered from stored rows and joined joint-wise; translations add.
 
-        A joint set by two parts to different values is a ``conflict`` unless ``last_wins``;
-        a part with ``exact`` is not substituted.
+        The same part twice is a ``conflict`` unless ``last_wins``; a part with ``exact`` is
+        not substituted.
         """
-        return join(self.query, self._name, parts, last_wins)
+        if not parts:
+            raise KinesphereError("malformed", "a compound pose needs at least one part")
+        resolved = [self._part(i, p) for i, p in enumerate(parts)]
+        answered = [Answered(g, self._answer(g)) for g in groups(resolved, last_wins)]
+        return join(self._name, answered, last_wins)
+
+    def solves(self, parts: Sequence[PartLike]) -> bool:
+        """Whether answering ``parts`` needs the nested solver (tens of milliseconds, more
+        on a cold start: the databank answers such requests off the network's threads): a
+        cut limb (an upper arm) or two limbs of one chain. Never raises."""
+        seen: dict[int, str] = {}
+        for part in parts:
+            limb = part.limb if isinstance(part, SpatialCommand) else (
+                part[0] if isinstance(part, (tuple, list)) and part else None)
+            if not isinstance(limb, str):
+                continue
+            if limb.strip() in self._cuts:
+                return True
+            label = self._limbs.get(limb.strip())
+            chain = self._chains.get(label) if label is not None else None
+            if label is None or chain is None:
+                continue
+            if seen.setdefault(chain[0], label) != label:
+                return True
+        return False
+
+    def _part(self, i: int, part: PartLike) -> Part:
+        """One part with its names resolved and checked (the errors of :meth:`query`)."""
+        limb, origin, direction, size, exact = unpack(part, i)
+        cut: BodyWord | None = None
+        try:
+            lname = self._limbs[limb]
+        except (KeyError, TypeError):
+            cut = self._cuts.get(limb.strip()) if isinstance(limb, str) else None
+            lname = cut.label if cut is not None else self._bad_limb(limb)
+        try:
+            oname = self._origins[origin]
+        except (KeyError, TypeError):
+            oname = self._bad_origin(origin, lname)
+        if (lname, oname) not in self._cells:
+            raise self._unpaired(lname, origin)
+        try:
+            slug = self._slugs[direction]
+        except (KeyError, TypeError):
+            slug = self._direction(direction)
+        if (type(size) is float or type(size) is int) and 0 <= size <= self._max_size:
+            s = float(size)
+        else:
+            s = self._size(size)
+        said = self._said
+        words = tuple(said[n.strip()] for n in (limb, origin)
+                      if isinstance(n, str) and n.strip() in said)
+        index = self._chains.get(lname)
+        return Part(i, lname, oname, cut.end if cut is not None else None, slug, s,
+                    bool(exact), index[0] if index else None, index[1] if index else 0, words)
+
+    def _answer(self, group: tuple[Part, ...]) -> Pose:
+        if len(group) == 1 and group[0].end is None:
+            p = group[0]
+            return self.query(p.limb, p.origin, p.direction, p.size, p.exact)
+        return self._solved(group)
+
+    def _solved(self, group: tuple[Part, ...]) -> Pose:
+        """Nested parts (or a cut limb) pointed together by the nested solver."""
+        from kinesphere.services.ecl.nested import Segment
+
+        solver = self.nested()
+        segments = [Segment(p.limb, p.origin, p.end, Direction.parse(p.direction), p.size)
+                    for p in group]
+        solution = solver.solve(segments)
+        translation: list[float] | None = None
+        for p in group:
+            if p.size > self.vsam.k_smax:
+                t = self._translate(p.direction, p.size - self.vsam.k_smax)
+                translation = [a + b for a, b in zip(translation or [0.0] * 3, t, strict=True)]
+        first = group[0]
+        return Pose(platform=self._name, limb=first.limb, origin=first.origin,
+                    direction=first.direction, size=max(p.size for p in group),
+                    joints=dict(solution.joints), translation=translation, k_id=NO_ID,
+                    words=[w for p in group for w in p.words])
+
+    def nested(self) -> Nested:
+        """The nested solver of this platform, made when first needed (compiles the model)."""
+        with self._nested_lock:
+            if self._nested is None:
+                from kinesphere.platforms.mjcf import model_of
+                from kinesphere.services.ecl.nested import Nested
+
+                self._nested = Nested(model_of(self.platform), self.vsam.k_smax)
+            return self._nested
 
     # -- names and errors --------------------------------------------------------------------
     def directions(self, limb: str, origin: str) -> list[Direction]:
@@ -247,7 +377,10 @@ class Ecl:
         if isinstance(limb, str) and limb.strip() in self._limbs:
             return self._limbs[limb.strip()]
         name = limb.strip() if isinstance(limb, str) else None
-        if name is not None and e.aliases.get(name, name) in e.C:
+        word = self._words.get(name) if name is not None else None
+        if word is not None and not word.label:
+            raise self._absent(word)
+        if name is not None and (e.aliases.get(name, name) in e.C or name in CORE_WORDS):
             raise KinesphereError(
                 "cannot_translate", f"{self.platform.name} has a fixed base; the core "
                 f"{limb!r} cannot be moved. Limbs: {self._valid_limbs()}",
@@ -261,7 +394,17 @@ class Ecl:
     def _bad_origin(self, origin: object, limb: str) -> str:
         if isinstance(origin, str) and origin.strip() in self._origins:
             return self._origins[origin.strip()]
+        word = self._words.get(origin.strip()) if isinstance(origin, str) else None
+        if word is not None and not word.label:
+            raise self._absent(word)
         raise self._unpaired(limb, origin)
+
+    def _absent(self, word: BodyWord) -> KinesphereError:
+        has = [w.word for w in self._vocabulary if w.label]
+        return KinesphereError(
+            "absent_part", f"{self._name} has {word.note or 'no such part'}: {word.word!r} is "
+            f"a body part it lacks; the body words it answers: {', '.join(has) or 'none'}",
+        )
 
     def _unpaired(self, limb: str, origin: object) -> KinesphereError:
         paired = self._limb_origins.get(limb, [])
@@ -300,6 +443,7 @@ class Ecl:
             version=self.version,
             max_size=self._max_size,
             base_kind=self.platform.base.kind,
+            vocabulary=list(self._vocabulary),
         )
         return self._catalogue
 

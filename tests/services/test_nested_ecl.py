@@ -1,0 +1,138 @@
+"""Nested parts in the ECL: a limb and a limb inside it pointed together, each segment where
+told, measured by forward kinematics with yourdfpy (not the solver's MuJoCo model); the same
+part twice still a conflict; sizes, refusals, toppling, limits, determinism and the cache."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from kinesphere.errors import KinesphereError
+from kinesphere.laban import Direction
+from kinesphere.platforms.platform import load_platform
+from kinesphere.protocol import NO_ID, SpatialCommand
+from kinesphere.services.ecl.ecl import Ecl
+from kinesphere.services.ecl.nested import sized
+from support.ecl import build
+from support.nested import Body, Segment, degrees, unit
+from support.paths import TOY
+
+UPPER_ARM, FOREARM = Segment("distal_11", "distal_12"), Segment("distal_12", "limb_12")
+
+
+def arm_pair(d1: str, d2: str, size: float = 3) -> list[SpatialCommand]:
+    return [SpatialCommand("right_upper_arm", "right_shoulder", d1, size),
+            SpatialCommand("right_forearm", "right_elbow", d2, size)]
+
+
+def measured(body: Body, joints: dict[str, float], seg: Segment) -> np.ndarray:
+    body.pose(joints)
+    return body.direction(seg)
+
+
+@pytest.fixture(scope="module")
+def baxter() -> Ecl:
+    return Ecl.open("baxter")
+
+
+@pytest.fixture(scope="module")
+def nao() -> Ecl:
+    return Ecl.open("nao")
+
+
+def test_a_brought_robots_arm_and_forearm_are_pointed_together(tmp_path: Path) -> None:
+    """The toy arm (a platform folder, as a user brings one): its upper arm turns only about
+    itself (always up), its forearm anywhere; both named at once is no conflict."""
+    db = tmp_path / "toy.sqlite"
+    build(db)
+    ecl = Ecl.open(str(TOY), db)
+    body = Body(str(TOY))
+    for d in ("forward-middle", "left-high", "right-forward-low"):
+        pose = ecl.compound([("arm", "shoulder", "place-high", 3), ("forearm", "elbow_loc", d, 3)])
+        assert set(pose.joints) == {"yaw", "elbow", "wrist"}
+        assert [p.limb for p in pose.parts] == ["limb_11", "limb_12"]
+        assert degrees(measured(body, pose.joints, UPPER_ARM), unit(Direction.PLACE_HIGH)) < 1
+        assert degrees(measured(body, pose.joints, FOREARM), unit(Direction.parse(d))) < 5, d
+
+
+def test_baxters_forearm_points_where_told_whatever_the_upper_arm_does(baxter: Ecl) -> None:
+    """What last-wins joins got wrong (the forearm's stored row assumes a hanging upper arm)."""
+    body = Body("baxter")
+    for d1, d2 in (("forward-high", "left-forward-middle"), ("right-middle", "forward-low"),
+                   ("right-forward-low", "right-high")):
+        pose = baxter.compound(arm_pair(d1, d2))
+        assert degrees(measured(body, pose.joints, UPPER_ARM), unit(Direction.parse(d1))) < 15
+        assert degrees(measured(body, pose.joints, FOREARM), unit(Direction.parse(d2))) < 15
+        limits = body.eurdf.limits
+        assert all(limits[j].lower <= v <= limits[j].upper for j, v in pose.joints.items())
+        assert [w.word for w in pose.words] == ["right_upper_arm"]
+        assert pose.words[0].label == "limb_11" and pose.words[0].end == "distal_12"
+
+
+def test_the_same_part_twice_is_still_a_conflict(nao: Ecl) -> None:
+    twice = [SpatialCommand("right_forearm", "right_elbow", "forward-middle", 3),
+             SpatialCommand("limb_12", "distal_12", "back-low", 3)]
+    with pytest.raises(KinesphereError) as err:
+        nao.compound(twice)
+    assert err.value.code == "conflict" and "both move limb_12" in err.value.message
+    later = nao.compound(twice, last_wins=True)
+    assert later.joints == nao.query("limb_12", "distal_12", "back-low", 3).joints
+    with pytest.raises(KinesphereError) as err:  # an upper arm is the arm: the same part
+        nao.compound([SpatialCommand("right_arm", "right_shoulder", "forward-high", 3),
+                      SpatialCommand("right_upper_arm", "right_shoulder", "forward-low", 3)])
+    assert err.value.code == "conflict"
+
+
+def test_a_cut_limb_alone_is_answered_on_its_pose_key(nao: Ecl) -> None:
+    pose = nao.query("right_upper_arm", "right_shoulder", "forward-high", 3)
+    assert (pose.limb, pose.origin, pose.direction, pose.k_id) == (
+        "limb_11", "distal_11", "forward-high", NO_ID)
+    assert [(w.word, w.label, w.end) for w in pose.words] == [
+        ("right_upper_arm", "limb_11", "distal_12")]
+    body = Body("nao")
+    assert degrees(measured(body, pose.joints, UPPER_ARM), unit(Direction.FORWARD_HIGH)) < 15
+    assert nao.solves([("right_upper_arm", "right_shoulder", "forward-high", 3)])
+    assert nao.solves(arm_pair("forward-high", "left-middle"))
+    assert not nao.solves([("right_arm", "right_shoulder", "forward-high", 3),
+                           ("left_forearm", "left_elbow", "forward-high", 3)])
+
+
+def test_sizes_turn_a_segment_part_of_the_way_from_neutral(baxter: Ecl) -> None:
+    """A segment's length cannot change: near and mid turn it a third and two thirds of the
+    way from its neutral direction toward the one asked, far all the way."""
+    body = Body("baxter")
+    body.pose({})
+    rest = body.direction(UPPER_ARM)
+    target = unit(Direction.FORWARD_MIDDLE)
+    full = float(degrees(rest, target))
+    for size, share in ((1, 1 / 3), (2, 2 / 3), (3, 1.0)):
+        pose = baxter.query("right_upper_arm", "right_shoulder", "forward-middle", size)
+        got = measured(body, pose.joints, UPPER_ARM)
+        want = sized(rest, Direction.FORWARD_MIDDLE, size, 3)
+        assert degrees(want, rest) == pytest.approx(share * full, abs=0.5)
+        assert degrees(got, want) < 8, size
+    neutral = baxter.query("right_upper_arm", "right_shoulder", "place-middle", 3)
+    assert degrees(measured(body, neutral.joints, UPPER_ARM), rest) < 3
+
+
+def test_directions_a_segment_cannot_take_and_toppling_poses_are_refused(nao: Ecl) -> None:
+    with pytest.raises(KinesphereError) as err:  # NAO's right upper arm cannot cross left
+        nao.query("right_upper_arm", "right_shoulder", "left-middle", 3)
+    assert err.value.code == "direction_unavailable"
+    assert "limb_11 from distal_11 to distal_12 points" in err.value.message
+    with pytest.raises(KinesphereError) as err:  # a leg kicked forward, standing on the other
+        nao.compound([SpatialCommand("right_thigh", "right_hip", "forward-middle", 3),
+                      SpatialCommand("right_shin", "right_knee", "forward-middle", 3)])
+    assert err.value.code == "direction_unavailable" and "tip the body over" in err.value.message
+
+
+def test_answers_are_deterministic_and_remembered(tmp_path: Path) -> None:
+    parts = arm_pair("forward-middle", "left-forward-high")
+    first, second = Ecl.open("baxter"), Ecl.open("baxter")
+    a = first.compound(parts)
+    assert first.compound(parts) == a and first.nested().solves == 1  # remembered
+    assert second.compound(parts) == a  # and the same from a fresh start
+    plat = load_platform("baxter")
+    assert set(a.joints) == set(plat.eurdf.limb_joints("limb_11"))
