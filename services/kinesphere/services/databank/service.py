@@ -18,8 +18,9 @@ with its link and the next query goes to another. Replicas must agree on the kno
 
 Hot path: one dict hit on the key text, then ``query.reply`` with a pre-encoded payload.
 Records (SQL) run on the :class:`~kinesphere.services.databank.records.PoseRecorder`'s worker
-thread. A pose key with the selector parameter ``exact=true`` asks for that direction only: no
-substitution by the nearest one.
+thread, nested solves (an upper arm and its forearm pointed together) on
+:class:`~kinesphere.services.databank.solves.Solves`' worker. A pose key with the selector
+parameter ``exact=true`` asks for that direction only: no substitution by the nearest one.
 """
 
 from __future__ import annotations
@@ -50,6 +51,7 @@ from kinesphere.services.databank.replies import (
     request_bytes,
     send,
 )
+from kinesphere.services.databank.solves import Solves
 from kinesphere.services.ecl.ecl import Ecl
 from kinesphere.sizes import parse_size
 
@@ -120,6 +122,7 @@ class DatabankService:
         self._entities: list[Any] = []
         self.recorder = PoseRecorder(session, self.replica_id, writes_enabled, self.swap,
                                  self.refused)
+        self.solves = Solves(self.replica_id)
         self._started = False
         self._lock = threading.Lock()
 
@@ -131,6 +134,7 @@ class DatabankService:
                 return self
             self._started = True
             self.recorder.start()
+            self.solves.start()
             s, add = self.session, self._entities.append
             try:
                 if self.serves_all_known:
@@ -159,6 +163,7 @@ class DatabankService:
             self._started = False
             self._undeclare()
             self.recorder.stop()
+            self.solves.stop()
             for st in self.served.values():
                 closer = getattr(st.ecl, "close", None)
                 if callable(closer):
@@ -236,8 +241,11 @@ class DatabankService:
         try:
             if rest.startswith("pose/"):
                 pk = self.keys.parse_pose_key(plain)
-                pose = st.ecl.query(pk.limb, pk.origin, pk.direction, parse_size(pk.size), exact)
-                answer = ok(pose)
+                part = (pk.limb, pk.origin, pk.direction, parse_size(pk.size), exact)
+                if st.ecl.solves([part]):  # a cut limb: the nested solver, off this thread
+                    return self.solves.defer(
+                        query, lambda: self._pose(st, part, key, generation, failed))
+                return self._pose(st, part, key, generation, failed)
             elif rest == "catalogue":
                 answer = ok(st.ecl.catalogue())
             elif rest == "body":
@@ -257,7 +265,16 @@ class DatabankService:
             return self.answers.put(key, answer, generation)
         return self.errors.put(key, answer, failed)
 
-    def _compound(self, st: Served, query: zenoh.Query, key: str) -> EncodedReply:
+    def _pose(self, st: Served, part: tuple[str, str, str, float, bool], key: str,
+              generation: int, failed: int) -> EncodedReply:
+        """A pose key's answer, cached under ``key`` (errors in the error cache)."""
+        try:
+            answer = ok(st.ecl.query(*part))
+        except KinesphereError as exc:
+            return self.errors.put(key, error(exc.code, exc.message), failed)
+        return self.answers.put(key, answer, generation)
+
+    def _compound(self, st: Served, query: zenoh.Query, key: str) -> EncodedReply | Deferred:
         generation = self.compounds.generation
         try:
             raw = request_bytes(query, "CompoundRequest")
@@ -267,12 +284,23 @@ class DatabankService:
             req = decode(raw, CompoundRequest)
             for part in req.parts:
                 check_spatial(part)
-            answer = ok(st.ecl.compound(req.parts, last_wins=req.last_wins))
         except KinesphereError as exc:
             if exc.code == "malformed":
                 self.refused((st.name, "compound"), "%s compound refused: %s", st.name, exc)
             return error(exc.code, exc.message)
-        return self.compounds.put((key, raw), answer, generation)
+        if st.ecl.solves(req.parts):  # nested parts: the solver, off Zenoh's thread
+            return self.solves.defer(
+                query, lambda: self._joined(st, req, (key, raw), generation))
+        return self._joined(st, req, (key, raw), generation)
+
+    def _joined(self, st: Served, req: CompoundRequest, cache_key: tuple[str, bytes],
+                generation: int) -> EncodedReply:
+        """A compound request's answer; good ones cached under the request's bytes."""
+        try:
+            answer = ok(st.ecl.compound(req.parts, last_wins=req.last_wins))
+        except KinesphereError as exc:
+            return error(exc.code, exc.message)
+        return self.compounds.put(cache_key, answer, generation)
 
     def _wildcard(self, scope: Mapping[str, Served], query: zenoh.Query, key: str) -> None:
         """A wildcard key (discovery: ``{p}/ecl/*/catalogue``) gets each matching catalogue."""

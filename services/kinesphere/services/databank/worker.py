@@ -23,16 +23,24 @@ class Worker:
     def __init__(self, name: str, max_jobs: int = MAX_JOBS) -> None:
         self._jobs: queue.Queue[Callable[[], None] | None] = queue.Queue(max_jobs)
         self._thread = threading.Thread(target=self._run, name=name, daemon=True)
+        self._lock = threading.Lock()
+        self._waiting = 0
+
+    def waiting(self) -> int:
+        """Jobs submitted and not finished yet (queued or running)."""
+        return self._waiting
 
     def start(self) -> None:
         self._thread.start()
 
     def submit(self, job: Callable[[], None]) -> bool:
         """Queue ``job``; False (and not queued) when MAX_JOBS are already waiting."""
-        try:
-            self._jobs.put_nowait(job)
-        except queue.Full:
-            return False
+        with self._lock:
+            try:
+                self._jobs.put_nowait(job)
+            except queue.Full:
+                return False
+            self._waiting += 1
         return True
 
     def stop(self, timeout: float = 30.0) -> None:
@@ -48,3 +56,6 @@ class Worker:
                 job()
             except Exception:
                 log.exception("background job failed")
+            finally:
+                with self._lock:
+                    self._waiting -= 1
