@@ -20,7 +20,8 @@ from typing import TextIO
 
 from kinesphere.clients import targets as tg
 from kinesphere.clients.link import AckAnswer, RobotLink
-from kinesphere.protocol import Ack, AckStage, Substitution
+from kinesphere.protocol import Ack, AckStage, BodyWord, Substitution
+from kinesphere.words import body_words
 
 FINAL = frozenset({
     AckStage.REACHED, AckStage.CLAMPED, AckStage.BLOCKED, AckStage.SUPERSEDED, AckStage.HOLDING,
@@ -80,6 +81,15 @@ class Outcome:
         for a in self.acks:
             for s in a.substitutions:
                 seen.setdefault((s.limb, s.origin, s.requested, s.served), s)
+        return list(seen.values())
+
+    @property
+    def words(self) -> list[BodyWord]:
+        """The body words the robot answered with another name (once each)."""
+        seen: dict[tuple[str, str, str], BodyWord] = {}
+        for a in self.acks:
+            for w in a.words:
+                seen.setdefault((w.word, w.label, w.end), w)
         return list(seen.values())
 
     def final_for(self, seq: int) -> bool:
@@ -142,6 +152,9 @@ def line(o: Outcome, timeout: float, sent: int = 1) -> str:
         if stage in (AckStage.ACCEPTED, AckStage.MOVING):
             stage += f" (no final answer within {timeout:g} s)"
         words.insert(0, f"{stage}{': ' + last.detail if last.detail else ''}")
+    said = o.words
+    if said:
+        words.append(f"named {body_words(said)}")
     subs = o.substitutions
     if subs:
         words.append(f"substituted {substitution_text(subs)}")

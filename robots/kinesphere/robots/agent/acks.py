@@ -17,11 +17,20 @@ from __future__ import annotations
 import logging
 import time
 from collections import Counter, OrderedDict
-from collections.abc import Callable, Hashable, Sequence
-from dataclasses import dataclass, field
+from collections.abc import Callable, Hashable
+from dataclasses import dataclass
 from typing import NamedTuple
 
-from kinesphere.protocol import MAX_TEXT, Ack, AckStage, Command, Substitution, encode
+from kinesphere.protocol import (
+    MAX_TEXT,
+    Ack,
+    AckStage,
+    BodyWord,
+    Command,
+    Pose,
+    Substitution,
+    encode,
+)
 
 log = logging.getLogger(__name__)
 
@@ -74,6 +83,23 @@ class AckLimiter:
         return ok
 
 
+class Meaning(NamedTuple):
+    """What a command meant on this body, told in its acks: the parts served with another
+    direction, and the body words it answers with another name (``right_arm``: the only
+    arm)."""
+
+    substitutions: tuple[Substitution, ...] = ()
+    words: tuple[BodyWord, ...] = ()
+
+    @classmethod
+    def of(cls, pose: Pose) -> Meaning:
+        return cls(tuple(pose.substitutions), tuple(pose.words))
+
+
+PLAIN = Meaning()
+"""A command that meant what it said."""
+
+
 class Pending(NamedTuple):
     """An ack decided during a step, published at the step's flush."""
 
@@ -81,7 +107,7 @@ class Pending(NamedTuple):
     stage: AckStage
     code: str
     detail: str
-    substitutions: tuple[Substitution, ...]
+    meaning: Meaning
     lease_holder: str
     stamp_ns: int
 
@@ -92,7 +118,7 @@ class Motion:
 
     cmd: Command
     target: Hashable
-    substitutions: list[Substitution] = field(default_factory=list)
+    meaning: Meaning = PLAIN
     moved: bool = False
 
 
@@ -118,14 +144,14 @@ class Acks:
         self._pending: list[Pending] = []
 
     def send(self, cmd: Command, stage: AckStage, detail: str = "", *, code: str = "",
-             substitutions: Sequence[Substitution] = ()) -> None:
+             meaning: Meaning = PLAIN) -> None:
         """Tell ``cmd``'s sender ``stage``, within the rate limit (e-stops: always), at the
         next :meth:`flush`, stamped now (when the robot decided, not when it published)."""
         if stage is AckStage.REJECTED:
             self.refused[code] += 1
         if self.publish is None or not (stage in URGENT or self.limiter.allow(cmd.sender)):
             return
-        self._pending.append(Pending(cmd, stage, code, detail, tuple(substitutions),
+        self._pending.append(Pending(cmd, stage, code, detail, meaning,
                                      self.lease_holder(), time.time_ns()))
 
     def flush(self) -> None:
@@ -139,7 +165,7 @@ class Acks:
                 return
             try:
                 publish(make_ack(self.robot_id, p.cmd, p.stage, code=p.code, detail=p.detail,
-                                 substitutions=p.substitutions, lease_holder=p.lease_holder,
+                                 meaning=p.meaning, lease_holder=p.lease_holder,
                                  stamp_ns=p.stamp_ns))
                 self.sent += 1
             except Exception as exc:  # session closing or congested: the loop goes on
@@ -148,18 +174,17 @@ class Acks:
     @property
     def substitutions(self) -> list[Substitution]:
         """Those of the followed motion (``RobotState.substitutions``)."""
-        return self.motion.substitutions if self.motion is not None else []
+        return list(self.motion.meaning.substitutions) if self.motion is not None else []
 
-    def follow(self, cmd: Command, target: Hashable,
-               substitutions: Sequence[Substitution] = ()) -> None:
+    def follow(self, cmd: Command, target: Hashable, meaning: Meaning = PLAIN) -> None:
         """``cmd`` is now followed; another motion it replaced is ``superseded``."""
         old = self.motion
         if old is not None and old.target == target and (
                 old.cmd.sender, old.cmd.session) == (cmd.sender, cmd.session):
             old.cmd = cmd  # the same stream: the last command gets the final stage
-            old.substitutions = list(substitutions)
+            old.meaning = meaning
             return
-        self.motion = Motion(cmd, target, list(substitutions))
+        self.motion = Motion(cmd, target, meaning)
         if old is not None:
             self.send(old.cmd, AckStage.SUPERSEDED,
                       f"command {cmd.seq} from {cmd.sender or '?'} replaced it")
@@ -179,11 +204,11 @@ class Acks:
         ``stage``."""
         m, self.motion = self.motion, None
         if m is not None:
-            self.send(m.cmd, stage, detail, substitutions=m.substitutions)
+            self.send(m.cmd, stage, detail, meaning=m.meaning)
 
 
 def make_ack(robot_id: str, cmd: Command, stage: AckStage, *, code: str = "", detail: str = "",
-             substitutions: Sequence[Substitution] = (), lease_holder: str = "",
+             meaning: Meaning = PLAIN, lease_holder: str = "",
              stamp_ns: int | None = None) -> bytes:
     """The encoded Ack for ``cmd`` (detail cut to the protocol's 1024 characters), stamped
     ``stamp_ns`` (default: now)."""
@@ -191,4 +216,5 @@ def make_ack(robot_id: str, cmd: Command, stage: AckStage, *, code: str = "", de
         robot_id=robot_id, sender=cmd.sender, session=cmd.session, seq=cmd.seq, stage=stage,
         code=code, detail=detail[:MAX_TEXT],
         stamp_ns=time.time_ns() if stamp_ns is None else stamp_ns,
-        substitutions=list(substitutions), lease_holder=lease_holder))
+        substitutions=list(meaning.substitutions), words=list(meaning.words),
+        lease_holder=lease_holder))

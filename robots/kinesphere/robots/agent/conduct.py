@@ -22,7 +22,7 @@ from collections.abc import Callable
 from kinesphere.errors import KinesphereError
 from kinesphere.protocol import AckStage, Command, LeaseAction, Pose, Status
 from kinesphere.ratelog import RateLog
-from kinesphere.robots.agent.acks import Acks
+from kinesphere.robots.agent.acks import Acks, Meaning
 from kinesphere.robots.agent.base import drive_base
 from kinesphere.robots.agent.controller import BLOCKED_TOL, Controller
 from kinesphere.robots.agent.inbox import Resolved
@@ -306,8 +306,9 @@ class Conduct:
             ) from None
         refused = ctrl.guard.fault if ctrl.guard is not None else ""
         if refused:  # the target the guard halted or refused, again: said again, not retried
-            self.acks.follow(cmd, key, pose.substitutions)
-            self.acks.send(cmd, AckStage.ACCEPTED, substitutions=pose.substitutions)
+            meaning = Meaning.of(pose)
+            self.acks.follow(cmd, key, meaning)
+            self.acks.send(cmd, AckStage.ACCEPTED, meaning=meaning)
             self.acks.end(AckStage.BLOCKED, refused)
             self.set(Status.ERROR, f"{refused} and holding")
             return
@@ -335,8 +336,9 @@ class Conduct:
         else:
             detail = f"to {pose.limb}/{pose.origin}/{pose.direction}/{pose.size:g}"
         self.set(Status.MOVING, detail)
-        self.acks.follow(cmd, key, pose.substitutions)
-        self.acks.send(cmd, AckStage.ACCEPTED, detail, substitutions=pose.substitutions)
+        meaning = Meaning.of(pose)
+        self.acks.follow(cmd, key, meaning)
+        self.acks.send(cmd, AckStage.ACCEPTED, detail, meaning=meaning)
 
     def _aim(self, pose: Pose) -> Aim:
         """``pose`` compiled for this robot's joints, once per pose: the resolver hands out

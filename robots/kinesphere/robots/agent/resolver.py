@@ -19,6 +19,10 @@ loop can drop answers that a newer command has overtaken.
 Unreachable means no queryable answered (``get`` ended without replies), Zenoh's timeout, or
 an ``unavailable`` error; the worker then probes the catalogue every ``probe_s`` until it
 answers again, so recovery needs no restart and no new command.
+
+A request the databank may answer with its nested solver (several parts, or a cut limb such
+as ``right_upper_arm`` by the catalogue's vocabulary) waits up to ``solve_timeout_s`` instead:
+a first solve on a cold databank compiles the body's model, which takes longer than a lookup.
 """
 
 from __future__ import annotations
@@ -53,6 +57,8 @@ T = TypeVar("T")
 PartsKey = tuple[tuple[str, str, str, float, bool], ...]
 PoseAnswer = Pose | KinesphereError
 Callback = Callable[[int, PoseAnswer], None]
+SOLVE_TIMEOUT_S = 5.0
+"""How long a request that may need the databank's nested solver waits for its answer."""
 CACHE_BYTES = 4 * 1024 * 1024
 """Budget of the pose cache (a pose of a 26-joint NAO is ~1 KB encoded: thousands fit)."""
 ENTRY_BYTES = 128
@@ -110,11 +116,13 @@ class Resolver:
         probe_s: float = 0.25,
         ready_s: float = 2.0,
         cache_bytes: int = CACHE_BYTES,
+        solve_timeout_s: float = SOLVE_TIMEOUT_S,
     ) -> None:
         self.session = session
         self.platform = platform
         self.keys = keys or Keys()
         self.timeout_s = timeout_s
+        self.solve_timeout_s = max(solve_timeout_s, timeout_s)
         self.refresh_s = refresh_s
         self.probe_s = probe_s
         self.ready_s = ready_s
@@ -271,16 +279,19 @@ class Resolver:
         if self.version is None:
             self.refresh()  # learn the version first, so the answer is cached under it
         version = self.version
+        timeout = self.solve_timeout_s if self._may_solve(key) else self.timeout_s
         try:
             if len(key) == 1 and not key[0][4]:  # a pose key cannot say "exact only"
                 limb, origin, direction, size, _ = key[0]
                 pose = self._query(
-                    self.keys.pose(self.platform, limb, origin, direction, size), None, Pose
+                    self.keys.pose(self.platform, limb, origin, direction, size), None, Pose,
+                    timeout=timeout,
                 )
             else:
                 parts = [SpatialCommand(*p) for p in key]
                 pose = self._query(
-                    self.keys.compound(self.platform), encode(CompoundRequest(parts=parts)), Pose
+                    self.keys.compound(self.platform), encode(CompoundRequest(parts=parts)), Pose,
+                    timeout=timeout,
                 )
         except KinesphereError as exc:
             if exc.code == "unavailable":
@@ -295,12 +306,20 @@ class Resolver:
                 self._keep(key, pose)
         return pose
 
+    def _may_solve(self, key: PartsKey) -> bool:
+        """Whether the databank may answer ``key`` with its nested solver (see the module)."""
+        if len(key) > 1:
+            return True
+        cat = self.catalogue
+        return cat is not None and any(w.end and w.word == key[0][0] for w in cat.vocabulary)
+
     def _query(self, key: str, payload: bytes | None, type_: type[T],
-               querier: zenoh.Querier | None = None) -> T:
+               querier: zenoh.Querier | None = None, timeout: float | None = None) -> T:
         """One ``get`` (the first answer wins; other replicas may answer too), no retry: the
         worker's schedule does the retrying."""
         return get_one(querier if querier is not None else self.session, key, type_, payload,
-                       timeout=self.timeout_s, no_answer=f"no databank answers {key}")
+                       timeout=self.timeout_s if timeout is None else timeout,
+                       no_answer=f"no databank answers {key}")
 
     def _unreachable(self, exc: KinesphereError) -> None:
         if self.reachable or self.last_error != exc.message:
