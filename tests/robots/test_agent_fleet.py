@@ -11,8 +11,6 @@ import signal
 import subprocess
 import sys
 import threading
-from collections.abc import Iterator
-from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
@@ -32,7 +30,13 @@ from kinesphere.robots.agent.fleet import (
 )
 from kinesphere.robots.agent.mujoco_body import MujocoBody
 from kinesphere.robots.agent.runtime import AgentOptions
-from support.agents import AckWatch, Databank, Operator, StateWatch, joints_close
+from support.agents import (
+    AckWatch,
+    Databank,
+    Operator,
+    joints_close,
+    running_fleet_host,
+)
 from support.network import KEYS
 from support.paths import ROOT
 from support.wait import WAIT_S
@@ -47,24 +51,6 @@ def far(cat: Catalogue, k: int) -> tuple[str, str, str, float]:
     return (entry.limb, entry.origin, pulls[k], float(max(entry.sizes)))
 
 
-@contextmanager
-def running_fleet(endpoint: str, robots: list[RobotSpec], speed: float = 2.0,
-                  ) -> Iterator[tuple[FleetHost, dict[str, StateWatch]]]:
-    """A fleet host in this process on its own session, and each robot's state stream."""
-    with zconfig.session(config=zconfig.loopback_config(endpoint)) as s:
-        fleet = FleetHost(robots, s, AgentOptions(speed=speed), helpers=1)
-        watches = {r.robot_id: StateWatch(s, r.robot_id) for r in robots}
-        fleet.start()
-        try:
-            for rid, w in watches.items():
-                w.wait(lambda st: True, f"first state of {rid}")
-            yield fleet, watches
-        finally:
-            fleet.close()
-            for w in watches.values():
-                w.close()
-
-
 def test_robots_of_several_platforms_obey_their_own_commands(
     hub: tuple[zenoh.Session, str], databank: Databank
 ) -> None:
@@ -73,7 +59,7 @@ def test_robots_of_several_platforms_obey_their_own_commands(
              for i, r in enumerate(ROBOTS)}
     targets = {r.robot_id: databank.query(r.platform, SpatialCommand(*poses[r.robot_id])).joints
                for r in ROBOTS}
-    with running_fleet(endpoint, ROBOTS) as (fleet, watches):
+    with running_fleet_host(endpoint, ROBOTS) as (fleet, watches):
         assert fleet.stepper.threads == 2
         start = {rid: w.states[-1] for rid, w in watches.items()}
         ops = {r.robot_id: Operator(session, r.robot_id, sender=f"op-{r.robot_id}")
@@ -108,7 +94,7 @@ def test_one_robots_estop_does_not_stop_the_others(
     robots = ROBOTS[:2]
     cats = {r.robot_id: databank.catalogue(r.platform) for r in robots}
     acks = AckWatch(session, "*")
-    with running_fleet(endpoint, robots) as (_fleet, watches):
+    with running_fleet_host(endpoint, robots) as (_fleet, watches):
         stopped, other = (r.robot_id for r in robots)
         op_s = Operator(session, stopped, sender="op-s")
         op_o = Operator(session, other, sender="op-o")
@@ -272,7 +258,7 @@ def test_send_all_moves_every_body_exact_or_substituted(
                       "s-nao": [("left-low", answers["s-nao"].direction)],
                       "s-packbot": [("left-low", "left-forward-low")]}
     acks = AckWatch(session, "*")
-    with running_fleet(endpoint, robots) as (_fleet, watches):
+    with running_fleet_host(endpoint, robots) as (_fleet, watches):
         assert main(["send", "all", *map(str, pose), "--connect", endpoint,
                      "--prefix", KEYS.prefix, "--wait", str(WAIT_S)]) == 0
         for rid, watch in watches.items():

@@ -39,6 +39,7 @@ from kinesphere.protocol import (
     error_from_reply,
 )
 from kinesphere.robots.agent.controller import Controller
+from kinesphere.robots.agent.fleet import FleetHost, RobotSpec
 from kinesphere.robots.agent.runtime import Agent, AgentOptions
 from support.network import KEYS
 from support.paths import ROOT
@@ -213,6 +214,24 @@ def agent_process(endpoint: str, platform: str, robot_id: str) -> Iterator[subpr
             except subprocess.TimeoutExpired:
                 proc.kill()
                 proc.wait()
+
+
+@contextmanager
+def running_fleet_host(endpoint: str, robots: list[RobotSpec], speed: float = 2.0
+                       ) -> Iterator[tuple[FleetHost, dict[str, StateWatch]]]:
+    """A fleet host in this process on its own session, and each robot's state stream."""
+    with zconfig.session(config=zconfig.loopback_config(endpoint)) as s:
+        fleet = FleetHost(robots, s, AgentOptions(speed=speed), helpers=1)
+        watches = {r.robot_id: StateWatch(s, r.robot_id) for r in robots}
+        fleet.start()
+        try:
+            for rid, w in watches.items():
+                w.wait(lambda st: True, f"first state of {rid}")
+            yield fleet, watches
+        finally:
+            fleet.close()
+            for w in watches.values():
+                w.close()
 
 
 class Operator:

@@ -38,9 +38,11 @@ def register(sub: Any) -> None:
     p.set_defaults(func=_platforms)
     d = sub.add_parser(
         "describe",
-        help="print a platform's labels C, J, L and configuration space P",
+        help="print a platform's labels C, J, L, configuration space P and body vocabulary",
         description="Print C (core), J (joint locations), L (limbs, with the links each covers), "
-        "the DOF count and P (joint limits). PLATFORM is a shipped name or an .eurdf file.",
+        "the DOF count, P (joint limits) and the body vocabulary: which label answers each "
+        "Motif/Labanotation body part (right_arm, upper_arm, forearm, left_leg, ...), read "
+        "from the labels' aliases. PLATFORM is a shipped name or an .eurdf file.",
     )
     d.add_argument(
         "platform", help="platform name, any case (see 'kinesphere platforms'), 'all' (with "
@@ -98,7 +100,9 @@ def _platforms(args: argparse.Namespace) -> int:
 
 
 def describe_dict(e: Eurdf, base: str | None = None) -> dict[str, Any]:
-    """The (C, J, L, P) of an eURDF as plain data (also the --json output)."""
+    """The (C, J, L, P) of an eURDF and its body vocabulary as plain data (the --json
+    output)."""
+    from kinesphere.vocabulary import vocabulary
 
     def num(x: float) -> float | None:
         return x if math.isfinite(x) else None
@@ -129,6 +133,10 @@ def describe_dict(e: Eurdf, base: str | None = None) -> dict[str, Any]:
                 "velocity": num(lim.velocity),
             }
             for lim in e.P
+        ],
+        "vocabulary": [
+            {"word": w.word, "label": w.label or None, "end": w.end or None, "note": w.note}
+            for w in vocabulary(e)
         ],
     }
 
@@ -174,4 +182,12 @@ def _describe(args: argparse.Namespace) -> int:
         hi = "+inf" if p["upper"] is None else f"{p['upper']:+.4f}"
         vel = "inf" if p["velocity"] is None else f"{p['velocity']:.3f}"
         print(f"  {p['joint']:<18} {p['type']:<10} [{lo}, {hi}]  vmax {vel}")
+    print("body vocabulary (Motif/Labanotation words -> labels):")
+    for w in info["vocabulary"]:
+        if w["label"]:
+            to = w["label"] + (f" up to {w['end']}" if w["end"] else "")
+            print(f"  {w['word']:<16} {to:<22} {w['note']}".rstrip())
+    lacks = [w["word"] for w in info["vocabulary"] if not w["label"]]
+    if lacks:
+        print(f"  lacks: {', '.join(lacks)}")
     return 0
