@@ -12,12 +12,14 @@ How, deterministically (no randomness, no clock, fixed caps):
 
 1. Seeds. The direction a segment points, seen from the body its location hangs on, depends
    only on the location's own joints: a grid over them is tabulated once per segment. A query
-   reads the tables from the outermost segment in: the few best grid points for it, then, for
-   each, the best point for the next segment in the frame the first one leaves it in.
-2. Refinement. From the best seed that touches nothing, differential IK (one
-   :class:`SegmentTask` per segment, a light posture task toward neutral, the limits and
-   contact constraints of :class:`~kinesphere.services.ecl.ik.LimbSolver`) until the segments
-   stop turning.
+   reads the tables from the outermost segment in: a few grid points for it (the best, and
+   among those as good the most different ones, so that a segment turning about itself leaves
+   its inner segments every way to go), then for each the best points of the next segment, in
+   the frame the outer ones leave it in; points whose segments touch something are skipped.
+2. Refinement. Differential IK (one :class:`SegmentTask` per segment, a light posture task
+   toward neutral, the limits and contact constraints of
+   :class:`~kinesphere.services.ecl.ik.LimbSolver`): a few steps from each of the best seeds,
+   then the best of them until the segments stop turning.
 
 Sizes follow the rule of a part whose length cannot change: the segment turns from its neutral
 direction toward the requested one by ``size / k_smax`` of the angle (far points exactly);
@@ -40,7 +42,7 @@ from kinesphere.errors import KinesphereError
 from kinesphere.laban import Direction
 from kinesphere.platforms.frames import pivot
 from kinesphere.platforms.mjcf import PlatformModel
-from kinesphere.services.ecl.arcs import along_arc
+from kinesphere.services.ecl.arcs import along_arc, halfway
 from kinesphere.services.ecl.balance import Balance
 from kinesphere.services.ecl.constraints import GAIN, tip_point
 from kinesphere.services.ecl.ik import DAMPING, SOLVER, LimbSolver
@@ -157,21 +159,15 @@ class _Table:
 
 def sized(neutral: np.ndarray, d: Direction, size: float, k_smax: float) -> np.ndarray:
     """Where a part of fixed length points at ``size``: its neutral direction turned toward
-    ``d`` by ``size / k_smax`` of the angle (at far and beyond, ``d`` itself); Place-Middle
-    is the neutral direction."""
+    ``d`` by ``size / k_smax`` of the angle (at far and beyond, ``d`` itself; from the
+    opposite direction, over the top); Place-Middle is the neutral direction."""
     if d is Direction.PLACE_MIDDLE:
         return neutral
     v = np.asarray(d.vector, dtype=float)
     v = v / np.linalg.norm(v)
     g = min(max(size / k_smax, 0.0), 1.0)
-    if float(neutral @ v) < -0.999999:  # opposite: turn over the top (or forward)
-        up = np.array([0.0, 0.0, 1.0]) if abs(neutral[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
-        side = up - (up @ neutral) * neutral
-        side = side / np.linalg.norm(side)
-        half = along_arc(neutral, side, 1.0)
-        first = min(g * 2.0, 1.0)
-        return along_arc(neutral, half, first) if g <= 0.5 else along_arc(half, v, 2 * g - 1)
-    return along_arc(neutral, v, g)
+    mid = halfway(neutral, v)
+    return along_arc(neutral, mid, 2 * g) if g <= 0.5 else along_arc(mid, v, 2 * g - 1)
 
 
 def degrees(a: np.ndarray, b: np.ndarray) -> float:
@@ -190,6 +186,8 @@ class ChainSolver:
         self.data = ls.config.data
         dofs = [pm.dof_index[j] for j, go in zip(ls.joints, ls.moving, strict=True) if go]
         self._dofs = np.array(dofs, dtype=int)
+        self._posture = np.zeros(self.model.nv)
+        self._posture[dofs] = POSTURE
         ls.config.update(ls.neutral)
         self._origin = ls.origin.copy()
         self._points: dict[str, _Point] = {}
@@ -391,15 +389,14 @@ class ChainSolver:
         angles = tuple(round(degrees(t.unit(data)[0], g), 3)
                        for t, g in zip(tasks, targets, strict=True))
         joints = {j: round(float(v), 6) for j, v in zip(ls.joints, values, strict=True)}
-        return Solution(joints, angles, self.balance.check(ls.full_q(np.array(list(
-            joints.values())))))
+        return Solution(joints, angles, self.balance.check(ls.full_q(values)))
 
     def _refine(self, tasks: list[SegmentTask], targets: list[np.ndarray], start: np.ndarray,
                 iterations: int) -> np.ndarray:
         ls = self.limb
         for t, g in zip(tasks, targets, strict=True):
             t.target = g
-        ls.posture.set_cost(ls._posture_mask * POSTURE)  # noqa: SLF001 - its own mask
+        ls.posture.set_cost(self._posture)
         ls.posture.set_target(ls.neutral)
         q = ls.full_q(start)
         ls.config.update(q)
