@@ -51,6 +51,9 @@ from kinesphere.substitution import MAX_ANGLE_DEG
 GRID_POINTS = 1600
 """Grid points per segment table (spread over the location's joints): ~4 degrees of each of
 two joints' typical range, tabulated once in ~50 ms."""
+GRID_JOINTS = 4
+"""Joints of a location the grid spans at most (a palm's many finger joints stay at neutral):
+the table never holds more than about 2 * GRID_POINTS points."""
 CANDIDATES = 3
 """Seeds kept per segment: the best grid point and the next best ones that differ from it."""
 SCAN = 400
@@ -233,13 +236,14 @@ class ChainSolver:
             return hit
         ls, m, e = self.limb, self.model, self.pm.platform.eurdf
         idx = [ls.joints.index(j) for j in e.origin(seg.origin).joints
-               if j in ls.joints and ls.moving[ls.joints.index(j)]]
+               if j in ls.joints and ls.moving[ls.joints.index(j)]][:GRID_JOINTS]
         lo, hi = ls.lower[idx], ls.upper[idx]
         lo = np.where(np.isfinite(lo), lo, -math.pi)
         hi = np.where(np.isfinite(hi), hi, math.pi)
         per = max(2, int(round(GRID_POINTS ** (1.0 / max(len(idx), 1)))))
         axes = [np.linspace(a, b, per) for a, b in zip(lo, hi, strict=True)]
-        values = np.array(np.meshgrid(*axes, indexing="ij")).reshape(len(idx), -1).T
+        values = (np.array(np.meshgrid(*axes, indexing="ij")).reshape(len(idx), -1).T
+                  if idx else np.zeros((1, 0)))
         base = ls.neutral[ls.qadr].copy()
         data = self._scratch
         body = int(m.body_parentid[m.jnt_bodyid[m.joint(e.origin(seg.origin).joints[0]).id]])
