@@ -17,7 +17,15 @@ from kinesphere.errors import KinesphereError
 from kinesphere.ratelog import RateLog
 from kinesphere.services.databank.service import DatabankService, changed_key
 from kinesphere.services.ecl.ecl import Ecl
-from support.databank import Tokens, answered, build_toy, error_code, pose_of, raw_get
+from support.databank import (
+    Tokens,
+    answered,
+    build_toy,
+    error_code,
+    pose_of,
+    raw_get,
+    serving,
+)
 from support.network import OWN_KEYS, peer
 from support.paths import TOY
 
@@ -33,16 +41,8 @@ def db(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def net(db: Path) -> Iterator[tuple[DatabankService, zenoh.Session]]:
     """A read-only replica serving toyarm (a subset of the known platforms) on the hub, and
     a querier joined to the hub."""
-    with zconfig.loopback_hub() as (hub, endpoint):
-        server, client = peer(endpoint), peer(endpoint)
-        svc = DatabankService(server, {"toyarm": Ecl.open(str(TOY), db)}, OWN_KEYS, "solo")
-        try:
-            with svc:
-                answered(client, OWN_KEYS.catalogue("toyarm"))
-                yield svc, client
-        finally:
-            zconfig.close_session(client)
-            zconfig.close_session(server)
+    with serving({"toyarm": Ecl.open(str(TOY), db)}, "solo") as (svc, client, _):
+        yield svc, client
 
 
 def pose_key(direction: str, size: str, limb: str = "limb_11", origin: str = "distal_11") -> str:

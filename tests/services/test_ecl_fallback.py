@@ -13,18 +13,16 @@ import pytest
 import zenoh
 
 from kinesphere import protocol as pr
-from kinesphere import zconfig
 from kinesphere.cli import main
 from kinesphere.errors import KinesphereError
 from kinesphere.keyexpr import EXACT
 from kinesphere.laban import Direction
-from kinesphere.services.databank.service import DatabankService
 from kinesphere.services.ecl.ecl import Ecl
 from kinesphere.sizes import MAX_TRANSLATION
 from kinesphere.substitution import MAX_ANGLE_DEG, nearest_direction
-from support.databank import answered, error_code, pose_of, raw_get
+from support.databank import error_code, pose_of, raw_get, serving
 from support.ecl import gaze
-from support.network import OWN_KEYS, peer
+from support.network import OWN_KEYS
 
 ARM = ("limb_11", "distal_11")
 
@@ -124,16 +122,9 @@ def test_sizes_stop_at_max_size_and_translations_at_ten_metres() -> None:
 def net() -> Iterator[tuple[str, zenoh.Session]]:
     """The shipped NAO and PackBot databanks served in-process; the hub's endpoint and a
     querier joined to it."""
-    with zconfig.loopback_hub() as (_hub, endpoint):
-        server, client = peer(endpoint), peer(endpoint)
-        ecls = {"nao": Ecl.open("nao"), "packbot": Ecl.open("packbot")}
-        try:
-            with DatabankService(server, ecls, OWN_KEYS, "shipped"):
-                answered(client, OWN_KEYS.catalogue("nao"))
-                yield endpoint, client
-        finally:
-            zconfig.close_session(client)
-            zconfig.close_session(server)
+    ecls = {"nao": Ecl.open("nao"), "packbot": Ecl.open("packbot")}
+    with serving(ecls, "shipped") as (_, client, endpoint):
+        yield endpoint, client
 
 
 def test_query_nao_head_left_middle_looks_left(

@@ -12,13 +12,11 @@ import pytest
 import zenoh
 
 from kinesphere import protocol as pr
-from kinesphere import zconfig
 from kinesphere.services.databank.service import DatabankService
 from kinesphere.services.databank.solves import Solves
 from kinesphere.services.ecl.ecl import Ecl
-from support.databank import answered, pose_of, raw_get
+from support.databank import pose_of, raw_get, serving
 from support.network import OWN_KEYS as KEYS
-from support.network import peer
 from support.wait import WAIT_S, until
 
 UPPER = ("right_upper_arm", "right_shoulder")
@@ -33,16 +31,8 @@ def nested(d1: str, d2: str) -> bytes:
 @pytest.fixture
 def net() -> Iterator[tuple[DatabankService, zenoh.Session]]:
     """A fresh service (its solver cold) serving Baxter, and a querier, on a hub."""
-    with zconfig.loopback_hub() as (_, endpoint):
-        server, client = peer(endpoint), peer(endpoint)
-        svc = DatabankService(server, {"baxter": Ecl.open("baxter")}, KEYS, "nest")
-        try:
-            with svc:
-                answered(client, KEYS.catalogue("baxter"))
-                yield svc, client
-        finally:
-            zconfig.close_session(client)
-            zconfig.close_session(server)
+    with serving({"baxter": Ecl.open("baxter")}, "nest") as (svc, client, _):
+        yield svc, client
 
 
 def test_a_cold_nested_solve_does_not_hold_up_other_queries(
@@ -88,23 +78,16 @@ def test_nested_answers_are_remembered_and_cut_limbs_answer_on_pose_keys(
 
 
 def test_too_many_nested_queries_waiting_are_refused_not_queued() -> None:
-    with zconfig.loopback_hub() as (_, endpoint):
-        server, client = peer(endpoint), peer(endpoint)
-        svc = DatabankService(server, {"baxter": Ecl.open("baxter")}, KEYS, "busy")
-        svc.solves = Solves("busy", max_jobs=1)  # one waiting beside the one being solved
-        try:
-            with svc:
-                answered(client, KEYS.catalogue("baxter"))
-                pending = [client.get(KEYS.compound("baxter"), payload=nested(d, "forward-low"),
-                                      timeout=30.0)
-                           for d in ("forward-high", "right-high", "right-middle",
-                                     "right-low", "forward-low")]
-                codes = []
-                for replies in pending:
-                    reply = next(iter(replies))
-                    err = reply.err
-                    codes.append("ok" if err is None else pr.error_from_reply(err.payload).code)
-        finally:
-            zconfig.close_session(client)
-            zconfig.close_session(server)
+    def one_waiting(svc: DatabankService) -> None:  # beside the one being solved
+        svc.solves = Solves("busy", max_jobs=1)
+
+    with serving({"baxter": Ecl.open("baxter")}, "busy", one_waiting) as (_, client, _e):
+        pending = [client.get(KEYS.compound("baxter"), payload=nested(d, "forward-low"),
+                              timeout=30.0)
+                   for d in ("forward-high", "right-high", "right-middle", "right-low",
+                             "forward-low")]
+        codes = []
+        for replies in pending:
+            err = next(iter(replies)).err
+            codes.append("ok" if err is None else pr.error_from_reply(err.payload).code)
     assert codes[0] == "ok" and "unavailable" in codes, codes

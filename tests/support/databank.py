@@ -12,18 +12,21 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 
 import zenoh
 
 from kinesphere import protocol as pr
+from kinesphere import zconfig
 from kinesphere.keyexpr import Keys
 from kinesphere.platforms.platform import load_platform
+from kinesphere.services.databank.service import DatabankService
+from kinesphere.services.ecl.ecl import Ecl
 from kinesphere.services.ecl.store import PoseRow, write_databank
 from kinesphere.services.ecl.vsam import load_vsam
-from support.network import OWN_KEYS
+from support.network import OWN_KEYS, peer
 from support.paths import ROOT, TOY
 
 Raw = list[tuple[bool, bytes]]
@@ -58,6 +61,28 @@ def build_baxter(path: Path) -> Path:
     ]
     write_databank(path, plat, load_vsam(plat), rows, "test")
     return path
+
+
+@contextmanager
+def serving(ecls: Mapping[str, Ecl], replica: str,
+            prepare: Callable[[DatabankService], None] | None = None,
+            ) -> Iterator[tuple[DatabankService, zenoh.Session, str]]:
+    """A databank service in this process serving ``ecls`` under the tests' own prefix on a
+    fresh loopback hub (changed first by ``prepare``, if given), and a querier joined to the
+    hub: (service, querier, the hub's endpoint), once the first platform's catalogue is
+    answered."""
+    with zconfig.loopback_hub() as (_hub, endpoint):
+        server, client = peer(endpoint), peer(endpoint)
+        svc = DatabankService(server, ecls, OWN_KEYS, replica)
+        if prepare is not None:
+            prepare(svc)
+        try:
+            with svc:
+                answered(client, OWN_KEYS.catalogue(next(iter(ecls))))
+                yield svc, client, endpoint
+        finally:
+            zconfig.close_session(client)
+            zconfig.close_session(server)
 
 
 def raw_get(

@@ -181,14 +181,7 @@ class Ecl:
         cells = self._cells.get((lname, oname))
         if cells is None:
             raise self._unpaired(lname, origin)
-        try:
-            slug = self._slugs[direction]
-        except (KeyError, TypeError):
-            slug = self._direction(direction)
-        if (type(size) is float or type(size) is int) and 0 <= size <= self._max_size:
-            s = float(size)
-        else:
-            s = self._size(size)
+        slug, s = self._slug_size(direction, size)
         cell = cells.get(slug)
         if slug == _PLACE_MIDDLE and lname in self._neutral:
             return Pose(platform=self._name, limb=lname, origin=oname, direction=slug, size=s,
@@ -220,6 +213,16 @@ class Ecl:
         return Pose(platform=self._name, limb=lname, origin=oname, direction=cell.slug, size=s,
                     joints=joints, translation=translation, k_id=cell.k_id, p_id=p_id,
                     substitutions=substitutions, words=words)
+
+    def _slug_size(self, direction: object, size: object) -> tuple[str, float]:
+        """The canonical slug and a checked size (cached spellings cost a dict hit)."""
+        try:
+            slug = self._slugs[direction]
+        except (KeyError, TypeError):
+            slug = self._direction(direction)
+        if (type(size) is float or type(size) is int) and 0 <= size <= self._max_size:
+            return slug, float(size)
+        return slug, self._size(size)
 
     def _translate(self, slug: str, units: float) -> list[float]:
         """``units`` translation steps along the direction's unit horizontal, body frame."""
@@ -300,14 +303,7 @@ class Ecl:
             oname = self._bad_origin(origin, lname)
         if (lname, oname) not in self._cells:
             raise self._unpaired(lname, origin)
-        try:
-            slug = self._slugs[direction]
-        except (KeyError, TypeError):
-            slug = self._direction(direction)
-        if (type(size) is float or type(size) is int) and 0 <= size <= self._max_size:
-            s = float(size)
-        else:
-            s = self._size(size)
+        slug, s = self._slug_size(direction, size)
         said = self._said
         words = tuple(said[n.strip()] for n in (limb, origin)
                       if isinstance(n, str) and n.strip() in said)
