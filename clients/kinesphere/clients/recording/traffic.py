@@ -33,7 +33,6 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -56,6 +55,7 @@ from kinesphere.clients.mcaplog import (
 )
 from kinesphere.errors import KinesphereError
 from kinesphere.keyexpr import WILDCARD, Keys
+from kinesphere.lru import Lru
 from kinesphere.protocol import Command, Message, RobotState, decode_any, encode
 from kinesphere.zconfig import undeclare, unmatched
 
@@ -228,7 +228,7 @@ def replay(session: zenoh.Session, path: str | Path, kind: str = "commands",
                 f"it with 'kinesphere gamepad --replay {path}'")
         return Replayed(0, [])
     me = sender or operator_id()
-    sessions: OrderedDict[tuple[str, str], str] = OrderedDict()
+    sessions: Lru[tuple[str, str], str] = Lru(MAX_SESSIONS)
     clock = host_clock()
 
     put_on = {topic: topic for topic in found.topics}
@@ -290,16 +290,11 @@ def few(keys: list[str], most: int = 3) -> str:
 
 
 def _restamped(cmd: Command, sender: str, clock: str,
-               sessions: OrderedDict[tuple[str, str], str]) -> Command:
+               sessions: Lru[tuple[str, str], str]) -> Command:
     """``cmd`` sent now by ``sender``, in a fresh session standing for its recorded one (the
     :data:`MAX_SESSIONS` most recent are remembered)."""
     key = (cmd.sender, cmd.session)
-    session = sessions.get(key)
-    if session is None:
-        session = sessions[key] = new_session()
-        while len(sessions) > MAX_SESSIONS:
-            sessions.popitem(last=False)
-    sessions.move_to_end(key)
+    session = sessions.get(key) or sessions.put(key, new_session())
     return msgspec.structs.replace(cmd, sent_ns=time.time_ns(), sender=sender, session=session,
                                    clock=clock)
 

@@ -28,6 +28,7 @@ import zenoh
 from kinesphere.clients.view.body import BodyGeometry
 from kinesphere.errors import KinesphereError
 from kinesphere.keyexpr import Keys
+from kinesphere.lru import Lru
 from kinesphere.protocol import BodyModel, CompoundRequest, Pose, SpatialCommand, encode
 from kinesphere.query import get_one
 
@@ -130,7 +131,7 @@ class Bodies:
 
     def __init__(self, most: int = MAX_BODIES) -> None:
         self.most = most
-        self._known: OrderedDict[str, BodyGeometry | KinesphereError] = OrderedDict()
+        self._known: Lru[str, BodyGeometry | KinesphereError] = Lru(most)
         self.built = 0
         """Bodies parsed (accepted or refused) since start."""
 
@@ -149,10 +150,7 @@ class Bodies:
                 if known.missing:
                     log.warning("body of %s: %d mesh(es) not sent with it, not drawn (%s)",
                                 model.platform, len(known.missing), ", ".join(known.missing[:3]))
-            self._known[key] = known
-            while len(self._known) > self.most:
-                self._known.popitem(last=False)
-        self._known.move_to_end(key)
+            self._known.put(key, known)
         if isinstance(known, KinesphereError):
             raise known
         if known.platform != model.platform:  # the same content under another name

@@ -38,15 +38,14 @@ lengths, so by bytes too (least recently heard entries are forgotten first).
 from __future__ import annotations
 
 import logging
-from collections import OrderedDict
 from dataclasses import dataclass
-from typing import NamedTuple, TypeVar
+from typing import NamedTuple
 
 from kinesphere.errors import KinesphereError
+from kinesphere.lru import Lru
 from kinesphere.protocol import Command
 from kinesphere.robots.agent.safety import DRIVE_TTL_S
 
-T = TypeVar("T")
 MAX_SENDERS = 1024
 """``(sender, session)`` pairs remembered (each at most 2 x 64 characters: ~0.3 MB in all)."""
 MAX_CLOCK_AHEAD_S = 60.0
@@ -120,8 +119,8 @@ class Ordering:
         self.dropped = 0
         """Commands dropped as stale or expired since start."""
         self.max_senders = max_senders
-        self._pairs: OrderedDict[tuple[str, str], _Pair] = OrderedDict()
-        self._clocks: OrderedDict[tuple[str, str], _Clock] = OrderedDict()
+        self._pairs: Lru[tuple[str, str], _Pair] = Lru(max_senders)
+        self._clocks: Lru[tuple[str, str], _Clock] = Lru(max_senders)
         self._stall: tuple[int, int] | None = None
         self._ticket = 0
         self._waiting: Waiting | None = None
@@ -144,7 +143,7 @@ class Ordering:
             return None if exempt else KinesphereError(
                 "malformed", f"sent_ns lies {ahead:.0f} s ahead of the robot's clock (at most "
                 f"{MAX_CLOCK_AHEAD_S:g} s): check the sender's clock")
-        pair = self._remember(self._pairs, (cmd.sender, cmd.session), None)
+        pair = self._pairs.get((cmd.sender, cmd.session))
         newest = -1 if pair is None else pair.seq
         if cmd.seq > newest + SEQ_WINDOW:  # obeyed if it only stops, never remembered
             if exempt:
@@ -153,8 +152,7 @@ class Ordering:
             return KinesphereError("stale", f"seq {cmd.seq} jumps more than {SEQ_WINDOW} past "
                                    f"{newest} in this session: start a new session")
         if pair is None:
-            pair = self._remember(self._pairs, (cmd.sender, cmd.session), _Pair(-1, 0))
-        assert pair is not None
+            pair = self._pairs.put((cmd.sender, cmd.session), _Pair(-1, 0))
         if cmd.seq <= pair.seq and (cmd.session or cmd.sent_ns <= pair.sent_ns):
             if not exempt:
                 self.dropped += 1
@@ -175,9 +173,9 @@ class Ordering:
         cmd = item.cmd
         transit = item.wall_ns - cmd.sent_ns
         key = (cmd.sender, cmd.clock or f"session:{cmd.session}")
-        clock = self._remember(self._clocks, key, None)
+        clock = self._clocks.get(key)
         if clock is None:
-            self._remember(self._clocks, key, _Clock(transit))
+            self._clocks.put(key, _Clock(transit))
             stall = self._stall
             if stall is not None and stall[0] < item.mono_ns <= stall[1] + STALL_GRACE_S * 1e9:
                 return stall[1] - stall[0]
@@ -197,20 +195,6 @@ class Ordering:
             clock.transit_ns, clock.late_since_ns = transit, None
             return 0
         return late
-
-    def _remember(self, table: OrderedDict[tuple[str, str], T], key: tuple[str, str],
-                  new: T | None) -> T | None:
-        """``table[key]`` made the most recent (or ``new`` stored there, the least recent
-        entry forgotten past :attr:`max_senders`); None when absent and ``new`` is None."""
-        entry = table.get(key)
-        if entry is None:
-            if new is None:
-                return None
-            entry = table[key] = new
-            while len(table) > self.max_senders:
-                table.popitem(last=False)
-        table.move_to_end(key)
-        return entry
 
     def acted(self, seq: int) -> None:
         """Rule 6: ``seq`` was acted on (moved, halted, or rejected with an error)."""

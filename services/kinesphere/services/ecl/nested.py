@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import math
 import threading
-from collections import OrderedDict
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -40,6 +39,7 @@ import numpy as np
 
 from kinesphere.errors import KinesphereError
 from kinesphere.laban import Direction
+from kinesphere.lru import Lru
 from kinesphere.platforms.frames import pivot
 from kinesphere.platforms.mjcf import PlatformModel
 from kinesphere.services.ecl.arcs import along_arc, halfway
@@ -448,17 +448,13 @@ class Nested:
         self.k_smax = k_smax
         self.max_angle = max_angle
         self._chains: dict[tuple[str, str], ChainSolver] = {}
-        self._solutions: OrderedDict[tuple[Segment, ...], Solution] = OrderedDict()
+        self._solutions: Lru[tuple[Segment, ...], Solution] = Lru(SOLUTIONS)
         self._lock = threading.Lock()
         self.solves = 0
         """Solves computed (not remembered), for tests and benches."""
 
     def cached(self, segments: Sequence[Segment]) -> Solution | None:
-        key = tuple(segments)
-        hit = self._solutions.get(key)
-        if hit is not None:
-            self._solutions.move_to_end(key)
-        return hit
+        return self._solutions.get(tuple(segments))
 
     def solve(self, segments: Sequence[Segment]) -> Solution:
         """The joints pointing every segment where told, or ``direction_unavailable`` naming
@@ -473,9 +469,7 @@ class Nested:
                         self.pm, outer.limb, outer.origin)
                 hit = chain.solve(segments, self.k_smax)
                 self.solves += 1
-                if len(self._solutions) >= SOLUTIONS:
-                    self._solutions.popitem(last=False)
-                self._solutions[tuple(segments)] = hit
+                self._solutions.put(tuple(segments), hit)
         for s, angle in zip(segments, hit.angles, strict=True):
             if angle > self.max_angle:
                 raise KinesphereError(
