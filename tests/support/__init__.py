@@ -2,7 +2,8 @@
 
 ``paths`` (the repository and test data), ``wait`` (the one poller and the upper bound on
 waits), ``network`` (key prefixes, the hub's shape, peer sessions), then one module per role or
-part under test: ``agents``, ``clients``, ``client_fleet``, ``databank``, ``ecl``, ``protocol``,
-``ros2``, ``ros2_peer`` (zenoh-ros2-sdk's peer, ``sdk_peer.py``, as a process), ``system``,
-``view``, ``soak``, ``byor``.
+part under test: ``agents``, ``clients``, ``client_fleet``, ``databank``, ``ecl``, ``nested``
+(segments measured by another kinematics), ``protocol``, ``ros2``, ``ros2_peer``
+(zenoh-ros2-sdk's peer, ``sdk_peer.py``, as a process), ``system``, ``view``, ``hostile``
+(bodies a forged answer could carry), ``soak``, ``byor``.
 """
