@@ -9,6 +9,7 @@ from collections.abc import Iterable, Mapping
 from typing import Any
 
 from rich.console import Console
+from rich.markup import escape
 from rich.table import Table
 
 from kinesphere.protocol import RobotState
@@ -25,6 +26,16 @@ STYLE = {
 }
 
 
+DETAIL_CHARS = 60
+"""A longer detail is cut at a word and ends in "…", so a row stays on one line and says so."""
+
+
+def _clip(text: str, limit: int = DETAIL_CHARS) -> str:
+    if len(text) <= limit:
+        return text
+    return text[: limit - 1].rsplit(" ", 1)[0].rstrip(" ,;:") + "…"
+
+
 def _age(state: RobotState, now_ns: int) -> str:
     return f"{max(0.0, (now_ns - state.stamp_ns) / 1e9):.1f}s"
 
@@ -35,11 +46,12 @@ def robot_table(
     databanks: Iterable[str] = (),
     title: str = "kinesphere robots",
 ) -> Table:
-    """One row per robot seen (live token, state, or both); missing state shows as '-'."""
+    """One row per robot seen (live token, state, or both); missing state shows as '-'.
+    Names and details come from the network: shown as text, never read as rich markup."""
     now = time.time_ns()
     live = set(alive)
     dbs = sorted(databanks)
-    caption = f"databanks: {', '.join(dbs) if dbs else 'none alive'}"
+    caption = escape(f"databanks: {', '.join(dbs) if dbs else 'none alive'}")
     table = Table(title=title, caption=caption, expand=False)
     for col in ("robot", "platform", "status", "cmd", "base x, y, yaw", "max |qd|", "age",
                 "detail"):
@@ -48,19 +60,19 @@ def robot_table(
         st = states.get(rid)
         mark = "" if rid in live or not live else " (no token)"
         if st is None:
-            table.add_row(rid + mark, "-", "[dim]no state yet[/]", "-", "-", "-", "-", "")
+            table.add_row(escape(rid + mark), "-", "[dim]no state yet[/]", "-", "-", "-", "-", "")
             continue
         qd = max((abs(v) for v in st.qd), default=0.0)
         x, y, yaw = st.base_pose
         table.add_row(
-            rid + mark,
-            st.platform,
-            f"[{STYLE.get(st.status, 'white')}]{st.status}[/]",
+            escape(rid + mark),
+            escape(st.platform),
+            f"[{STYLE.get(st.status, 'white')}]{escape(st.status)}[/]",
             str(st.last_command_seq),
             f"{x:+.2f}, {y:+.2f}, {math.degrees(yaw):+.0f}°",
             f"{qd:.3f}",
             _age(st, now),
-            st.detail[:60],
+            escape(_clip(st.detail)),
         )
     return table
 
