@@ -6,7 +6,7 @@ STAMP  := $(VENV)/.installed
 # The six distributions of this repository (docs/architecture.md): the core, the platform
 # descriptions and one per role.
 PARTS  := . platforms robots services clients deploy
-# Everything editable, with the extras the tests and `kinesphere up` use (README, "Install").
+# Everything editable, with the extras the tests and `kinesphere up` use (docs/deployment.md).
 EDITABLE := -e '.[test,ros2]' -e platforms -e robots -e services -e clients -e 'deploy[up]'
 SRC    := kinesphere platforms robots services clients deploy tests bench
 export MUJOCO_GL ?= egl

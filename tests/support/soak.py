@@ -1,8 +1,8 @@
 """Helpers for the fuzz and flood tests, which run at two sizes from the same code.
 
 ``make test`` runs them at :data:`SCALE` 1 (a few seconds each); ``make soak`` sets
-``KINESPHERE_SOAK_SCALE`` (default there: 20) and prints each test's tally, the numbers the
-README's "Soak results" quote. Not a test module itself (pytest collects nothing here).
+``KINESPHERE_SOAK_SCALE`` (default there: 20) and prints each test's tally, the numbers
+docs/soak.md quotes. Not a test module itself (pytest collects nothing here).
 """
 
 from __future__ import annotations

@@ -33,7 +33,7 @@ pytestmark = pytest.mark.processes
 # name: (URDF, limb, origin, direction, what the user edits in platform.toml's [neutral])
 ROBOTS = {
     "panda": (PANDA, "arm", "shoulder", "left-high", ""),
-    # the UR5's zero pose is a stretched, singular arm: bend it, as the README says
+    # the UR5's zero pose is a stretched, singular arm: bend it, as docs/byor.md says
     "ur5": (UR5, "arm", "shoulder", "left-high",
             "shoulder_lift_joint = -1.2\nelbow_joint = 1.5\nwrist_1_joint = -1.5\n"),
     "tiago": (TIAGO, "right_arm", "right_shoulder", "left-high", ""),

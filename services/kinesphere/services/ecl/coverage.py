@@ -4,7 +4,7 @@ The paper's promise is one command for every body; what each body honestly keeps
 This module counts, from the shipped databanks, the pulls (of Laban's 26) each (limb, origin)
 pair keeps and the directions that every body with a given limb label shares: a fleet
 command in a shared direction is exact on every robot, any other is substituted on some
-(``fallback``). ``kinesphere ecl coverage`` prints the tables the README shows.
+(``fallback``). ``kinesphere ecl coverage`` prints the tables docs/ecl.md shows.
 """
 
 from __future__ import annotations
@@ -54,7 +54,7 @@ def shared(rows: list[Kept], limb: str) -> tuple[Direction, ...]:
 
 def markdown(platforms: list[str], limbs: tuple[str, ...] = ("limb_11", "limb_12", "limb_13")
              ) -> str:
-    """The README's two coverage tables (per pair, then shared per limb label)."""
+    """docs/ecl.md's two coverage tables (per pair, then shared per limb label)."""
     rows = kept(platforms)
     lines = ["| platform | limb (alias) | origin | pulls kept of 26 | dropped for stability |",
              "|---|---|---|---|---|"]
