@@ -5,14 +5,19 @@ start); killed, nothing (no command, no e-stop) reached the still-running robots
 ``estop`` process had nobody to join. ``status`` in peer mode listed no robot in 5 of 10 runs.
 Now ``kinesphere up`` starts a router child that serves nothing else and everything else joins
 it as a client. This test runs that exact start-up (:class:`kinesphere.deploy.up.Demo`), kills
-the databank and an agent with SIGKILL, and checks that every other process keeps talking.
+the databank and an agent with SIGKILL, and checks that every other process keeps talking; the
+README's five-minute tour (the same shape by hand) is run as written and checked the same way.
 """
 
 from __future__ import annotations
 
 import json
+import re
+import shlex
 import time
+import urllib.request
 from collections.abc import Iterator
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import pytest
@@ -21,12 +26,13 @@ from rich.console import Console
 
 from kinesphere.cli import main
 from kinesphere.deploy.plan import PlannedRobot, UpOptions
-from kinesphere.deploy.procs import Supervisor
+from kinesphere.deploy.procs import Child, Supervisor
 from kinesphere.deploy.up import Demo
 from kinesphere.keyexpr import KEYS
 from kinesphere.protocol import Ack, Command, SpatialCommand, decode, encode
 from kinesphere.zconfig import free_port, loopback_config
-from support.system import Observer, at_pose, databank_args, port_open
+from support.paths import ROOT
+from support.system import Observer, at_pose
 from support.wait import WAIT_S, until
 
 pytestmark = pytest.mark.processes
@@ -126,25 +132,118 @@ def test_kill_any_service_and_the_rest_keep_talking(
     assert status_lists(ep, "client", capsys) == alive
 
 
+@dataclass
+class Step:
+    """One command of the README's tour and the lines the README shows it print."""
 
-def test_quick_start_topology_peers_around_a_router(
+    words: list[str]
+    background: bool
+    shown: list[str] = field(default_factory=list)
+
+
+SETUP = (["make", "install"], [".", ".venv/bin/activate"])
+"""The tour's commands that are not ``kinesphere``: the set-up this suite already ran."""
+NUMBER = re.compile(r"[-+]?\d+(?:\.\d+)?")
+ANSI = re.compile(r"\x1b\[[0-9;]*m")
+
+
+def tour() -> tuple[list[Step], str]:
+    """The console blocks of the README's "A five-minute tour", and the sender it names."""
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    start = text.index("\n## A five-minute tour\n")
+    section = text[start : text.find("\n## ", start + 1)]
+    steps: list[Step] = []
+    for block in re.findall(r"```console\n(.*?)```", section, flags=re.S):
+        for line in block.splitlines():
+            if line.startswith("$ "):
+                words = shlex.split(line[2:], comments=True)
+                background = words[-1] == "&"
+                steps.append(Step(words[:-1] if background else words, background))
+            else:
+                steps[-1].shown.append(line)
+    sender = re.search(r"\(here `([^`]+)`\)", section)
+    assert steps and sender, "the README lost its tour"
+    return steps, sender.group(1)
+
+
+def normal(line: str) -> str:
+    """A line with every number made ``#`` and every run of blanks one space."""
+    return " ".join(NUMBER.sub("#", ANSI.sub("", line)).split())
+
+
+def unprinted(shown: list[str], output: str) -> list[str]:
+    """The lines the README shows that ``output`` lacks (numbers aside; ``…``: anything)."""
+    lines = [normal(line) for line in output.splitlines()]
+    missing = []
+    for line in shown:
+        if not re.search(r"\w", line):
+            continue  # a table's border
+        pattern = re.compile(".*".join(re.escape(part) for part in normal(line).split("…")))
+        if not any(pattern.fullmatch(out) for out in lines):
+            missing.append(line)
+    return missing
+
+
+def log(child: Child, since: int = 0) -> str:
+    """What ``child`` printed (after the first ``since`` bytes of its log)."""
+    with child.log_path.open("rb") as f:
+        f.seek(since)
+        return f.read().decode("utf-8", errors="replace")
+
+
+def wait_printed(sup: Supervisor, child: Child, shown: list[str], since: int = 0) -> None:
+    """Wait until ``child`` printed every line ``shown`` (failing at once if a child died)."""
+
+    def done() -> bool:
+        sup.check()
+        return not unprinted(shown, log(child, since))
+
+    until(done, WAIT_S, f"{child.name} to print what the README shows",
+          explain=lambda: (unprinted(shown, log(child, since)), child.tail()))
+
+
+def test_the_readme_tour_runs_as_written(
     sup: Supervisor, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    """The README's quick start: ``kinesphere router``, then the databank, agents and operator
-    commands with their default (peer) options, here pointed at the router's free port."""
-    port = free_port()
+    """The README's five-minute tour, command by command as processes, each printing what the
+    README shows (the router and the view on free ports instead of 7447 and 8080, which other
+    suites on this machine may hold); then, in that topology, ``status`` lists every live robot
+    every time, as a peer and as a client (before the router: 5 of 10 as a peer), and with the
+    databank killed a new ``estop`` process still reaches every robot."""
+    steps, sender = tour()
+    sup.env["KINESPHERE_SENDER"] = sender
+    port, view_port = free_port(), free_port()
     ep = f"tcp/127.0.0.1:{port}"
-    robots = {"k1", "k2"}
-    sup.spawn("router", ["router", "--listen", ep])
-    until(lambda: sup.check() or port_open(port), WAIT_S, "the router")
-    sup.spawn("databank", ["databank", "serve", *databank_args(["khepera"]), "--connect", ep])
-    for r in sorted(robots):
-        sup.spawn(f"agent-{r}", ["agent", "khepera", "--id", r, "--connect", ep])
+    jobs: list[str] = []
+    for n, step in enumerate(steps):
+        if step.words[0] != "kinesphere":
+            if step.words[0] == "kill":
+                break
+            assert step.words in SETUP, f"the tour runs {step.words}: teach this test to"
+            continue
+        command = step.words[1]
+        args = step.words[1:] + (["--listen", ep] if command == "router" else ["--connect", ep])
+        if command == "view":
+            args += ["--port", str(view_port)]
+        if step.background:
+            jobs.append(command)
+            wait_printed(sup, sup.spawn(command, args), step.shown)
+        else:
+            child = sup.spawn(f"{n}-{command}", args, expect_exit=True)
+            assert sup.wait(child.name, WAIT_S) == 0, log(child)
+            assert not unprinted(step.shown, log(child)), log(child)
+        if command == "view":
+            with urllib.request.urlopen(f"http://127.0.0.1:{view_port}/", timeout=WAIT_S) as page:
+                assert page.status == 200 and b"<html" in page.read(4096).lower()
+    kill = steps[n]
+    assert kill.words == ["kill", *(f"%{i}" for i in range(1, len(jobs) + 1))], (kill, jobs)
+    assert jobs == ["router", "databank", "agent", "view"] and n == len(steps) - 1
+
+    robots = {"yb-1", "k2"}
+    sup.spawn("agent-k2", ["agent", "khepera", "--id", "k2", "--connect", ep])
     obs = Observer(loopback_config(ep))
     try:
         obs.wait_alive(robots, databank=True, sup=sup)
-        # status lists every live robot, 10 runs of 10, as a peer and as a client
-        # (before: 5 of 10 in peer mode)
         for mode in ("peer", "client"):
             runs = [status_lists(ep, mode, capsys) for _ in range(10)]
             assert all(r == robots for r in runs), f"{mode}: {runs}"
@@ -162,5 +261,14 @@ def test_quick_start_topology_peers_around_a_router(
                   explain=lambda: acks.seen)
         finally:
             acks.close()
+        # the databank again, as the tour started it, for the tour's last step
+        bank = next(step for step in steps if step.words[1:2] == ["databank"])
+        before = sup.children["databank"].log_path.stat().st_size  # the log is appended to
+        wait_printed(sup, sup.spawn("databank", bank.words[1:] + ["--connect", ep]), bank.shown,
+                     since=before)
+        assert sup.stop("agent-k2") == 0
     finally:
         obs.close()
+    codes = sup.stop_all()  # the tour's kill: SIGTERM to each, and each stops cleanly
+    assert {job: codes[job] for job in jobs} == dict.fromkeys(jobs, 0), {
+        job: sup.children[job].tail() for job in jobs if codes[job] != 0}
