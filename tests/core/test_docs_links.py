@@ -1,6 +1,7 @@
 """Every relative link in the repository's Markdown reaches a file (and, for ``#fragment``, a
-heading of it, by GitHub's slug rule), and every repository path the docs and the ``--help``
-texts name exists: a newcomer who follows them never lands on nothing.
+heading of it, by GitHub's slug rule), and every repository path, ``kinesphere`` command and
+``make`` target the docs and the ``--help`` texts name exists: a newcomer who follows them never
+lands on nothing. (That the README's tour runs as written is tests/system/test_system_hub.py.)
 
 A *repository path* is a word that starts with one of the repository's top-level folders or
 files (``robots/...``, ``deploy/router.json5``, ``README.md``); ``<name>``, ``{platform}`` and
@@ -15,6 +16,7 @@ import importlib
 import importlib.util
 import os
 import re
+import shlex
 import unicodedata
 from collections.abc import Iterator
 from pathlib import Path
@@ -41,6 +43,10 @@ REFERENCE = re.compile(r"^\s{0,3}\[[^\]]+\]:\s*<?(\S+?)>?(?:\s|$)")
 WORD = re.compile(r"[^\s`'\"()\[\],;|=]+")
 PLACEHOLDER = re.compile(r"<[^>/]*>|\{[^}/]*\}")
 DOTTED = re.compile(r"\bkinesphere(?:\.[A-Za-z_]\w*)+")
+QUOTED_COMMAND = re.compile(r"['`\"](kinesphere [^'`\"]+)['`\"]")
+MAKE_TARGET = re.compile(r"^([A-Za-z][\w-]*)\s*:(?!=)", re.M)
+SHELL_END = frozenset({"&", "|", "&&", "||", ";", ">", ">>", "2>&1"})
+"""Words after which a command line's own words end."""
 
 
 def markdown_files() -> list[Path]:
@@ -213,6 +219,69 @@ def help_texts(monkeypatch: pytest.MonkeyPatch) -> dict[str, str]:
     return {p.prog: p.format_help() for p in parsers(build_parser())}
 
 
+def command_lines(path: Path, program: str) -> Iterator[str]:
+    """The ``program ...`` command lines a Markdown file shows: lines of its code blocks (a
+    console's ``$ `` prompt dropped) and code spans of its prose."""
+    prose, code = split_fences(path.read_text(encoding="utf-8"))
+    for line in code:
+        line = line.strip().removeprefix("$ ")
+        if line.startswith(f"{program} "):
+            yield line
+    for line in prose:
+        for span in CODE_SPAN.finditer(line):
+            if span.group(2).strip().startswith(f"{program} "):
+                yield span.group(2).strip()
+
+
+def sub_commands(parser: argparse.ArgumentParser) -> dict[str, argparse.ArgumentParser]:
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            return dict(action.choices)
+    return {}
+
+
+def unknown_in(line: str, root: argparse.ArgumentParser) -> str | None:
+    """What in the ``kinesphere ...`` command ``line`` names no sub-command or option of
+    ``root`` (a usage line's ``[--opt X]`` counts as ``--opt X``), else None. Words in
+    CAPITALS, ``<placeholders>`` and positionals are the user's: only names are checked."""
+    try:
+        words = shlex.split(line, comments=True)
+    except ValueError:  # an unbalanced quote in a usage line
+        words = line.split()
+    parser, commands_done = root, False
+    options = dict(root._option_string_actions)
+    value_next = False
+    for word in words[1:]:
+        if word in SHELL_END:
+            break
+        word = word.strip("[]")
+        if value_next:  # the value of the option before
+            value_next = False
+            continue
+        if re.match(r"--?[A-Za-z]", word):
+            name, eq, _ = word.partition("=")
+            if name not in options:
+                return f"{parser.prog} has no option {name}"
+            value_next = not eq and options[name].nargs != 0
+            continue
+        choices = sub_commands(parser)
+        if commands_done or not choices:
+            commands_done = True
+            continue
+        if word in choices:
+            parser = choices[word]
+            options |= parser._option_string_actions
+        elif re.fullmatch(r"[a-z][a-z0-9-]*", word):
+            return f"{parser.prog} has no sub-command {word}"
+        else:
+            commands_done = True
+    return None
+
+
+def make_targets() -> set[str]:
+    return set(MAKE_TARGET.findall((ROOT / "Makefile").read_text(encoding="utf-8")))
+
+
 def test_the_checks_see_the_docs_and_every_command(tmp_path: Path) -> None:
     files = {f.relative_to(ROOT).as_posix() for f in markdown_files()}
     assert {"README.md", "docs/architecture.md", "docs/protocol.md", "deploy/README.md"} <= files
@@ -227,6 +296,14 @@ def test_the_checks_see_the_docs_and_every_command(tmp_path: Path) -> None:
     assert module_names("`kinesphere.laban.Direction`, kinesphere.RobotState, kinesphere.env") == {
         "kinesphere.laban.Direction"}
     assert resolves("kinesphere.laban.Direction.parse") and not resolves("kinesphere.laban.Dir")
+    root = build_parser()
+    assert unknown_in("kinesphere ecl bogus ", root) == "kinesphere ecl has no sub-command bogus"
+    assert unknown_in("kinesphere -v send b arm --no", root) == "kinesphere send has no option --no"
+    assert unknown_in("kinesphere --platforms ~/r databank serve --no", root) == (
+        "kinesphere databank serve has no option --no")
+    assert unknown_in("kinesphere replay F [--what commands|states] [--wait 5] &", root) is None
+    assert unknown_in("kinesphere agent baxter --body ros2 --ros2-namespace /b", root) is None
+    assert {"demo", "test", "lint"} <= make_targets() and "VENV" not in make_targets()
     table = tmp_path / "t.md"
     table.write_text("| a | b |\n|---|---|\n| `x \\| y` | z |\n| w |\n", encoding="utf-8")
     assert [(cells, header) for _, cells, header in table_rows(table)] == [
@@ -268,4 +345,31 @@ def test_every_module_the_docs_name_exists() -> None:
     absent = [f"{md.relative_to(ROOT)}: {name}" for md in markdown_files()
               for name in sorted(module_names(md.read_text(encoding="utf-8")))
               if not resolves(name)]
+    assert not absent, "\n".join(absent)
+
+
+def test_every_kinesphere_command_the_docs_name_exists() -> None:
+    root = build_parser()
+    lines = [(md, line) for md in markdown_files() for line in command_lines(md, "kinesphere")]
+    assert len(lines) >= 100, len(lines)
+    wrong = [f"{md.relative_to(ROOT)}: {line}: {why}" for md, line in lines
+             if (why := unknown_in(line, root))]
+    assert not wrong, "\n".join(wrong)
+
+
+def test_every_kinesphere_command_a_help_text_names_exists(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    root = build_parser()
+    wrong = [f"{prog} --help: {found}: {why}"
+             for prog, text in sorted(help_texts(monkeypatch).items())
+             for found in QUOTED_COMMAND.findall(text) if (why := unknown_in(found, root))]
+    assert not wrong, "\n".join(wrong)
+
+
+def test_every_make_target_the_docs_name_exists() -> None:
+    targets = make_targets()
+    absent = [f"{md.relative_to(ROOT)}: {line}" for md in markdown_files()
+              for line in command_lines(md, "make")
+              if shlex.split(line, comments=True)[1] not in targets]
     assert not absent, "\n".join(absent)
