@@ -160,3 +160,31 @@ def _tree_order(root: str, parents: Sequence[str], children: Sequence[str]) -> l
             order.append(i)
             stack.append(children[i])
     return order
+
+
+PIVOT_REACH = 0.05
+"""metres: a joint location's pivot must lie this close to every one of its axes, else it is
+its first joint's anchor."""
+_PULL = 1e-6  # a whisper toward the first anchor: picks the point on a lone or shared axis
+
+
+def pivot(anchors: Sequence[Array], axes: Sequence[Array]) -> Array:
+    """The point a joint location turns about: nearest (least squares) to all of its joints'
+    axis lines ``(anchor, unit axis)``; the first anchor when the group has one joint or the
+    lines miss the point by more than :data:`PIVOT_REACH` (two parallel pitch joints).
+
+    Why: a shoulder's pitch and roll axes meet at the shoulder, but Baxter's elbow group starts
+    with a roll 27 cm before the bend, and its pivot is at the elbow, where a person puts it.
+    """
+    first = np.asarray(anchors[0], dtype=float)
+    if len(anchors) < 2:
+        return first
+    lhs, rhs = _PULL * np.eye(3), _PULL * first
+    for p, a in zip(anchors, axes, strict=True):
+        proj = np.eye(3) - np.outer(a, a)
+        lhs = lhs + proj
+        rhs = rhs + proj @ p
+    point = np.linalg.solve(lhs, rhs)
+    far = max(float(np.linalg.norm((point - p) - ((point - p) @ a) * a))
+              for p, a in zip(anchors, axes, strict=True))
+    return np.asarray(point if far <= PIVOT_REACH else first)
