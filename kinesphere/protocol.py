@@ -34,6 +34,8 @@ MAX_JOINTS: Final = 256
 """Entries in a joint map (``Pose.joints``, ``RecordRequest.joints``)."""
 MAX_TTL_MS: Final = 60_000
 """Largest command watchdog; a robot never moves on one message for longer than a minute."""
+MAX_HEADING: Final = 1000.0
+"""Largest ``Command.heading`` magnitude in radians (any yaw, wound many times)."""
 MAX_INT: Final = 2**63 - 1
 """Every integer on the wire fits SQLite's and C's int64."""
 MAX_PAYLOAD: Final = 64 * 1024
@@ -308,6 +310,14 @@ class Command(Message, tag="command", kw_only=True):
     """Names the clock ``sent_ns`` is read from (the sender's host, until it reboots): a
     robot learns each clock's offset from its first command and times every later one by it,
     whichever session it belongs to."""
+    arrive_ms: Annotated[int, msgspec.Meta(ge=0, le=MAX_TTL_MS)] = 0
+    """When the parts' pose is to be reached: ``arrive_ms`` after ``sent_ns`` (a score's
+    keyframe time). The robot plans its trajectory to arrive then, or as soon after as its
+    limits allow, and says how late in its acks (``Ack.late_ms``); copies of a streamed
+    command count down to the same moment. 0: as fast as the limits allow."""
+    heading: Annotated[float, msgspec.Meta(ge=-MAX_HEADING, le=MAX_HEADING)] | None = None
+    """Turn a mobile base to this yaw (rad, the odometry frame of ``RobotState.base_pose``),
+    arriving with the parts; a fixed base refuses it (``cannot_translate``). None: keep it."""
 
 
 class RobotState(Message, tag="robot_state", kw_only=True):
@@ -405,6 +415,10 @@ class Ack(Message, tag="ack", kw_only=True):
     lease_holder: Name = ""
     words: Words = []
     """Body-vocabulary words of the command this robot answered with another name, and how."""
+    late_ms: NonNegInt = 0
+    """For a command with ``arrive_ms``: how much later than asked the robot reaches its
+    target, in the sender's milliseconds; planned in ``moving``, as it happened in the final
+    stage (``superseded`` before arriving: how late the command that replaced it found it)."""
 
 
 class BodyModel(Message, tag="body_model", kw_only=True):

@@ -110,6 +110,7 @@ class Pending(NamedTuple):
     meaning: Meaning
     lease_holder: str
     stamp_ns: int
+    late_ms: int = 0
 
 
 @dataclass
@@ -120,6 +121,8 @@ class Motion:
     target: Hashable
     meaning: Meaning = PLAIN
     moved: bool = False
+    due: float | None = None
+    """When the motion is to arrive (robot seconds; a command's ``arrive_ms``), else None."""
 
 
 class Acks:
@@ -141,10 +144,13 @@ class Acks:
         self.sent = 0
         self.refused: Counter[str] = Counter()
         """Commands rejected, by error code (whether or not the ack was held back)."""
+        self.late: Callable[[Motion, bool], int] = lambda motion, planned: 0
+        """How late a motion with a ``due`` time arrives, in the sender's ms: as planned at
+        its first step (``planned``), else as it went (set by the agent)."""
         self._pending: list[Pending] = []
 
     def send(self, cmd: Command, stage: AckStage, detail: str = "", *, code: str = "",
-             meaning: Meaning = PLAIN) -> None:
+             meaning: Meaning = PLAIN, late_ms: int = 0) -> None:
         """Tell ``cmd``'s sender ``stage``, within the rate limit (e-stops: always), at the
         next :meth:`flush`, stamped now (when the robot decided, not when it published)."""
         if stage is AckStage.REJECTED:
@@ -152,7 +158,7 @@ class Acks:
         if self.publish is None or not (stage in URGENT or self.limiter.allow(cmd.sender)):
             return
         self._pending.append(Pending(cmd, stage, code, detail, meaning,
-                                     self.lease_holder(), time.time_ns()))
+                                     self.lease_holder(), time.time_ns(), late_ms))
 
     def flush(self) -> None:
         """Publish what :meth:`send` queued. The control loop flushes once the step's
@@ -166,7 +172,7 @@ class Acks:
             try:
                 publish(make_ack(self.robot_id, p.cmd, p.stage, code=p.code, detail=p.detail,
                                  meaning=p.meaning, lease_holder=p.lease_holder,
-                                 stamp_ns=p.stamp_ns))
+                                 stamp_ns=p.stamp_ns, late_ms=p.late_ms))
                 self.sent += 1
             except Exception as exc:  # session closing or congested: the loop goes on
                 log.debug("ack not published: %s", exc)
@@ -176,27 +182,36 @@ class Acks:
         """Those of the followed motion (``RobotState.substitutions``)."""
         return list(self.motion.meaning.substitutions) if self.motion is not None else []
 
-    def follow(self, cmd: Command, target: Hashable, meaning: Meaning = PLAIN) -> None:
-        """``cmd`` is now followed; another motion it replaced is ``superseded``."""
+    def follow(self, cmd: Command, target: Hashable, meaning: Meaning = PLAIN,
+               due: float | None = None) -> None:
+        """``cmd`` is now followed (to arrive at ``due``); another motion it replaced is
+        ``superseded``. A stream of one target keeps the arrival time of its first command
+        (its copies count down to the same moment)."""
         old = self.motion
         if old is not None and old.target == target and (
                 old.cmd.sender, old.cmd.session) == (cmd.sender, cmd.session):
             old.cmd = cmd  # the same stream: the last command gets the final stage
             old.meaning = meaning
             return
-        self.motion = Motion(cmd, target, meaning)
+        self.motion = Motion(cmd, target, meaning, due=due)
         if old is not None:
             self.send(old.cmd, AckStage.SUPERSEDED,
-                      f"command {cmd.seq} from {cmd.sender or '?'} replaced it")
+                      f"command {cmd.seq} from {cmd.sender or '?'} replaced it",
+                      late_ms=self._late(old, False))
+
+    def _late(self, m: Motion, planned: bool) -> int:
+        return self.late(m, planned) if m.due is not None else 0
 
     def stepped(self) -> Command | None:
         """The followed command, the first time a step's setpoint went toward it
-        (acknowledged ``moving``)."""
+        (acknowledged ``moving``, saying how late it will arrive if it has a time)."""
         m = self.motion
         if m is None or m.moved:
             return None
         m.moved = True
-        self.send(m.cmd, AckStage.MOVING)
+        late = self._late(m, True)
+        self.send(m.cmd, AckStage.MOVING, f"arrives {late} ms late" if late else "",
+                  late_ms=late)
         return m.cmd
 
     def end(self, stage: AckStage, detail: str = "") -> None:
@@ -204,12 +219,12 @@ class Acks:
         ``stage``."""
         m, self.motion = self.motion, None
         if m is not None:
-            self.send(m.cmd, stage, detail, meaning=m.meaning)
+            self.send(m.cmd, stage, detail, meaning=m.meaning, late_ms=self._late(m, False))
 
 
 def make_ack(robot_id: str, cmd: Command, stage: AckStage, *, code: str = "", detail: str = "",
              meaning: Meaning = PLAIN, lease_holder: str = "",
-             stamp_ns: int | None = None) -> bytes:
+             stamp_ns: int | None = None, late_ms: int = 0) -> bytes:
     """The encoded Ack for ``cmd`` (detail cut to the protocol's 1024 characters), stamped
     ``stamp_ns`` (default: now)."""
     return encode(Ack(
@@ -217,4 +232,4 @@ def make_ack(robot_id: str, cmd: Command, stage: AckStage, *, code: str = "", de
         code=code, detail=detail[:MAX_TEXT],
         stamp_ns=time.time_ns() if stamp_ns is None else stamp_ns,
         substitutions=list(meaning.substitutions), words=list(meaning.words),
-        lease_holder=lease_holder))
+        lease_holder=lease_holder, late_ms=late_ms))

@@ -83,6 +83,20 @@ class BaseController:
         """Why the last motion was braked instead of followed ("" when it was not)."""
         return self._otg.fault
 
+    @property
+    def remaining(self) -> float:
+        """Seconds until the planned motion arrives (0 at rest or cruising)."""
+        return self._otg.remaining if self.moving and not self.driving else 0.0
+
+    def turn_to(self, yaw: float, duration: float | None = None) -> None:
+        """Turn in place to world heading ``yaw`` (the nearest way round), arriving no sooner
+        than ``duration`` seconds from now; the same heading again changes nothing."""
+        raise NotImplementedError
+
+    def _heading(self, yaw: float, now: float) -> float:
+        """``yaw`` as the equivalent heading nearest ``now`` (a planned yaw is not wrapped)."""
+        return now + wrap_angle(yaw - now)
+
     def reset(self, pose: Sequence[float]) -> None:
         """Start planning from world ``pose`` ``[x, y, yaw]`` (where the body is), at rest."""
         raise NotImplementedError
@@ -143,6 +157,18 @@ class OmniBase(BaseController):
         self._otg.scale(self._share(wx, wy))
         self._otg.go_to([self.pose[0] + wx, self.pose[1] + wy, self.pose[2]],
                         Synchronization.Phase)
+
+    def turn_to(self, yaw: float, duration: float | None = None) -> None:
+        goal = self._otg.target.copy() if self.moving and not self.driving else self.pose.copy()
+        goal[2] = self._heading(yaw, float(self.pose[2]))
+        if self.moving and not self.driving and np.allclose(goal, self._otg.target, atol=1e-9):
+            return
+        if not self.moving and abs(goal[2] - float(self.pose[2])) < 1e-9:
+            return
+        self.driving = False
+        self._follow = None
+        self._otg.scale([1.0, 1.0, 1.0])
+        self._otg.go_to(goal, Synchronization.Phase, duration)
 
     def drive(self, direction: Sequence[float], speed: float) -> None:
         wx, wy = self._world(direction)
@@ -238,10 +264,24 @@ class DiffBase(BaseController):
             self._queue.insert(0, (s, turned))
         self._next()
 
-    def _next(self) -> None:
+    def _next(self, duration: float | None = None) -> None:
         s, yaw = self._queue.pop(0)
         self._otg.scale([1.0, 1.0])
-        self._otg.go_to([s, yaw], Synchronization.Phase)
+        self._otg.go_to([s, yaw], Synchronization.Phase, duration)
+
+    def turn_to(self, yaw: float, duration: float | None = None) -> None:
+        s, now = self._otg.position
+        if self.moving and not self.driving and not self._queue:
+            s = float(self._otg.target[0])
+        heading = self._heading(yaw, float(now))
+        if self.moving and not self.driving and not self._queue and np.allclose(
+                self._otg.target, [s, heading], atol=1e-9):
+            return
+        if not self.moving and abs(heading - float(now)) < 1e-9:
+            return
+        self.driving = False
+        self._queue = [(float(s), heading)]
+        self._next(duration)
 
     def drive(self, direction: Sequence[float], speed: float) -> None:
         fx, fy = float(direction[0]), float(direction[1])

@@ -17,12 +17,12 @@ import logging
 import math
 import time
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Hashable
 
 from kinesphere.errors import KinesphereError
 from kinesphere.protocol import AckStage, Command, LeaseAction, Pose, Status
 from kinesphere.ratelog import RateLog
-from kinesphere.robots.agent.acks import Acks, Meaning
+from kinesphere.robots.agent.acks import Acks, Meaning, Motion
 from kinesphere.robots.agent.base import drive_base
 from kinesphere.robots.agent.controller import BLOCKED_TOL, Controller
 from kinesphere.robots.agent.inbox import Resolved
@@ -50,17 +50,22 @@ class Conduct:
     def __init__(
         self, robot_id: str, controller: Controller, resolver: Resolver,
         on_resolved: Callable[[int, PoseAnswer], None], max_translation_m: float,
+        time_scale: float = 1.0,
     ) -> None:
         self.robot_id = robot_id
         self.controller = controller
         self.platform = controller.platform.name
         self.resolver = resolver
         self.max_translation_m = max_translation_m
+        self.time_scale = time_scale if time_scale > 0 else 1.0
+        """Robot seconds per second of the senders' clocks (the loop's ``speed``; an unpaced
+        loop counts as 1): a command's ``arrive_ms`` is in the sender's time."""
         self._on_resolved = on_resolved
         self.safety = Safety()
         self.lease = Lease()
         self.ordering = Ordering()
         self.acks = Acks(robot_id, lambda: self.lease.holder)
+        self.acks.late = self._late
         self.latencies: deque[tuple[int, int, int]] = deque(maxlen=10_000)
         """(seq, sent_ns, ns when the first setpoint toward it went to the body) per pose
         command applied."""
@@ -77,8 +82,10 @@ class Conduct:
         self._ratelog = RateLog(log)
         self._moved_at = 0.0
         self._aims: dict[int, tuple[Pose, Aim]] = {}
-        self._started: tuple[Command, Pose, PartsKey, list[Clamp]] | None = None
+        self._started: tuple[Command, Pose, PartsKey, list[Clamp], float | None] | None = None
         """The move started this step, its status and acks not yet said (:meth:`_settle`)."""
+        self._waiting_due: float | None = None
+        """When the command waiting for the databank is to arrive (robot seconds)."""
 
     def watch(self, now: float) -> None:
         """The wall-clock timers: an expired lease frees, an expired watchdog holds."""
@@ -161,7 +168,7 @@ class Conduct:
                 self.ordering.acted(cmd.seq)
                 if isinstance(item.answer, KinesphereError):
                     raise item.answer
-                self._apply_pose(item.answer, waiting.yaw, cmd)
+                self._apply_pose(item.answer, waiting.yaw, cmd, due=self._waiting_due)
             elif isinstance(item, KinesphereError):
                 raise item
             else:
@@ -238,7 +245,28 @@ class Conduct:
             self.acks.send(cmd, AckStage.LEASED,
                            f"lease {cmd.lease}: " + (f"held by {holder}" if holder else "free"))
         else:
-            self._move(cmd)
+            self._move(cmd, self._due(cmd, now_ns - item.mono_ns))
+
+    def _due(self, cmd: Command, age_ns: int) -> float | None:
+        """When ``cmd`` is to arrive in robot time: ``arrive_ms`` after it was sent (its age
+        here counts as gone), None when it sets no time."""
+        if cmd.arrive_ms <= 0:
+            return None
+        left = max(0.0, cmd.arrive_ms / 1e3 - age_ns / 1e9)
+        return self.controller.time + left * self.time_scale
+
+    def _late(self, motion: Motion, planned: bool) -> int:
+        """Milliseconds (the sender's) by which ``motion`` arrives after its due time: as
+        planned when it starts, else as it went (still under way: late by now, at least)."""
+        ctrl = self.controller
+        if motion.due is None:
+            return 0
+        if planned:
+            arrival = ctrl.time + ctrl.dt + ctrl.remaining
+        else:
+            arrival = ctrl.time if ctrl.moving else self._moved_at
+        late = max(0.0, arrival - motion.due - ctrl.dt) / self.time_scale
+        return round(late * 1e3)
 
     def _latched(self, cmd: Command) -> str:
         """Why ``cmd`` is refused while an e-stop is latched."""
@@ -259,9 +287,16 @@ class Conduct:
                           code="lease_held")
         self._holders = {self.lease.holder: cmd}
 
-    def _move(self, cmd: Command) -> None:
+    def _move(self, cmd: Command, due: float | None = None) -> None:
         ctrl = self.controller
         base = ctrl.base
+        if cmd.heading is not None:
+            if base is None:
+                raise KinesphereError("cannot_translate", f"{self.platform} has a fixed base: "
+                                      "it cannot turn to a heading")
+            if cmd.drive is not None:
+                raise KinesphereError("malformed", "a command turns the base to a heading or "
+                                      "drives it, not both")
         if cmd.drive is not None:
             self.set(Status.MOVING, drive_base(base, cmd.drive, self.platform))
         elif base is not None and base.driving:
@@ -271,6 +306,10 @@ class Conduct:
         if not cmd.parts:
             if cmd.drive is not None:
                 self.acks.follow(cmd, _DRIVE)
+            elif cmd.heading is not None and base is not None:
+                self._overtake()
+                base.turn_to(cmd.heading, self._duration(due))
+                self.acks.follow(cmd, ("heading", cmd.heading), due=due)
             self.acks.send(cmd, AckStage.ACCEPTED)
             return
         key = parts_key(cmd.parts)
@@ -279,15 +318,20 @@ class Conduct:
         if hit is not None:
             self._overtake()
             self.ordering.acted(cmd.seq)
-            self._apply_pose(hit, yaw, cmd, key)
+            self._apply_pose(hit, yaw, cmd, key, due)
         else:
             ticket, overtaken = self.ordering.wait(cmd, yaw)
+            self._waiting_due = due
             if overtaken is not None:
                 self.acks.send(overtaken.cmd, AckStage.SUPERSEDED, "a newer command arrived first")
             self.resolver.submit(ticket, key, self._on_resolved)
 
+    def _duration(self, due: float | None) -> float | None:
+        """Robot seconds from now until ``due`` (None: as fast as the limits allow)."""
+        return None if due is None else max(0.0, due - self.controller.time)
+
     def _apply_pose(self, pose: Pose, yaw: float | None, cmd: Command,
-                    key: PartsKey | None = None) -> None:
+                    key: PartsKey | None = None, due: float | None = None) -> None:
         ctrl = self.controller
         key = parts_key(cmd.parts) if key is None else key
         if pose.platform != self.platform:
@@ -298,8 +342,8 @@ class Conduct:
                 raise KinesphereError(
                     "size_out_of_range", f"the pose translates the base {far:.4g} m; this "
                     f"robot moves at most {self.max_translation_m:g} m per command")
-        try:
-            clamps = ctrl.move(self._aim(pose))  # checked by the guard, waypoints if needed
+        try:  # checked by the guard, waypoints if needed
+            clamps = ctrl.move(self._aim(pose), self._duration(due))
         except (KeyError, ValueError) as exc:
             raise KinesphereError(
                 "internal", f"databank pose has joints {self.platform} cannot take: {exc}"
@@ -307,14 +351,16 @@ class Conduct:
         refused = ctrl.guard.fault if ctrl.guard is not None else ""
         if refused:  # the target the guard halted or refused, again: said again, not retried
             meaning = Meaning.of(pose)
-            self.acks.follow(cmd, key, meaning)
+            self.acks.follow(cmd, _target(key, cmd), meaning)
             self.acks.send(cmd, AckStage.ACCEPTED, meaning=meaning)
             self.acks.end(AckStage.BLOCKED, refused)
             self.set(Status.ERROR, f"{refused} and holding")
             return
         if pose.translation is not None and ctrl.base is not None and not ctrl.base.driving:
             ctrl.base.translate(pose.translation, yaw)
-        self._started = (cmd, pose, key, clamps)
+        if cmd.heading is not None and ctrl.base is not None:
+            ctrl.base.turn_to(cmd.heading, self._duration(due))
+        self._started = (cmd, pose, key, clamps, due)
 
     def _settle(self) -> None:
         """Say what the move started this step is: status, followed motion, ``accepted``.
@@ -327,7 +373,7 @@ class Conduct:
         started, self._started = self._started, None
         if started is None:
             return
-        cmd, pose, key, clamps = started
+        cmd, pose, key, clamps, due = started
         beyond = [c for c in clamps if c.beyond]
         if beyond:
             detail = "clamped " + ", ".join(f"{c.joint} {c.requested:+.4f}->{c.target:+.4f}"
@@ -337,7 +383,7 @@ class Conduct:
             detail = f"to {pose.limb}/{pose.origin}/{pose.direction}/{pose.size:g}"
         self.set(Status.MOVING, detail)
         meaning = Meaning.of(pose)
-        self.acks.follow(cmd, key, meaning)
+        self.acks.follow(cmd, _target(key, cmd), meaning, due)
         self.acks.send(cmd, AckStage.ACCEPTED, detail, meaning=meaning)
 
     def _aim(self, pose: Pose) -> Aim:
@@ -379,3 +425,9 @@ class Conduct:
             blocked=lambda: ctrl.blocked(BLOCKED_TOL),
         )
         return reported
+
+
+def _target(key: PartsKey, cmd: Command) -> Hashable:
+    """What a motion goes to: the parts, and the heading when the command turns the base
+    (a keyframe that only turns is another motion)."""
+    return key if cmd.heading is None else (key, cmd.heading)

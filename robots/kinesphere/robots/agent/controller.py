@@ -55,13 +55,21 @@ class Controller:
         """A trajectory, drive or stop is still being followed."""
         return self.joints.moving or (self.base is not None and self.base.moving)
 
-    def move(self, joints: Mapping[str, float] | Aim) -> list[Clamp]:
-        """Retarget the named joints (or a compiled :class:`Aim`): through the guard
-        (checked, via waypoints when the straight way touches something) when there is one."""
+    def move(self, joints: Mapping[str, float] | Aim, duration: float | None = None
+             ) -> list[Clamp]:
+        """Retarget the named joints (or a compiled :class:`Aim`), arriving no sooner than
+        ``duration`` seconds from now when given: through the guard (checked, via waypoints
+        when the straight way touches something) when there is one."""
         aim = joints if isinstance(joints, Aim) else self.joints.aim(joints)
         if self.guard is None:
-            return self.joints.retarget(aim)
-        return self.guard.move(self.joints, aim)
+            return self.joints.retarget(aim, duration=duration)
+        return self.guard.move(self.joints, aim, duration)
+
+    @property
+    def remaining(self) -> float:
+        """Seconds until the joints and the base arrive, as planned (0 at rest)."""
+        base = self.base.remaining if self.base is not None else 0.0
+        return max(self.joints.remaining, base)
 
     def step(self) -> None:
         """One control cycle: trajectories forward, body commanded, body stepped."""

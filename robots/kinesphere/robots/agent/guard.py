@@ -110,15 +110,17 @@ class Guard:
                 lambda: self._closed or (self._asked is None and not self._busy), timeout)
 
     # --- control thread ----------------------------------------------------------------------
-    def move(self, joints: JointTrajectory, aim: Aim) -> list[Clamp]:
-        """Start toward ``aim`` at once and have the way there checked; the target of the
-        move under way again changes nothing (not even a halt it came to)."""
+    def move(self, joints: JointTrajectory, aim: Aim, duration: float | None = None
+             ) -> list[Clamp]:
+        """Start toward ``aim`` at once (arriving no sooner than ``duration`` s) and have the
+        way there checked; the target of the move under way again changes nothing (not even
+        a halt it came to, nor its arrival time)."""
         goal = self._goal
         if goal is not None and not joints.fault and goal[aim.index].tolist() == aim.targets:
             return list(aim.clamps)
         start = joints.position.copy()
         base = goal if goal is not None and self.legs else None  # not a waypoint's joints
-        clamps = joints.retarget(aim, straight=True, base=base)
+        clamps = joints.retarget(aim, straight=True, base=base, duration=duration)
         self._goal = joints.target.copy()
         self.legs = []
         self.fault = ""

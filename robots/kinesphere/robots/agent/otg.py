@@ -85,6 +85,9 @@ class Otg:
         self.braking = False
         self.fault = ""
         """Why the last motion was braked instead of followed; "" when it was not."""
+        self.remaining = 0.0
+        """Seconds the motion planned last still takes from the latest output (Ruckig's
+        trajectory duration, counted from the step that planned it)."""
         self._why = ""
         self._otg = Ruckig(n, dt)
         self._inp = InputParameter(n)
@@ -117,12 +120,15 @@ class Otg:
         self._inp.max_acceleration = [a * k for a, k in zip(self.amax, s, strict=True)]
         self._inp.max_jerk = [j * k for j, k in zip(self.jmax, s, strict=True)]
 
-    def go_to(self, target: Values,
-              sync: Synchronization = Synchronization.Time) -> None:
-        """Reach ``target`` at rest."""
+    def go_to(self, target: Values, sync: Synchronization = Synchronization.Time,
+              duration: float | None = None) -> None:
+        """Reach ``target`` at rest, taking at least ``duration`` seconds when given (Ruckig's
+        minimum duration: a motion that could be quicker arrives then, one that cannot
+        arrives as soon as the limits allow)."""
         self.target[:] = target
         self._plan(ControlInterface.Position, sync)
         self._inp.target_position = self.target.tolist()
+        self._inp.minimum_duration = duration if duration is not None and duration > 0 else None
 
     def go_at(self, velocity: Values,
               sync: Synchronization = Synchronization.Phase) -> None:
@@ -138,6 +144,7 @@ class Otg:
     def _plan(self, interface: ControlInterface, sync: Synchronization) -> None:
         self._inp.control_interface = interface
         self._inp.synchronization = sync
+        self._inp.minimum_duration = None
         self.active = self.n > 0  # Ruckig cannot step zero DoFs
         self.braking = False
         self.fault = ""
@@ -158,6 +165,10 @@ class Otg:
         if result is None:
             return self._hold()
         out = self._out
+        if out.new_calculation:
+            self.remaining = max(0.0, out.trajectory.duration - out.time)
+        else:
+            self.remaining = max(0.0, self.remaining - self.dt)
         self.position[:] = out.new_position
         self.velocity[:] = out.new_velocity
         self.acceleration[:] = out.new_acceleration
@@ -184,6 +195,7 @@ class Otg:
         """A profile Ruckig refused: loosen it (full limits, no synchronisation), else brake."""
         inp = self._inp
         self.scale([1.0] * self.n)
+        inp.minimum_duration = None
         if inp.synchronization != Synchronization.No:
             inp.synchronization = Synchronization.No
             result = self._update()
@@ -216,6 +228,7 @@ class Otg:
             self.target[:] = self.position
         self.active = False
         self.braking = False
+        self.remaining = 0.0
         inp = self._inp
         inp.control_interface = ControlInterface.Position
         inp.synchronization = Synchronization.Time

@@ -87,7 +87,8 @@ class Agent:
         self.resolver = Resolver(session, self.platform, self.keys, self.options.query_timeout_s)
         self.inbox = Inbox(wake)
         self.conduct = Conduct(robot_id, self.controller, self.resolver,
-                               self.inbox.put_resolved, self.options.max_translation_m)
+                               self.inbox.put_resolved, self.options.max_translation_m,
+                               self.options.speed)
         self.stats = LoopStats()
         self.last_state: RobotState | None = None
         self._ratelog = RateLog(log)

@@ -141,6 +141,11 @@ class JointTrajectory:
         """Why the last motion was braked instead of followed ("" when it was not)."""
         return self._otg.fault
 
+    @property
+    def remaining(self) -> float:
+        """Seconds until the motion under way arrives, as planned (0 at rest)."""
+        return self._otg.remaining if self._otg.active else 0.0
+
     def clamp(self, joints: Mapping[str, float]) -> tuple[dict[str, float], list[Clamp]]:
         """``joints`` inside the limits with margin, and the joints that had to move."""
         out: dict[str, float] = {}
@@ -173,13 +178,14 @@ class JointTrajectory:
             {c.joint: c for c in clamps if c.beyond})
 
     def retarget(self, joints: Mapping[str, float] | Aim, straight: bool = False,
-                 base: np.ndarray | None = None) -> list[Clamp]:
+                 base: np.ndarray | None = None, duration: float | None = None) -> list[Clamp]:
         """Move the named joints to ``joints`` (clamped); the others keep their last target
         (or go to ``base``'s, every joint in P order: the guard's goal past a waypoint).
 
         ``straight``: phase-synchronised, so a move from rest follows the straight line in
-        joint space (what the guard checked). Unknown joint names (KeyError) and non-finite
-        values (ValueError) change nothing.
+        joint space (what the guard checked). ``duration``: arrive no sooner (a score's
+        keyframe time; later when the limits allow no quicker). Unknown joint names
+        (KeyError) and non-finite values (ValueError) change nothing.
         """
         aim = joints if isinstance(joints, Aim) else self.aim(joints)
         goal = (self.target if base is None else base).copy()
@@ -191,7 +197,8 @@ class JointTrajectory:
         if aim.beyond:
             clamped.update(aim.beyond)
         if self.dof:
-            self._otg.go_to(goal, Synchronization.Phase if straight else Synchronization.Time)
+            self._otg.go_to(goal, Synchronization.Phase if straight else Synchronization.Time,
+                            duration)
         return list(aim.clamps)
 
     def go_to(self, q: np.ndarray) -> None:
