@@ -24,6 +24,7 @@ from pathlib import Path
 import pytest
 
 from kinesphere.cli import build_parser
+from support.names import MISSING, resolve
 from support.paths import ROOT
 
 TOP_DIRS = ("kinesphere", "platforms", "robots", "services", "clients", "deploy", "tests",
@@ -187,22 +188,6 @@ def module_names(text: str) -> set[str]:
             if importlib.util.find_spec(".".join(name.split(".")[:2])) is not None}
 
 
-def resolves(dotted: str) -> bool:
-    """Whether the longest importable prefix of ``dotted`` has the attributes that follow."""
-    parts = dotted.split(".")
-    for cut in range(len(parts), 1, -1):
-        try:
-            obj: object = importlib.import_module(".".join(parts[:cut]))
-        except ModuleNotFoundError:
-            continue
-        for attr in parts[cut:]:
-            if not hasattr(obj, attr):
-                return False
-            obj = getattr(obj, attr)
-        return True
-    return False
-
-
 def parsers(parser: argparse.ArgumentParser) -> Iterator[argparse.ArgumentParser]:
     """``parser`` and every sub-command's parser below it."""
     yield parser
@@ -295,7 +280,8 @@ def test_the_checks_see_the_docs_and_every_command(tmp_path: Path) -> None:
     assert missing("services/ecl/data/<platform>.sqlite") and not missing("deploy/certs/ca.pem")
     assert module_names("`kinesphere.laban.Direction`, kinesphere.RobotState, kinesphere.env") == {
         "kinesphere.laban.Direction"}
-    assert resolves("kinesphere.laban.Direction.parse") and not resolves("kinesphere.laban.Dir")
+    assert resolve("kinesphere.laban.Direction.parse") is not MISSING
+    assert resolve("kinesphere.laban.Dir") is MISSING
     root = build_parser()
     assert unknown_in("kinesphere ecl bogus ", root) == "kinesphere ecl has no sub-command bogus"
     assert unknown_in("kinesphere -v send b arm --no", root) == "kinesphere send has no option --no"
@@ -344,7 +330,7 @@ def test_every_table_row_has_the_cells_of_its_header() -> None:
 def test_every_module_the_docs_name_exists() -> None:
     absent = [f"{md.relative_to(ROOT)}: {name}" for md in markdown_files()
               for name in sorted(module_names(md.read_text(encoding="utf-8")))
-              if not resolves(name)]
+              if resolve(name) is MISSING]
     assert not absent, "\n".join(absent)
 
 

@@ -4,10 +4,10 @@ lists exactly the modules that exist, with their layer; the main loops it names 
 
 from __future__ import annotations
 
-import importlib
 import re
 import tomllib
 
+from support.names import MISSING, resolve
 from support.paths import ROOT
 
 DOC = ROOT / "docs" / "architecture.md"
@@ -57,25 +57,11 @@ def test_module_map_lists_exactly_the_modules_of_the_tree_with_their_layer() -> 
     assert all(holds.strip() for _, _, holds in rows)
 
 
-def _resolve(dotted: str) -> object:
-    """``a.b.c.Name.attr``: the longest importable module prefix, then attributes."""
-    parts = dotted.split(".")
-    for cut in range(len(parts), 0, -1):
-        try:
-            obj: object = importlib.import_module(".".join(parts[:cut]))
-        except ModuleNotFoundError:
-            continue
-        for attr in parts[cut:]:
-            obj = getattr(obj, attr)
-        return obj
-    raise AssertionError(f"{dotted} names no module")
-
-
 def test_every_main_loop_and_module_the_processes_table_names_exists() -> None:
     names = re.findall(r"`(kinesphere\.[\w.]+)`", section("Processes and their main loops"))
     assert len(names) >= 8
     for dotted in names:
-        assert _resolve(dotted) is not None, dotted
+        assert resolve(dotted) is not MISSING, dotted
 
 
 def test_the_core_contract_lists_every_core_module() -> None:
