@@ -10,7 +10,6 @@ one of their own, so a querier inventing keys can neither grow memory nor evict 
 from __future__ import annotations
 
 import threading
-from collections import OrderedDict
 from collections.abc import Hashable
 from dataclasses import dataclass
 from typing import Final, NamedTuple
@@ -19,6 +18,7 @@ import msgspec
 import zenoh
 
 from kinesphere.errors import KinesphereError
+from kinesphere.lru import Lru
 from kinesphere.protocol import MAX_PAYLOAD, Error, encode
 
 ANSWER_BYTES: Final = 32 * 1024 * 1024
@@ -105,54 +105,44 @@ def entry_bytes(key: Hashable, answer: EncodedReply) -> int:
 
 
 class ReplyCache:
-    """Answers by request (key text, or key and payload), bounded in bytes, least recently
-    used evicted first, all dropped when a databank changes.
+    """Answers by request (key text, or key and payload), bounded in bytes (:func:`entry_bytes`
+    each), least recently used evicted first, all dropped when a databank changes.
 
-    Readers call :meth:`get` without a lock (dict reads and ``move_to_end`` are atomic under
-    the GIL). A writer passes the :attr:`generation` it read before computing, so an answer
-    computed from the old databank while a record was swapping it in is never stored.
-    :meth:`put` returns the answer, so a miss reads ``return cache.put(key, compute(), g)``.
-    An answer bigger than a quarter of the budget is not cached at all.
+    Readers call :meth:`get` without a lock (:meth:`kinesphere.lru.Lru.get`). A writer passes
+    the :attr:`generation` it read before computing, so an answer computed from the old
+    databank while a record was swapping it in is never stored. :meth:`put` returns the
+    answer, so a miss reads ``return cache.put(key, compute(), g)``. An answer bigger than a
+    quarter of the budget is not cached at all.
     """
 
     def __init__(self, max_bytes: int) -> None:
-        self._answers: OrderedDict[Hashable, EncodedReply] = OrderedDict()
+        if max_bytes < 4 * ENTRY_BYTES:
+            raise ValueError(f"a reply cache needs at least {4 * ENTRY_BYTES} bytes, got "
+                             f"{max_bytes}")
+        # no entry costs less than ENTRY_BYTES: the byte budget bounds the count too
+        self._answers: Lru[Hashable, EncodedReply] = Lru(
+            max_bytes // ENTRY_BYTES, max_bytes, entry_bytes, largest=max_bytes // 4)
+        self.get = self._answers.get
+        """``get(key)``: the answer (now the most recently used), or None."""
         self.max_bytes = max_bytes
-        self.bytes = 0
-        """Bytes charged (:func:`entry_bytes`) by the answers held now."""
         self._lock = threading.Lock()
         self.generation = 0
 
     def __len__(self) -> int:
         return len(self._answers)
 
-    def get(self, key: Hashable) -> EncodedReply | None:
-        answer = self._answers.get(key)
-        if answer is not None:
-            try:
-                self._answers.move_to_end(key)
-            except KeyError:  # evicted by another thread meanwhile
-                pass
-        return answer
+    @property
+    def bytes(self) -> int:
+        """Bytes charged (:func:`entry_bytes`) by the answers held now."""
+        return self._answers.bytes
 
     def put(self, key: Hashable, answer: EncodedReply, generation: int) -> EncodedReply:
-        cost = entry_bytes(key, answer)
-        if cost > self.max_bytes // 4:
-            return answer
         with self._lock:
             if generation == self.generation:
-                old = self._answers.pop(key, None)
-                if old is not None:
-                    self.bytes -= entry_bytes(key, old)
-                while self._answers and self.bytes + cost > self.max_bytes:
-                    k, a = self._answers.popitem(last=False)
-                    self.bytes -= entry_bytes(k, a)
-                self._answers[key] = answer
-                self.bytes += cost
+                self._answers.put(key, answer)
         return answer
 
     def invalidate(self) -> None:
         with self._lock:
             self.generation += 1
             self._answers.clear()
-            self.bytes = 0
