@@ -20,6 +20,7 @@ from collections import deque
 from collections.abc import Callable, Hashable
 
 from kinesphere.errors import KinesphereError
+from kinesphere.lru import Lru
 from kinesphere.protocol import AckStage, Command, LeaseAction, Pose, Status
 from kinesphere.ratelog import RateLog
 from kinesphere.robots.agent.acks import Acks, Meaning, Motion
@@ -81,7 +82,7 @@ class Conduct:
         self._body_fault = False
         self._ratelog = RateLog(log)
         self._moved_at = 0.0
-        self._aims: dict[int, tuple[Pose, Aim]] = {}
+        self._aims: Lru[int, tuple[Pose, Aim]] = Lru(AIMS_KEPT)
         self._started: tuple[Command, Pose, PartsKey, list[Clamp], float | None] | None = None
         """The move started this step, its status and acks not yet said (:meth:`_settle`)."""
         self._waiting_due: float | None = None
@@ -390,13 +391,11 @@ class Conduct:
         """``pose`` compiled for this robot's joints, once per pose: the resolver hands out
         the same Pose for every hit on its cache, so a repeated or alternating command skips
         the per-joint checks and clamps on its way to the first setpoint."""
-        entry = self._aims.get(id(pose))
+        entry = self._aims.peek(id(pose))
         if entry is not None and entry[0] is pose:  # the entry holds the pose: its id is its own
             return entry[1]
         aim = self.controller.joints.aim(pose.joints)
-        if len(self._aims) >= AIMS_KEPT:
-            del self._aims[next(iter(self._aims))]
-        self._aims[id(pose)] = (pose, aim)
+        self._aims.put(id(pose), (pose, aim))
         return aim
 
     def _overtake(self) -> None:

@@ -9,7 +9,8 @@ unreachable cached poses keep working (they are the best knowledge there is). Th
 also puts on ``{p}/ecl/{platform}/changed`` after every record, which triggers a re-read.
 
 The cache is bounded in bytes (:data:`CACHE_BYTES`, each answer charged its encoded size and
-its key), least recently used first out: fractional sizes make the keys unbounded in number.
+its key, reckoned once on the worker), least recently used first out: fractional sizes make the
+keys unbounded in number.
 
 Why a worker thread: a Zenoh ``get`` blocks and must never run in the control loop or in a
 Zenoh callback. Requests are coalesced (only the newest pending one matters: an operator who
@@ -30,7 +31,6 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections import OrderedDict
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, TypeVar
@@ -40,6 +40,7 @@ import zenoh
 from kinesphere.errors import KinesphereError
 from kinesphere.keyexpr import Keys
 from kinesphere.laban import Direction
+from kinesphere.lru import Lru
 from kinesphere.protocol import (
     Catalogue,
     CompoundRequest,
@@ -66,10 +67,12 @@ ENTRY_BYTES = 128
 
 
 PartKey = tuple[str, str, str, float, bool]
-_CANONICAL: dict[tuple[str, str, str, float, bool], PartKey] = {}
 CANONICAL_ENTRIES = 4096
 """Spellings of parts remembered with their canonical key (names are at most 64 characters:
-about 1 MB at most); the table starts over when full."""
+about 1 MB at most), the first remembered forgotten first."""
+_CANONICAL: Lru[tuple[str, str, str, float, bool], PartKey] = Lru(CANONICAL_ENTRIES)
+"""Written by control loops only; agents' loops in threads of one process may race on it,
+which can only forget a spelling early (every value is a function of its key)."""
 
 
 def parts_key(parts: Sequence[SpatialCommand]) -> PartsKey:
@@ -79,14 +82,12 @@ def parts_key(parts: Sequence[SpatialCommand]) -> PartsKey:
     key = []
     for p in parts:
         spelled = (p.limb, p.origin, p.direction, p.size, p.exact)
-        canonical = _CANONICAL.get(spelled)
+        canonical = _CANONICAL.peek(spelled)
         if canonical is None:
             check_spatial(p)
             canonical = (p.limb, p.origin, Direction.parse(p.direction).slug, float(p.size),
                          p.exact)
-            if len(_CANONICAL) >= CANONICAL_ENTRIES:
-                _CANONICAL.clear()
-            _CANONICAL[spelled] = canonical
+            _CANONICAL.put(spelled, canonical)
         key.append(canonical)
     return tuple(key)
 
@@ -94,6 +95,14 @@ def parts_key(parts: Sequence[SpatialCommand]) -> PartsKey:
 def _charge(key: PartsKey, pose: Pose) -> int:
     return ENTRY_BYTES + len(encode(pose)) + sum(len(a) + len(b) + len(c) + 16
                                                  for a, b, c, _, _ in key)
+
+
+Charged = tuple[Pose, int]
+"""A cached pose and its charge (:func:`_charge`), reckoned before the cache's lock is taken."""
+
+
+def _charged(key: PartsKey, kept: Charged) -> int:
+    return kept[1]
 
 
 @dataclass
@@ -131,10 +140,8 @@ class Resolver:
         self.reachable: bool | None = None  # None until the first answer or failure
         self.last_error = ""
         self.queries = 0  # round trips made for poses (cache misses), for tests and benches
-        self.cache_bytes = cache_bytes
-        self.cached_bytes = 0
-        """Bytes charged by the poses cached now."""
-        self._cache: OrderedDict[PartsKey, tuple[Pose, int]] = OrderedDict()
+        self._cache: Lru[PartsKey, Charged] = Lru(max(1, cache_bytes // ENTRY_BYTES),
+                                                  cache_bytes, _charged)
         self._lock = threading.Lock()
         self._wake = threading.Condition(self._lock)
         self._pending: _Request | None = None
@@ -167,7 +174,7 @@ class Resolver:
         """A record happened: forget now (a command right behind must miss the cache), and let
         the worker re-read the catalogue for the new version."""
         with self._wake:
-            self._forget()
+            self._cache.clear()
             self.version = None
             self._stale = True
             self._wake.notify()
@@ -187,31 +194,25 @@ class Resolver:
         """The answer for ``key`` if this databank version already gave it."""
         with self._lock:
             hit = self._cache.get(key)
-            if hit is None:
-                return None
-            self._cache.move_to_end(key)
-            return hit[0]
+        return None if hit is None else hit[0]
 
     def __len__(self) -> int:
         return len(self._cache)
 
-    def _forget(self) -> None:
-        """Empty the cache (the caller holds the lock)."""
-        self._cache = OrderedDict()
-        self.cached_bytes = 0
+    @property
+    def cache_bytes(self) -> int:
+        """Budget of the pose cache (a smaller one applies from the next answer cached)."""
+        return self._cache.max_bytes
 
-    def _keep(self, key: PartsKey, pose: Pose) -> None:
-        """Cache ``pose`` (the caller holds the lock), evicting the least recently used."""
-        cost = _charge(key, pose)
-        if cost > self.cache_bytes:
-            return
-        old = self._cache.pop(key, None)
-        if old is not None:
-            self.cached_bytes -= old[1]
-        while self._cache and self.cached_bytes + cost > self.cache_bytes:
-            self.cached_bytes -= self._cache.popitem(last=False)[1][1]
-        self._cache[key] = (pose, cost)
-        self.cached_bytes += cost
+    @cache_bytes.setter
+    def cache_bytes(self, budget: int) -> None:
+        with self._lock:
+            self._cache.max_bytes = budget
+
+    @property
+    def cached_bytes(self) -> int:
+        """Bytes charged by the poses cached now."""
+        return self._cache.bytes
 
     def submit(self, ticket: int, key: PartsKey, callback: Callback) -> None:
         """Resolve ``key`` in the worker; ``callback(ticket, pose or error)`` runs there.
@@ -264,7 +265,7 @@ class Resolver:
                 log.info("databank %s changed version %s -> %s; cache cleared",
                          self.platform, self.version, cat.version)
             with self._lock:
-                self._forget()
+                self._cache.clear()
             self.version = cat.version
         self.catalogue = cat
         self._reached()
@@ -302,8 +303,9 @@ class Resolver:
         self._reached()
         self.queries += 1
         if version is not None and version == self.version:
+            kept = (pose, _charge(key, pose))
             with self._lock:
-                self._keep(key, pose)
+                self._cache.put(key, kept)
         return pose
 
     def _may_solve(self, key: PartsKey) -> bool:
