@@ -16,11 +16,12 @@ from __future__ import annotations
 
 import logging
 import time
-from collections import Counter, OrderedDict
+from collections import Counter
 from collections.abc import Callable, Hashable
 from dataclasses import dataclass
 from typing import NamedTuple
 
+from kinesphere.lru import Lru
 from kinesphere.protocol import (
     MAX_TEXT,
     Ack,
@@ -51,7 +52,7 @@ class AckLimiter:
 
     def __init__(self, clock: Callable[[], float] = time.monotonic) -> None:
         self._clock = clock
-        self._buckets: OrderedDict[Hashable, list[float]] = OrderedDict()
+        self._buckets: Lru[Hashable, list[float]] = Lru(MAX_BUCKETS)
         self._total = [TOTAL_BURST, clock()]
         self.held = 0
         """Acks not published because a bucket was empty."""
@@ -72,10 +73,7 @@ class AckLimiter:
         now = self._clock()
         bucket = self._buckets.get(sender)
         if bucket is None:
-            bucket = self._buckets[sender] = [SENDER_BURST, now]
-            while len(self._buckets) > MAX_BUCKETS:
-                self._buckets.popitem(last=False)
-        self._buckets.move_to_end(sender)
+            bucket = self._buckets.put(sender, [SENDER_BURST, now])
         ok = self._take(bucket, now, SENDER_RATE, SENDER_BURST) and self._take(
             self._total, now, TOTAL_RATE, TOTAL_BURST)
         if not ok:
