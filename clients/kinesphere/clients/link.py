@@ -36,7 +36,7 @@ import socket
 import threading
 import time
 import uuid
-from collections import OrderedDict, deque
+from collections import deque
 from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -49,6 +49,7 @@ from kinesphere import zconfig
 from kinesphere.clients import targets as tg
 from kinesphere.errors import KinesphereError, did_you_mean
 from kinesphere.keyexpr import Keys
+from kinesphere.lru import Lru
 from kinesphere.protocol import (
     MAX_NAME,
     Ack,
@@ -218,8 +219,8 @@ class RobotLink:
         self._sequencer: Sequencer | None = None
         self._lock = threading.RLock()  # wait_for predicates read states under it
         self._publishers: dict[tuple[str, bool], zenoh.Publisher] = {}
-        self._states: OrderedDict[str, Seen] = OrderedDict()
-        self._answers: OrderedDict[str, deque[AckAnswer]] = OrderedDict()
+        self._states: Lru[str, Seen] = Lru(MAX_ROBOTS)
+        self._answers: Lru[str, deque[AckAnswer]] = Lru(MAX_ROBOTS)
         self._alive: set[str] = set()
         self._catalogues: dict[str, Catalogue] = {}
         self.catalogue_epoch = 0
@@ -274,10 +275,7 @@ class RobotLink:
         if st is None:
             return
         with self.changed:
-            self._states[st.robot_id] = Seen(st, time.monotonic())
-            self._states.move_to_end(st.robot_id)
-            while len(self._states) > MAX_ROBOTS:
-                self._states.popitem(last=False)
+            self._states.put(st.robot_id, Seen(st, time.monotonic()))
             self.changed.notify_all()
 
     def _on_ack(self, sample: zenoh.Sample) -> None:
@@ -291,10 +289,7 @@ class RobotLink:
                 self._renew(ack)
             box = self._answers.get(ack.robot_id)
             if box is None:
-                box = self._answers[ack.robot_id] = deque(maxlen=ACKS_PER_ROBOT)
-                while len(self._answers) > MAX_ROBOTS:
-                    self._answers.popitem(last=False)
-            self._answers.move_to_end(ack.robot_id)
+                box = self._answers.put(ack.robot_id, deque(maxlen=ACKS_PER_ROBOT))
             box.append(AckAnswer(ack, time.monotonic()))
             self.changed.notify_all()
 
@@ -331,7 +326,7 @@ class RobotLink:
     def states(self) -> dict[str, Seen]:
         """Latest state of every robot heard from."""
         with self._lock:
-            return dict(self._states)
+            return dict(self._states.items())
 
     def robots(self) -> list[str]:
         """Robot ids known alive (liveliness) or streaming state, sorted."""

@@ -19,7 +19,6 @@ import logging
 import queue
 import threading
 import time
-from collections import OrderedDict
 from collections.abc import Callable, Hashable, Sequence
 from typing import Final, Generic, TypeVar
 
@@ -46,8 +45,8 @@ class Answers(Generic[T]):
 
     def __init__(self, fetch: Callable[[Hashable], T], name: str) -> None:
         self._fetch = fetch
-        self._done: OrderedDict[Hashable, T | KinesphereError] = OrderedDict()
-        self._failed_at: dict[Hashable, float] = {}
+        self._done: Lru[Hashable, tuple[T | KinesphereError, float]] = Lru(MAX_ANSWERS)
+        """request -> its answer and when it came"""
         self._asked: set[Hashable] = set()
         self._lock = threading.Lock()
         self._jobs: queue.SimpleQueue[Hashable | None] = queue.SimpleQueue()
@@ -56,20 +55,21 @@ class Answers(Generic[T]):
 
     def get(self, request: Hashable) -> T | KinesphereError | None:
         with self._lock:
-            done = self._done.get(request)
-            if isinstance(done, KinesphereError):
-                if time.monotonic() - self._failed_at.get(request, 0.0) > RETRY_S:
-                    del self._done[request]
-                    self._ask(request)
-                return done
+            done = self._done.peek(request)
             if done is None:
                 self._ask(request)
-            return done
+                return None
+            answer, at = done
+            if isinstance(answer, KinesphereError) and time.monotonic() - at > RETRY_S:
+                self._done.pop(request)
+                self._ask(request)
+            return answer
 
     def peek(self, request: Hashable) -> T | KinesphereError | None:
         """What :meth:`get` would return, without asking for anything."""
         with self._lock:
-            return self._done.get(request)
+            done = self._done.peek(request)
+        return None if done is None else done[0]
 
     def _ask(self, request: Hashable) -> None:
         if request not in self._asked:
@@ -87,11 +87,7 @@ class Answers(Generic[T]):
                 answer = KinesphereError("internal", repr(exc))
             with self._lock:
                 self._asked.discard(request)
-                self._done[request] = answer
-                self._failed_at[request] = time.monotonic()
-                while len(self._done) > MAX_ANSWERS:
-                    old, _ = self._done.popitem(last=False)
-                    self._failed_at.pop(old, None)
+                self._done.put(request, (answer, time.monotonic()))
 
     def close(self) -> None:
         self._jobs.put(None)
