@@ -11,8 +11,9 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections import OrderedDict
 from collections.abc import Callable, Hashable
+
+from kinesphere.lru import Lru
 
 EVERY_S = 10.0
 """Default interval between two lines of one key."""
@@ -40,11 +41,10 @@ class RateLog:
         self._log = logger
         self._level = level
         self._every = every
-        self._max = max_keys
         self._clock = clock
         self._burst = burst
         # key -> [window start, lines in the window, lines held back]
-        self._seen: OrderedDict[Hashable, list[float]] = OrderedDict()
+        self._seen: Lru[Hashable, list[float]] = Lru(max_keys)
         self._lock = threading.Lock()
         self.held = 0
         """Lines held back since start (all keys)."""
@@ -57,7 +57,7 @@ class RateLog:
         report with this one); counts a refusal."""
         now = self._clock()
         with self._lock:
-            entry = self._seen.get(key)
+            entry = self._seen.peek(key)
             if entry is not None and now - entry[0] < self._every:
                 if entry[1] >= self._burst:
                     entry[2] += 1
@@ -66,10 +66,7 @@ class RateLog:
                 entry[1] += 1
                 return True, 0
             held = int(entry[2]) if entry is not None else 0
-            self._seen[key] = [now, 1, 0]
-            self._seen.move_to_end(key)
-            while len(self._seen) > self._max:
-                self._seen.popitem(last=False)
+            self._seen.put(key, [now, 1, 0])
             return True, held
 
     def __call__(self, key: Hashable, msg: str, *args: object) -> bool:

@@ -20,10 +20,10 @@ import queue
 import re
 import threading
 import time
-from collections import OrderedDict
-from collections.abc import Callable, Hashable
-from typing import Final, TypeVar
+from collections.abc import Callable
+from typing import Final
 
+from kinesphere.lru import Lru
 from kinesphere.ratelog import RateLog
 
 INTERCEPTOR = "zenoh::net::routing::interceptor"
@@ -63,17 +63,6 @@ may lag behind the kernel's notice)."""
 _PROPERTY = re.compile(r"^(\w+)\((.*)\)$")
 _NAMES = {"CertCommonName": "CN", "Username": "user", "Interface": "interface",
           "Transport": "link"}
-
-K = TypeVar("K", bound=Hashable)
-V = TypeVar("V")
-
-
-def _remember(table: OrderedDict[K, V], key: K, value: V) -> None:
-    table[key] = value
-    table.move_to_end(key)
-    while len(table) > MAX_ENTRIES:
-        table.popitem(last=False)
-
 
 def describe_subject(subject: str, zid: str) -> str:
     """``Interface(lo)+CertCommonName(op)+...+<zid>`` -> ``CN=op (interface=lo, ...)``."""
@@ -117,10 +106,10 @@ class DenialFilter:
         self._queue: queue.Queue[tuple[str, float]] = queue.Queue(MAX_QUEUED)
         self._worker: threading.Thread | None = None
         self._lock = threading.Lock()
-        self._pending: OrderedDict[str, str] = OrderedDict()
+        self._pending: Lru[str, str] = Lru(MAX_ENTRIES)
         """thread -> its last 'unauthorized' line, until Zenoh says the message was dropped"""
-        self._last: OrderedDict[tuple[str, str, str], tuple[float, int]] = OrderedDict()
-        self._subjects: OrderedDict[str, str] = OrderedDict()
+        self._last: Lru[tuple[str, str, str], tuple[float, int]] = Lru(MAX_ENTRIES)
+        self._subjects: Lru[str, str] = Lru(MAX_ENTRIES)
         """zid -> ACL subject; Zenoh names the subject only when it first evaluates a key."""
         # only its allow() is used: it counts, report() writes
         self._budget = RateLog(logging.getLogger(__name__), every=WINDOW_S, burst=BURST,
@@ -153,13 +142,13 @@ class DenialFilter:
         thread, msg = m["thread"], m["msg"]
         known = _SUBJECT.match(msg)
         if known:
-            _remember(self._subjects, known["zid"], known["subject"])
+            self._subjects.put(known["zid"], known["subject"])
         if " is unauthorized to " in msg:
-            _remember(self._pending, thread, msg)
+            self._pending.put(thread, msg)
         elif " is authorized to " in msg:
-            self._pending.pop(thread, None)
+            self._pending.pop(thread)
         elif msg.startswith("Msg intercepted"):
-            self._denied(self._pending.pop(thread, ""))
+            self._denied(self._pending.pop(thread) or "")
 
     def _emit(self, identity: str, line: str) -> None:
         ok, held = self._budget.allow(identity)
@@ -182,17 +171,17 @@ class DenialFilter:
             subject = who
         else:
             zid = d["zid"]
-            subject = d["subject"] or self._subjects.get(zid, "")
+            subject = d["subject"] or self._subjects.peek(zid) or ""
             who = describe_subject(subject, zid) if subject else f"session {zid}"
             action, key = d["action"], d["key"]
         ident = (subject, action, key)
         now = self.clock()
-        last, suppressed = self._last.get(ident, (-1e18, 0))
+        last, suppressed = self._last.peek(ident) or (-1e18, 0)
         if now - last < SUPPRESS_S:
-            self._last[ident] = (last, suppressed + 1)
+            self._last.put(ident, (last, suppressed + 1))
             return
         more = f" (+{suppressed} more)" if suppressed else ""
-        _remember(self._last, ident, (now, 0))
+        self._last.put(ident, (now, 0))
         self._emit(_identity(who), f"access denied: {action} on {key} by {who}{more}")
 
     def _tls_refused(self, reason: str) -> None:
