@@ -208,6 +208,7 @@ class Resolver:
     def cache_bytes(self, budget: int) -> None:
         with self._lock:
             self._cache.max_bytes = budget
+            self._cache.most = max(1, budget // ENTRY_BYTES)
 
     @property
     def cached_bytes(self) -> int:
