@@ -359,3 +359,16 @@ def test_every_make_target_the_docs_name_exists() -> None:
               for line in command_lines(md, "make")
               if shlex.split(line, comments=True)[1] not in targets]
     assert not absent, "\n".join(absent)
+
+
+def test_the_readme_stays_a_start_and_reaches_every_topic() -> None:
+    """The README is where a newcomer starts (issue 23): short, and one link away from every
+    topic file in ``docs/``; new material goes to the topic's file, a new topic gets a file
+    and a row in the README's table."""
+    readme = ROOT / "README.md"
+    lines = readme.read_text(encoding="utf-8").count("\n")
+    assert lines <= 300, f"README.md has {lines} lines: move the new text to its docs/ file"
+    linked = {(ROOT / target.partition("#")[0]).resolve() for target in links(readme)}
+    unlinked = sorted(md.relative_to(ROOT).as_posix() for md in (ROOT / "docs").glob("*.md")
+                      if md.resolve() not in linked)
+    assert not unlinked, f"give these a row in README.md's 'Where to read on': {unlinked}"
