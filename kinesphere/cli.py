@@ -15,7 +15,13 @@ from importlib.metadata import entry_points, version
 from pathlib import Path
 from typing import Any
 
-from kinesphere.cliargs import PLATFORMS_ENV, add_platforms_argument, use_platform_dirs
+from kinesphere.cliargs import (
+    PLATFORMS_ENV,
+    add_merge_distance,
+    add_output,
+    add_platforms_argument,
+    use_platform_dirs,
+)
 from kinesphere.errors import KinesphereError
 
 ROLE_COMMANDS: dict[str, tuple[str, ...]] = {
@@ -38,14 +44,8 @@ def _register_core(sub: Any) -> None:
         "URDF tree and print the eURDF; edit it, then check it with 'kinesphere describe FILE'.",
     )
     p.add_argument("urdf", type=Path, help="a plain URDF file")
-    p.add_argument(
-        "--merge-distance",
-        type=float,
-        default=0.01,
-        metavar="M",
-        help="joints closer than M metres form one joint location (default 0.01)",
-    )
-    p.add_argument("-o", "--output", type=Path, help="write to this file instead of stdout")
+    add_merge_distance(p)
+    add_output(p, "the eURDF", default="stdout")
     p.set_defaults(func=_label)
 
 

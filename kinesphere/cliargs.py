@@ -1,4 +1,8 @@
-"""Command-line options every role's sub-commands share: the ``zenoh`` option group.
+"""Command-line options every role's sub-commands share: the ``zenoh`` option group, and one
+function per option family more than one role's commands take (output file, JSON, waiting for
+answers, platform lists, the key prefix, ROS 2 domain and distribution, joint merging). A
+family's default comes from its caller's options dataclass (or a constant here), never
+repeated in a parser; its help is written once.
 
 One rule for every command (after zenoh-python's ``examples/common/common.py``): the session
 starts from ``--zenoh-config FILE`` (or Zenoh's defaults), ``--mode``, ``--connect`` and
@@ -127,14 +131,104 @@ def add_zenoh_arguments(
         default=None,
         help=f"Zenoh session mode (default {defaults.mode}, or the config file's)",
     )
-    group.add_argument(
-        "--prefix",
-        default=DEFAULT_PREFIX,
-        help=f"key prefix shared by every process of a deployment (default {DEFAULT_PREFIX})",
-    )
+    add_prefix(group)
     parser.set_defaults(zenoh_defaults=defaults)
     if not listen:
         parser.set_defaults(listen=None, zenoh_fixed_listen=True)
+
+
+def add_prefix(parser: argparse.ArgumentParser | argparse._ArgumentGroup,
+               default: str = DEFAULT_PREFIX) -> None:
+    """``--prefix``: the key prefix of a deployment."""
+    parser.add_argument(
+        "--prefix", default=default,
+        help=f"key prefix shared by every process of a deployment (default {default})",
+    )
+
+
+def add_output(parser: argparse.ArgumentParser, what: str, *, default: str | None = None,
+               metavar: str = "FILE") -> None:
+    """``-o/--output FILE``: where a command writes ``what``; required unless the command
+    has a ``default`` (named in the help)."""
+    parser.add_argument(
+        "-o", "--output", type=Path, required=default is None, metavar=metavar,
+        help=f"{what} to write" + (f" (default {default})" if default is not None else ""),
+    )
+
+
+def add_json(parser: argparse.ArgumentParser, what: str) -> None:
+    """``--json``: print ``what`` as JSON instead of text for people."""
+    parser.add_argument("--json", action="store_true", help=f"print {what} as JSON")
+
+
+def _add_seconds(parser: argparse.ArgumentParser, flag: str, default: float, what: str,
+                 then: str = "") -> None:
+    parser.add_argument(flag, type=float, default=default, metavar="S",
+                        help=f"wait up to S seconds for {what} (default {default:g})"
+                        + (f"; {then}" if then else ""))
+
+
+def add_timeout(parser: argparse.ArgumentParser, default: float, what: str, *,
+                then: str = "") -> None:
+    """``--timeout S``: how long a command waits for ``what`` (its answers); ``then`` says
+    what follows when they do not come."""
+    _add_seconds(parser, "--timeout", default, what, then)
+
+
+def add_wait(parser: argparse.ArgumentParser, default: float, what: str) -> None:
+    """``--wait S``: how long a command waits for ``what`` before it starts."""
+    _add_seconds(parser, "--wait", default, what)
+
+
+def platform_list(text: str) -> list[str]:
+    """``baxter, nao`` -> ``["baxter", "nao"]`` (empty items dropped)."""
+    return [name for name in (n.strip() for n in text.split(",")) if name]
+
+
+def add_platform_list(parser: argparse.ArgumentParser, default: Sequence[str] | None = None
+                      ) -> None:
+    """``--platforms A,B``: the bodies a command shows side by side, a list in
+    ``args.platforms``; without it ``default``, or None for every shipped platform."""
+    parser.add_argument(
+        "--platforms", type=platform_list, metavar="LIST",
+        default=None if default is None else list(default),
+        help="comma-separated platforms (default: "
+        + ("all shipped" if default is None else ",".join(default)) + ")",
+    )
+
+
+MERGE_DISTANCE_M = 0.01
+"""Joints closer than this (metres) form one joint location when labels are proposed
+(:mod:`kinesphere.labeller`); here so that ``--help`` needs no URDF library."""
+
+
+def add_merge_distance(parser: argparse.ArgumentParser) -> None:
+    """``--merge-distance M``: how close joints are to count as one joint location."""
+    parser.add_argument(
+        "--merge-distance", type=float, default=MERGE_DISTANCE_M, metavar="M",
+        help=f"joints closer than M metres form one joint location (default {MERGE_DISTANCE_M})",
+    )
+
+
+def add_ros_distro(parser: argparse.ArgumentParser | argparse._ArgumentGroup, default: str,
+                   whose: str, note: str = "") -> None:
+    """``--ros-distro``: the ROS 2 distribution of ``whose`` rmw_zenoh (``note``: what it
+    changes)."""
+    from kinesphere.rmw_zenoh import ROS_DISTROS
+
+    parser.add_argument("--ros-distro", choices=ROS_DISTROS, default=default,
+                        help=f"ROS 2 distribution of {whose} rmw_zenoh"
+                        + (f"; {note}" if note else "") + f" (default {default})")
+
+
+def add_ros_domain(parser: argparse.ArgumentParser | argparse._ArgumentGroup, default: int,
+                   of: str = "", *, alias: str | None = None) -> None:
+    """``--ros2-domain N``: the ROS domain id (``ROS_DOMAIN_ID``) ``of`` what; ``alias`` is a
+    second spelling a command took before (``args.ros2_domain`` either way)."""
+    flags = ["--ros2-domain"] + ([alias] if alias else [])
+    parser.add_argument(*flags, dest="ros2_domain", type=int, default=default, metavar="N",
+                        help=f"ROS domain id{' of ' + of if of else ''} (ROS_DOMAIN_ID; default "
+                        f"{default})")
 
 
 PLATFORMS_ENV = "KINESPHERE_PLATFORMS"
@@ -174,4 +268,15 @@ __all__ = [
     "PLATFORMS_ENV",
     "add_platforms_argument",
     "use_platform_dirs",
+    "add_prefix",
+    "add_output",
+    "add_json",
+    "add_timeout",
+    "add_wait",
+    "platform_list",
+    "add_platform_list",
+    "MERGE_DISTANCE_M",
+    "add_merge_distance",
+    "add_ros_distro",
+    "add_ros_domain",
 ]

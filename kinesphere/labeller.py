@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 import yourdfpy
 
+from kinesphere.cliargs import MERGE_DISTANCE_M
 from kinesphere.errors import KinesphereError
 from kinesphere.eurdf import ACTUATED_TYPES
 from kinesphere.labeller_names import (
@@ -82,7 +83,7 @@ def _unbounded_revolutes(root: ET.Element) -> None:
                                     "continuous "))
 
 
-def propose_eurdf(source: str | Path, merge_distance: float = 0.01) -> str:
+def propose_eurdf(source: str | Path, merge_distance: float = MERGE_DISTANCE_M) -> str:
     """Return eURDF text: the URDF unchanged plus proposed ``<body_part>`` elements."""
     root_el, urdf = read_urdf(source)
     for old in root_el.findall("body_part"):
@@ -227,7 +228,7 @@ class _Tree:
         )
 
 
-def propose(urdf: yourdfpy.URDF, merge_distance: float = 0.01) -> Proposal:
+def propose(urdf: yourdfpy.URDF, merge_distance: float = MERGE_DISTANCE_M) -> Proposal:
     """The labels for a URDF: core parts and joints, then chains in the paper's order."""
     tree = _Tree(urdf)
     core_joints = _core_joints(tree)

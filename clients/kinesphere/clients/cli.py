@@ -12,9 +12,20 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from kinesphere.cliargs import add_zenoh_arguments
-from kinesphere.clients.options import JOY_LAYOUTS, JoyOptions, TeleopOptions, add_identity
-from kinesphere.rmw_zenoh import ROS_DISTROS
+from kinesphere.cliargs import add_ros_distro, add_ros_domain, add_zenoh_arguments
+from kinesphere.clients.options import (
+    ANSWER,
+    JOY_LAYOUTS,
+    SEND,
+    JoyOptions,
+    TeleopOptions,
+    add_answers,
+    add_duration,
+    add_identity,
+    add_lifetime,
+    add_rate,
+    add_target,
+)
 
 KEYS_HELP = """keys (keyboard fallback, the HUD window needs focus):
   arrows      right stick: the limb's horizontal direction (diagonals: two arrows)
@@ -72,37 +83,6 @@ def _lease(args: argparse.Namespace) -> int:
     return lease(args)
 
 
-def _targeting(
-    p: argparse.ArgumentParser, ttl_default: str = f"{STREAM.ttl_ms}", wait: bool = True
-) -> None:
-    p.add_argument(
-        "--ttl-ms",
-        type=int,
-        default=None,
-        metavar="MS",
-        help=f"robots hold if no newer command arrives within MS (default {ttl_default})",
-    )
-    if wait:
-        p.add_argument(
-            "--wait",
-            type=float,
-            default=5.0,
-            metavar="S",
-            help="wait up to S seconds for the target robots to be reachable (default 5)",
-        )
-
-
-def _answers(p: argparse.ArgumentParser, default: float, what: str) -> None:
-    p.add_argument(
-        "--timeout",
-        type=float,
-        default=default,
-        metavar="S",
-        help=f"wait up to S seconds for every addressed robot's answer {what} (default "
-        f"{default:g}); a robot that does not answer makes the exit status 1",
-    )
-
-
 def register(sub: Any) -> None:
     fmt = argparse.RawDescriptionHelpFormatter
     g = sub.add_parser(
@@ -116,12 +96,7 @@ def register(sub: Any) -> None:
         "letting go sends a final stop.",
         epilog=KEYS_HELP,
     )
-    g.add_argument(
-        "--target",
-        default="all",
-        metavar="ID|group:NAME|all",
-        help="robot id, group:NAME or 'all' (default all; cycle with the target button)",
-    )
+    add_target(g, note="cycle with the target button")
     g.add_argument("--headless", action="store_true", help="no HUD window (needs a gamepad)")
     g.add_argument(
         "--mapping", metavar="FILE",
@@ -134,13 +109,7 @@ def register(sub: Any) -> None:
         metavar="FILE",
         help="replay a recording instead of reading a device; exits when it ends",
     )
-    g.add_argument(
-        "--rate",
-        type=float,
-        default=STREAM.rate_hz,
-        metavar="HZ",
-        help=f"command rate while engaged (default {STREAM.rate_hz:g})",
-    )
+    add_rate(g, "while engaged")
     g.add_argument(
         "--no-deadman",
         action="store_true",
@@ -154,16 +123,14 @@ def register(sub: Any) -> None:
         "sensor_msgs/Joy from a ROS 2 joy node over rmw_zenoh, e.g. ros2:/joy (ros2 extra)",
     )
     joy = JoyOptions()
-    g.add_argument("--ros2-domain", type=int, default=joy.domain, metavar="N",
-                   help=f"ROS domain of the Joy topic (default {joy.domain})")
+    add_ros_domain(g, joy.domain, "the Joy topic")
     g.add_argument("--joy-layout", choices=JOY_LAYOUTS, default=joy.layout,
                    help="Joy axis/button order: game_controller_node's SDL order (default) or "
                    "joy_node's device order, read with the mapping's [joystick] numbers")
     g.add_argument("--joy-timeout", type=float, default=joy.timeout_s, metavar="S",
                    help=f"no Joy message for S seconds = pad unplugged (default {joy.timeout_s})")
-    g.add_argument("--ros-distro", choices=ROS_DISTROS, default=joy.distro,
-                   help=f"ROS 2 distribution of the joy node's rmw_zenoh (default {joy.distro})")
-    g.add_argument("--duration", type=float, metavar="S", help="quit after S seconds")
+    add_ros_distro(g, joy.distro, "the joy node's")
+    add_duration(g)
     g.add_argument("--screenshot", metavar="PNG", help="save the HUD to PNG when quitting")
     g.add_argument(
         "--take",
@@ -171,7 +138,7 @@ def register(sub: Any) -> None:
         help="take control (the lease) of the target from another operator on every engage, "
         "instead of being refused while they hold it",
     )
-    _targeting(g, wait=False)
+    add_lifetime(g, wait=False)
     add_identity(g)
     add_zenoh_arguments(g)
     g.set_defaults(func=_gamepad)
@@ -188,7 +155,7 @@ def register(sub: Any) -> None:
         "the deadman is let go.\nPrints one line per addressed robot (what it did, "
         "substitutions, refusals) and exits 1 unless every one accepted.",
     )
-    s.add_argument("target", help="robot id, group:NAME (agents run with --group) or 'all'")
+    add_target(s, positional=True)
     s.add_argument(
         "parts",
         nargs="*",
@@ -208,12 +175,9 @@ def register(sub: Any) -> None:
         metavar="S",
         help="repeat the command for S seconds, then stop",
     )
-    s.add_argument(
-        "--rate", type=float, default=STREAM.rate_hz, metavar="HZ",
-        help=f"repeat rate with --for (default {STREAM.rate_hz:g})",
-    )
-    _targeting(s, f"0: the pose is reached whatever happens next; {STREAM.ttl_ms} with --for")
-    _answers(s, 5.0, "(the last command's final stage: reached, clamped, blocked...)")
+    add_rate(s, "with --for")
+    add_lifetime(s, f"0: the pose is reached whatever happens next; {STREAM.ttl_ms} with --for")
+    add_answers(s, SEND, "(the last command's final stage: reached, clamped, blocked...)")
     add_identity(s)
     add_zenoh_arguments(s)
     s.set_defaults(func=_send)
@@ -228,11 +192,10 @@ def register(sub: Any) -> None:
         "addressed robot and exits 1 unless every one accepted every step.",
     )
     p.add_argument("phrase", metavar="PHRASE", help="phrase file (TOML) or shipped name")
-    p.add_argument("--target", default="all", help="robot id, group:NAME or 'all' (default)")
-    p.add_argument("--rate", type=float, default=STREAM.rate_hz, metavar="HZ",
-                   help=f"default {STREAM.rate_hz:g}")
-    _targeting(p, f"the phrase's ttl_ms, else {STREAM.ttl_ms}")
-    _answers(p, 5.0, "after the phrase")
+    add_target(p)
+    add_rate(p, "while the phrase plays")
+    add_lifetime(p, f"the phrase's ttl_ms, else {STREAM.ttl_ms}")
+    add_answers(p, SEND, "after the phrase")
     add_identity(p)
     add_zenoh_arguments(p)
     p.set_defaults(func=_play)
@@ -246,11 +209,9 @@ def register(sub: Any) -> None:
         "--release clears the latch of --target (required: say whose).",
     )
     e.add_argument("--release", action="store_true", help="release instead of stopping")
-    e.add_argument(
-        "--target", help="with --release: whose e-stop to release (ID, group:NAME or all)"
-    )
-    _targeting(e)
-    _answers(e, 2.0, "(estopped, released)")
+    add_target(e, default=None, note="with --release: whose e-stop to release")
+    add_lifetime(e)
+    add_answers(e, ANSWER, "(estopped, released)")
     add_identity(e)
     add_zenoh_arguments(e)
     e.set_defaults(func=_estop)
@@ -266,11 +227,11 @@ def register(sub: Any) -> None:
         "then releases it. E-stop works whoever holds the lease.",
     )
     ls.add_argument("action", choices=("acquire", "take", "release"))
-    ls.add_argument("target", help="robot id, group:NAME or 'all'")
+    add_target(ls, positional=True)
     ls.add_argument("--hold", type=float, default=0.0, metavar="S",
                     help="keep the lease alive for S seconds (Ctrl-C ends it), then release")
-    _targeting(ls)
-    _answers(ls, 2.0, "(leased, or refused naming the holder)")
+    add_lifetime(ls)
+    add_answers(ls, ANSWER, "(leased, or refused naming the holder)")
     add_identity(ls)
     add_zenoh_arguments(ls)
     ls.set_defaults(func=_lease)

@@ -11,12 +11,23 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from kinesphere.cliargs import DEFAULT_ENDPOINT, WATCHER, add_zenoh_arguments
+from kinesphere.cliargs import (
+    DEFAULT_ENDPOINT,
+    WATCHER,
+    add_json,
+    add_output,
+    add_platform_list,
+    add_prefix,
+    add_timeout,
+    add_zenoh_arguments,
+)
 from kinesphere.deploy.plan import DEFAULT_ROBOTS, UpOptions
 from kinesphere.errors import KinesphereError
 
 UP = UpOptions(robots=[], phrases=[])
 """The defaults ``kinesphere up`` shows and uses."""
+STATUS_TIMEOUT_S = 2.0
+"""How long ``kinesphere status`` listens at most."""
 
 
 def register(sub: Any) -> None:
@@ -51,7 +62,7 @@ def register(sub: Any) -> None:
                     f"{UP.start_timeout:g})")
     up.add_argument("--db", action="append", default=[], metavar="PLATFORM=PATH",
                     help="serve this databank file instead of the shipped one (repeatable)")
-    up.add_argument("--prefix", default=UP.prefix, help=f"key prefix (default {UP.prefix})")
+    add_prefix(up, UP.prefix)
     up.set_defaults(func=_up)
 
     st = sub.add_parser(
@@ -62,9 +73,9 @@ def register(sub: Any) -> None:
         "up for 0.3 s (a peer waits at least 1 s for its gossip links), or --timeout. Exit 0 "
         "when something answered, 1 when nothing did.",
     )
-    st.add_argument("--timeout", type=float, default=2.0, metavar="S",
-                    help="seconds to wait for answers (default 2)")
-    st.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    add_timeout(st, STATUS_TIMEOUT_S, "discovery to settle",
+                then="exit 1 when nothing answered by then")
+    add_json(st, "the databanks and robots found (instead of a table)")
     add_zenoh_arguments(st, WATCHER, listen=False)
     st.set_defaults(func=_status)
 
@@ -102,11 +113,10 @@ def register(sub: Any) -> None:
         "current command in words, as an MP4 and a GIF.",
     )
     fm.add_argument("phrase", metavar="PHRASE", help="phrase file (TOML) or shipped name")
-    fm.add_argument("-o", "--output", metavar="MP4", help="video file (default PHRASE.mp4)")
+    add_output(fm, "the video file", default="PHRASE.mp4", metavar="MP4")
     fm.add_argument("--gif", metavar="GIF", help="GIF file (default: the video's name, .gif)")
     fm.add_argument("--no-gif", action="store_true", help="write only the MP4")
-    fm.add_argument("--platforms", default=",".join(DEFAULT_ROBOTS),
-                    help=f"comma-separated bodies (default {','.join(DEFAULT_ROBOTS)})")
+    add_platform_list(fm, DEFAULT_ROBOTS)
     fm.add_argument("--width", type=int, default=320, help="tile width in pixels (default 320)")
     fm.add_argument("--height", type=int, default=240, help="tile height (default 240)")
     fm.add_argument("--fps", type=float, default=15.0, help="frames per second (default 15)")
@@ -157,7 +167,6 @@ def _film(args: argparse.Namespace) -> int:
 
     out = Path(args.output or f"{Path(args.phrase).stem}.mp4")
     gif = None if args.no_gif else Path(args.gif or out.with_suffix(".gif"))
-    platforms = [x for x in args.platforms.split(",") if x]
-    n = render(args.phrase, out, gif, platforms, args.width, args.height, args.fps)
+    n = render(args.phrase, out, gif, args.platforms, args.width, args.height, args.fps)
     print(f"wrote {n} frames to {out}" + (f" and {gif}" if gif else ""), file=sys.stderr)
     return 0

@@ -8,6 +8,8 @@ import math
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from kinesphere.cliargs import add_json, add_merge_distance
+
 if TYPE_CHECKING:  # imported lazily: yourdfpy/trimesh cost ~1 s at every CLI start
     from kinesphere.eurdf import Eurdf
 
@@ -29,12 +31,11 @@ def register(sub: Any) -> None:
         "--dir", type=Path, default=None,
         help="folder to create NAME/ in (default: the first --platforms folder, else .)",
     )
-    new.add_argument("--merge-distance", type=float, default=0.01, metavar="M",
-                     help="joints closer than M metres form one joint location (default 0.01)")
+    add_merge_distance(new)
     new.add_argument("--force", action="store_true", help="replace an existing folder's files")
     new.set_defaults(func=_platform_new)
     p = sub.add_parser("platforms", help="list the known platforms (shipped and brought)")
-    p.add_argument("--json", action="store_true", help="machine-readable output")
+    add_json(p, "the list")
     p.set_defaults(func=_platforms)
     d = sub.add_parser(
         "describe",
@@ -48,7 +49,7 @@ def register(sub: Any) -> None:
         "platform", help="platform name, any case (see 'kinesphere platforms'), 'all' (with "
         "--json: one list), or an eURDF path"
     )
-    d.add_argument("--json", action="store_true", help="machine-readable output")
+    add_json(d, "the description")
     d.set_defaults(func=_describe)
 
 

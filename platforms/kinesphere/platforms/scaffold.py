@@ -18,6 +18,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
+from kinesphere.cliargs import MERGE_DISTANCE_M
 from kinesphere.errors import KinesphereError
 from kinesphere.eurdf import Eurdf, load_eurdf
 from kinesphere.labeller import propose, propose_eurdf, read_urdf
@@ -49,7 +50,8 @@ class Scaffold:
 
 
 def new_platform(
-    name: str, urdf: Path, parent: Path, merge_distance: float = 0.01, force: bool = False
+    name: str, urdf: Path, parent: Path, merge_distance: float = MERGE_DISTANCE_M,
+    force: bool = False,
 ) -> Scaffold:
     """Write ``parent/name/`` from a URDF; refuse to overwrite unless ``force``."""
     if not _NAME.match(name):

@@ -13,8 +13,8 @@ import time
 from pathlib import Path
 from typing import Any
 
-from kinesphere.cliargs import OPERATOR, WATCHER, add_zenoh_arguments
-from kinesphere.clients.options import add_identity
+from kinesphere.cliargs import OPERATOR, WATCHER, add_output, add_wait, add_zenoh_arguments
+from kinesphere.clients.options import REPLAYED, TrafficOptions, add_duration, add_identity
 from kinesphere.errors import KinesphereError
 from kinesphere.keyexpr import Keys
 from kinesphere.signals import handle_signals
@@ -30,10 +30,11 @@ def register(sub: Any) -> None:
         "message type: Foxglove and 'mcap info' read it). Stops on Ctrl-C, SIGTERM, "
         "--duration or --max-mb.",
     )
-    r.add_argument("-o", "--output", required=True, metavar="FILE", help="MCAP file to write")
-    r.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
-    r.add_argument("--max-mb", type=float, default=1024.0,
-                   help="stop when this many MB of messages are written (default 1024)")
+    d = TrafficOptions()
+    add_output(r, "the MCAP file")
+    add_duration(r, "stop")
+    r.add_argument("--max-mb", type=float, default=d.max_mb, metavar="MB",
+                   help=f"stop when MB megabytes of messages are written (default {d.max_mb:g})")
     add_zenoh_arguments(r, WATCHER)
     r.set_defaults(func=record)
 
@@ -52,19 +53,18 @@ def register(sub: Any) -> None:
         "any.",
     )
     p.add_argument("recording", metavar="FILE", help="MCAP file written by kinesphere record")
-    p.add_argument("--what", choices=("commands", "states", "all"), default="commands",
-                   help="which messages to put back (default commands)")
-    p.add_argument("--speed", type=float, default=1.0, help="time scale (default 1 = as recorded)")
+    p.add_argument("--what", choices=REPLAYED, default=d.what,
+                   help=f"which messages to put back (default {d.what})")
+    p.add_argument("--speed", type=float, default=d.speed,
+                   help=f"time scale (default {d.speed:g} = as recorded)")
     p.add_argument("--restamp", action="store_true",
                    help="send commands now and as yours (--sender), each recorded session as "
                    "a fresh one (seq kept), so robots that heard the original do not drop "
                    "them as stale and lease to you")
-    p.add_argument("--max-gap", type=float, default=10.0, metavar="S",
+    p.add_argument("--max-gap", type=float, default=d.max_gap_s, metavar="S",
                    help="shorten a silence in the recording longer than S seconds to S "
-                   "(default 10)")
-    p.add_argument("--wait", type=float, default=5.0, metavar="S",
-                   help="wait up to S seconds for a subscriber on each recorded key before "
-                   "the first put (default 5)")
+                   f"(default {d.max_gap_s:g})")
+    add_wait(p, d.wait_s, "a subscriber on each recorded key before the first put")
     add_identity(p)
     add_zenoh_arguments(p, OPERATOR)
     p.set_defaults(func=replay)

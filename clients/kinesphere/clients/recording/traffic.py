@@ -53,6 +53,7 @@ from kinesphere.clients.mcaplog import (
     described,
     messages,
 )
+from kinesphere.clients.options import REPLAYED, TrafficOptions
 from kinesphere.errors import KinesphereError
 from kinesphere.keyexpr import WILDCARD, Keys
 from kinesphere.lru import Lru
@@ -60,11 +61,11 @@ from kinesphere.protocol import Command, Message, RobotState, decode_any, encode
 from kinesphere.zconfig import undeclare, unmatched
 
 log = logging.getLogger(__name__)
-MAX_BYTES: Final = 1 << 30
-KINDS: Final = ("commands", "states", "all")
-WAIT_S: Final = 5.0
+MAX_BYTES: Final = int(TrafficOptions.max_mb * 1e6)
+KINDS: Final = REPLAYED
+WAIT_S: Final = TrafficOptions.wait_s
 """How long a replay waits for a subscriber on each recorded key before its first put."""
-MAX_GAP_S: Final = 10.0
+MAX_GAP_S: Final = TrafficOptions.max_gap_s
 """The longest silence a replay keeps; longer ones are shortened to it."""
 MAX_SESSIONS: Final = 1024
 """Recorded sessions a restamped replay keeps a fresh session for at once."""

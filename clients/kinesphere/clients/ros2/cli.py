@@ -12,9 +12,8 @@ import threading
 from types import FrameType
 from typing import Any
 
-from kinesphere.cliargs import ZenohDefaults, add_zenoh_arguments
+from kinesphere.cliargs import ZenohDefaults, add_ros_distro, add_ros_domain, add_zenoh_arguments
 from kinesphere.clients.options import BridgeOptions
-from kinesphere.rmw_zenoh import ROS_DISTROS
 
 BRIDGE_EPILOG = """topics, for robot ID (made a ROS name: baxter-1 -> baxter_1), relative to NS:
   ID/joint_states       sensor_msgs/msg/JointState   at the robot's state rate
@@ -52,16 +51,14 @@ def register(sub: Any) -> None:
         "tools (ros2 topic, RViz, Foxglove, ros2 bag) until SIGINT/SIGTERM.",
         epilog=BRIDGE_EPILOG,
     )
-    b.add_argument("--domain", type=int, default=d.domain,
-                   help=f"ROS domain id (ROS_DOMAIN_ID; default {d.domain})")
+    add_ros_domain(b, d.domain, "the node", alias="--domain")
     b.add_argument("--namespace", default=d.namespace, metavar="NS",
                    help=f"ROS namespace of the node and its topics (default {d.namespace})")
     b.add_argument("--node", default=d.node, help=f"ROS node name (default {d.node})")
     b.add_argument("--odom-frame", default=d.odom_frame, metavar="ODOM",
                    help=f"TF parent frame of every robot's base (default {d.odom_frame})")
-    b.add_argument("--ros-distro", choices=ROS_DISTROS, default=d.distro,
-                   help="ROS 2 distribution whose rmw_zenoh keys to write: humble's carry no "
-                   f"type hash (default {d.distro})")
+    add_ros_distro(b, d.distro, "the ROS nodes'",
+                   note="the keys written follow it: humble's carry no type hash")
     add_zenoh_arguments(b, BRIDGE_ZENOH)
     b.set_defaults(func=bridge)
 
@@ -74,9 +71,9 @@ def bridge(args: argparse.Namespace) -> int:
     from kinesphere.signals import handle_signals
     from kinesphere.zconfig import session_from_args
 
-    options = dataclasses.replace(BridgeOptions(), domain=args.domain, namespace=args.namespace,
-                                  node=args.node, odom_frame=args.odom_frame,
-                                  distro=args.ros_distro)
+    options = dataclasses.replace(BridgeOptions(), domain=args.ros2_domain,
+                                  namespace=args.namespace, node=args.node,
+                                  odom_frame=args.odom_frame, distro=args.ros_distro)
     stop = threading.Event()
 
     def on_signal(signum: int, frame: FrameType | None) -> None:

@@ -24,6 +24,7 @@ from typing import Any, Final
 import viser
 import zenoh
 
+from kinesphere.clients.options import ViewOptions
 from kinesphere.clients.view.body import Array, BodyGeometry
 from kinesphere.clients.view.fleet import Fleet, Robot
 from kinesphere.clients.view.gate import Gate, guarding
@@ -96,9 +97,9 @@ def describe(robot: Robot, body: BodyGeometry | None) -> tuple[str, str]:
 class FleetView:
     """A viser server showing every robot under ``keys.prefix`` seen on ``session``."""
 
-    def __init__(self, session: zenoh.Session, keys: Keys, host: str = "127.0.0.1",
-                 port: int = 8080, fps: float = 30.0, allow_origins: Sequence[str] = ()
-                 ) -> None:
+    def __init__(self, session: zenoh.Session, keys: Keys, host: str = ViewOptions.host,
+                 port: int = ViewOptions.port, fps: float = ViewOptions.fps,
+                 allow_origins: Sequence[str] = ()) -> None:
         if not fps > 0:
             raise KinesphereError("malformed", f"--fps must be > 0, got {fps}")
         self.period = 1.0 / fps

@@ -12,6 +12,7 @@ import threading
 from typing import Any
 
 from kinesphere.cliargs import WATCHER, add_zenoh_arguments
+from kinesphere.clients.options import ViewOptions, add_duration
 from kinesphere.keyexpr import Keys
 from kinesphere.signals import handle_signals
 
@@ -27,18 +28,20 @@ def register(sub: Any) -> None:
         "files are needed here. Open http://HOST:PORT in a browser; no internet access is "
         "needed.",
     )
-    v.add_argument("--host", default="127.0.0.1",
-                   help="address to serve the page on (default 127.0.0.1; 0.0.0.0 = every "
+    d = ViewOptions()
+    v.add_argument("--host", default=d.host,
+                   help=f"address to serve the page on (default {d.host}; 0.0.0.0 = every "
                    "interface, for other machines)")
-    v.add_argument("--port", type=int, default=8080, help="HTTP/websocket port (default 8080)")
-    v.add_argument("--fps", type=float, default=30.0,
-                   help="scene updates per second sent to browsers (default 30)")
+    v.add_argument("--port", type=int, default=d.port,
+                   help=f"HTTP/websocket port (default {d.port})")
+    v.add_argument("--fps", type=float, default=d.fps,
+                   help=f"scene updates per second sent to browsers (default {d.fps:g})")
     v.add_argument("--allow-origin", action="append", default=[], metavar="ORIGIN",
                    help="a web origin (http://lab-pc:8080) whose pages may open the view's "
                    "websocket, and whose host name the view answers to; repeatable. By "
                    "default only the view's own page may, reached by a loopback name, the "
                    "--host address, or (with --host 0.0.0.0) this machine's names")
-    v.add_argument("--duration", type=float, metavar="S", help="quit after S seconds")
+    add_duration(v)
     add_zenoh_arguments(v, WATCHER)
     v.set_defaults(func=view)
 

@@ -15,9 +15,8 @@ from pathlib import Path
 from types import FrameType
 from typing import Any
 
-from kinesphere.cliargs import AGENT, add_zenoh_arguments
+from kinesphere.cliargs import AGENT, add_ros_distro, add_ros_domain, add_zenoh_arguments
 from kinesphere.errors import KinesphereError
-from kinesphere.rmw_zenoh import ROS_DISTROS
 from kinesphere.robots.agent.bodies import BODIES
 from kinesphere.robots.agent.options import ROS2_INTERFACES, AgentOptions, Ros2BodyOptions
 from kinesphere.signals import handle_signals
@@ -57,8 +56,7 @@ def register(sub: Any) -> None:
         "controller. Connect to the router its nodes use. See docs/ros2.md.")
     ros2.add_argument("--ros2-namespace", default=r.namespace, metavar="NS",
                       help=f"the robot's ROS namespace (default {r.namespace})")
-    ros2.add_argument("--ros2-domain", type=int, default=r.domain, metavar="N",
-                      help=f"ROS domain id (default {r.domain})")
+    add_ros_domain(ros2, r.domain, "the robot's nodes")
     ros2.add_argument("--ros2-interface", choices=ROS2_INTERFACES, default=r.interface,
                       help="trajectory: JointTrajectory on CONTROLLER/joint_trajectory; "
                       "forward: Float64MultiArray on CONTROLLER/commands "
@@ -77,8 +75,7 @@ def register(sub: Any) -> None:
                       "requires it) instead of Twist")
     ros2.add_argument("--ros2-odom", default=r.odom, metavar="TOPIC",
                       help=f"a mobile base's nav_msgs/Odometry topic (default {r.odom})")
-    ros2.add_argument("--ros-distro", choices=ROS_DISTROS, default=r.distro,
-                      help=f"the ROS 2 distribution of the robot's rmw_zenoh (default {r.distro})")
+    add_ros_distro(ros2, r.distro, "the robot's")
     add_zenoh_arguments(p, AGENT)
     p.set_defaults(func=_agent)
 

@@ -10,8 +10,9 @@ import json
 import sys
 from typing import Any
 
-from kinesphere.cliargs import QUERY, SERVICE, add_zenoh_arguments
+from kinesphere.cliargs import QUERY, SERVICE, add_json, add_timeout, add_zenoh_arguments
 from kinesphere.errors import KinesphereError
+from kinesphere.services.options import QueryOptions, add_exact
 
 
 def register(sub: Any) -> None:
@@ -70,11 +71,9 @@ def register(sub: Any) -> None:
     q.add_argument("params", nargs="*", metavar="L O D S", help="limb origin direction size")
     q.add_argument("--catalogue", action="store_true",
                    help="print what the platform answers instead of a pose")
-    q.add_argument("--json", action="store_true", help="print the reply message as JSON")
-    q.add_argument("--exact", action="store_true",
-                   help="this direction only: no substitution by the nearest one the limb has")
-    q.add_argument("--timeout", type=float, default=2.0, metavar="S",
-                   help="seconds to wait for an answer (default 2)")
+    add_json(q, "the reply message")
+    add_exact(q)
+    add_timeout(q, QueryOptions.timeout_s, "an answer")
     add_zenoh_arguments(q, QUERY)
     q.set_defaults(func=_query)
 

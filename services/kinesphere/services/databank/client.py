@@ -25,10 +25,11 @@ from kinesphere.protocol import (
     encode,
 )
 from kinesphere.query import get_one
+from kinesphere.services.options import QueryOptions
 from kinesphere.sizes import parse_size
 
 T = TypeVar("T")
-DEFAULT_TIMEOUT = 2.0
+DEFAULT_TIMEOUT = QueryOptions.timeout_s
 
 
 def request(

@@ -21,9 +21,14 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
+from kinesphere.cliargs import add_output, add_platform_list
 from kinesphere.errors import KinesphereError
-
-_DB_HELP = "databank file instead of the shipped databank of the platform"
+from kinesphere.services.options import (
+    SHEET_SIZE,
+    add_cell,
+    add_platform,
+    add_spatial_words,
+)
 
 
 def register_build(ecl_sub: Any, top_sub: Any) -> None:
@@ -37,8 +42,7 @@ def register_build(ecl_sub: Any, top_sub: Any) -> None:
         "generated in parallel (one process per core); the output is the same as a serial "
         "run's. The databank is replaced atomically; the wall time is printed.",
     )
-    b.add_argument("platform", nargs="?", help="platform name or folder (omit with --all)")
-    b.add_argument("--db", type=Path, metavar="PATH", help=_DB_HELP)
+    add_platform(b, omit="omit with --all")
     b.add_argument("--all", action="store_true", help="build every shipped platform")
     b.add_argument("--reasons", action="store_true", help="say why each direction was dropped")
     b.add_argument(
@@ -59,8 +63,7 @@ def register_build(ecl_sub: Any, top_sub: Any) -> None:
         "joint limit (rad), and the directions dropped for stability (the whole-body centre "
         "of mass would leave the support polygon).",
     )
-    r.add_argument("platform", help="platform name or folder")
-    r.add_argument("--db", type=Path, metavar="PATH", help=_DB_HELP)
+    add_platform(r)
     r.add_argument("--rows", action="store_true",
                    help="also print every row's figures and why each unstable pull toppled")
     r.set_defaults(func=_report)
@@ -72,7 +75,7 @@ def register_build(ecl_sub: Any, top_sub: Any) -> None:
         "origin) pair keeps, and list the directions every platform with limb_11, limb_12, "
         "limb_13 keeps: a fleet command in one of those is exact on every robot.",
     )
-    v.add_argument("--platforms", help="comma-separated platforms (default: all shipped)")
+    add_platform_list(v)
     v.set_defaults(func=_coverage)
 
     s = ecl_sub.add_parser(
@@ -81,12 +84,10 @@ def register_build(ecl_sub: Any, top_sub: Any) -> None:
         description="Render every direction of a (limb, origin) pair at one size off-screen "
         "(rows high/middle/low, columns the 9 horizontals); missing directions are greyed.",
     )
-    s.add_argument("platform", help="platform name or folder")
-    s.add_argument("--limb", required=True, help="limb label or alias")
-    s.add_argument("--origin", required=True, help="origin label or alias")
-    s.add_argument("--size", default="3", help="size (default 3, far)")
-    s.add_argument("--db", type=Path, metavar="PATH", help=_DB_HELP)
-    s.add_argument("-o", "--output", type=Path, required=True, help="PNG file to write")
+    add_platform(s)
+    add_cell(s, required=True, direction=False)
+    s.add_argument("--size", default=str(SHEET_SIZE), help=f"size (default {SHEET_SIZE}, far)")
+    add_output(s, "the PNG file")
     s.set_defaults(func=_render)
 
     c = ecl_sub.add_parser(
@@ -95,8 +96,9 @@ def register_build(ecl_sub: Any, top_sub: Any) -> None:
         description="The paper's 'same command, different bodies' figure: one (limb, origin, "
         "direction, size) rendered on each platform's shipped databank.",
     )
-    _command_args(c, with_platform=False)
-    c.add_argument("--platforms", help="comma-separated platforms (default: all shipped)")
+    add_spatial_words(c)
+    add_output(c, "the PNG file")
+    add_platform_list(c)
     c.set_defaults(func=_compare)
 
     p = top_sub.add_parser(
@@ -105,19 +107,10 @@ def register_build(ecl_sub: Any, top_sub: Any) -> None:
         description="Look up (limb, origin, direction, size) in the platform's ECL and render "
         "the pose off-screen.",
     )
-    _command_args(p, with_platform=True)
-    p.add_argument("--db", type=Path, metavar="PATH", help=_DB_HELP)
+    add_platform(p)
+    add_spatial_words(p)
+    add_output(p, "the PNG file")
     p.set_defaults(func=_pose)
-
-
-def _command_args(p: argparse.ArgumentParser, with_platform: bool) -> None:
-    if with_platform:
-        p.add_argument("platform", help="platform name or folder")
-    p.add_argument("limb", help="limb label or alias, e.g. limb_11")
-    p.add_argument("origin", help="origin label or alias, e.g. distal_11")
-    p.add_argument("direction", help="Laban direction, e.g. left-high")
-    p.add_argument("size", help="size: 1 near, 2 mid, 3 far, fractions, beyond")
-    p.add_argument("-o", "--output", type=Path, required=True, help="PNG file to write")
 
 
 def _console() -> Console:
@@ -275,8 +268,7 @@ def _coverage(args: argparse.Namespace) -> int:
     from kinesphere.platforms.platform import platform_names
     from kinesphere.services.ecl.coverage import markdown
 
-    names = [n.strip() for n in args.platforms.split(",")] if args.platforms else platform_names()
-    sys.stdout.write(markdown(names))
+    sys.stdout.write(markdown(args.platforms or platform_names()))
     return 0
 
 
@@ -296,8 +288,8 @@ def _compare(args: argparse.Namespace) -> int:
     from kinesphere.platforms.platform import platform_names
     from kinesphere.services.ecl.render import compare_sheet
 
-    names = [n.strip() for n in args.platforms.split(",")] if args.platforms else platform_names()
-    image = compare_sheet(args.limb, args.origin, args.direction, args.size, names)
+    image = compare_sheet(args.limb, args.origin, args.direction, args.size,
+                          args.platforms or platform_names())
     return _save(image, args.output)
 
 

@@ -15,12 +15,16 @@ import msgspec
 from rich.console import Console
 from rich.table import Table
 
-from kinesphere.cliargs import add_zenoh_arguments
+from kinesphere.cliargs import add_json, add_output, add_timeout, add_zenoh_arguments
 from kinesphere.errors import KinesphereError
 from kinesphere.protocol import Pose
-
-_DB_HELP = "databank file to use instead of the shipped databank of the platform"
-_PLATFORM_HELP = "platform name (see 'kinesphere platforms') or a platform folder"
+from kinesphere.services.options import (
+    QueryOptions,
+    add_cell,
+    add_exact,
+    add_platform,
+    add_spatial_words,
+)
 
 
 def register(sub: Any) -> None:
@@ -46,14 +50,10 @@ def register(sub: Any) -> None:
         "--exact. Use 'c_1 c_1 DIRECTION SIZE' for a pure base translation on mobile "
         "platforms.",
     )
-    _platform_args(g)
-    g.add_argument("limb", help="limb label or alias, e.g. limb_11 or right_arm")
-    g.add_argument("origin", help="origin (joint location) label or alias, e.g. distal_11")
-    g.add_argument("direction", help="Laban direction, e.g. left-high or 'Place Low'")
-    g.add_argument("size", help="size: 1 near, 2 mid, 3 far, fractions, or near/mid/far")
-    g.add_argument("--json", action="store_true", help="print the protocol Pose as JSON")
-    g.add_argument("--exact", action="store_true",
-                   help="this direction only: no substitution by the nearest one the limb has")
+    add_platform(g)
+    add_spatial_words(g)
+    add_json(g, "the protocol Pose")
+    add_exact(g)
     g.set_defaults(func=_get)
 
     r = ecl_sub.add_parser(
@@ -65,10 +65,8 @@ def register(sub: Any) -> None:
         "a new cell). Sizes are positive integers; place-middle is the neutral pose and is "
         "changed in platform.toml instead.",
     )
-    _platform_args(r)
-    r.add_argument("--limb", required=True, help="limb label or alias")
-    r.add_argument("--origin", required=True, help="origin label or alias paired with the limb")
-    r.add_argument("--direction", required=True, help="Laban direction")
+    add_platform(r)
+    add_cell(r, required=True)
     r.add_argument("--size", required=True, help="integer size (1 near, 2 mid, 3 far, ...)")
     source = r.add_mutually_exclusive_group(required=True)
     source.add_argument(
@@ -79,10 +77,8 @@ def register(sub: Any) -> None:
         "--from-robot", metavar="ID",
         help="capture the limb's joints from the running agent ID (its next RobotState)",
     )
-    r.add_argument(
-        "--timeout", type=float, default=5.0, help="with --from-robot: seconds to wait (default 5)"
-    )
-    r.add_argument("--json", action="store_true", help="print the stored Pose as JSON")
+    add_timeout(r, QueryOptions.capture_timeout_s, "the robot's state with --from-robot")
+    add_json(r, "the stored Pose")
     add_zenoh_arguments(r, listen=False)  # used with --from-robot only
     r.set_defaults(func=_record)
 
@@ -92,10 +88,8 @@ def register(sub: Any) -> None:
         description="Print the databank's rows (k_id, size, joint values and the generator's "
         "quality figures: cosine to the direction, reach fraction, joint-limit margin).",
     )
-    _platform_args(s)
-    s.add_argument("--limb", help="only this limb")
-    s.add_argument("--origin", help="only this origin")
-    s.add_argument("--direction", help="only this direction")
+    add_platform(s)
+    add_cell(s, required=False)
     s.set_defaults(func=_show)
 
     x = ecl_sub.add_parser(
@@ -104,8 +98,8 @@ def register(sub: Any) -> None:
         description="Export every table (meta, vsam, pose, quality) as JSON for review or "
         "editing; 'ecl import' of the file restores the same content (round trip identical).",
     )
-    _platform_args(x)
-    x.add_argument("-o", "--output", type=Path, required=True, help="JSON file to write")
+    add_platform(x)
+    add_output(x, "the JSON file")
     x.set_defaults(func=_export)
 
     i = ecl_sub.add_parser(
@@ -115,7 +109,7 @@ def register(sub: Any) -> None:
         "limits, NULLs outside each limb) and replace the databank with it atomically; a "
         "rejected file changes nothing.",
     )
-    _platform_args(i)
+    add_platform(i)
     i.add_argument("file", type=Path, help="JSON file written by 'kinesphere ecl export'")
     i.set_defaults(func=_import)
 
@@ -126,11 +120,6 @@ def register(sub: Any) -> None:
             raise
     else:
         register_build(ecl_sub, sub)
-
-
-def _platform_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("platform", help=_PLATFORM_HELP)
-    p.add_argument("--db", type=Path, metavar="PATH", help=_DB_HELP)
 
 
 def _usage(parser: argparse.ArgumentParser) -> int:

@@ -30,6 +30,7 @@ from kinesphere.laban import Direction, Horizontal, Level
 from kinesphere.platforms.mjcf import PlatformModel, model_of, platform_model  # noqa: E402
 from kinesphere.protocol import Pose
 from kinesphere.services.ecl.ecl import Ecl
+from kinesphere.services.options import SHEET_SIZE
 from kinesphere.sizes import size_name
 
 LEVELS = (Level.HIGH, Level.MIDDLE, Level.LOW)
@@ -229,7 +230,7 @@ def pose_image(ecl: Ecl, limb: str, origin: str, direction: str, size: object,
     return _titled(picture, title, CONVENTION)
 
 
-def contact_sheet(ecl: Ecl, limb: str, origin: str, size: object = 3) -> Image.Image:
+def contact_sheet(ecl: Ecl, limb: str, origin: str, size: object = SHEET_SIZE) -> Image.Image:
     """The 27 directions of one (limb, origin) pair at one size, as a 3x9 grid."""
     pm = model_of(ecl.platform)
     poses: dict[Direction, Pose | None] = {}
