@@ -29,8 +29,8 @@ from bench.bench_databank import (
     _latencies,
     _wait_reply,
 )
-from kinesphere.deploy.procs import Supervisor
 from kinesphere.errors import KinesphereError
+from kinesphere.procs import Supervisor
 from kinesphere.robots.agent.runtime import Agent, AgentOptions
 from kinesphere.zconfig import close_session, free_port, open_session
 

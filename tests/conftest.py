@@ -20,7 +20,7 @@ from pathlib import Path
 import pytest
 
 from kinesphere import zconfig
-from kinesphere.deploy.procs import Supervisor
+from kinesphere.procs import Supervisor
 from support.agents import Databank
 from support.network import Hub
 from support.system import supervisor

@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from kinesphere.deploy.procs import Supervisor
+from kinesphere.procs import Supervisor
 from kinesphere.zconfig import free_port
 from support.system import Observer, at_pose, query_pose, router_hub
 from support.view import browser_page, coloured, pixels

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from kinesphere.clients.view.app import FleetView
-from kinesphere.deploy.procs import Supervisor
+from kinesphere.procs import Supervisor
 from kinesphere.protocol import Status
 from kinesphere.zconfig import free_port
 from support.network import KEYS

@@ -18,9 +18,9 @@ import pytest
 import zenoh
 
 from kinesphere import protocol as pr
-from kinesphere.deploy.procs import Supervisor
 from kinesphere.errors import KinesphereError
 from kinesphere.keyexpr import KEYS
+from kinesphere.procs import Supervisor
 from kinesphere.zconfig import loopback_config, loopback_hub
 from support.soak import MIB, SCALE, Tally, mib, rss
 from support.system import Observer

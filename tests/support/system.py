@@ -17,8 +17,8 @@ import psutil
 import pytest
 import zenoh
 
-from kinesphere.deploy.procs import Supervisor
 from kinesphere.deploy.watch import Alive, StateRecorder, watch_alive
+from kinesphere.procs import Supervisor
 from kinesphere.protocol import Pose, RobotState, decode, error_from_reply
 from kinesphere.services.ecl.store import DATA_DIR
 from kinesphere.zconfig import (

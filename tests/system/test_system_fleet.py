@@ -14,8 +14,8 @@ from pathlib import Path
 
 import pytest
 
-from kinesphere.deploy.procs import Supervisor
 from kinesphere.keyexpr import KEYS
+from kinesphere.procs import Supervisor
 from kinesphere.protocol import Command, SpatialCommand, encode
 from support.system import (
     Observer,

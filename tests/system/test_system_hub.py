@@ -26,9 +26,9 @@ from rich.console import Console
 
 from kinesphere.cli import main
 from kinesphere.deploy.plan import PlannedRobot, UpOptions
-from kinesphere.deploy.procs import Child, Supervisor
 from kinesphere.deploy.up import Demo
 from kinesphere.keyexpr import KEYS
+from kinesphere.procs import Child, Supervisor
 from kinesphere.protocol import Ack, Command, SpatialCommand, decode, encode
 from kinesphere.zconfig import free_port, loopback_config
 from support.paths import ROOT

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from kinesphere.deploy.procs import Supervisor
+from kinesphere.procs import Supervisor
 from kinesphere.zconfig import loopback_config
 from support.network import Hub
 from support.system import Observer, databank_args, listeners, loopback

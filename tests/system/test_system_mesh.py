@@ -24,8 +24,8 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from kinesphere.deploy.procs import Supervisor
 from kinesphere.keyexpr import KEYS, Keys
+from kinesphere.procs import Supervisor
 from kinesphere.protocol import Ack, Command, SpatialCommand, decode, encode
 from kinesphere.zconfig import free_port, session, session_config, undeclare, wait_matching
 from support.paths import DEPLOY

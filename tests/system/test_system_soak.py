@@ -25,9 +25,9 @@ import zenoh
 from kinesphere import protocol as pr
 from kinesphere.cli import main
 from kinesphere.deploy.hub import client_args, start_hub
-from kinesphere.deploy.procs import Supervisor
 from kinesphere.deploy.watch import StateRecorder, watch_alive
 from kinesphere.keyexpr import KEYS
+from kinesphere.procs import Supervisor
 from kinesphere.query import get_one
 from kinesphere.zconfig import close_session, undeclare
 from support.soak import SCALE, Tally

@@ -14,8 +14,8 @@ from typing import Final
 
 import zenoh
 
-from kinesphere.deploy.procs import ChildFailed, Supervisor
 from kinesphere.errors import KinesphereError
+from kinesphere.procs import ChildFailed, Supervisor
 from kinesphere.zconfig import loopback_endpoint, open_session, session_config
 
 ATTEMPTS: Final = 5

@@ -26,11 +26,11 @@ from rich.live import Live
 
 from kinesphere.deploy.hub import client_args, start_hub
 from kinesphere.deploy.plan import PlannedPhrase, UpOptions
-from kinesphere.deploy.procs import ChildFailed, Supervisor
 from kinesphere.deploy.table import robot_table, state_dict, wide_console
 from kinesphere.deploy.watch import Alive, StateRecorder, is_settled, watch_alive
 from kinesphere.errors import KinesphereError
 from kinesphere.keyexpr import DEFAULT_PREFIX, Keys
+from kinesphere.procs import ChildFailed, Supervisor
 from kinesphere.protocol import RobotState
 from kinesphere.signals import handle_signals
 from kinesphere.zconfig import close_session, undeclare
@@ -79,7 +79,8 @@ class Demo:
         self.opts = opts
         self.keys = Keys(opts.prefix)
         self.console = console or wide_console()
-        self.sup = Supervisor(opts.out / "logs")
+        self.logs = opts.out / "logs"
+        self.sup = Supervisor(self.logs)
         self.recorder = StateRecorder(self.keys)
         self.alive: Alive | None = None
         self.endpoint = ""
@@ -115,13 +116,13 @@ class Demo:
 
     def start(self) -> None:
         o = self.opts
-        shutil.rmtree(self.sup.log_dir, ignore_errors=True)
+        shutil.rmtree(self.logs, ignore_errors=True)
         self.endpoint, session = start_hub(self.sup, o.start_timeout)
         self._session = session
         self.recorder.start(session)
         self.alive, self._subs = watch_alive(session, self.keys)
         self.console.log(f"hub {self.endpoint} (kinesphere router, serving nothing else); "
-                         f"logs in {self.sup.log_dir}")
+                         f"logs in {self.logs}")
         zargs = client_args(self.endpoint)
         prefix = [] if o.prefix == DEFAULT_PREFIX else ["--prefix", o.prefix]
         dbs = [a for spec in o.databanks for a in ("--db", spec)]

@@ -2,7 +2,8 @@
 
 Every child is ``sys.executable -m kinesphere.cli ...`` in its own session (so a terminal's
 Ctrl-C reaches only the supervisor, which then stops children in order) with stdout and
-stderr in a log file. Stopping sends SIGTERM to the child's process group, waits a grace
+stderr in a log file, or the supervisor's own (``kinesphere up`` keeps logs, a fleet host's
+workers write where it does). Stopping sends SIGTERM to the child's process group, waits a grace
 period, then SIGKILLs the group; afterwards ``/proc`` is scanned for anything still in those
 groups. On Linux each child also gets ``PR_SET_PDEATHSIG`` so it is told to stop even when the
 supervisor itself is SIGKILLed.
@@ -56,8 +57,9 @@ class Child:
     name: str
     argv: list[str]
     proc: subprocess.Popen[bytes]
-    log_path: Path
-    log_file: IO[bytes]
+    log_path: Path | None
+    """None: the child writes to the supervisor's stdout and stderr."""
+    log_file: IO[bytes] | None
 
     @property
     def pid(self) -> int:
@@ -67,6 +69,8 @@ class Child:
         return self.proc.poll() is None
 
     def tail(self, lines: int = 15) -> str:
+        if self.log_path is None:
+            return ""
         try:
             text = self.log_path.read_text(encoding="utf-8", errors="replace")
         except OSError:
@@ -99,8 +103,9 @@ def group_members(pgids: set[int]) -> list[int]:
 class Supervisor:
     """Owns the child processes of one run; a context manager that always stops them."""
 
-    def __init__(self, log_dir: Path, env: Mapping[str, str] | None = None) -> None:
+    def __init__(self, log_dir: Path | None, env: Mapping[str, str] | None = None) -> None:
         self.log_dir = log_dir
+        """Where each child's log goes (``NAME.log``); None: the supervisor's own output."""
         self.env = dict(os.environ if env is None else env)
         self.env.setdefault("PYTHONUNBUFFERED", "1")
         self.children: dict[str, Child] = {}
@@ -112,15 +117,18 @@ class Supervisor:
         old = self.children.get(name)
         if old is not None and old.alive():
             raise ValueError(f"child {name!r} is already running")
-        self.log_dir.mkdir(parents=True, exist_ok=True)
-        log_path = self.log_dir / f"{name}.log"
-        log_file = open(log_path, "ab")  # closed in stop()
+        log_path: Path | None = None
+        log_file: IO[bytes] | None = None
+        if self.log_dir is not None:
+            self.log_dir.mkdir(parents=True, exist_ok=True)
+            log_path = self.log_dir / f"{name}.log"
+            log_file = open(log_path, "ab")  # closed in stop()
         argv = kinesphere_argv(*args)
         proc = subprocess.Popen(
             argv,
             stdin=subprocess.DEVNULL,
             stdout=log_file,
-            stderr=subprocess.STDOUT,
+            stderr=None if log_file is None else subprocess.STDOUT,
             env=self.env,
             start_new_session=True,
             preexec_fn=_PREEXEC,  # only a prctl syscall, see _pdeathsig
@@ -140,10 +148,9 @@ class Supervisor:
         for child in self.children.values():
             code = child.proc.poll()
             if code is not None and child.name not in self.expected_exit:
-                raise ChildFailed(
-                    f"{child.name} exited with code {code}; last lines of {child.log_path}:\n"
-                    f"{child.tail()}"
-                )
+                where = (f"; last lines of {child.log_path}:\n{child.tail()}"
+                         if child.log_path is not None else "")
+                raise ChildFailed(f"{child.name} exited with code {code}{where}")
 
     def wait(self, name: str, timeout: float) -> int:
         """Wait for an expected exit; raises subprocess.TimeoutExpired."""
@@ -178,7 +185,8 @@ class Supervisor:
         for pid in group_members({child.pid}):
             with contextlib.suppress(ProcessLookupError):
                 os.kill(pid, signal.SIGKILL)
-        child.log_file.close()
+        if child.log_file is not None:
+            child.log_file.close()
         return child.proc.returncode
 
     def stop_all(self, grace: float = GRACE_S) -> dict[str, int | None]:
