@@ -11,12 +11,17 @@ brakes to rest; if even the brake fails, it holds where the last output was. Not
 raises into the control loop (the binding raises ``RuckigError`` or ``ValueError`` for some
 failures, e.g. a 10 km translation whose duration exceeds Ruckig's maximum): a failure is a
 braked hold and a reason in :attr:`Otg.fault`, which the agent reports as ``error``.
+
+On a fleet host the steps between two plans are not taken here: the generator is attached to
+the host's :class:`~kinesphere.robots.agent.follow.Followers`, which follow every robot's
+trajectory at once on arrays, bit for bit as ``update`` would (``follow.py``).
 """
 
 from __future__ import annotations
 
 import logging
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 from ruckig import (
@@ -27,6 +32,9 @@ from ruckig import (
     Ruckig,
     Synchronization,
 )
+
+if TYPE_CHECKING:
+    from kinesphere.robots.agent.follow import Followers
 
 log = logging.getLogger(__name__)
 
@@ -89,6 +97,12 @@ class Otg:
         """Seconds the motion planned last still takes from the latest output (Ruckig's
         trajectory duration, counted from the step that planned it)."""
         self._why = ""
+        self.following = False
+        """Whether :class:`Followers` take the steps of the trajectory now (not :meth:`step`)."""
+        self._arrived = False
+        """The followers' step just brought the motion to rest (:meth:`step` says so)."""
+        self._followers: Followers | None = None
+        self._slot = -1
         self._otg = Ruckig(n, dt)
         self._inp = InputParameter(n)
         self._out = OutputParameter(n)
@@ -104,8 +118,39 @@ class Otg:
             inp.max_position = list(upper)
         self.scale([1.0] * n)
 
+    def attach(self, followers: Followers, slot: int, rows: slice) -> None:
+        """Let ``followers`` take the steps along each trajectory once Ruckig planned it; the
+        outputs become views of their arrays (``rows``)."""
+        for name in ("position", "velocity", "acceleration"):
+            shared = getattr(followers, name)[rows]
+            shared[:] = getattr(self, name)
+            setattr(self, name, shared)
+        self._followers, self._slot = followers, slot
+
+    def arrived(self) -> None:
+        """The followed trajectory ended (``Finished``): rest, unless it cruises on."""
+        if self.cruising:
+            return  # a cruise that reached its velocity extrapolates at it
+        self._detach()
+        self._arrived = self._rest()
+
+    def _detach(self) -> None:
+        """Take the steps here again: Ruckig's input continues from the followed state (what
+        ``pass_to_input`` would have left there)."""
+        if not self.following:
+            return
+        self.following = False
+        assert self._followers is not None
+        self._followers.drop(self._slot)
+        inp = self._inp
+        inp.current_position = self.position.tolist()
+        inp.current_velocity = self.velocity.tolist()
+        inp.current_acceleration = self.acceleration.tolist()
+
     def reset(self, position: Values) -> None:
         """At rest at ``position`` (where the body was found)."""
+        self._detach()
+        self._arrived = False
         self.position[:] = position
         self._inp.current_position = list(self.position)
         self._inp.current_velocity = [0.0] * self.n
@@ -116,9 +161,14 @@ class Otg:
     def scale(self, share: Values) -> None:
         """Limits per axis = limit x share (a direction's components, at least :data:`FLOOR`)."""
         s = [max(abs(x), FLOOR) for x in share]
-        self._inp.max_velocity = [v * k for v, k in zip(self.vmax, s, strict=True)]
-        self._inp.max_acceleration = [a * k for a, k in zip(self.amax, s, strict=True)]
-        self._inp.max_jerk = [j * k for j, k in zip(self.jmax, s, strict=True)]
+        limits = ([v * k for v, k in zip(self.vmax, s, strict=True)],
+                  [a * k for a, k in zip(self.amax, s, strict=True)],
+                  [j * k for j, k in zip(self.jmax, s, strict=True)])
+        inp = self._inp
+        if limits == (inp.max_velocity, inp.max_acceleration, inp.max_jerk):
+            return  # Ruckig's input is unchanged: it would follow on
+        self._detach()
+        inp.max_velocity, inp.max_acceleration, inp.max_jerk = limits
 
     def go_to(self, target: Values, sync: Synchronization = Synchronization.Time,
               duration: float | None = None) -> None:
@@ -126,25 +176,39 @@ class Otg:
         minimum duration: a motion that could be quicker arrives then, one that cannot
         arrives as soon as the limits allow)."""
         self.target[:] = target
-        self._plan(ControlInterface.Position, sync)
-        self._inp.target_position = self.target.tolist()
-        self._inp.minimum_duration = duration if duration is not None and duration > 0 else None
+        self._plan(ControlInterface.Position, sync, self.target.tolist(), None,
+                   duration if duration is not None and duration > 0 else None)
 
     def go_at(self, velocity: Values,
               sync: Synchronization = Synchronization.Phase) -> None:
         """Reach ``velocity`` and cruise at it until told otherwise."""
-        self._plan(ControlInterface.Velocity, sync)
-        self._inp.target_velocity = list(velocity)
+        self._plan(ControlInterface.Velocity, sync, None, [float(v) for v in velocity])
 
     def brake(self) -> None:
         """Come to rest where the brake ends, the fastest jerk-limited stop the limits allow."""
         self.go_at([0.0] * self.n, Synchronization.No)
         self.braking = True
 
-    def _plan(self, interface: ControlInterface, sync: Synchronization) -> None:
-        self._inp.control_interface = interface
-        self._inp.synchronization = sync
-        self._inp.minimum_duration = None
+    def _plan(self, interface: ControlInterface, sync: Synchronization,
+              position: list[float] | None, velocity: list[float] | None,
+              duration: float | None = None) -> None:
+        """A new input for Ruckig (``position`` or ``velocity``: the target that changes;
+        ``duration``: the minimum duration, None for none). The same input again changes
+        nothing for Ruckig, which follows on (so do followers)."""
+        self._arrived = False
+        inp = self._inp
+        if not (self.following and inp.control_interface == interface
+                and inp.synchronization == sync and inp.minimum_duration == duration
+                and (position is None or inp.target_position == position)
+                and (velocity is None or inp.target_velocity == velocity)):
+            self._detach()
+            inp.control_interface = interface
+            inp.synchronization = sync
+            inp.minimum_duration = duration
+            if position is not None:
+                inp.target_position = position
+            if velocity is not None:
+                inp.target_velocity = velocity
         self.active = self.n > 0  # Ruckig cannot step zero DoFs
         self.braking = False
         self.fault = ""
@@ -157,8 +221,9 @@ class Otg:
 
     def step(self) -> bool:
         """Advance one cycle; True when the motion just came to rest (reached or braked)."""
-        if not self.active:
-            return False
+        if not self.active or self.following:
+            arrived, self._arrived = self._arrived, False
+            return arrived  # the followers took this step
         result = self._update()
         if result is None:
             result = self._recover()
@@ -174,6 +239,9 @@ class Otg:
         self.acceleration[:] = out.new_acceleration
         out.pass_to_input(self._inp)
         if result != Result.Finished:
+            if self._followers is not None:
+                self._followers.load(self._slot, out.trajectory, out.time)
+                self.following = True
             return False
         if self.cruising:
             return False  # a cruise that reached its velocity extrapolates at it

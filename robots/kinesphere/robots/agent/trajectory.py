@@ -106,9 +106,11 @@ class JointTrajectory:
         self.max_acceleration = float(max_acceleration)
         self.max_jerk = float(max_jerk)
         self.clamped: dict[str, Clamp] = {}
-        self._otg = Otg(n, dt, self.max_velocity, [self.max_acceleration] * n,
-                        [self.max_jerk] * n, start, [lim.lower for lim in limits],
-                        [lim.upper for lim in limits])
+        self.generator = Otg(n, dt, self.max_velocity, [self.max_acceleration] * n,
+                             [self.max_jerk] * n, start, [lim.lower for lim in limits],
+                             [lim.upper for lim in limits])
+        """The Ruckig generator of all joints (a fleet host lets its ``Followers`` take the
+        steps between plans: ``follow.py``)."""
 
     @property
     def dof(self) -> int:
@@ -117,34 +119,34 @@ class JointTrajectory:
     @property
     def moving(self) -> bool:
         """True while a trajectory (or a stop) is still being followed."""
-        return self._otg.active
+        return self.generator.active
 
     @property
     def position(self) -> np.ndarray:
-        return self._otg.position
+        return self.generator.position
 
     @property
     def velocity(self) -> np.ndarray:
-        return self._otg.velocity
+        return self.generator.velocity
 
     @property
     def acceleration(self) -> np.ndarray:
-        return self._otg.acceleration
+        return self.generator.acceleration
 
     @property
     def target(self) -> np.ndarray:
         """Where the joints are going, or are held (after a stop: where they came to rest)."""
-        return self._otg.target
+        return self.generator.target
 
     @property
     def fault(self) -> str:
         """Why the last motion was braked instead of followed ("" when it was not)."""
-        return self._otg.fault
+        return self.generator.fault
 
     @property
     def remaining(self) -> float:
         """Seconds until the motion under way arrives, as planned (0 at rest)."""
-        return self._otg.remaining if self._otg.active else 0.0
+        return self.generator.remaining if self.generator.active else 0.0
 
     def clamp(self, joints: Mapping[str, float]) -> tuple[dict[str, float], list[Clamp]]:
         """``joints`` inside the limits with margin, and the joints that had to move."""
@@ -197,20 +199,20 @@ class JointTrajectory:
         if aim.beyond:
             clamped.update(aim.beyond)
         if self.dof:
-            self._otg.go_to(goal, Synchronization.Phase if straight else Synchronization.Time,
-                            duration)
+            self.generator.go_to(goal, Synchronization.Phase if straight else Synchronization.Time,
+                                 duration)
         return list(aim.clamps)
 
     def go_to(self, q: np.ndarray) -> None:
         """Straight (phase-synchronised) to ``q``, every joint, already inside the limits (the
         guard's waypoints); what was clamped stays reported."""
         if self.dof:
-            self._otg.go_to(q, Synchronization.Phase)
+            self.generator.go_to(q, Synchronization.Phase)
 
     def reset(self, q: Values) -> None:
         """At rest at ``q`` (where the body was found), held there."""
         if self.dof:
-            self._otg.reset(q)
+            self.generator.reset(q)
 
     def stop(self) -> None:
         """Brake every joint to rest where it is, jerk-limited (the fastest stop the limits allow).
@@ -218,8 +220,8 @@ class JointTrajectory:
         The targets become wherever the joints come to rest.
         """
         if self.dof:
-            self._otg.brake()
+            self.generator.brake()
 
     def step(self) -> None:
         """Advance one control cycle along the current trajectory."""
-        self._otg.step()
+        self.generator.step()
