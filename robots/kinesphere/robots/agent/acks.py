@@ -176,6 +176,11 @@ class Acks:
                 log.debug("ack not published: %s", exc)
 
     @property
+    def pending(self) -> bool:
+        """Acks decided and not yet published (:meth:`flush`)."""
+        return bool(self._pending)
+
+    @property
     def substitutions(self) -> list[Substitution]:
         """Those of the followed motion (``RobotState.substitutions``)."""
         return list(self.motion.meaning.substitutions) if self.motion is not None else []

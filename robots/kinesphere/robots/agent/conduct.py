@@ -94,6 +94,33 @@ class Conduct:
         if self.safety.expired(now) and self.controller.moving:
             self.halt(Status.HOLDING, "no new command within ttl_ms: holding", AckStage.HOLDING)
 
+    def quiet(self) -> bool:
+        """Whether the next step needs nothing of the conduct before the body's step but its
+        timers (:meth:`deadline`): nothing said and not flushed, no motion whose ``moving``
+        is still to say, no body fault to clear (``Agent.needs_cycle``)."""
+        motion = self.acks.motion
+        return not (self._started is not None or self.acks.pending or self._body_fault
+                    or (motion is not None and not motion.moved))
+
+    @property
+    def settled(self) -> bool:
+        """No motion whose end is still to say (:meth:`after_step`; a drive ends only when
+        replaced)."""
+        motion = self.acks.motion
+        return motion is None or motion.target == _DRIVE
+
+    def deadline(self) -> float:
+        """When :meth:`watch` next has something to do (monotonic s; inf: never, until a
+        command arrives): the watchdog, the lease's expiry."""
+        watchdog = self.safety.deadline
+        lease = self.lease.expires
+        return min(math.inf if watchdog is None else watchdog, lease)
+
+    def followed(self) -> None:
+        """A step along a followed trajectory went as planned: all :meth:`after_step` would
+        have done (a fleet host's lean step, ``Agent.followed``)."""
+        self._moved_at = self.controller.time
+
     def commanded(self) -> None:
         """The step's setpoints went to the body: the first toward a new target is the moment
         the robot started moving for that command (``moving``; the latency probe)."""

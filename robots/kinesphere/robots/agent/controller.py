@@ -79,9 +79,20 @@ class Controller:
 
     def prepare(self) -> None:
         """The cycle up to the body's step: trajectories forward, body commanded. (A fleet
-        host steps many bodies between :meth:`prepare` and :meth:`finish`.)"""
+        host steps many bodies between :meth:`prepare` and :meth:`finish`, and takes the
+        steps of followed joint trajectories for all of them at once between :meth:`guide`
+        and :meth:`command`: ``follow.py``.)"""
+        self.guide()
+        self.command()
+
+    def guide(self) -> None:
+        """The guard's verdicts and next leg, before the trajectories step."""
         if self.guard is not None:
             self.guard.before_step(self.joints)
+
+    def command(self) -> None:
+        """Trajectories forward (a followed joint trajectory has been already: ``follow.py``),
+        their setpoints to the body."""
         self.joints.step()
         twist = _FIXED
         if self.base is not None:
@@ -93,11 +104,23 @@ class Controller:
         """The cycle after the body's step: one period of robot time has passed."""
         if self.guard is not None:
             self.guard.after_step(self.joints)
+        self.elapse()
+
+    def elapse(self) -> None:
+        """One period of robot time has passed (the end of :meth:`finish`: all a fleet host
+        does for a robot whose guard has nothing to do, ``Agent.needs_cycle``)."""
         self._reading = None
         self.time += self.dt
         self.steps += 1
         if self.on_step is not None:
             self.on_step(self)
+
+    @property
+    def unattended(self) -> bool:
+        """Whether the next step needs nothing of the controller before the body's step but
+        the trajectories forward and the setpoints to the body: the guard has no verdict to
+        apply nor leg to start, and no hook watches the steps (``Agent.needs_cycle``)."""
+        return (self.guard is None or self.guard.idle) and self.on_step is None
 
     def halt(self) -> None:
         """Brake joints and base to rest where they are (jerk-limited)."""

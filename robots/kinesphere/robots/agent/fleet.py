@@ -1,19 +1,26 @@
 """A fleet host: many robots in one process, one control loop stepping every body per tick.
 
 Why: a simulated robot at 500 Hz costs 20-60 us of work per step, but as a process of its own
-it also pays an interpreter, a Zenoh session and a scheduler wake-up every 2 ms; on two cores
-that kept 16 robots in real time. A fleet host runs one :class:`Agent` per robot on one Zenoh
-session, and each robot keeps everything that makes it a robot: its keys, liveliness token,
-state stream, acks, lease, watchdog, e-stop latch and databank resolver. Per tick the loop
-does every robot's commands and trajectories and hands the setpoints to the bodies; then the
-bodies' physics (with their hard stops) is split between the loop's thread and helper threads
-(``stepper.py``: MuJoCo releases the GIL, so the shares step side by side). The loop returns
-once its own share is done; the helpers' shares finish while it waits for its next tick, which
-begins with every robot's faults, acks and state. So physics overlaps physics and the loop's
-idle time, and a helper that starts late under load costs the loop nothing unless it is still
-busy a whole period later. Robots publish state on different ticks (``phase``), so no tick
-encodes them all. Whatever arrives for any robot wakes the loop at once (``pacing.py``); a
-robot whose step fails is held and reported alone.
+it also pays an interpreter, a Zenoh session and a scheduler wake-up every 2 ms. A fleet host
+runs one :class:`Agent` per robot on one Zenoh session, and each robot keeps everything that
+makes it a robot: its keys, liveliness token, state stream, acks, lease, watchdog, e-stop
+latch and databank resolver. ``kinesphere fleet`` runs one fleet host per core, each with a
+share of the robots (``workers.py``).
+
+Per tick, what every robot does every step is done for all of them at once: their joint
+trajectories are followed on arrays (``follow.py``: Ruckig plans, the arrays take the steps
+between plans), the hard stops of all bodies are one comparison (``HardStops``), and the
+robots whose state is due are looked up, not asked. A robot runs its whole cycle (e-stops and
+commands, timers, the guard's verdicts, what it says) only when something is there for it:
+something arrived (its inbox and guard ``notify`` the host), a timer runs out
+(``Conduct.deadline``), a motion's ``moving`` is to say. Otherwise it only moves
+(``Agent.follow``: the followed setpoint to its body, its base's step) or, at rest, nothing at
+all but its physics. A robot whose step fails is held and reported alone.
+
+The physics of the bodies is split between the loop's thread and helper threads (``stepper.py``:
+MuJoCo releases the GIL); the loop returns once its own share is done, and the helpers' shares
+finish while it waits for its next tick, which begins with the end of the step: hard stops,
+faults, acks, states. Whatever arrives for any robot wakes the loop at once (``pacing.py``).
 
 Robots come from ``kinesphere fleet FLEET.toml`` (:func:`load_fleet_file`) or repeated
 ``kinesphere agent --robot PLATFORM:ID`` (:func:`parse_robot`).
@@ -23,23 +30,33 @@ from __future__ import annotations
 
 import logging
 import threading
+from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 
 import msgspec
+import numpy as np
 import zenoh
 
 from kinesphere.configfile import load_toml
 from kinesphere.errors import KinesphereError
 from kinesphere.keyexpr import check_segment
 from kinesphere.protocol import Status
+from kinesphere.robots.agent.body import Body
+from kinesphere.robots.agent.follow import Followers
+from kinesphere.robots.agent.inbox import clocks
+from kinesphere.robots.agent.mujoco_body import HardStops, MujocoBody
 from kinesphere.robots.agent.options import AgentOptions
 from kinesphere.robots.agent.pacing import LoopStats, Wake, run_paced
 from kinesphere.robots.agent.runtime import Agent
 from kinesphere.robots.agent.stepper import Stepper
 
 log = logging.getLogger(__name__)
+
+_CYCLE, _LEAN, _REST = object(), object(), object()
+"""What a robot does in a tick: the whole cycle, only its motion (``Agent.follow``), or
+nothing but robot time (``Fleet.tick``)."""
 
 MAX_ROBOTS = 1024
 """Robots one fleet host runs (each holds a MuJoCo model instance and a resolver thread)."""
@@ -111,7 +128,8 @@ class FleetHost:
     beside the loop's own (None: one per further core)."""
 
     def __init__(self, robots: Sequence[RobotSpec], session: zenoh.Session,
-                 options: AgentOptions | None = None, helpers: int | None = None) -> None:
+                 options: AgentOptions | None = None, helpers: int | None = None,
+                 batched: bool = True) -> None:
         check_fleet(robots)
         self.options = options or AgentOptions()
         if self.options.body != "mujoco":
@@ -120,16 +138,35 @@ class FleetHost:
                                   "real robot")
         self.wake = Wake()
         self.stats = LoopStats()
+        self._awake: deque[int] = deque()
+        """Robots something arrived for (any thread): the whole cycle next step."""
         self.agents: list[Agent] = []
         try:
             for i, r in enumerate(robots):
                 self.agents.append(Agent(r.platform, r.robot_id, session,
                                          replace(self.options, groups=r.groups),
-                                         wake=self.wake, phase=i))
+                                         wake=self.wake, phase=i, stats=self.stats,
+                                         notify=self._notify(i)))
         except BaseException:
             self._close_agents()
             raise
         self.stepper = Stepper(helpers)
+        self.batched = batched
+        """False: every robot's whole cycle every step, Ruckig stepped per robot (the way
+        before the batching, kept to measure it against: ``bench_fleet.py``)."""
+        self.followers = Followers([a.controller.joints.generator for a in self.agents]
+                                   if batched else [], 1.0 / self.options.rate)
+        self._bodies: list[Body] = []
+        self._stops = HardStops([])
+        every = self.agents[0].publish_every
+        self._due: list[list[Agent]] = [[] for _ in range(every)]
+        """Robots whose state is due, by tick modulo the state period (``Agent.due``)."""
+        for agent in self.agents:
+            self._due[(-agent.phase) % every].append(agent)
+        self._modes: list[object] = [_CYCLE] * len(self.agents)
+        """What each robot does in the step in flight (:meth:`tick`), then in the next."""
+        self._deadlines = np.full(len(self.agents), np.inf)
+        """When each robot's next timer runs out (``Conduct.deadline``; monotonic s)."""
         self._failures: list[Exception | None] | None = None
         """The step in flight (its physics launched): what failed before the physics."""
         self._stop = threading.Event()
@@ -166,30 +203,92 @@ class FleetHost:
 
     def tick(self) -> None:
         """One control cycle of every robot (module text): the end of the last tick's step,
-        then this tick's commands and trajectories, then the physics: this thread's share now,
-        the helpers' finishing while the loop waits for its next tick."""
+        then this tick's commands, the joint trajectories followed at once, each robot's
+        setpoints, then the physics: this thread's share now, the helpers' finishing while the
+        loop waits for its next tick. A robot with nothing to react to (``Agent.needs_cycle``)
+        only hands its followed setpoint to its body, or nothing at all when it is at rest."""
         self.complete()
-        failures = [_guarded(a.begin_step) for a in self.agents]
+        agents, modes, awake = self.agents, self._modes, self._awake
+        while awake:
+            modes[awake.popleft()] = _CYCLE
+        deadlines = self._deadlines
+        for i in np.flatnonzero(deadlines <= clocks()[0] / 1e9).tolist():
+            modes[i] = _CYCLE
+            deadlines[i] = np.inf
+        failures: list[Exception | None] = [None] * len(agents)
+        for i, agent in enumerate(agents):
+            if modes[i] is _CYCLE:
+                failures[i] = _guarded(agent.react)
+            else:
+                agent.count()
+        self.followers.advance()
+        for i, agent in enumerate(agents):
+            mode = modes[i]
+            if mode is _CYCLE:
+                if failures[i] is None:
+                    failures[i] = _guarded(agent.actuate)
+            elif mode is _LEAN:
+                failures[i] = agent.follow()
         self._failures = failures
-        bodies = [a.controller.body for a, f in zip(self.agents, failures, strict=True)
-                  if f is None]
-        self.stepper.launch(bodies, share=True)
+        bodies = [a.controller.body for a in agents]
+        if bodies != self._bodies:
+            self._regroup(bodies)
+        self.stepper.launch([b for b, f in zip(bodies, failures, strict=True) if f is None],
+                            share=True)
         self.stats.steps += 1
 
     def complete(self) -> None:
-        """Finish the step in flight: wait for its physics, then every robot's faults, acks
-        and state (a no-op when none is)."""
+        """Finish the step in flight: wait for its physics, the hard stops of every body at
+        once, then every robot's faults and acks and what it does next step, and the states
+        due (a no-op when no step is in flight)."""
         failures, self._failures = self._failures, None
         if failures is None:
             return
         errors = iter(self.stepper.wait())
-        for agent, failure in zip(self.agents, failures, strict=True):
+        self._stops.apply()
+        modes = self._modes
+        for i, (agent, failure) in enumerate(zip(self.agents, failures, strict=True)):
             if failure is None:
                 failure = next(errors)
+            mode = modes[i]
             try:
-                agent.end_step(failure)
+                if failure is not None or mode is _CYCLE:
+                    agent.end_step(failure)
+                    modes[i] = self._next(i, agent)
+                elif mode is _LEAN:
+                    if not agent.followed():
+                        modes[i] = self._next(i, agent)
+                else:
+                    agent.controller.elapse()
             except Exception:  # one robot's bug must not hold up the others
                 log.exception("fleet host: robot %s: end of step failed", agent.robot_id)
+                modes[i] = _CYCLE
+        for agent in self._due[self.stats.steps % len(self._due)]:
+            agent.publish()
+
+    def _next(self, i: int, agent: Agent) -> object:
+        """What robot ``i`` does next step: the whole cycle, or follow its motion, or rest
+        until something wakes it (``Agent.needs_cycle``)."""
+        self._deadlines[i] = agent.conduct.deadline()
+        if not self.batched or agent.needs_cycle():
+            return _CYCLE
+        return _REST if agent.at_rest else _LEAN
+
+    def _notify(self, i: int) -> Callable[[], None]:
+        """What robot ``i``'s inbox and guard call when something arrives for it (any
+        thread): it does the whole cycle next step, which starts at once."""
+        awake, wake = self._awake, self.wake
+
+        def notify() -> None:
+            awake.append(i)
+            wake.set()
+
+        return notify
+
+    def _regroup(self, bodies: list[Body]) -> None:
+        """The hard stops of the bodies stepped from now on, all at once."""
+        self._bodies = bodies
+        self._stops = HardStops([b for b in bodies if isinstance(b, MujocoBody)])
 
     def close(self) -> None:
         """Stop the loop and every robot (the session stays open: the caller owns it)."""

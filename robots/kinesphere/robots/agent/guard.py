@@ -26,6 +26,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -87,6 +88,9 @@ class Guard:
         self._braked = self._halted = False
         self._ask: tuple[int, np.ndarray, np.ndarray] | None = None
         """A move asked this step, handed to the worker after the step (:meth:`after_step`)."""
+        self.notify: Callable[[], None] | None = None
+        """Called (on the worker thread) after a finding is posted: a fleet host wakes the
+        robot for it (``Agent.needs_cycle``); a lone agent looks every step anyway."""
         self._wake = threading.Condition()
         self._busy = False
         self._closed = False
@@ -99,6 +103,13 @@ class Guard:
         with self._wake:
             return (self._ask is not None or self._asked is not None or self._busy
                     or any(g == self._generation for g, _ in self._findings))
+
+    @property
+    def idle(self) -> bool:
+        """Nothing for the control thread to do before or after a step but watch for
+        contacts: no move to hand over, no finding to apply, no leg to start (lock-free: a
+        finding posted while this reads is applied at the next step)."""
+        return not (self._ask is not None or self._findings or self.legs)
 
     def settle(self, timeout: float) -> bool:
         """Wait until the way to the newest target is checked (and a route planned when it
@@ -249,8 +260,11 @@ class Guard:
 
     def _post(self, generation: int, finding: Finding) -> None:
         with self._wake:
-            if generation == self._generation:
-                self._findings.append((generation, finding))
+            if generation != self._generation:
+                return
+            self._findings.append((generation, finding))
+        if self.notify is not None:
+            self.notify()
 
 
 def make_guard(body: Body, platform: str) -> Guard:

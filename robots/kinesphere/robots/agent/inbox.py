@@ -21,6 +21,7 @@ from __future__ import annotations
 import threading
 import time
 from collections import OrderedDict, deque
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -80,8 +81,11 @@ class Inbox:
     """Thread-safe intake; :meth:`drain` empties it. Every put sets ``wake``, the control
     loop's signal to look now rather than at its next tick (``pacing.py``)."""
 
-    def __init__(self, wake: Wake | None = None) -> None:
+    def __init__(self, wake: Wake | None = None,
+                 notify: Callable[[], None] | None = None) -> None:
         self.wake = Wake() if wake is None else wake
+        self._notify = self.wake.set if notify is None else notify
+        """Called after every put: sets ``wake`` (a fleet host's also notes the robot)."""
         self._lock = threading.Lock()
         self._arrivals = 0
         self._estops: deque[Received] = deque(maxlen=MAX_ESTOPS)
@@ -95,7 +99,7 @@ class Inbox:
         with self._lock:
             if cmd.estop:
                 self._estops.append(item)
-                self.wake.set()
+                self._notify()
                 return
             self._arrivals += 1
             key = (cmd.sender, cmd.session)
@@ -111,7 +115,7 @@ class Inbox:
             elif len(queue) >= PER_SENDER:
                 self._superseded.append(queue.popleft()[1])
             queue.append((self._arrivals, item))
-        self.wake.set()
+        self._notify()
 
     def _evict(self, keep: tuple[str, str]) -> deque[tuple[int, Received]]:
         """Make room: the least recently heard pair waiting with motion commands only (they
@@ -129,22 +133,28 @@ class Inbox:
         with self._lock:
             self._arrivals += 1
             self._bad = (self._arrivals, error)
-        self.wake.set()
+        self._notify()
 
     def put_resolved(self, ticket: int, answer: PoseAnswer) -> None:
         with self._lock:
             self._arrivals += 1
             self._other.append((self._arrivals, Resolved(ticket, answer)))
-        self.wake.set()
+        self._notify()
 
     def __len__(self) -> int:
         with self._lock:
             return (len(self._estops) + sum(len(q) for q in self._pairs.values())
                     + len(self._other) + (self._bad is not None))
 
+    @property
+    def waiting(self) -> bool:
+        """Something is here for the next step (reading emptiness needs no lock: what
+        arrives while this reads is seen at the next step, which its ``wake`` starts)."""
+        return bool(self._estops or self._pairs or self._other or self._bad or self._superseded)
+
     def drain(self) -> Drained:
-        if not (self._estops or self._pairs or self._other or self._bad or self._superseded):
-            return _EMPTY  # the common step: nothing new (reading emptiness needs no lock)
+        if not self.waiting:
+            return _EMPTY  # the common step: nothing new
         with self._lock:
             if len(self._pairs) == 1 and not (self._estops or self._other or self._bad
                                               or self._superseded):

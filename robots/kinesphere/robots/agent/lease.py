@@ -20,6 +20,7 @@ Pure logic on the robot's monotonic clock. The rules (``docs/protocol.md``, "Con
 from __future__ import annotations
 
 import logging
+import math
 from dataclasses import dataclass
 
 from kinesphere.protocol import Command, LeaseAction
@@ -64,6 +65,11 @@ class Lease:
             log.info("lease of %r expired after %.1f s of silence", gone, self.timeout_s)
             return gone
         return ""
+
+    @property
+    def expires(self) -> float:
+        """When a silent holder loses the lease (inf while it is free)."""
+        return self._heard + self.timeout_s if self.holder else math.inf
 
     def touch(self, cmd: Command, now: float) -> None:
         """``cmd`` was heard (and refused for another reason): it keeps its sender's lease."""

@@ -66,13 +66,17 @@ class Agent:
 
     ``body`` defaults to ``options.body`` made for ``platform`` (``body.py``'s registry).
     ``wake`` is set whenever something arrives for the loop (a fleet host shares one among its
-    robots); ``phase`` shifts the steps that publish state (a fleet host spreads them).
+    robots); ``phase`` shifts the steps that publish state (a fleet host spreads them);
+    ``stats`` are the loop's (a fleet host's, shared by its robots; else this agent's own);
+    ``notify`` is called whenever something arrives for this robot (default: ``wake.set``; a
+    fleet host also notes the robot, ``needs_cycle``).
     """
 
     def __init__(
         self, platform: str, robot_id: str, session: zenoh.Session,
         options: AgentOptions | None = None, body: Body | None = None,
-        wake: Wake | None = None, phase: int = 0,
+        wake: Wake | None = None, phase: int = 0, stats: LoopStats | None = None,
+        notify: Callable[[], None] | None = None,
     ) -> None:
         self.options = options or AgentOptions()
         self.keys = Keys(self.options.prefix)
@@ -85,21 +89,26 @@ class Agent:
         self.controller = Controller(body, self.options.margin, make_guard(body, platform))
         self.platform = self.controller.platform.name
         self.resolver = Resolver(session, self.platform, self.keys, self.options.query_timeout_s)
-        self.inbox = Inbox(wake)
+        self.inbox = Inbox(wake, notify)
+        if self.controller.guard is not None:
+            self.controller.guard.notify = notify
         self.conduct = Conduct(robot_id, self.controller, self.resolver,
                                self.inbox.put_resolved, self.options.max_translation_m,
                                self.options.speed)
-        self.stats = LoopStats()
+        self.stats = LoopStats() if stats is None else stats
         self.last_state: RobotState | None = None
         self._ratelog = RateLog(log)
         self._ticks = 0
         self._tick_ns = 0
         """Monotonic ns when the last step began."""
         self._state_seq = 0
-        self._publish_every = max(1, round(self.options.rate / self.options.state_rate))
-        self._phase = phase
+        self.publish_every = max(1, round(self.options.rate / self.options.state_rate))
+        """Steps between two published states."""
+        self.phase = phase
         """Offsets the steps that publish state: a fleet host spreads its robots' states
         over the steps instead of encoding them all in one."""
+        self._followed_only = False
+        """The step in flight was taken by a fleet host's followers alone (:meth:`follow`)."""
         self._entities: list[Any] = []
         self._publisher: Any = None
         self._thread: threading.Thread | None = None
@@ -224,10 +233,68 @@ class Agent:
             except Exception as exc:
                 failure = exc
         self.end_step(failure)
+        self.stats.steps += 1
+        if self.due():
+            self.publish()
 
     def begin_step(self) -> Exception | None:
         """The cycle up to the body's step: e-stops, commands, timers, the trajectories
         commanded to the body. Returns what failed there (the body must not step then)."""
+        failure = self.react()
+        return failure if failure is not None else self.actuate()
+
+    def needs_cycle(self) -> bool:
+        """Whether the next step needs the whole cycle (:meth:`react`, :meth:`actuate`,
+        :meth:`end_step`): something arrived, the guard has a verdict or a leg, a motion's
+        ``moving`` is to say. A fleet host asks after each step and does less for a robot
+        that needs none of it, until something arrives for it (``notify``) or a timer runs
+        out (``Conduct.deadline``): :meth:`follow` and :meth:`followed` while it moves or a
+        motion's end is to say, else nothing but robot time (``Controller.elapse``)."""
+        return (self.inbox.waiting or not self.controller.unattended
+                or not self.conduct.quiet())
+
+    @property
+    def at_rest(self) -> bool:
+        """Nothing moves and nothing is to say about a motion: until something arrives, a
+        step is robot time and physics alone."""
+        return not self.controller.moving and self.conduct.settled
+
+    def follow(self) -> Exception | None:
+        """A step with nothing to react to (:meth:`needs_cycle`), up to the body's step: the
+        trajectories forward (a fleet host followed the joints' already: ``follow.py``),
+        their setpoints to the body. Returns what failed (the body must not step then)."""
+        ctrl = self.controller
+        base = ctrl.base
+        self._followed_only = (ctrl.joints.generator.following
+                               and (base is None or not base.moving))
+        try:
+            ctrl.command()
+        except Exception as exc:
+            return exc
+        return None
+
+    def followed(self) -> bool:
+        """The end of a :meth:`follow` step whose body stepped: contacts, robot time, and all
+        :meth:`end_step` says when a trajectory was stepped here, ended or was halted.
+        True when the followers took the step and nothing else changed (the next step is
+        such a step again); else ask :meth:`needs_cycle` and :attr:`at_rest`."""
+        ctrl, conduct = self.controller, self.conduct
+        ctrl.finish()  # the guard watches for contacts
+        if self._followed_only and ctrl.joints.generator.following:
+            conduct.followed()  # nothing else can have changed
+            return True
+        conduct.after_step()
+        conduct.acks.flush()
+        return False
+
+    def count(self) -> None:
+        """One more step begun, nothing to react to before it (:meth:`needs_cycle`)."""
+        self._ticks = self.conduct.ticks = self._ticks + 1
+
+    def react(self) -> Exception | None:
+        """The first part of :meth:`begin_step`: e-stops, commands, timers, the guard's
+        verdicts (a fleet host then follows every robot's joint trajectory at once, then
+        :meth:`actuate`s each)."""
         conduct = self.conduct
         self._ticks = conduct.ticks = self._ticks + 1
         now_ns = clocks()[0]
@@ -244,7 +311,18 @@ class Agent:
             conduct.handle(any_item, now_ns)
         conduct.watch(now_ns / 1e9)
         try:
-            self.controller.prepare()
+            self.controller.guide()
+        except Exception as exc:
+            conduct.acks.flush()
+            return exc
+        return None
+
+    def actuate(self) -> Exception | None:
+        """The rest of :meth:`begin_step`: the trajectories forward, their setpoints to the
+        body, what that says (``moving``)."""
+        conduct = self.conduct
+        try:
+            self.controller.command()
         except Exception as exc:
             conduct.acks.flush()
             return exc
@@ -254,18 +332,20 @@ class Agent:
 
     def end_step(self, failure: Exception | None) -> None:
         """The cycle after the body's step (``failure``: what :meth:`begin_step` or the body
-        raised): faults, acks, state when due."""
+        raised): faults, acks. The state follows when :meth:`due`."""
         conduct = self.conduct
         if failure is None:
             self.controller.finish()
             conduct.step_worked()
         else:
             conduct.step_failed(failure)
-        self.stats.steps += 1
         conduct.after_step()
         conduct.acks.flush()
-        if (self._ticks + self._phase) % self._publish_every == 0:
-            self.publish()
+
+    def due(self) -> bool:
+        """Whether this step publishes the state (every ``1/state_rate`` s, shifted by
+        ``phase``)."""
+        return (self._ticks + self.phase) % self.publish_every == 0
 
     # --- state -----------------------------------------------------------------------------------
 

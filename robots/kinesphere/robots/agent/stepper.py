@@ -27,10 +27,10 @@ SMOOTH = 0.05
 """Weight of the newest cost sample in each body's running mean."""
 
 
-def default_helpers() -> int:
-    """One helper per core beyond the loop's own (at most 3: beyond that the GIL-bound rest
-    of the tick dominates)."""
-    return max(0, min(3, (os.cpu_count() or 1) - 1))
+def default_helpers(processes: int = 1) -> int:
+    """One helper per core beyond the loop's own, the cores shared by ``processes`` loops (a
+    fleet host's workers); at most 3: beyond that the GIL-bound rest of the tick dominates."""
+    return max(0, min(3, (os.cpu_count() or 1) // max(1, processes) - 1))
 
 
 @dataclass
@@ -129,6 +129,13 @@ class Stepper:
 
     def _run(self, indices: Sequence[int]) -> None:
         bodies, errors, cost = self._bodies, self._errors, self._cost
+        if not self._helpers:  # nothing to balance: no clock either
+            for i in indices:
+                try:
+                    bodies[i].simulate()
+                except Exception as exc:  # reported for this body; the others step on
+                    errors[i] = exc
+            return
         clock = time.perf_counter
         for i in indices:
             body = bodies[i]

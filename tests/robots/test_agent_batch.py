@@ -1,0 +1,215 @@
+"""A fleet host's per-robot work done for all robots at once: trajectories followed on arrays
+(``follow.py``), hard stops in one comparison (``HardStops``), and a lean step for a robot with
+nothing to react to (``Agent.needs_cycle``).
+
+Each is checked against what it replaces: Ruckig's own ``update`` step by step, the per-body
+hard stop, and a lone agent's whole cycle given the same commands at the same steps.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+
+import mujoco
+import numpy as np
+import zenoh
+from ruckig import Synchronization
+from test_agent_support import Databank, databank, far, hub
+
+from kinesphere import zconfig
+from kinesphere.protocol import Ack, Command, Drive, SpatialCommand, decode, encode
+from kinesphere.robots.agent.bodies import make_body
+from kinesphere.robots.agent.fleet import Fleet, RobotSpec
+from kinesphere.robots.agent.follow import Followers
+from kinesphere.robots.agent.mujoco_body import HardStops, MujocoBody
+from kinesphere.robots.agent.otg import Otg
+from kinesphere.robots.agent.runtime import Agent, AgentOptions
+
+__all__ = ["databank", "hub"]  # fixtures
+
+DT = 0.002
+
+
+def generators(seed: int) -> list[Otg]:
+    """Generators of 2 to 26 DoF with their own limits, starts and position bounds."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for n in (2, 5, 9, 14, 26, 3):
+        out.append(Otg(n, DT, rng.uniform(0.5, 2, n), rng.uniform(1, 8, n),
+                       rng.uniform(10, 80, n), rng.uniform(-1, 1, n), [-3.0] * n, [3.0] * n))
+        rng = np.random.default_rng(seed + n)
+    return out
+
+
+def test_followers_give_ruckigs_own_outputs_bit_for_bit() -> None:
+    """Targets, brakes, velocity targets and limit changes at random, mid-motion too: every
+    output of every step is the one Ruckig's ``update`` gives (a generator of its own)."""
+    logging.getLogger("kinesphere.robots.agent.otg").setLevel(logging.ERROR)  # refused plans
+    rng = np.random.default_rng(7)
+    alone, followed = generators(3), generators(3)
+    followers = Followers(followed, DT)
+    seen = {"followed": 0, "brake": 0, "ended": 0}
+    for step in range(6000):
+        for a, b in zip(alone, followed, strict=True):
+            roll = rng.random()
+            if roll < 0.004:
+                target = rng.uniform(-2.5, 2.5, a.n)
+                sync = (Synchronization.Time, Synchronization.Phase,
+                        Synchronization.No)[rng.integers(3)]
+                a.go_to(target, sync)
+                b.go_to(target, sync)
+            elif roll < 0.006:
+                a.brake()
+                b.brake()
+                seen["brake"] += 1
+            elif roll < 0.007:
+                v = rng.uniform(-0.5, 0.5, a.n)
+                a.go_at(v)
+                b.go_at(v)
+            elif roll < 0.008:
+                share = rng.uniform(0, 1, a.n)
+                a.scale(share)
+                b.scale(share)
+        was = [b.following for b in followed]
+        followers.advance()
+        for a, b, followed_here in zip(alone, followed, was, strict=True):
+            assert a.step() == b.step()
+            seen["followed"] += followed_here
+            seen["ended"] += followed_here and not b.active
+            for name in ("position", "velocity", "acceleration", "target"):
+                assert np.array_equal(getattr(a, name), getattr(b, name)), (step, name)
+            assert (a.active, a.fault) == (b.active, b.fault), step
+    assert seen["followed"] > 20_000 and seen["brake"] > 50 and seen["ended"] >= 10, seen
+
+
+def test_hard_stops_put_back_only_the_joints_past_a_limit() -> None:
+    bodies = [make_body("mujoco", p, DT) for p in ("nao", "baxter", "youbot", "nao")]
+    mbodies = [b for b in bodies if isinstance(b, MujocoBody)]
+    stops = HardStops(mbodies)
+    nao, baxter, youbot, other = mbodies
+    for b in mbodies:
+        mujoco.mj_step(b.model, b.data)
+    before = [(b.data.qpos.copy(), b.data.qvel.copy()) for b in mbodies]
+    stops.apply()  # nothing is past a limit: nothing changes
+    assert all(np.array_equal(b.data.qpos, q) and np.array_equal(b.data.qvel, v)
+               for b, (q, v) in zip(mbodies, before, strict=True))
+    j = len(nao._qadr) - 1  # NAO's joints are not contiguous in qpos: its last joint
+    nao.data.qpos[nao._qadr[j]] = nao._upper[j] + 0.02
+    nao.data.qvel[nao._dadr[j]] = 1.0
+    youbot.data.qpos[youbot._qadr[0]] = youbot._lower[0] - 0.03
+    youbot.data.qvel[youbot._dadr[0]] = -2.0
+    stops.apply()
+    assert nao.data.qpos[nao._qadr[j]] == nao._upper[j] and nao.data.qvel[nao._dadr[j]] == 0.0
+    assert youbot.data.qpos[youbot._qadr[0]] == youbot._lower[0]
+    assert youbot.data.qvel[youbot._dadr[0]] == 0.0
+    for b, (q, v) in ((baxter, before[1]), (other, before[3])):
+        assert np.array_equal(b.data.qpos, q) and np.array_equal(b.data.qvel, v)
+    # the per-body stop, on a copy, agrees
+    single = make_body("mujoco", "nao", DT)
+    assert isinstance(single, MujocoBody)
+    mujoco.mj_copyData(single.data, single.model, nao.data)
+    single.data.qpos[single._qadr[j]] = single._upper[j] + 0.02
+    single.stop_at_limits()
+    assert np.array_equal(single.data.qpos, nao.data.qpos)
+
+
+PLATFORMS = ("baxter", "youbot", "nao")
+
+
+def payload(seq: int, parts: list[tuple[str, str, str, float]] | None = None,
+            **kw: object) -> bytes:
+    fields: dict[str, object] = {"seq": seq, "sent_ns": time.time_ns(), "deadman": True,
+                                 "ttl_ms": 0, "sender": "test"}
+    fields.update(kw)
+    return encode(Command(parts=[SpatialCommand(*p) for p in parts or []], **fields))  # type: ignore[arg-type]
+
+
+def test_a_fleet_robot_steps_exactly_like_a_lone_agent(
+    hub: tuple[zenoh.Session, str], databank: Databank
+) -> None:
+    """The same commands at the same steps to robots of a fleet host (lean steps, followers,
+    batched stops) and to lone agents (their whole cycle every step) from the same state:
+    the same bodies, statuses and acks, step by step."""
+    _session, endpoint = hub
+    poses = {p: [far(databank.catalogue(p), k) for k in (0, 1)] for p in PLATFORMS}
+    with zconfig.session(config=zconfig.loopback_config(endpoint)) as s:
+        fleet = Fleet([RobotSpec(p, f"lean-f-{p}") for p in PLATFORMS], s,
+                      AgentOptions(speed=0.0), helpers=0)
+        lone = [Agent(p, f"lean-a-{p}", s, AgentOptions(speed=0.0)) for p in PLATFORMS]
+        pairs = list(zip(fleet.agents, lone, strict=True))
+        said: dict[str, list[tuple[int, str, str]]] = {}
+        try:
+            fleet.declare()
+            for a in lone:
+                a.declare()
+            for f, a in pairs:  # what each says, in order: (seq, stage, code)
+                for agent in (f, a):
+                    log = said.setdefault(agent.robot_id, [])
+                    agent.conduct.acks.publish = agent.conduct.acks.publish_urgent = (
+                        lambda data, log=log: log.append(_stage(data)))
+            for k in (0, 1):  # every pose resolved and cached on both sides
+                for f, a in pairs:
+                    for agent in (f, a):
+                        agent.receive(payload(k + 1, [poses[agent.platform][k]]))
+                deadline = time.monotonic() + 30
+                while not all(len(x.conduct.latencies) > k for pair in pairs for x in pair):
+                    fleet.tick()
+                    for a in lone:
+                        a.tick()
+                    assert time.monotonic() < deadline, "poses not resolved"
+            for f, a in pairs:  # both stop and rest, then start from the same state
+                for agent in (f, a):
+                    agent.receive(payload(10, stop=True))
+            for _ in range(150):
+                fleet.tick()
+                for a in lone:
+                    a.tick()
+            fleet.complete()
+            for f, a in pairs:
+                fb, ab = f.controller.body, a.controller.body
+                assert isinstance(fb, MujocoBody) and isinstance(ab, MujocoBody)
+                mujoco.mj_copyData(ab.data, ab.model, fb.data)
+                for agent in (f, a):
+                    agent.controller.fail_safe()
+                    agent.conduct.acks.motion = None
+                    said[agent.robot_id].clear()
+            script = {
+                0: lambda p: payload(20, [poses[p][0]]),
+                150: lambda p: payload(21, [poses[p][1]]),  # mid-motion
+                400: lambda p: payload(22, stop=True),
+                450: lambda p: payload(23, [poses[p][0]]),
+                1600: lambda p: payload(24, [poses[p][0]]),  # the same target again
+                1700: lambda p: (payload(25, drive=Drive(forward=0.4, yaw=0.3), ttl_ms=60_000)
+                                 if p == "youbot" else payload(25, [poses[p][1]])),
+                2000: lambda p: payload(26, estop=True),
+                2050: lambda p: payload(27, release=True),
+                2100: lambda p: payload(28, [poses[p][1]]),
+            }
+            for step in range(3000):
+                if step in script:
+                    for f, a in pairs:
+                        f.receive(script[step](f.platform))
+                        a.receive(script[step](a.platform))
+                fleet.tick()
+                fleet.complete()  # this step's end now, as a lone agent's tick has it
+                for f, a in pairs:
+                    a.tick()
+                    fd, ad = f.controller.body.data, a.controller.body.data  # type: ignore[attr-defined]
+                    assert np.array_equal(fd.qpos, ad.qpos), (f.platform, step)
+                    assert np.array_equal(fd.qvel, ad.qvel), (f.platform, step)
+                    assert f.status() == a.status(), (f.platform, step)
+                    assert said[f.robot_id] == said[a.robot_id], (f.platform, step)
+            for p in PLATFORMS:
+                stages = {stage for _, stage, _ in said[f"lean-f-{p}"]}
+                assert {"accepted", "moving", "reached", "superseded", "stopped", "estopped",
+                        "released"} <= stages, (p, stages)
+        finally:
+            fleet.close()
+            for a in lone:
+                a.close()
+
+
+def _stage(data: bytes) -> tuple[int, str, str]:
+    ack = decode(data, Ack)
+    return ack.seq, str(ack.stage), ack.code
