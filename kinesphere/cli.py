@@ -139,6 +139,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"error: {message} [unavailable]", file=sys.stderr)
         return 2
     args = parser.parse_args(words)
+    args.command_line = tuple(words)  # a command that starts copies of itself passes them on
     logging.basicConfig(
         level=logging.DEBUG if args.verbose else logging.INFO,
         format="%(asctime)s %(name)s %(levelname)s %(message)s",

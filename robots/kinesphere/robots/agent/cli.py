@@ -19,6 +19,7 @@ from kinesphere.cliargs import AGENT, add_ros_distro, add_ros_domain, add_zenoh_
 from kinesphere.errors import KinesphereError
 from kinesphere.robots.agent.bodies import BODIES
 from kinesphere.robots.agent.options import ROS2_INTERFACES, AgentOptions, Ros2BodyOptions
+from kinesphere.robots.agent.workers import default_workers
 from kinesphere.signals import handle_signals
 
 log = logging.getLogger(__name__)
@@ -40,8 +41,8 @@ def register(sub: Any) -> None:
                    help="platform name (see 'kinesphere platforms') or folder")
     p.add_argument("--id", dest="robot_id", help="robot id (default: the platform name)")
     p.add_argument("--robot", action="append", default=[], metavar="PLATFORM:ID",
-                   help="run this robot too, all in one process and one loop (repeatable; "
-                   "instead of PLATFORM; see 'kinesphere fleet')")
+                   help="run this robot too, on a fleet host (repeatable; instead of "
+                   "PLATFORM; see 'kinesphere fleet')")
     d = DEFAULTS
     p.add_argument("--body", choices=sorted(BODIES), default=d.body,
                    help=f"what the agent drives (default {d.body}: the platform's MuJoCo model)")
@@ -82,9 +83,11 @@ def register(sub: Any) -> None:
     f = sub.add_parser(
         "fleet",
         help="run many simulated robots in one process (a fleet host)",
-        description="Run every robot of FLEET.toml in this process: one control loop steps "
-        "all their MuJoCo bodies each tick, on one Zenoh session; each robot keeps its own "
-        "keys, liveliness token, state stream, acks, lease, watchdog and e-stop latch. "
+        description="Run every robot of FLEET.toml on this host: the robots are dealt to "
+        "--workers processes (one per core by default), each stepping its share of MuJoCo "
+        "bodies in one control loop on its own Zenoh session; each robot keeps its own keys, "
+        "liveliness token, state stream, acks, lease, watchdog and e-stop latch, and a worker "
+        "that dies takes only its own robots. SIGTERM or SIGINT stops them all. "
         "FLEET.toml: [robots.ID] tables with platform = NAME and optional groups = [...], "
         "and an optional prefix.",
     )
@@ -110,9 +113,14 @@ def _loop_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--strict-period", action="store_true",
                    help="step only on the fixed schedule: a command waits for the next tick "
                    "(default: the step due next runs as soon as a command arrives)")
+    p.add_argument("--workers", type=int, default=None, metavar="N",
+                   help="with several robots: worker processes they are dealt to, each with "
+                   "its own control loop and Zenoh session; one dying takes only its own "
+                   f"robots (default: one per core, {default_workers()} here)")
+    p.add_argument("--worker", help=argparse.SUPPRESS)  # K/N:DIGEST, from the parent
     p.add_argument("--physics-threads", type=int, default=None, metavar="N",
-                   help="with several robots: threads stepping their physics besides the "
-                   "loop's own (default: one per further core, at most 3)")
+                   help="with several robots: threads stepping each worker's physics besides "
+                   "its loop's own (default: one per further core a worker has, at most 3)")
 
 
 def _viewer(body: Any) -> Any:
@@ -146,15 +154,22 @@ def _until_signal() -> Iterator[threading.Event]:
 
 
 def _agent(args: argparse.Namespace) -> int:
-    from kinesphere.platforms.platform import platform_spelling
-    from kinesphere.robots.agent.runtime import Agent
-    from kinesphere.zconfig import close_session, session_from_args
-
     if args.robot:
         return _agent_robots(args)
     if args.platform is None:
         raise KinesphereError("malformed", "give a PLATFORM, or robots with --robot "
                               "PLATFORM:ID")
+    extra = [flag for flag, given in (("--workers", args.workers is not None),
+                                      ("--worker", args.worker is not None),
+                                      ("--physics-threads", args.physics_threads is not None))
+             if given]
+    if extra:
+        raise KinesphereError("malformed", f"{', '.join(extra)}: for several robots (--robot "
+                              "PLATFORM:ID ..., or 'kinesphere fleet'), not one PLATFORM")
+    from kinesphere.platforms.platform import platform_spelling
+    from kinesphere.robots.agent.runtime import Agent
+    from kinesphere.zconfig import close_session, session_from_args
+
     robot_id = args.robot_id or platform_spelling(Path(args.platform).name)  # PackBot: packbot
     ros2 = Ros2BodyOptions(
         namespace=args.ros2_namespace, domain=args.ros2_domain, interface=args.ros2_interface,
@@ -227,18 +242,38 @@ def _fleet_file(args: argparse.Namespace) -> int:
 
 
 def _run_fleet(args: argparse.Namespace, robots: Sequence[Any], body: str) -> int:
-    from kinesphere.robots.agent.fleet import FleetHost
+    """The fleet host: its workers (``workers.py``), or, with one worker (or as one), the
+    robots in this process."""
+    from kinesphere.robots.agent.fleet import FleetHost, check_fleet
+    from kinesphere.robots.agent.stepper import default_helpers
+    from kinesphere.robots.agent.workers import check_listen, deal, run_workers, share
     from kinesphere.zconfig import close_session, session_from_args
 
+    check_fleet(robots)
+    if args.workers is not None and args.workers < 1:
+        raise KinesphereError("malformed", f"--workers {args.workers}: give at least 1")
     options = AgentOptions(rate=args.rate, state_rate=args.state_rate, speed=args.speed,
                            prefix=args.prefix, body=body,
                            max_translation_m=args.max_translation,
                            strict_period=args.strict_period)
+    if args.worker is not None:
+        k, workers, robots = share(robots, args.worker)
+        log.info("worker %d/%d of a fleet host: %s", k, workers,
+                 ", ".join(r.robot_id for r in robots))
+    else:
+        workers = len(deal(robots, default_workers() if args.workers is None
+                                   else args.workers))
+        if workers > 1:
+            check_listen(args.listen, workers)
+            with _until_signal() as stop:
+                return run_workers(args.command_line, robots, workers, stop)
+    helpers = (default_helpers(workers) if args.physics_threads is None
+               else args.physics_threads)
     with _until_signal() as stop:
         session = session_from_args(args)
         fleet: FleetHost | None = None
         try:
-            fleet = FleetHost(robots, session, options, helpers=args.physics_threads)
+            fleet = FleetHost(robots, session, options, helpers=helpers)
             fleet.declare()
             fleet.run(stop)
         finally:
