@@ -22,6 +22,10 @@ if TYPE_CHECKING:  # the CLI reads BODIES for --help: no numpy, no URDF parser a
     from kinesphere.platforms.platform import Platform
 
 
+AT_REST = (0.0, 0.0, 0.0)
+"""The body-frame twist of a base at rest (``Body.command``: nothing to integrate)."""
+
+
 @dataclass(frozen=True)
 class Reading:
     """What a body measures: joint positions and velocities in P order (rad or m, rad/s or

@@ -130,20 +130,24 @@ class Conduct:
         if first is not None:
             self.latencies.append((first.seq, first.sent_ns, now_ns))
 
-    def after_step(self) -> None:
-        """After each step: faults, the first step of a motion, the end of one."""
+    def after_step(self) -> bool:
+        """After each step: faults, the first step of a motion, the end of one. Whether
+        anything changed (a fault, a motion's end)."""
         ctrl = self.controller
-        if ctrl.moving:
+        moving = ctrl.moving
+        if moving:
             self._moved_at = ctrl.time
+        changed = False
         fault = ctrl.fault()
         if fault != self._fault:
-            self._fault = fault
+            self._fault, changed = fault, True
             if fault:
                 self.acks.end(AckStage.BLOCKED, fault)
                 self.set(Status.ERROR, f"{fault} and holding")
         motion = self.acks.motion
         if (motion is not None and motion.moved and motion.target != _DRIVE
-                and not ctrl.moving and ctrl.time - self._moved_at >= SETTLE_S):
+                and not moving and ctrl.time - self._moved_at >= SETTLE_S):
+            changed = True
             why = ctrl.blocked(BLOCKED_TOL)
             if why:
                 self.acks.end(AckStage.BLOCKED, why)
@@ -152,6 +156,7 @@ class Conduct:
                               "clamped " + ", ".join(sorted(ctrl.joints.clamped)))
             else:
                 self.acks.end(AckStage.REACHED)
+        return changed
 
     def step_failed(self, exc: Exception) -> None:
         """A step raised (a bug, or a body that failed): hold the body and say so."""

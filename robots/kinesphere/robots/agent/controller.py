@@ -13,13 +13,12 @@ from collections.abc import Callable, Mapping
 import numpy as np
 
 from kinesphere.robots.agent.base import BaseController, make_base
-from kinesphere.robots.agent.body import Body, Reading
+from kinesphere.robots.agent.body import AT_REST, Body, Reading
 from kinesphere.robots.agent.guard import Guard
 from kinesphere.robots.agent.trajectory import DEFAULT_MARGIN, Aim, Clamp, JointTrajectory
 
 BLOCKED_TOL = 0.05
 """rad (m): a joint this far from where its finished trajectory ended is blocked."""
-_FIXED = np.zeros(3)
 
 
 class Controller:
@@ -94,11 +93,12 @@ class Controller:
         """Trajectories forward (a followed joint trajectory has been already: ``follow.py``),
         their setpoints to the body."""
         self.joints.step()
-        twist = _FIXED
-        if self.base is not None:
-            self.base.step()
-            twist = self.base.body_twist
-        self.body.command(self.joints.position, twist)
+        base = self.base
+        if base is not None and base.moving:
+            base.step()
+            self.body.command(self.joints.position, base.body_twist)
+        else:  # a base at rest stays where its servos hold it
+            self.body.command(self.joints.position, AT_REST)
 
     def finish(self) -> None:
         """The cycle after the body's step: one period of robot time has passed."""

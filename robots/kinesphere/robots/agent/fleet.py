@@ -216,11 +216,10 @@ class FleetHost:
             modes[i] = _CYCLE
             deadlines[i] = np.inf
         failures: list[Exception | None] = [None] * len(agents)
+        self.stats.begun += 1
         for i, agent in enumerate(agents):
             if modes[i] is _CYCLE:
                 failures[i] = _guarded(agent.react)
-            else:
-                agent.count()
         self.followers.advance()
         for i, agent in enumerate(agents):
             mode = modes[i]
@@ -263,7 +262,7 @@ class FleetHost:
             except Exception:  # one robot's bug must not hold up the others
                 log.exception("fleet host: robot %s: end of step failed", agent.robot_id)
                 modes[i] = _CYCLE
-        for agent in self._due[self.stats.steps % len(self._due)]:
+        for agent in self._due[self.stats.begun % len(self._due)]:
             agent.publish()
 
     def _next(self, i: int, agent: Agent) -> object:

@@ -17,7 +17,7 @@ have given, bit for bit (``tests/test_agent_follow.py`` compares them).
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
@@ -29,6 +29,24 @@ if TYPE_CHECKING:
 SEGMENTS = 10
 """Per DoF: two brake phases, the profile's seven, and the hold after its end."""
 _HOLD = SEGMENTS - 1
+
+
+class _Rows(NamedTuple):
+    """The followed rows' share of the arrays, as :meth:`Followers.advance` reads them."""
+
+    owner: np.ndarray
+    brake: np.ndarray
+    brake_t0: np.ndarray
+    t_sum: np.ndarray
+    end: np.ndarray
+    coef: np.ndarray
+    """Per row and segment (flattened): p0, v0, a0, a0 / 2, jerk."""
+    first: np.ndarray
+    """Index in ``coef`` of each row's first profile phase."""
+    order: np.ndarray
+    """0, 1, 2, ...: each row's place among the followed ones."""
+    braking: bool
+    """Whether any row has brake phases."""
 
 
 class Followers:
@@ -63,7 +81,7 @@ class Followers:
         self._following = np.zeros(len(sizes), dtype=bool)
         self._slots = np.zeros(0, dtype=np.intp)
         self._rows: slice | np.ndarray = slice(0, 0)
-        self._cache: tuple[np.ndarray, ...] = ()
+        self._cache: _Rows | None = None
         """What :meth:`advance` reads of the followed rows, gathered once per change."""
         self._dirty = False
         for slot, (otg, start, n) in enumerate(zip(self._otgs, self._start, sizes, strict=True)):
@@ -119,28 +137,32 @@ class Followers:
         slots = self._slots
         if not slots.size:
             return
-        owner, brake, brake_t0, t_sum, end, duration, coef, first = self._cache
-        self._time[slots] += self.dt
-        t = self._time[owner]
+        assert self._cache is not None
+        owner, brake, brake_t0, t_sum, end, coef, first, order, braking = self._cache
+        time = self._time
+        time[slots] += self.dt
+        t = time[owner]
         shifted = t - brake  # at_time's ``t_diff_dof -= p.brake.duration`` (t itself when 0)
         phase = (t_sum[:, 1:] <= shifted[:, None]).sum(axis=1)  # upper_bound over t_sum
-        tau = shifted - t_sum[np.arange(phase.size), phase]
+        tau = shifted - t_sum[order, phase]
         segment = phase + first
-        in_brake = t < brake
-        if in_brake.any():  # the brake phases before the profile (a retarget mid-motion)
+        if braking:  # the brake phases before the profile (after a retarget mid-motion)
+            in_brake = t < brake
             second = t >= brake_t0
             segment = np.where(in_brake, second.astype(np.intp) + first - 2, segment)
             tau = np.where(in_brake, t - brake_t0 * second, tau)
-        after = t >= duration
-        if after.any():  # the last step: Ruckig's ``time >= duration`` branch
+        duration = self._duration
+        if (time[slots] >= duration[slots]).any():  # Ruckig's ``time >= duration`` branch
+            after = t >= duration[owner]
             segment = np.where(after, first + _HOLD - 2, segment)
             tau = np.where(after, t - end, tau)
-        p0, v0, a0, jerk = coef[segment].T
+        p0, v0, a0, half, jerk = coef[segment].T
+        tj = tau * jerk
         rows = self._rows
-        self.position[rows] = p0 + tau * (v0 + tau * (a0 / 2 + tau * jerk / 6))
-        self.velocity[rows] = v0 + tau * (a0 + tau * jerk / 2)
-        self.acceleration[rows] = a0 + tau * jerk
-        ended = slots[self._time[slots] > self._duration[slots]]
+        self.position[rows] = p0 + tau * (v0 + tau * (half + tj / 6))
+        self.velocity[rows] = v0 + tau * (a0 + tj / 2)
+        self.acceleration[rows] = a0 + tj
+        ended = slots[time[slots] > duration[slots]]
         for slot in ended.tolist():
             self._otgs[slot].arrived()
 
@@ -152,7 +174,11 @@ class Followers:
         contiguous = rows.size and rows[-1] - rows[0] + 1 == rows.size
         self._rows = slice(int(rows[0]), int(rows[-1]) + 1) if contiguous else rows
         owner = self._owner[rows]
-        self._cache = (owner, self._brake[rows], self._brake_t0[rows], self._t_sum[rows],
-                       self._end[rows], self._duration[owner],
-                       self._coef[rows].reshape(-1, 4),
-                       np.arange(rows.size, dtype=np.intp) * SEGMENTS + 2)
+        coef = self._coef[rows]
+        index = np.arange(rows.size, dtype=np.intp)
+        self._cache = _Rows(
+            owner, self._brake[rows], self._brake_t0[rows], self._t_sum[rows], self._end[rows],
+            # a0 / 2 (exact in binary) beside a0: one division less per step
+            np.concatenate((coef[:, :, :3], coef[:, :, 2:3] / 2, coef[:, :, 3:]),
+                           axis=2).reshape(-1, 5),
+            index * SEGMENTS + 2, index, bool((self._brake[rows] > 0).any()))

@@ -23,7 +23,7 @@ import numpy as np
 
 from kinesphere.platforms.mjcf import BASE_JOINTS, PlatformModel, robot_contacts
 from kinesphere.robots.agent.base import rotate, wrap_angle
-from kinesphere.robots.agent.body import Body, Reading
+from kinesphere.robots.agent.body import AT_REST, Body, Reading
 
 
 class MujocoBody(Body):
@@ -53,6 +53,7 @@ class MujocoBody(Body):
         self._act = np.array([pm.actuator_index[j] for j in names], dtype=int)
         self._act_slice = _as_slice(self._act)
         self._q_slice = _as_slice(self._qadr)  # a view when contiguous: no copy per step
+        self._d_slice = _as_slice(self._dadr)
         self._setpoints = (self.data.ctrl[self._act_slice]
                            if isinstance(self._act_slice, slice) else None)
         """The joints' servo targets as a view, kept (an MjData never moves its buffers), when
@@ -78,14 +79,14 @@ class MujocoBody(Body):
         if self._mobile:
             x, y, yaw = data.qpos[self._base_q].tolist()
             pose = (x, y, wrap_angle(yaw))
-        return Reading(data.qpos[self._qadr].copy(), data.qvel[self._dadr].copy(), pose)
+        return Reading(data.qpos[self._q_slice].copy(), data.qvel[self._d_slice].copy(), pose)
 
     def command(self, q: np.ndarray, base_twist: Sequence[float] | np.ndarray) -> None:
         if self._setpoints is not None:
             self._setpoints[:] = q
         else:
             self.data.ctrl[self._act_slice] = q
-        if self._mobile:
+        if self._mobile and base_twist is not AT_REST:
             vx, vy, w = base_twist.tolist() if isinstance(base_twist, np.ndarray) else base_twist
             if vx or vy or w:  # else the servos hold the target already written
                 target = self._base_target

@@ -71,6 +71,8 @@ class LoopStats:
     """What the loop measured about itself (benchmarks and the falling-behind report)."""
 
     steps: int = 0
+    begun: int = 0
+    """Steps begun (the one running counts): the robots' step count, ``Agent.due``."""
     late: int = 0  # steps that started after their deadline
     slips: int = 0  # times the loop gave up catching up
     early: int = 0  # steps run ahead of their slot because work arrived (``wake``)

@@ -98,10 +98,12 @@ class Agent:
         self.stats = LoopStats() if stats is None else stats
         self.last_state: RobotState | None = None
         self._ratelog = RateLog(log)
-        self._ticks = 0
         self._tick_ns = 0
         """Monotonic ns when the last step began."""
         self._state_seq = 0
+        self._joint_names = list(self.controller.joint_names)
+        self._groups = list(self.options.groups)
+        """Lists every state carries as they are (never changed: made once)."""
         self.publish_every = max(1, round(self.options.rate / self.options.state_rate))
         """Steps between two published states."""
         self.phase = phase
@@ -197,7 +199,7 @@ class Agent:
             self._ratelog(exc.code, "agent %s: command refused: %s", self.robot_id, exc)
             self.inbox.put_bad(exc)
             return
-        self.inbox.put(received(cmd, self._ticks))
+        self.inbox.put(received(cmd, self.stats.begun))
 
     # --- the loop ------------------------------------------------------------------------------
 
@@ -240,6 +242,7 @@ class Agent:
     def begin_step(self) -> Exception | None:
         """The cycle up to the body's step: e-stops, commands, timers, the trajectories
         commanded to the body. Returns what failed there (the body must not step then)."""
+        self.stats.begun += 1
         failure = self.react()
         return failure if failure is not None else self.actuate()
 
@@ -276,27 +279,23 @@ class Agent:
     def followed(self) -> bool:
         """The end of a :meth:`follow` step whose body stepped: contacts, robot time, and all
         :meth:`end_step` says when a trajectory was stepped here, ended or was halted.
-        True when the followers took the step and nothing else changed (the next step is
-        such a step again); else ask :meth:`needs_cycle` and :attr:`at_rest`."""
+        True when the robot still moves and nothing changed (the next step is such a step
+        again); else ask :meth:`needs_cycle` and :attr:`at_rest`."""
         ctrl, conduct = self.controller, self.conduct
         ctrl.finish()  # the guard watches for contacts
         if self._followed_only and ctrl.joints.generator.following:
             conduct.followed()  # nothing else can have changed
             return True
-        conduct.after_step()
+        changed = conduct.after_step()
         conduct.acks.flush()
-        return False
-
-    def count(self) -> None:
-        """One more step begun, nothing to react to before it (:meth:`needs_cycle`)."""
-        self._ticks = self.conduct.ticks = self._ticks + 1
+        return not changed and ctrl.moving  # a base stepped here, a joint plan: lean still
 
     def react(self) -> Exception | None:
-        """The first part of :meth:`begin_step`: e-stops, commands, timers, the guard's
-        verdicts (a fleet host then follows every robot's joint trajectory at once, then
-        :meth:`actuate`s each)."""
+        """The first part of :meth:`begin_step` once the step is counted (``stats.begun``):
+        e-stops, commands, timers, the guard's verdicts (a fleet host then follows every
+        robot's joint trajectory at once, then :meth:`actuate`s each)."""
         conduct = self.conduct
-        self._ticks = conduct.ticks = self._ticks + 1
+        conduct.ticks = self.stats.begun
         now_ns = clocks()[0]
         if now_ns - self._tick_ns > STALL_NS and self._tick_ns:  # frozen, or a step hung
             conduct.ordering.stalled(self._tick_ns, now_ns)
@@ -345,7 +344,7 @@ class Agent:
     def due(self) -> bool:
         """Whether this step publishes the state (every ``1/state_rate`` s, shifted by
         ``phase``)."""
-        return (self._ticks + self.phase) % self.publish_every == 0
+        return (self.stats.begun + self.phase) % self.publish_every == 0
 
     # --- state -----------------------------------------------------------------------------------
 
@@ -365,10 +364,10 @@ class Agent:
         self._state_seq += 1
         state = RobotState(
             robot_id=self.robot_id, platform=self.platform, seq=self._state_seq,
-            stamp_ns=time.time_ns(), joint_names=list(ctrl.joint_names), q=ctrl.q(),
+            stamp_ns=time.time_ns(), joint_names=self._joint_names, q=ctrl.q(),
             qd=ctrl.qd(), base_pose=ctrl.base_pose(), status=status,
             last_command_seq=conduct.ordering.last_seq, detail=detail[:MAX_TEXT],
-            clamped=sorted(ctrl.joints.clamped), groups=list(self.options.groups),
+            clamped=sorted(ctrl.joints.clamped), groups=self._groups,
             lease_holder=conduct.lease.holder, estop_by=conduct.safety.estop_by,
             substitutions=conduct.acks.substitutions, dropped=conduct.ordering.dropped,
         )
