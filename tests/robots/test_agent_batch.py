@@ -18,12 +18,13 @@ from ruckig import Synchronization
 from test_agent_support import Databank, databank, far, hub
 
 from kinesphere import zconfig
-from kinesphere.protocol import Ack, Command, Drive, SpatialCommand, decode, encode
+from kinesphere.protocol import Ack, Catalogue, Command, Drive, SpatialCommand, decode, encode
 from kinesphere.robots.agent.bodies import make_body
 from kinesphere.robots.agent.fleet import Fleet, RobotSpec
 from kinesphere.robots.agent.follow import Followers
 from kinesphere.robots.agent.mujoco_body import HardStops, MujocoBody
 from kinesphere.robots.agent.otg import Otg
+from kinesphere.robots.agent.resolver import parts_key
 from kinesphere.robots.agent.runtime import Agent, AgentOptions
 
 __all__ = ["databank", "hub"]  # fixtures
@@ -114,7 +115,22 @@ def test_hard_stops_put_back_only_the_joints_past_a_limit() -> None:
     assert np.array_equal(single.data.qpos, nao.data.qpos)
 
 
-PLATFORMS = ("baxter", "youbot", "nao")
+PLATFORMS = ("baxter", "youbot", "nao", "khepera")
+
+
+def moves(cat: Catalogue) -> list[tuple[str, str, str, float]]:
+    """Two far reaches of the first limb, or two base translations for a body without one;
+    then the second reach past the largest size (a translation too, on a mobile base)."""
+    if not cat.limbs:
+        c = cat.core[0]
+        return [(c, c, "forward-middle", 2.0), (c, c, "left-middle", 2.0),
+                (c, c, "back-middle", 3.0)]
+    first, second = far(cat, 0), far(cat, 1)
+    entry = cat.limbs[0]
+    ahead = next(d for d in entry.directions if not d.startswith("place"))  # not vertical
+    mobile = cat.base_kind not in ("fixed", "")
+    return [first, second, (entry.limb, entry.origin, ahead,
+                            max(entry.sizes) + (2.0 if mobile else 0.0))]
 
 
 def payload(seq: int, parts: list[tuple[str, str, str, float]] | None = None,
@@ -132,7 +148,7 @@ def test_a_fleet_robot_steps_exactly_like_a_lone_agent(
     batched stops) and to lone agents (their whole cycle every step) from the same state:
     the same bodies, statuses and acks, step by step."""
     _session, endpoint = hub
-    poses = {p: [far(databank.catalogue(p), k) for k in (0, 1)] for p in PLATFORMS}
+    poses = {p: moves(databank.catalogue(p)) for p in PLATFORMS}
     with zconfig.session(config=zconfig.loopback_config(endpoint)) as s:
         fleet = Fleet([RobotSpec(p, f"lean-f-{p}") for p in PLATFORMS], s,
                       AgentOptions(speed=0.0), helpers=0)
@@ -148,12 +164,13 @@ def test_a_fleet_robot_steps_exactly_like_a_lone_agent(
                     log = said.setdefault(agent.robot_id, [])
                     agent.conduct.acks.publish = agent.conduct.acks.publish_urgent = (
                         lambda data, log=log: log.append(_stage(data)))
-            for k in (0, 1):  # every pose resolved and cached on both sides
+            for k in (0, 1, 2):  # every pose resolved and cached on both sides
                 for f, a in pairs:
                     for agent in (f, a):
                         agent.receive(payload(k + 1, [poses[agent.platform][k]]))
                 deadline = time.monotonic() + 30
-                while not all(len(x.conduct.latencies) > k for pair in pairs for x in pair):
+                while not all(x.resolver.cached(parts_key([SpatialCommand(*poses[x.platform][k])]))
+                              for pair in pairs for x in pair):
                     fleet.tick()
                     for a in lone:
                         a.tick()
@@ -181,12 +198,19 @@ def test_a_fleet_robot_steps_exactly_like_a_lone_agent(
                 450: lambda p: payload(23, [poses[p][0]]),
                 1600: lambda p: payload(24, [poses[p][0]]),  # the same target again
                 1700: lambda p: (payload(25, drive=Drive(forward=0.4, yaw=0.3), ttl_ms=60_000)
-                                 if p == "youbot" else payload(25, [poses[p][1]])),
-                2000: lambda p: payload(26, estop=True),
-                2050: lambda p: payload(27, release=True),
-                2100: lambda p: payload(28, [poses[p][1]]),
+                                 if p in ("youbot", "khepera") else payload(25, [poses[p][1]])),
+                1900: lambda p: payload(26, [poses[p][2]]),  # past the largest size
+                2600: lambda p: payload(27, estop=True),
+                2650: lambda p: payload(28, release=True),
+                2700: lambda p: payload(29, [poses[p][1]]),
             }
-            for step in range(3000):
+            followed: dict[str, int] = {}  # steps the followers took, per robot and generator
+            for step in range(3600):
+                for f in fleet.agents:
+                    for name, gen in zip(("joints", "base"), f.controller.generators,
+                                         strict=False):
+                        followed[f"{f.platform} {name}"] = (followed.get(f"{f.platform} {name}", 0)
+                                                            + gen.following)
                 if step in script:
                     for f, a in pairs:
                         f.receive(script[step](f.platform))
@@ -200,6 +224,8 @@ def test_a_fleet_robot_steps_exactly_like_a_lone_agent(
                     assert np.array_equal(fd.qvel, ad.qvel), (f.platform, step)
                     assert f.status() == a.status(), (f.platform, step)
                     assert said[f.robot_id] == said[a.robot_id], (f.platform, step)
+            followed.pop("khepera joints")  # no limb: its joints never move
+            assert min(followed.values()) > 200, followed  # the bases' steps too
             for p in PLATFORMS:
                 stages = {stage for _, stage, _ in said[f"lean-f-{p}"]}
                 assert {"accepted", "moving", "reached", "superseded", "stopped", "estopped",

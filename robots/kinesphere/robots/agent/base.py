@@ -75,8 +75,25 @@ class BaseController:
         self.driving = False
 
     @property
+    def generator(self) -> Otg:
+        """The Ruckig generator of the base (a fleet host's followers take its steps between
+        plans, ``follow.py``; :meth:`step` then integrates what they did)."""
+        return self._otg
+
+    @property
     def moving(self) -> bool:
         return self._otg.active
+
+    @property
+    def stepping(self) -> bool:
+        """Whether :meth:`step` has something to do: a motion, or the followers' last step
+        of one."""
+        return self.moving or self._otg.came_to_rest
+
+    @property
+    def followed(self) -> bool:
+        """Whether the followers take the steps of the motion under way (or none is)."""
+        return self._otg.following or not self.moving
 
     @property
     def fault(self) -> str:
@@ -134,11 +151,12 @@ class OmniBase(BaseController):
             [spec.max_jerk, spec.max_jerk, yaw_jerk],
         ))
         self._follow: tuple[float, float, float] | None = None
-        """Body-frame (vx, vy, yaw rate) being followed; its world velocity turns with the base."""
+        """Body-frame (vx, vy, yaw rate) being followed; its world velocity turns with the base
+        (set with :meth:`_track`)."""
 
     def reset(self, pose: Sequence[float]) -> None:
         self.pose[:] = pose
-        self._follow = None
+        self._track(None)
         self._otg.reset(pose)
 
     def _world(self, body: Sequence[float], yaw: float | None = None) -> tuple[float, float]:
@@ -153,7 +171,7 @@ class OmniBase(BaseController):
     def translate(self, displacement: Sequence[float], yaw: float | None = None) -> None:
         wx, wy = self._world(displacement, yaw)
         self.driving = False
-        self._follow = None
+        self._track(None)
         self._otg.scale(self._share(wx, wy))
         self._otg.go_to([self.pose[0] + wx, self.pose[1] + wy, self.pose[2]],
                         Synchronization.Phase)
@@ -178,7 +196,7 @@ class OmniBase(BaseController):
             return
         v = speed * self.spec.max_speed / norm
         self.driving = True
-        self._follow = None
+        self._track(None)
         self._otg.scale(self._share(wx, wy))
         self._otg.go_at([wx * v, wy * v, 0.0])
 
@@ -187,12 +205,19 @@ class OmniBase(BaseController):
         if norm > 1.0:
             forward, left = forward / norm, left / norm
         vmax = self.spec.max_speed
-        self._follow = (forward * vmax, left * vmax, yaw * self.spec.max_yaw_rate)
-        if not any(self._follow):
+        follow = (forward * vmax, left * vmax, yaw * self.spec.max_yaw_rate)
+        self._track(follow)
+        if not any(follow):
             self.stop()
             return
         self.driving = True
         self._aim()
+
+    def _track(self, follow: tuple[float, float, float] | None) -> None:
+        """Follow ``follow`` from now on (None: nothing); while it turns, :meth:`step` aims
+        again before every step, so no follower may take one."""
+        self._follow = follow
+        self._otg.followable = follow is None or not follow[2]
 
     def _aim(self) -> None:
         """Target the followed body-frame velocity in the world frame at today's heading."""
@@ -204,7 +229,7 @@ class OmniBase(BaseController):
 
     def stop(self) -> None:
         self.driving = False
-        self._follow = None
+        self._track(None)
         if not self._otg.active:
             return
         vx, vy = self._otg.velocity[:2]
@@ -212,15 +237,16 @@ class OmniBase(BaseController):
         self._otg.brake()
 
     def step(self) -> None:
-        if not self._otg.active:
+        otg = self._otg
+        if otg.active and self._follow is not None and self._follow[2]:
+            self._aim()  # turning: the body-frame velocity points elsewhere in the world
+        rested = otg.step()  # here, or the followers' (rested: it came to rest)
+        if not (otg.active or rested):
             self.body_twist[:] = 0.0  # cheaper than asking whether it already is
             return
-        if self._follow is not None and self._follow[2]:
-            self._aim()  # turning: the body-frame velocity points elsewhere in the world
         x0, y0, yaw0 = self.pose.tolist()
-        self._otg.step()
-        self.pose[:] = self._otg.position
-        self.twist[:] = self._otg.velocity
+        self.pose[:] = otg.position
+        self.twist[:] = otg.velocity
         x1, y1, yaw1 = self.pose.tolist()
         vx, vy = rotate((x1 - x0) / self.dt, (y1 - y0) / self.dt, -0.5 * (yaw0 + yaw1))
         self.body_twist[:] = (vx, vy, (yaw1 - yaw0) / self.dt)
@@ -236,11 +262,14 @@ class DiffBase(BaseController):
             [spec.max_acceleration, yaw_acc], [spec.max_jerk, yaw_jerk],
         ))
         self._queue: list[tuple[float, float]] = []  # (s, yaw) waypoints still to reach
+        self._last = (0.0, 0.0)
+        """(s, yaw) where the last step left the generator: what the next one starts from."""
 
     def reset(self, pose: Sequence[float]) -> None:
         self.pose[:] = pose
         self._queue.clear()
         self._otg.reset([0.0, float(pose[2])])
+        self._last = (0.0, float(pose[2]))
 
     @property
     def moving(self) -> bool:
@@ -313,12 +342,14 @@ class DiffBase(BaseController):
             self._otg.brake()
 
     def step(self) -> None:
-        if not self._otg.active:
+        otg = self._otg
+        done = otg.step()  # here, or the followers' (done: it came to rest)
+        if not (otg.active or done):
             self.body_twist[:] = 0.0  # cheaper than asking whether it already is
             return
-        s0, yaw0 = self._otg.position.tolist()
-        done = self._otg.step()
-        s1, yaw1 = self._otg.position.tolist()
+        s0, yaw0 = self._last
+        s1, yaw1 = otg.position.tolist()
+        self._last = (s1, yaw1)
         mid = 0.5 * (yaw0 + yaw1)
         ds = s1 - s0
         self.pose[0] += ds * math.cos(mid)

@@ -15,6 +15,7 @@ import numpy as np
 from kinesphere.robots.agent.base import BaseController, make_base
 from kinesphere.robots.agent.body import AT_REST, Body, Reading
 from kinesphere.robots.agent.guard import Guard
+from kinesphere.robots.agent.otg import Otg
 from kinesphere.robots.agent.trajectory import DEFAULT_MARGIN, Aim, Clamp, JointTrajectory
 
 BLOCKED_TOL = 0.05
@@ -94,7 +95,7 @@ class Controller:
         their setpoints to the body."""
         self.joints.step()
         base = self.base
-        if base is not None and base.moving:
+        if base is not None and base.stepping:
             base.step()
             self.body.command(self.joints.position, base.body_twist)
         else:  # a base at rest stays where its servos hold it
@@ -114,6 +115,23 @@ class Controller:
         self.steps += 1
         if self.on_step is not None:
             self.on_step(self)
+
+    @property
+    def followed(self) -> bool:
+        """Whether a fleet host's followers take the steps of every motion under way
+        (``follow.py``): nothing is planned or stepped here, nothing can fail here."""
+        joints = self.joints.generator
+        return ((joints.following or not joints.active)
+                and (self.base is None or self.base.followed))
+
+    @property
+    def generators(self) -> list[Otg]:
+        """The Ruckig generators of the joints and the base (a fleet host's followers take
+        their steps between plans)."""
+        gens = [self.joints.generator]
+        if self.base is not None:
+            gens.append(self.base.generator)
+        return gens
 
     @property
     def unattended(self) -> bool:

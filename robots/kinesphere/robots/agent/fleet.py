@@ -154,7 +154,7 @@ class FleetHost:
         self.batched = batched
         """False: every robot's whole cycle every step, Ruckig stepped per robot (the way
         before the batching, kept to measure it against: ``bench_fleet.py``)."""
-        self.followers = Followers([a.controller.joints.generator for a in self.agents]
+        self.followers = Followers([g for a in self.agents for g in a.controller.generators]
                                    if batched else [], 1.0 / self.options.rate)
         self._bodies: list[Body] = []
         self._stops = HardStops([])

@@ -101,6 +101,9 @@ class Otg:
         """Whether :class:`Followers` take the steps of the trajectory now (not :meth:`step`)."""
         self._arrived = False
         """The followers' step just brought the motion to rest (:meth:`step` says so)."""
+        self.followable = True
+        """Whether :class:`Followers` may take the steps once Ruckig planned (False: the
+        owner plans again before every step, as a base turning while it drives does)."""
         self._followers: Followers | None = None
         self._slot = -1
         self._otg = Ruckig(n, dt)
@@ -126,6 +129,12 @@ class Otg:
             shared[:] = getattr(self, name)
             setattr(self, name, shared)
         self._followers, self._slot = followers, slot
+
+    @property
+    def came_to_rest(self) -> bool:
+        """The followers' last step brought the motion to rest, and :meth:`step` has not said
+        so yet (its owner still has that step to account for)."""
+        return self._arrived
 
     def arrived(self) -> None:
         """The followed trajectory ended (``Finished``): rest, unless it cruises on."""
@@ -239,7 +248,7 @@ class Otg:
         self.acceleration[:] = out.new_acceleration
         out.pass_to_input(self._inp)
         if result != Result.Finished:
-            if self._followers is not None:
+            if self._followers is not None and self.followable:
                 self._followers.load(self._slot, out.trajectory, out.time)
                 self.following = True
             return False

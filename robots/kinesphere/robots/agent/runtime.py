@@ -267,9 +267,7 @@ class Agent:
         trajectories forward (a fleet host followed the joints' already: ``follow.py``),
         their setpoints to the body. Returns what failed (the body must not step then)."""
         ctrl = self.controller
-        base = ctrl.base
-        self._followed_only = (ctrl.joints.generator.following
-                               and (base is None or not base.moving))
+        self._followed_only = ctrl.followed
         try:
             ctrl.command()
         except Exception as exc:
@@ -283,7 +281,7 @@ class Agent:
         again); else ask :meth:`needs_cycle` and :attr:`at_rest`."""
         ctrl, conduct = self.controller, self.conduct
         ctrl.finish()  # the guard watches for contacts
-        if self._followed_only and ctrl.joints.generator.following:
+        if self._followed_only and ctrl.moving and ctrl.followed:
             conduct.followed()  # nothing else can have changed
             return True
         changed = conduct.after_step()
