@@ -332,7 +332,9 @@ def scale(endpoint: str, hub: zenoh.Session,
 
 
 def run_fleet(mode: str, endpoint: str, hub: zenoh.Session, ids: list[str],
-              platforms: list[str], states: dict[str, list[int]]) -> float:
+              platforms: list[str], states: dict[str, list[int]], workers: int = 1) -> float:
+    """The worst robot's share of real time over :data:`SCALE_WINDOW_S`, ``ids`` run as
+    processes, threads or a fleet host of ``workers`` worker processes (``mode``)."""
     procs: list[subprocess.Popen[bytes]] = []
     agents: list[Agent] = []
     session = None
@@ -348,7 +350,8 @@ def run_fleet(mode: str, endpoint: str, hub: zenoh.Session, ids: list[str],
             robots = [a for rid, p in zip(ids, platforms, strict=True)
                       for a in ("--robot", f"{p}:{rid}")]
             procs.append(subprocess.Popen(
-                [sys.executable, "-m", "kinesphere.cli", "agent", *robots, *zenoh_args],
+                [sys.executable, "-m", "kinesphere.cli", "agent", *robots, "--workers",
+                 str(workers), *zenoh_args],
                 cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
         else:
             session = zconfig.open_session(config=zconfig.loopback_config(endpoint))
