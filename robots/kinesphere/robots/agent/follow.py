@@ -1,4 +1,4 @@
-"""Many Ruckig trajectories followed at once, on arrays: the joints of every robot of a fleet host.
+"""Many Ruckig trajectories followed at once, on arrays: a fleet host's joints and bases.
 
 Why: once Ruckig has computed a trajectory, following it is only evaluating its profile. Per
 DoF that is at most two brake phases, seven phases of constant jerk and the hold after the end,
