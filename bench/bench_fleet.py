@@ -231,9 +231,7 @@ def hard_stops(n: int) -> None:
 
     def each() -> None:
         for b in mbodies:
-            q = b.data.qpos[b._q_slice].tolist()
-            if any(v < lo or v > hi for v, (lo, hi) in zip(q, b._stops, strict=True)):
-                b.stop_at_limits()
+            b.hard_stop()
 
     at_once, one_by_one = [], []
     for _ in range(3):

@@ -101,6 +101,11 @@ class MujocoBody(Body):
     def step(self) -> None:
         """The physics, then the hard stops."""
         self.simulate()
+        self.hard_stop()
+
+    def hard_stop(self) -> None:
+        """This body's hard stops alone (a fleet host's :class:`HardStops` check all bodies
+        at once)."""
         q = self.data.qpos[self._q_slice].tolist()  # plain floats: quicker than numpy here
         if any(v < lo or v > hi for v, (lo, hi) in zip(q, self._stops, strict=True)):
             self.stop_at_limits()
