@@ -203,7 +203,7 @@ class FleetHost:
 
     def tick(self) -> None:
         """One control cycle of every robot (module text): the end of the last tick's step,
-        then this tick's commands, the joint trajectories followed at once, each robot's
+        then this tick's commands, the trajectories followed at once, each robot's
         setpoints, then the physics: this thread's share now, the helpers' finishing while the
         loop waits for its next tick. A robot with nothing to react to (``Agent.needs_cycle``)
         only hands its followed setpoint to its body, or nothing at all when it is at rest."""

@@ -264,8 +264,9 @@ class Agent:
 
     def follow(self) -> Exception | None:
         """A step with nothing to react to (:meth:`needs_cycle`), up to the body's step: the
-        trajectories forward (a fleet host followed the joints' already: ``follow.py``),
-        their setpoints to the body. Returns what failed (the body must not step then)."""
+        trajectories forward (a fleet host's followers took their steps already, unless one
+        is planned here: ``follow.py``), their setpoints to the body. Returns what failed
+        (the body must not step then)."""
         ctrl = self.controller
         self._followed_only = ctrl.followed
         try:
@@ -291,7 +292,7 @@ class Agent:
     def react(self) -> Exception | None:
         """The first part of :meth:`begin_step` once the step is counted (``stats.begun``):
         e-stops, commands, timers, the guard's verdicts (a fleet host then follows every
-        robot's joint trajectory at once, then :meth:`actuate`s each)."""
+        robot's trajectories at once, then :meth:`actuate`s each)."""
         conduct = self.conduct
         conduct.ticks = self.stats.begun
         now_ns = clocks()[0]
