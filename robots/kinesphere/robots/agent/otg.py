@@ -123,7 +123,8 @@ class Otg:
 
     def attach(self, followers: Followers, slot: int, rows: slice) -> None:
         """Let ``followers`` take the steps along each trajectory once Ruckig planned it; the
-        outputs become views of their arrays (``rows``)."""
+        outputs become views of their arrays (``rows``). From then on their ``advance`` must
+        come before every :meth:`step` (a fleet host's tick does both)."""
         for name in ("position", "velocity", "acceleration"):
             shared = getattr(followers, name)[rows]
             shared[:] = getattr(self, name)
