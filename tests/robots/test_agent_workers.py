@@ -69,7 +69,9 @@ def test_robots_are_dealt_by_platform_and_a_worker_checks_its_share() -> None:
     check_listen([zconfig.LOOPBACK_ANY_PORT], 4)
 
 
-def test_worker_options_are_checked_before_anything_starts(tmp_path: Path) -> None:
+def test_worker_options_are_checked_before_anything_starts(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     fleet = tmp_path / "fleet.toml"
     fleet.write_text('[robots.a]\nplatform = "nao"\n[robots.b]\nplatform = "khepera"\n')
     for argv, named in ((["agent", "nao", "--workers", "2"], "for several robots"),
@@ -78,9 +80,8 @@ def test_worker_options_are_checked_before_anything_starts(tmp_path: Path) -> No
                         (["fleet", str(fleet), "--workers", "2", "--listen",
                           "tcp/127.0.0.1:7448"], "port 7448"),
                         (["fleet", str(fleet), "--worker", "1/2:" + "0" * 12], "edited")):
-        done = subprocess.run([sys.executable, "-m", "kinesphere.cli", *argv], cwd=ROOT,
-                              capture_output=True, text=True, timeout=WAIT_S)
-        assert done.returncode == 2 and named in done.stderr, (argv, done.stderr)
+        assert main(argv) == 2, argv
+        assert named in capsys.readouterr().err, argv
 
 
 class Alive:
