@@ -212,7 +212,7 @@ class FleetHost:
         while awake:
             modes[awake.popleft()] = _CYCLE
         deadlines = self._deadlines
-        for i in np.flatnonzero(deadlines <= clocks()[0] / 1e9).tolist():
+        for i in (deadlines <= clocks()[0] / 1e9).nonzero()[0].tolist():
             modes[i] = _CYCLE
             deadlines[i] = np.inf
         failures: list[Exception | None] = [None] * len(agents)

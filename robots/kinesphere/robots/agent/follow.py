@@ -38,9 +38,11 @@ class _Rows(NamedTuple):
     brake: np.ndarray
     brake_t0: np.ndarray
     t_sum: np.ndarray
+    """Per phase end (0 first), the rows: columns, so that a step compares whole rows."""
     end: np.ndarray
     coef: np.ndarray
-    """Per row and segment (flattened): p0, v0, a0, a0 / 2, jerk."""
+    """p0, v0, a0, a0 / 2, jerk, each over every row and segment (flattened): one gather
+    makes five contiguous vectors."""
     first: np.ndarray
     """Index in ``coef`` of each row's first profile phase."""
     order: np.ndarray
@@ -143,8 +145,8 @@ class Followers:
         time[slots] += self.dt
         t = time[owner]
         shifted = t - brake  # at_time's ``t_diff_dof -= p.brake.duration`` (t itself when 0)
-        phase = (t_sum[:, 1:] <= shifted[:, None]).sum(axis=1)  # upper_bound over t_sum
-        tau = shifted - t_sum[order, phase]
+        phase = (t_sum[1:] <= shifted).sum(axis=0)  # upper_bound over each row's t_sum
+        tau = shifted - t_sum[phase, order]
         segment = phase + first
         if braking:  # the brake phases before the profile (after a retarget mid-motion)
             in_brake = t < brake
@@ -156,7 +158,7 @@ class Followers:
             after = t >= duration[owner]
             segment = np.where(after, first + _HOLD - 2, segment)
             tau = np.where(after, t - end, tau)
-        p0, v0, a0, half, jerk = coef[segment].T
+        p0, v0, a0, half, jerk = coef[:, segment]
         tj = tau * jerk
         rows = self._rows
         self.position[rows] = p0 + tau * (v0 + tau * (half + tj / 6))
@@ -177,8 +179,9 @@ class Followers:
         coef = self._coef[rows]
         index = np.arange(rows.size, dtype=np.intp)
         self._cache = _Rows(
-            owner, self._brake[rows], self._brake_t0[rows], self._t_sum[rows], self._end[rows],
+            owner, self._brake[rows], self._brake_t0[rows],
+            np.ascontiguousarray(self._t_sum[rows].T), self._end[rows],
             # a0 / 2 (exact in binary) beside a0: one division less per step
-            np.concatenate((coef[:, :, :3], coef[:, :, 2:3] / 2, coef[:, :, 3:]),
-                           axis=2).reshape(-1, 5),
+            np.ascontiguousarray(np.concatenate(
+                (coef[:, :, :3], coef[:, :, 2:3] / 2, coef[:, :, 3:]), axis=2).reshape(-1, 5).T),
             index * SEGMENTS + 2, index, bool((self._brake[rows] > 0).any()))

@@ -147,30 +147,28 @@ class HardStops:
 
     def __init__(self, bodies: Sequence[MujocoBody]) -> None:
         self.bodies = list(bodies)
-        self._lower = np.concatenate([b._lower for b in self.bodies] or [np.zeros(0)])
-        self._upper = np.concatenate([b._upper for b in self.bodies] or [np.zeros(0)])
-        self._ends = np.cumsum([b._qadr.size for b in self.bodies])
         self._spans = [b.data.qpos[b._span] for b in self.bodies]
         """Views of the stretch of each body's ``qpos`` holding its joints (they stay valid:
         an MjData never moves its buffers)."""
-        joints, start = [], 0
+        lower, upper = [], []
         for b, span in zip(self.bodies, self._spans, strict=True):
-            joints.append(start + b._qadr - b._span.start)
-            start += span.size
-        self._joints: np.ndarray | None = np.concatenate(joints or [np.zeros(0, np.intp)])
-        if self._joints.size == start:
-            self._joints = None  # the spans hold nothing else: no gather
+            lo, hi = np.full(span.size, -np.inf), np.full(span.size, np.inf)
+            lo[b._qadr - b._span.start] = b._lower  # what lies between joints: no limit
+            hi[b._qadr - b._span.start] = b._upper
+            lower.append(lo)
+            upper.append(hi)
+        self._lower = np.concatenate(lower or [np.zeros(0)])
+        self._upper = np.concatenate(upper or [np.zeros(0)])
+        self._ends = np.cumsum([span.size for span in self._spans])
 
     def apply(self) -> None:
         """Joints past a limit back on it, stopped there."""
         if not self.bodies:
             return
         q = np.concatenate(self._spans)
-        if self._joints is not None:
-            q = q[self._joints]
         past = (q < self._lower) | (q > self._upper)
         if past.any():
-            for i in np.unique(np.searchsorted(self._ends, np.flatnonzero(past), side="right")):
+            for i in np.unique(np.searchsorted(self._ends, past.nonzero()[0], side="right")):
                 self.bodies[int(i)].stop_at_limits()
 
 
