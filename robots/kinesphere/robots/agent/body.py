@@ -12,8 +12,7 @@ from __future__ import annotations
 
 import abc
 from collections.abc import Sequence
-from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 if TYPE_CHECKING:  # the CLI reads BODIES for --help: no numpy, no URDF parser at import
     import numpy as np
@@ -26,10 +25,10 @@ AT_REST = (0.0, 0.0, 0.0)
 """The body-frame twist of a base at rest (``Body.command``: nothing to integrate)."""
 
 
-@dataclass(frozen=True)
-class Reading:
+class Reading(NamedTuple):
     """What a body measures: joint positions and velocities in P order (rad or m, rad/s or
-    m/s) and the base's odometry ``(x m, y m, yaw rad)``, yaw in (-pi, pi]."""
+    m/s) and the base's odometry ``(x m, y m, yaw rad)``, yaw in (-pi, pi]. (A named tuple:
+    made at every state a robot publishes.)"""
 
     q: np.ndarray
     qd: np.ndarray

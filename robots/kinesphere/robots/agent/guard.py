@@ -176,7 +176,8 @@ class Guard:
         """Wake the worker for a move this step started (not earlier: its checks would take
         the interpreter from the first step toward the new target, the command's latency);
         halt on a contact the motion did not start with, naming the links (once)."""
-        self._hand_over()
+        if self._ask is not None:
+            self._hand_over()
         if self._halted or not (joints.moving or self.legs) or not self.body.touching():
             return
         new = _pairs(self.body.contacts()) - self._start_contacts
