@@ -15,19 +15,17 @@ import mujoco
 import numpy as np
 import zenoh
 from ruckig import Synchronization
-from test_agent_support import Databank, databank, far, hub
 
 from kinesphere import zconfig
 from kinesphere.protocol import Ack, Catalogue, Command, Drive, SpatialCommand, decode, encode
 from kinesphere.robots.agent.bodies import make_body
-from kinesphere.robots.agent.fleet import Fleet, RobotSpec
+from kinesphere.robots.agent.fleet import FleetHost, RobotSpec
 from kinesphere.robots.agent.follow import Followers
 from kinesphere.robots.agent.mujoco_body import HardStops, MujocoBody
 from kinesphere.robots.agent.otg import Otg
 from kinesphere.robots.agent.resolver import parts_key
 from kinesphere.robots.agent.runtime import Agent, AgentOptions
-
-__all__ = ["databank", "hub"]  # fixtures
+from support.agents import Databank, far
 
 DT = 0.002
 
@@ -150,7 +148,7 @@ def test_a_fleet_robot_steps_exactly_like_a_lone_agent(
     _session, endpoint = hub
     poses = {p: moves(databank.catalogue(p)) for p in PLATFORMS}
     with zconfig.session(config=zconfig.loopback_config(endpoint)) as s:
-        fleet = Fleet([RobotSpec(p, f"lean-f-{p}") for p in PLATFORMS], s,
+        fleet = FleetHost([RobotSpec(p, f"lean-f-{p}") for p in PLATFORMS], s,
                       AgentOptions(speed=0.0), helpers=0)
         lone = [Agent(p, f"lean-a-{p}", s, AgentOptions(speed=0.0)) for p in PLATFORMS]
         pairs = list(zip(fleet.agents, lone, strict=True))

@@ -19,19 +19,6 @@ from pathlib import Path
 import psutil
 import pytest
 import zenoh
-from test_agent_support import (
-    KEYS,
-    ROOT,
-    WAIT_S,
-    AckWatch,
-    Databank,
-    Operator,
-    StateWatch,
-    databank,
-    far,
-    hub,
-    joints_close,
-)
 
 from kinesphere import zconfig
 from kinesphere.cli import main
@@ -39,8 +26,10 @@ from kinesphere.errors import KinesphereError
 from kinesphere.protocol import SpatialCommand
 from kinesphere.robots.agent.fleet import RobotSpec
 from kinesphere.robots.agent.workers import check_listen, deal, share, worker_flag
-
-__all__ = ["databank", "hub"]  # fixtures
+from support.agents import AckWatch, Databank, Operator, StateWatch, far, joints_close
+from support.network import KEYS
+from support.paths import ROOT
+from support.wait import WAIT_S
 
 ROBOTS = {"w-baxter": "baxter", "w-nao": "nao", "w-youbot": "youbot", "w-khepera": "khepera"}
 
