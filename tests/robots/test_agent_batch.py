@@ -23,6 +23,7 @@ from kinesphere.robots.agent.fleet import FleetHost, RobotSpec
 from kinesphere.robots.agent.follow import Followers
 from kinesphere.robots.agent.mujoco_body import HardStops, MujocoBody
 from kinesphere.robots.agent.otg import Otg
+from kinesphere.robots.agent.pacing import STALL_NS
 from kinesphere.robots.agent.resolver import parts_key
 from kinesphere.robots.agent.runtime import Agent, AgentOptions
 from support.agents import Databank, far
@@ -232,6 +233,44 @@ def test_a_fleet_robot_steps_exactly_like_a_lone_agent(
             fleet.close()
             for a in lone:
                 a.close()
+
+
+def test_a_resting_fleet_robot_sees_no_stall_but_a_stalled_loop_ages_new_clocks(
+    hub: tuple[zenoh.Session, str]
+) -> None:
+    """A robot at rest on a fleet host runs no cycle of its own for a long while: the loop
+    still stepped, so a command from a clock never heard is fresh. When the loop itself did
+    not step (frozen, a step hung), such a command that arrived meanwhile is as old as the
+    stall (``ordering.py``, rule 3) and expires like on a lone agent."""
+    _session, endpoint = hub
+    with zconfig.session(config=zconfig.loopback_config(endpoint)) as s:
+        fleet = FleetHost([RobotSpec("khepera", "stall-f-khepera")], s, AgentOptions(speed=0.0),
+                          helpers=0)
+        agent = fleet.agents[0]
+        said: list[tuple[int, str, str]] = []
+        try:
+            fleet.declare()
+            agent.conduct.acks.publish = agent.conduct.acks.publish_urgent = (
+                lambda data: said.append(_stage(data)))
+            begun = time.monotonic()
+            while time.monotonic() - begun < 3 * STALL_NS / 1e9:  # the loop steps, the robot rests
+                fleet.tick()
+            assert not agent.needs_cycle() and agent.at_rest
+            agent.receive(payload(1, drive=Drive(forward=0.2), ttl_ms=300, sender="op-a"))
+            for _ in range(3):
+                fleet.tick()
+            fleet.complete()
+            assert (1, "accepted", "") in said, said
+            before = len(said)
+            time.sleep(5 * STALL_NS / 1e9)  # the stall itself, not a wait for anything
+            agent.receive(payload(1, drive=Drive(forward=0.2), ttl_ms=300, sender="op-b"))
+            for _ in range(3):
+                fleet.tick()
+            fleet.complete()
+            assert (1, "rejected", "expired") in said[before:], said  # op-b's
+            assert (1, "accepted", "") not in said[before:], said
+        finally:
+            fleet.close()
 
 
 def _stage(data: bytes) -> tuple[int, str, str]:

@@ -211,12 +211,13 @@ class FleetHost:
         agents, modes, awake = self.agents, self._modes, self._awake
         while awake:
             modes[awake.popleft()] = _CYCLE
+        now_ns = clocks()[0]
+        self.stats.begin(now_ns)
         deadlines = self._deadlines
-        for i in (deadlines <= clocks()[0] / 1e9).nonzero()[0].tolist():
+        for i in (deadlines <= now_ns / 1e9).nonzero()[0].tolist():
             modes[i] = _CYCLE
             deadlines[i] = np.inf
         failures: list[Exception | None] = [None] * len(agents)
-        self.stats.begun += 1
         for i, agent in enumerate(agents):
             if modes[i] is _CYCLE:
                 failures[i] = _guarded(agent.react)

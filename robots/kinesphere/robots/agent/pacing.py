@@ -66,6 +66,11 @@ class Wake:
         return False
 
 
+STALL_NS = 100_000_000
+"""A gap between two steps' starts longer than this is a stall of the loop (``ordering.py``,
+rule 3)."""
+
+
 @dataclass
 class LoopStats:
     """What the loop measured about itself (benchmarks and the falling-behind report)."""
@@ -73,6 +78,11 @@ class LoopStats:
     steps: int = 0
     begun: int = 0
     """Steps begun (the one running counts): the robots' step count, ``Agent.due``."""
+    begun_ns: int = 0
+    """Monotonic ns when the step now running began."""
+    stall: tuple[int, int] | None = None
+    """The loop's last stall (monotonic ns from, to): no step began in between. The loop's,
+    not a robot's: a fleet host's robot at rest runs no cycle of its own for a long while."""
     late: int = 0  # steps that started after their deadline
     slips: int = 0  # times the loop gave up catching up
     early: int = 0  # steps run ahead of their slot because work arrived (``wake``)
@@ -80,6 +90,14 @@ class LoopStats:
     costs_s: deque[float] = field(default_factory=lambda: deque(maxlen=20_000))
     woken: bool = False
     """Whether the step now running was started by ``wake`` rather than by its deadline."""
+
+    def begin(self, now_ns: int) -> None:
+        """A step begins at ``now_ns`` (monotonic): counted, a gap since the last one's start
+        longer than :data:`STALL_NS` noted as a stall."""
+        if self.begun_ns and now_ns - self.begun_ns > STALL_NS:
+            self.stall = (self.begun_ns, now_ns)
+        self.begun_ns = now_ns
+        self.begun += 1
 
 
 def run_paced(

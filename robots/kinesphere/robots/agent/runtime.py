@@ -56,8 +56,6 @@ from kinesphere.robots.agent.resolver import Resolver
 from kinesphere.zconfig import undeclare
 
 log = logging.getLogger(__name__)
-STALL_NS = 100_000_000
-"""A gap between two steps' starts longer than this is a stall (ordering.py, rule 3)."""
 
 
 
@@ -98,8 +96,6 @@ class Agent:
         self.stats = LoopStats() if stats is None else stats
         self.last_state: RobotState | None = None
         self._ratelog = RateLog(log)
-        self._tick_ns = 0
-        """Monotonic ns when the last step began."""
         self._state_seq = 0
         self._joint_names = list(self.controller.joint_names)
         self._groups = list(self.options.groups)
@@ -242,7 +238,7 @@ class Agent:
     def begin_step(self) -> Exception | None:
         """The cycle up to the body's step: e-stops, commands, timers, the trajectories
         commanded to the body. Returns what failed there (the body must not step then)."""
-        self.stats.begun += 1
+        self.stats.begin(clocks()[0])
         failure = self.react()
         return failure if failure is not None else self.actuate()
 
@@ -296,9 +292,9 @@ class Agent:
         conduct = self.conduct
         conduct.ticks = self.stats.begun
         now_ns = clocks()[0]
-        if now_ns - self._tick_ns > STALL_NS and self._tick_ns:  # frozen, or a step hung
-            conduct.ordering.stalled(self._tick_ns, now_ns)
-        self._tick_ns = now_ns
+        stall = self.stats.stall  # the loop's: frozen, or a step hung
+        if stall is not None:
+            conduct.ordering.stalled(*stall)
         drained = self.inbox.drain()
         for item in drained.estops:
             conduct.handle(item, now_ns)
