@@ -43,13 +43,14 @@ def generators(seed: int) -> list[Otg]:
 
 
 def test_followers_give_ruckigs_own_outputs_bit_for_bit() -> None:
-    """Targets, brakes, velocity targets and limit changes at random, mid-motion too: every
-    output of every step is the one Ruckig's ``update`` gives (a generator of its own)."""
+    """Targets (some with a minimum duration), brakes, velocity targets and limit changes at
+    random, mid-motion too: every output of every step is the one Ruckig's ``update`` gives
+    (a generator of its own), and so is the time the motion has left."""
     logging.getLogger("kinesphere.robots.agent.otg").setLevel(logging.ERROR)  # refused plans
     rng = np.random.default_rng(7)
     alone, followed = generators(3), generators(3)
     followers = Followers(followed, DT)
-    seen = {"followed": 0, "brake": 0, "ended": 0}
+    seen = {"followed": 0, "brake": 0, "ended": 0, "timed": 0}
     for step in range(6000):
         for a, b in zip(alone, followed, strict=True):
             roll = rng.random()
@@ -57,8 +58,10 @@ def test_followers_give_ruckigs_own_outputs_bit_for_bit() -> None:
                 target = rng.uniform(-2.5, 2.5, a.n)
                 sync = (Synchronization.Time, Synchronization.Phase,
                         Synchronization.No)[rng.integers(3)]
-                a.go_to(target, sync)
-                b.go_to(target, sync)
+                duration = float(rng.uniform(0.5, 4.0)) if rng.random() < 0.5 else None
+                seen["timed"] += duration is not None
+                a.go_to(target, sync, duration)
+                b.go_to(target, sync, duration)
             elif roll < 0.006:
                 a.brake()
                 b.brake()
@@ -80,7 +83,9 @@ def test_followers_give_ruckigs_own_outputs_bit_for_bit() -> None:
             for name in ("position", "velocity", "acceleration", "target"):
                 assert np.array_equal(getattr(a, name), getattr(b, name)), (step, name)
             assert (a.active, a.fault) == (b.active, b.fault), step
+            assert abs(a.remaining - b.remaining) < 1e-9, (step, a.remaining, b.remaining)
     assert seen["followed"] > 20_000 and seen["brake"] > 50 and seen["ended"] >= 10, seen
+    assert seen["timed"] > 20, seen
 
 
 def test_hard_stops_put_back_only_the_joints_past_a_limit() -> None:

@@ -184,7 +184,7 @@ class OmniBase(BaseController):
         if not self.moving and abs(goal[2] - float(self.pose[2])) < 1e-9:
             return
         self.driving = False
-        self._follow = None
+        self._track(None)
         self._otg.scale([1.0, 1.0, 1.0])
         self._otg.go_to(goal, Synchronization.Phase, duration)
 

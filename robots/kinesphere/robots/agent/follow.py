@@ -125,6 +125,10 @@ class Followers:
         self._following[slot] = True
         self._dirty = True
 
+    def left(self, slot: int) -> float:
+        """Seconds the trajectory of generator ``slot`` still takes (``Otg.remaining``)."""
+        return max(0.0, float(self._duration[slot] - self._time[slot]))
+
     def drop(self, slot: int) -> None:
         """Generator ``slot`` is no longer followed here (it plans again, or rests)."""
         if self._following[slot]:

@@ -93,9 +93,8 @@ class Otg:
         self.braking = False
         self.fault = ""
         """Why the last motion was braked instead of followed; "" when it was not."""
-        self.remaining = 0.0
-        """Seconds the motion planned last still takes from the latest output (Ruckig's
-        trajectory duration, counted from the step that planned it)."""
+        self._remaining = 0.0
+        """What :attr:`remaining` says while the steps are taken here."""
         self._why = ""
         self.following = False
         """Whether :class:`Followers` take the steps of the trajectory now (not :meth:`step`)."""
@@ -132,6 +131,16 @@ class Otg:
         self._followers, self._slot = followers, slot
 
     @property
+    def remaining(self) -> float:
+        """Seconds the motion planned last still takes from the latest output (Ruckig's
+        trajectory duration, counted from the step that planned it; the followers' clock
+        while they take the steps)."""
+        if self.following:
+            assert self._followers is not None
+            return self._followers.left(self._slot)
+        return self._remaining
+
+    @property
     def came_to_rest(self) -> bool:
         """The followers' last step brought the motion to rest, and :meth:`step` has not said
         so yet (its owner still has that step to account for)."""
@@ -151,6 +160,7 @@ class Otg:
             return
         self.following = False
         assert self._followers is not None
+        self._remaining = self._followers.left(self._slot)
         self._followers.drop(self._slot)
         inp = self._inp
         inp.current_position = self.position.tolist()
@@ -241,9 +251,9 @@ class Otg:
             return self._hold()
         out = self._out
         if out.new_calculation:
-            self.remaining = max(0.0, out.trajectory.duration - out.time)
+            self._remaining = max(0.0, out.trajectory.duration - out.time)
         else:
-            self.remaining = max(0.0, self.remaining - self.dt)
+            self._remaining = max(0.0, self._remaining - self.dt)
         self.position[:] = out.new_position
         self.velocity[:] = out.new_velocity
         self.acceleration[:] = out.new_acceleration
@@ -306,7 +316,7 @@ class Otg:
             self.target[:] = self.position
         self.active = False
         self.braking = False
-        self.remaining = 0.0
+        self._remaining = 0.0
         inp = self._inp
         inp.control_interface = ControlInterface.Position
         inp.synchronization = Synchronization.Time
