@@ -17,10 +17,10 @@ import json
 import socket
 import threading
 import time
-from collections.abc import Iterator, Mapping, Sequence
-from contextlib import contextmanager
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from contextlib import AbstractContextManager, contextmanager
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any, ParamSpec, Protocol
 
 import zenoh
 
@@ -145,33 +145,25 @@ def open_session(
         raise KinesphereError("unavailable", f"cannot open zenoh session: {_zmsg(exc)}") from None
 
 
-@contextmanager
-def session(
-    mode: str | None = None,
-    listen: Sequence[str] | None = None,
-    connect: Sequence[str] | None = None,
-    config_file: str | Path | None = None,
-    scouting: bool | None = None,
-    *,
-    gossip: bool | None = None,
-    lease_ms: int | None = None,
-    config: zenoh.Config | None = None,
-) -> Iterator[zenoh.Session]:
-    """:func:`open_session` that closes the session (and all it declared) on exit."""
-    s = open_session(
-        mode,
-        listen,
-        connect,
-        config_file,
-        scouting,
-        gossip=gossip,
-        lease_ms=lease_ms,
-        config=config,
-    )
-    try:
-        yield s
-    finally:
-        close_session(s)
+P = ParamSpec("P")
+
+
+def _closing(
+    open_: Callable[P, zenoh.Session],
+) -> Callable[P, AbstractContextManager[zenoh.Session]]:
+    @contextmanager
+    def scoped(*args: P.args, **kwargs: P.kwargs) -> Iterator[zenoh.Session]:
+        s = open_(*args, **kwargs)
+        try:
+            yield s
+        finally:
+            close_session(s)
+
+    return scoped
+
+
+session = _closing(open_session)
+""":func:`open_session` (same arguments) that closes the session, and all it declared, on exit."""
 
 
 def _apply_cfg(config: zenoh.Config, pairs: Sequence[str]) -> None:
