@@ -10,6 +10,7 @@ streaming loop (~0.2 s), which ``kinesphere --help`` does not need.
 from __future__ import annotations
 
 import argparse
+from collections.abc import Callable
 from typing import Any
 
 from kinesphere.cliargs import add_ros_distro, add_ros_domain, add_zenoh_arguments
@@ -18,6 +19,7 @@ from kinesphere.clients.options import (
     JOY_LAYOUTS,
     SEND,
     JoyOptions,
+    OrderOptions,
     TeleopOptions,
     add_answers,
     add_duration,
@@ -83,6 +85,19 @@ def _lease(args: argparse.Namespace) -> int:
     return lease(args)
 
 
+def _sends(p: argparse.ArgumentParser, run: Callable[[argparse.Namespace], int],
+           ttl: str = f"{STREAM.ttl_ms}", answers: tuple[OrderOptions, str] | None = None
+           ) -> None:
+    """What every command that sends takes last: how long robots keep to its commands (and,
+    when it waits for ``answers``, how long), who sends, the Zenoh session; then ``run``."""
+    add_lifetime(p, ttl, wait=answers is not None)
+    if answers is not None:
+        add_answers(p, *answers)
+    add_identity(p)
+    add_zenoh_arguments(p)
+    p.set_defaults(func=run)
+
+
 def register(sub: Any) -> None:
     fmt = argparse.RawDescriptionHelpFormatter
     g = sub.add_parser(
@@ -138,10 +153,7 @@ def register(sub: Any) -> None:
         help="take control (the lease) of the target from another operator on every engage, "
         "instead of being refused while they hold it",
     )
-    add_lifetime(g, wait=False)
-    add_identity(g)
-    add_zenoh_arguments(g)
-    g.set_defaults(func=_gamepad)
+    _sends(g, _gamepad)
 
     s = sub.add_parser(
         "send",
@@ -176,11 +188,8 @@ def register(sub: Any) -> None:
         help="repeat the command for S seconds, then stop",
     )
     add_rate(s, "with --for")
-    add_lifetime(s, f"0: the pose is reached whatever happens next; {STREAM.ttl_ms} with --for")
-    add_answers(s, SEND, "(the last command's final stage: reached, clamped, blocked...)")
-    add_identity(s)
-    add_zenoh_arguments(s)
-    s.set_defaults(func=_send)
+    _sends(s, _send, f"0: the pose is reached whatever happens next; {STREAM.ttl_ms} with --for",
+           (SEND, "(the last command's final stage: reached, clamped, blocked...)"))
 
     p = sub.add_parser(
         "play",
@@ -194,11 +203,7 @@ def register(sub: Any) -> None:
     p.add_argument("phrase", metavar="PHRASE", help="phrase file (TOML) or shipped name")
     add_target(p)
     add_rate(p, "while the phrase plays")
-    add_lifetime(p, f"the phrase's ttl_ms, else {STREAM.ttl_ms}")
-    add_answers(p, SEND, "after the phrase")
-    add_identity(p)
-    add_zenoh_arguments(p)
-    p.set_defaults(func=_play)
+    _sends(p, _play, f"the phrase's ttl_ms, else {STREAM.ttl_ms}", (SEND, "after the phrase"))
 
     e = sub.add_parser(
         "estop",
@@ -210,11 +215,7 @@ def register(sub: Any) -> None:
     )
     e.add_argument("--release", action="store_true", help="release instead of stopping")
     add_target(e, default=None, note="with --release: whose e-stop to release")
-    add_lifetime(e)
-    add_answers(e, ANSWER, "(estopped, released)")
-    add_identity(e)
-    add_zenoh_arguments(e)
-    e.set_defaults(func=_estop)
+    _sends(e, _estop, answers=(ANSWER, "(estopped, released)"))
 
     ls = sub.add_parser(
         "lease",
@@ -230,8 +231,4 @@ def register(sub: Any) -> None:
     add_target(ls, positional=True)
     ls.add_argument("--hold", type=float, default=0.0, metavar="S",
                     help="keep the lease alive for S seconds (Ctrl-C ends it), then release")
-    add_lifetime(ls)
-    add_answers(ls, ANSWER, "(leased, or refused naming the holder)")
-    add_identity(ls)
-    add_zenoh_arguments(ls)
-    ls.set_defaults(func=_lease)
+    _sends(ls, _lease, answers=(ANSWER, "(leased, or refused naming the holder)"))
