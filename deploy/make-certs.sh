@@ -59,41 +59,38 @@ for name in "$@"; do
     if [[ $name =~ ^[0-9.]+$ || $name == *:* ]]; then san+=",IP:$name"; else san+=",DNS:$name"; fi
 done
 
-for role in $roles; do
-    [[ -s "$out/$role.pem" ]] && continue
+# sign PATH SUBJECT USAGE [SAN]: a key (PATH.key) and a certificate (PATH.pem) for SUBJECT,
+# signed by the CA, with extendedKeyUsage USAGE (and subjectAltName SAN)
+sign() {
+    local path=$1 subject=$2 usage=$3 san=${4:-} ext
     ext=$(mktemp)
-    # Every role may both listen and connect (peers do both), so allow both usages.
-    # The CN is the role: the router's access_control matches it (cert_common_names).
     {
         echo "basicConstraints=critical,CA:FALSE"
         echo "keyUsage=critical,digitalSignature,keyEncipherment"
-        echo "extendedKeyUsage=serverAuth,clientAuth"
-        if [[ $role == router ]]; then echo "subjectAltName=DNS:router,$san"; else echo "subjectAltName=DNS:$role,$san"; fi
+        echo "extendedKeyUsage=$usage"
+        if [[ -n $san ]]; then echo "subjectAltName=$san"; fi
     } >"$ext"
-    openssl genpkey -algorithm EC -pkeyopt ec_paramgen_curve:P-256 -out "$out/$role.key" 2>/dev/null
-    openssl req -new -key "$out/$role.key" -subj "/O=kinesphere/CN=$role" -out "$out/$role.csr"
-    openssl x509 -req -in "$out/$role.csr" -CA "$out/ca.pem" -CAkey "$out/ca.key" \
-        -CAcreateserial -days "$days" -sha256 -extfile "$ext" -out "$out/$role.pem" 2>/dev/null
-    rm -f "$out/$role.csr" "$ext"
+    openssl genpkey -algorithm EC -pkeyopt ec_paramgen_curve:P-256 -out "$path.key" 2>/dev/null
+    openssl req -new -key "$path.key" -subj "$subject" -out "$path.csr"
+    openssl x509 -req -in "$path.csr" -CA "$out/ca.pem" -CAkey "$out/ca.key" \
+        -CAcreateserial -days "$days" -sha256 -extfile "$ext" -out "$path.pem" 2>/dev/null
+    rm -f "$path.csr" "$ext"
+}
+
+for role in $roles; do
+    [[ -s "$out/$role.pem" ]] && continue
+    # Every role may both listen and connect (peers do both), so allow both usages.
+    # The CN is the role: the router's access_control matches it (cert_common_names).
+    sign "$out/$role" "/O=kinesphere/CN=$role" serverAuth,clientAuth "DNS:$role,$san"
     echo "made $role: $out/$role.pem (CN=$role)"
 done
 # client_cert DIR KIND NAME: a certificate for one robot or operator (CN = NAME), which
 # only connects (to the router), so client authentication is all it needs
 client_cert() {
-    local dir=$1 kind=$2 id=$3 ext
+    local dir=$1 kind=$2 id=$3
     mkdir -p "$out/$dir"
     [[ -s "$out/$dir/$id.pem" ]] && return 0
-    ext=$(mktemp)
-    {
-        echo "basicConstraints=critical,CA:FALSE"
-        echo "keyUsage=critical,digitalSignature,keyEncipherment"
-        echo "extendedKeyUsage=clientAuth"
-    } >"$ext"
-    openssl genpkey -algorithm EC -pkeyopt ec_paramgen_curve:P-256 -out "$out/$dir/$id.key" 2>/dev/null
-    openssl req -new -key "$out/$dir/$id.key" -subj "/O=kinesphere/OU=$kind/CN=$id" -out "$out/$dir/$id.csr"
-    openssl x509 -req -in "$out/$dir/$id.csr" -CA "$out/ca.pem" -CAkey "$out/ca.key" \
-        -CAcreateserial -days "$days" -sha256 -extfile "$ext" -out "$out/$dir/$id.pem" 2>/dev/null
-    rm -f "$out/$dir/$id.csr" "$ext"
+    sign "$out/$dir/$id" "/O=kinesphere/OU=$kind/CN=$id" clientAuth
     chmod 644 "$out/$dir/$id.pem"
     echo "made $kind $id: $out/$dir/$id.pem (CN=$id)"
 }
