@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import math
 import os
-import signal
 import subprocess
 import sys
 import threading
@@ -43,7 +42,8 @@ from kinesphere.robots.agent.fleet import FleetHost, RobotSpec
 from kinesphere.robots.agent.runtime import Agent, AgentOptions
 from support.network import KEYS
 from support.paths import ROOT
-from support.wait import WAIT_S
+from support.wait import WAIT_S, stop_process
+from support.watch import Watch
 
 # --- the databank ---------------------------------------------------------------------------
 
@@ -83,12 +83,7 @@ class Databank:
     def stop(self) -> None:
         if self.proc is None:
             return
-        self.proc.send_signal(signal.SIGTERM)
-        try:
-            self.proc.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            self.proc.wait()
+        stop_process(self.proc, timeout=10)
         self.proc = None
 
     def query(self, platform: str, part: SpatialCommand) -> Pose:
@@ -135,43 +130,22 @@ class Trace:
         return (np.array(self.t), np.array(self.pos), np.array(self.vel), np.array(self.acc))
 
 
-class StateWatch:
+class StateWatch(Watch[RobotState]):
     """The RobotState stream of one robot, with waits on predicates."""
 
     def __init__(self, session: zenoh.Session, robot_id: str) -> None:
-        self.states: list[RobotState] = []
-        self._cond = threading.Condition()
-        self._sub = session.declare_subscriber(KEYS.state(robot_id), self._on)
+        super().__init__(session, KEYS.state(robot_id), RobotState)
+        self.states = self.heard
 
-    def _on(self, sample: zenoh.Sample) -> None:
-        state = decode(sample.payload, RobotState)
-        with self._cond:
-            self.states.append(state)
-            self._cond.notify_all()
-
-    def wait(self, pred: Callable[[RobotState], bool], what: str,
-             timeout: float = WAIT_S) -> RobotState:
+    def wait(self, pred: Callable[[RobotState], bool], what: str, timeout: float = WAIT_S,
+             *, from_latest: bool = True) -> RobotState:
         """The first state from now on (or the latest) satisfying ``pred``."""
-        deadline = time.monotonic() + timeout
-        with self._cond:
-            seen = max(0, len(self.states) - 1)
-            while True:
-                for s in self.states[seen:]:
-                    if pred(s):
-                        return s
-                seen = len(self.states)
-                left = deadline - time.monotonic()
-                if left <= 0 or not self._cond.wait(left):
-                    last = self.states[-1] if self.states else None
-                    raise AssertionError(f"timed out waiting for {what}; last state {last}")
+        return super().wait(pred, what, timeout, from_latest=from_latest)
 
     def after(self, seq: int, pred: Callable[[RobotState], bool], what: str,
               timeout: float = WAIT_S) -> RobotState:
         """A state acting on command ``seq`` (or later) that satisfies ``pred``."""
         return self.wait(lambda s: s.last_command_seq >= seq and pred(s), what, timeout)
-
-    def close(self) -> None:
-        zconfig.undeclare(self._sub)
 
 
 @contextmanager
@@ -206,14 +180,7 @@ def agent_process(endpoint: str, platform: str, robot_id: str) -> Iterator[subpr
     try:
         yield proc
     finally:
-        if proc.poll() is None:
-            proc.send_signal(signal.SIGCONT)
-            proc.send_signal(signal.SIGTERM)
-            try:
-                proc.wait(timeout=WAIT_S)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
+        stop_process(proc)
 
 
 @contextmanager
@@ -273,31 +240,12 @@ class Operator:
         zconfig.undeclare(self.pub, self.urgent)
 
 
-class AckWatch:
+class AckWatch(Watch[Ack]):
     """The Acks of one robot (``*``: all), with waits on predicates."""
 
     def __init__(self, session: zenoh.Session, robot_id: str = "*") -> None:
-        self.acks: list[Ack] = []
-        self._cond = threading.Condition()
-        self._sub = session.declare_subscriber(KEYS.ack(robot_id), self._on)
-
-    def _on(self, sample: zenoh.Sample) -> None:
-        ack = decode(sample.payload, Ack)
-        with self._cond:
-            self.acks.append(ack)
-            self._cond.notify_all()
-
-    def wait(self, pred: Callable[[Ack], bool], what: str, timeout: float = WAIT_S) -> Ack:
-        """The first ack so far (or from now on) satisfying ``pred``."""
-        deadline = time.monotonic() + timeout
-        with self._cond:
-            while True:
-                for a in self.acks:
-                    if pred(a):
-                        return a
-                left = deadline - time.monotonic()
-                if left <= 0 or not self._cond.wait(left):
-                    raise AssertionError(f"timed out waiting for {what}; acks {self.acks[-5:]}")
+        super().__init__(session, KEYS.ack(robot_id), Ack)
+        self.acks = self.heard
 
     def of(self, sender: str, seq: int, stage: str, what: str = "") -> Ack:
         return self.wait(lambda a: a.sender == sender and a.seq == seq and a.stage == stage,
@@ -306,9 +254,6 @@ class AckWatch:
     def stages(self, sender: str, seq: int) -> list[str]:
         with self._cond:
             return [a.stage for a in self.acks if a.sender == sender and a.seq == seq]
-
-    def close(self) -> None:
-        zconfig.undeclare(self._sub)
 
 
 def far(cat: Catalogue, k: int = 0) -> tuple[str, str, str, float]:

@@ -7,7 +7,6 @@ operator runs in this process on its own session.
 from __future__ import annotations
 
 import os
-import signal
 import subprocess
 import sys
 import threading
@@ -30,7 +29,7 @@ from kinesphere.clients.options import TeleopOptions
 from kinesphere.protocol import RobotState, decode
 from support.network import KEYS
 from support.paths import ROOT
-from support.wait import WAIT_S
+from support.wait import WAIT_S, stop_process
 
 TTL_MS = 300
 PB, YB = "pb-1", "yb-1"
@@ -69,13 +68,7 @@ class Child:
             zconfig.undeclare(sub)
 
     def stop(self) -> None:
-        if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGTERM)
-            try:
-                self.proc.wait(timeout=15)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
+        stop_process(self.proc, timeout=15)
         self.log.close()
 
 

@@ -42,6 +42,7 @@ from kinesphere.protocol import (  # noqa: E402
 )
 from support.network import OWN_KEYS  # noqa: E402
 from support.wait import WAIT_S  # noqa: E402
+from support.watch import Watch  # noqa: E402
 
 SENTINEL = "sentinel"
 MAX = 32767
@@ -79,7 +80,28 @@ def pygames_sdl() -> ctypes.CDLL:
     return lib
 
 
-class VirtualPad:
+class Hands:
+    """A pad's two sticks and its deadman, however its axes and buttons reach SDL."""
+
+    def axis(self, axis: int, value: float) -> None:
+        raise NotImplementedError
+
+    def button(self, b: int, down: bool = True) -> None:
+        raise NotImplementedError
+
+    def right(self, x: float, y: float) -> None:
+        self.axis(pygame.CONTROLLER_AXIS_RIGHTX, x)
+        self.axis(pygame.CONTROLLER_AXIS_RIGHTY, y)
+
+    def left(self, x: float, y: float) -> None:
+        self.axis(pygame.CONTROLLER_AXIS_LEFTX, x)
+        self.axis(pygame.CONTROLLER_AXIS_LEFTY, y)
+
+    def deadman(self, down: bool = True) -> None:
+        self.button(pygame.CONTROLLER_BUTTON_LEFTSHOULDER, down)
+
+
+class VirtualPad(Hands):
     """An SDL virtual GameController: input goes through SDL's real joystick and game
     controller path (device added, mapping, axis and button events), as from a USB pad.
 
@@ -108,19 +130,8 @@ class VirtualPad:
             raw = max(-32768, min(32767, round(value * 32767)))
         assert self.sdl.SDL_JoystickSetVirtualAxis(self.joystick, axis, raw) == 0
 
-    def right(self, x: float, y: float) -> None:
-        self.axis(pygame.CONTROLLER_AXIS_RIGHTX, x)
-        self.axis(pygame.CONTROLLER_AXIS_RIGHTY, y)
-
-    def left(self, x: float, y: float) -> None:
-        self.axis(pygame.CONTROLLER_AXIS_LEFTX, x)
-        self.axis(pygame.CONTROLLER_AXIS_LEFTY, y)
-
     def button(self, b: int, down: bool = True) -> None:
         assert self.sdl.SDL_JoystickSetVirtualButton(self.joystick, b, int(down)) == 0
-
-    def deadman(self, down: bool = True) -> None:
-        self.button(pygame.CONTROLLER_BUTTON_LEFTSHOULDER, down)
 
     def unplug(self) -> None:
         """Detach the device (SDL then reports it removed, like a pulled cable)."""
@@ -141,42 +152,23 @@ class Got:
     signer: str = ""
 
 
-class Inbox:
+class Inbox(Watch[Got]):
     """Every Command put on ``key`` (may be a wildcard), signed or not, with arrival times."""
 
     def __init__(self, session: zenoh.Session, key: str) -> None:
-        self.got: list[Got] = []
-        self._cond = threading.Condition()
-        self._sub = session.declare_subscriber(Keys.subscribed(key), self._on)
+        super().__init__(session, Keys.subscribed(key), Got)
+        self.got = self.heard
 
-    def _on(self, sample: zenoh.Sample) -> None:
-        cmd = decode(sample.payload, Command)
+    def decoded(self, sample: zenoh.Sample) -> Got:
         key = str(sample.key_expr)
         signer = OWN_KEYS.sender_of(key)
         if signer:
             key = key.rsplit("/", 1)[0]
-        with self._cond:
-            self.got.append(Got(time.monotonic(), key, cmd, signer))
-            self._cond.notify_all()
-
-    def wait(self, pred: Callable[[Got], bool], what: str, timeout: float = WAIT_S) -> Got:
-        """The first message so far or from now on that satisfies ``pred``."""
-        deadline = time.monotonic() + timeout
-        with self._cond:
-            while True:
-                for g in self.got:
-                    if pred(g):
-                        return g
-                left = deadline - time.monotonic()
-                if left <= 0 or not self._cond.wait(left):
-                    raise AssertionError(f"timed out waiting for {what}; got {len(self.got)}")
+        return Got(time.monotonic(), key, decode(sample.payload, Command), signer)
 
     def commands(self, real: bool = True) -> list[Command]:
         with self._cond:
             return [g.cmd for g in self.got if (g.cmd.sender != SENTINEL) == real]
-
-    def close(self) -> None:
-        zconfig.undeclare(self._sub)
 
 
 Reply = tuple[AckStage, str, str, list[Substitution]]
@@ -285,7 +277,7 @@ def post(kind: int, **attrs: object) -> None:
     pygame.event.post(pygame.event.Event(kind, **attrs))
 
 
-class Pad:
+class Pad(Hands):
     """A gamepad that exists only as events posted into pygame's queue."""
 
     def __init__(self, iid: int = 3) -> None:
@@ -300,14 +292,6 @@ class Pad:
     def axis(self, a: int, value: float) -> None:
         post(pygame.CONTROLLERAXISMOTION, instance_id=self.iid, axis=a, value=int(value * MAX))
 
-    def right(self, x: float, y: float) -> None:
-        self.axis(pygame.CONTROLLER_AXIS_RIGHTX, x)
-        self.axis(pygame.CONTROLLER_AXIS_RIGHTY, y)
-
-    def left(self, x: float, y: float) -> None:
-        self.axis(pygame.CONTROLLER_AXIS_LEFTX, x)
-        self.axis(pygame.CONTROLLER_AXIS_LEFTY, y)
-
     def button(self, b: int, down: bool = True) -> None:
         kind = pygame.CONTROLLERBUTTONDOWN if down else pygame.CONTROLLERBUTTONUP
         post(kind, instance_id=self.iid, button=b)
@@ -315,9 +299,6 @@ class Pad:
     def tap(self, b: int) -> None:
         self.button(b)
         self.button(b, down=False)
-
-    def deadman(self, down: bool = True) -> None:
-        self.button(pygame.CONTROLLER_BUTTON_LEFTSHOULDER, down)
 
 
 class Script:

@@ -1,4 +1,5 @@
-"""Waiting for what another thread or process does: one upper bound, one poller.
+"""Waiting for what another thread or process does: one upper bound, one poller, one way to
+stop a process.
 
 Tests wait on events (a message, a state matching a predicate) wherever one exists; this
 poller is for state that changes without an event to wait on.
@@ -6,8 +7,11 @@ poller is for state that changes without an event to wait on.
 
 from __future__ import annotations
 
+import signal
+import subprocess
 import time
 from collections.abc import Callable
+from typing import Any
 
 import pytest
 
@@ -25,3 +29,16 @@ def until(cond: Callable[[], bool], timeout: float, what: str, every: float = 0.
             extra = f"\n{explain()}" if explain is not None else ""
             pytest.fail(f"timed out after {timeout:g} s waiting for {what}{extra}")
         time.sleep(every)
+
+
+def stop_process(proc: subprocess.Popen[Any], timeout: float = WAIT_S) -> int:
+    """SIGTERM ``proc`` (thawed first, in case a test froze it) and wait for it to end; killed
+    if it has not after ``timeout`` seconds. Its exit status."""
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGCONT)
+        proc.send_signal(signal.SIGTERM)
+    try:
+        return proc.wait(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        return proc.wait()

@@ -16,7 +16,6 @@ from __future__ import annotations
 import io
 import math
 import os
-import signal
 import subprocess
 import sys
 import threading
@@ -41,7 +40,7 @@ from support.agents import Databank, Operator, StateWatch, joints_close, running
 from support.paths import ROOT
 from support.ros2 import GraphWatch, RosTap
 from support.ros2_peer import JAZZY_ZENOH, SdkPeer
-from support.wait import WAIT_S
+from support.wait import WAIT_S, stop_process
 
 JS = "sensor_msgs/msg/JointState"
 STRING = "std_msgs/msg/String"
@@ -80,12 +79,7 @@ class Proc:
             return next(ln for ln in self.lines if text in ln)
 
     def stop(self) -> int:
-        self.proc.send_signal(signal.SIGTERM)
-        try:
-            return self.proc.wait(timeout=WAIT_S)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            return self.proc.wait()
+        return stop_process(self.proc)
 
 
 @dataclass
