@@ -138,9 +138,9 @@ class StateWatch(Watch[RobotState]):
         self.states = self.heard
 
     def wait(self, pred: Callable[[RobotState], bool], what: str, timeout: float = WAIT_S,
-             *, from_latest: bool = True) -> RobotState:
+             *, start: int = -1) -> RobotState:
         """The first state from now on (or the latest) satisfying ``pred``."""
-        return super().wait(pred, what, timeout, from_latest=from_latest)
+        return super().wait(pred, what, timeout, start=start)
 
     def after(self, seq: int, pred: Callable[[RobotState], bool], what: str,
               timeout: float = WAIT_S) -> RobotState:

@@ -21,6 +21,7 @@ from zenoh.ext import Int64, z_deserialize, z_serialize
 
 from kinesphere import zconfig
 from support.wait import WAIT_S
+from support.watch import Heard
 
 JAZZY = get_typestore(Stores.ROS2_JAZZY)
 """Upper bound for events on a loaded 2-core machine; tests finish far sooner."""
@@ -95,15 +96,15 @@ class Received:
     at: float
 
 
-class RosTap:
+class RosTap(Heard[Received]):
     """Every message on one ROS topic, decoded with rosbags, attachment checked."""
 
     def __init__(self, session: zenoh.Session, domain: int, topic: str, ros_type: str,
                  history: bool = False) -> None:
+        super().__init__()
         self.ros_type = ros_type
         self.key = key(domain, topic, ros_type)
-        self.got: list[Received] = []
-        self._cond = threading.Condition()
+        self.got = self.heard
         if history:  # what rmw_zenoh does for a transient-local subscription
             self._sub: Any = zenoh.ext.declare_advanced_subscriber(
                 session, self.key, self._on,
@@ -116,25 +117,15 @@ class RosTap:
     def _on(self, sample: zenoh.Sample) -> None:
         seq, ts, gid = read_attachment(sample)
         msg = JAZZY.deserialize_cdr(sample.payload.to_bytes(), self.ros_type)
-        with self._cond:
-            self.got.append(Received(msg, seq, ts, gid, time.monotonic()))
-            self._cond.notify_all()
+        self.add(Received(msg, seq, ts, gid, time.monotonic()))
+
+    def explain(self) -> str:
+        return f"on {self.key} ({len(self.got)} other messages)"
 
     def wait(self, pred: Callable[[Any], bool] = lambda m: True, what: str = "a message",
-             timeout: float = WAIT_S) -> Received:
-        """The first message (from the start) that satisfies ``pred``."""
-        deadline = time.monotonic() + timeout
-        seen = 0
-        with self._cond:
-            while True:
-                for r in self.got[seen:]:
-                    if pred(r.msg):
-                        return r
-                seen = len(self.got)
-                left = deadline - time.monotonic()
-                if left <= 0 or not self._cond.wait(left):
-                    raise AssertionError(f"no {what} on {self.key} within {timeout} s "
-                                         f"({len(self.got)} other messages)")
+             timeout: float = WAIT_S, *, start: int = 0) -> Received:
+        """The first message (from the start) whose ``msg`` satisfies ``pred``."""
+        return super().wait(lambda r: pred(r.msg), what, timeout, start=start)
 
     def close(self) -> None:
         zconfig.undeclare(self._sub)

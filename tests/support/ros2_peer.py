@@ -16,13 +16,13 @@ import subprocess
 import sys
 import tempfile
 import threading
-import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 from support.paths import ROOT
 from support.wait import WAIT_S
+from support.watch import Heard
 
 SCRIPT = Path(__file__).resolve().parent / "sdk_peer.py"
 JAZZY_ZENOH = "1.6.2"
@@ -68,13 +68,13 @@ def peer_python(zenoh: str | None = None) -> str:
     return str(python)
 
 
-class SdkPeer:
+class SdkPeer(Heard[dict[str, Any]]):
     """``sdk_peer.py`` in a subprocess, joined to ``router``; its events, kept in order."""
 
     def __init__(self, router: str, zenoh: str | None = None, domain: int = 0,
                  distro: str = "jazzy") -> None:
-        self.events: list[dict[str, Any]] = []
-        self._cond = threading.Condition()
+        super().__init__()
+        self.events = self.heard
         env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "VIRTUAL_ENV")}
         env["PYTHONUNBUFFERED"] = "1"
         self._log = tempfile.TemporaryFile(mode="w+")  # the SDK's logging, for failures
@@ -90,13 +90,8 @@ class SdkPeer:
     def _read(self) -> None:
         assert self.proc.stdout is not None
         for line in self.proc.stdout:
-            event = json.loads(line)
-            with self._cond:
-                self.events.append(event)
-                self._cond.notify_all()
-        with self._cond:
-            self.events.append({"event": "exit"})
-            self._cond.notify_all()
+            self.add(json.loads(line))
+        self.add({"event": "exit"})
 
     def send(self, **cmd: Any) -> None:
         assert self.proc.stdin is not None
@@ -113,26 +108,21 @@ class SdkPeer:
             every: float | None = None) -> None:
         self.send(op="pub", name=name, topic=topic, type=ros_type, fields=fields, every=every)
 
+    def explain(self) -> str:
+        return f"from the ROS 2 peer ({len(self.events)} other events); its log: {self._stderr()}"
+
     def wait(self, pred: Callable[[dict[str, Any]], bool], what: str,
-             timeout: float = WAIT_S, start: int = 0) -> dict[str, Any]:
+             timeout: float = WAIT_S, *, start: int = 0) -> dict[str, Any]:
         """The first event from index ``start`` on that satisfies ``pred``; an ``error`` event
         or the peer's exit fails the wait at once, naming it."""
-        deadline = time.monotonic() + timeout
-        seen = start
-        with self._cond:
-            while True:
-                for e in self.events[seen:]:
-                    if e["event"] in ("error", "exit"):
-                        raise AssertionError(f"the ROS 2 peer failed while waiting for {what}: "
-                                             f"{e} {self._stderr()}")
-                    if pred(e):
-                        return e
-                seen = len(self.events)
-                left = deadline - time.monotonic()
-                if left <= 0 or not self._cond.wait(left):
-                    raise AssertionError(f"no {what} from the ROS 2 peer within {timeout} s "
-                                         f"({len(self.events)} other events); its log: "
-                                         f"{self._stderr()}")
+
+        def failing(e: dict[str, Any]) -> bool:
+            if e["event"] in ("error", "exit"):
+                raise AssertionError(f"the ROS 2 peer failed while waiting for {what}: "
+                                     f"{e} {self._stderr()}")
+            return pred(e)
+
+        return super().wait(failing, what, timeout, start=start)
 
     def messages(self, name: str) -> list[dict[str, Any]]:
         with self._cond:

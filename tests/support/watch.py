@@ -1,7 +1,10 @@
-"""What a test hears on a key: every message put there, decoded, with waits on predicates.
+"""What a test hears from another thread: items kept in order of arrival, with waits on
+predicates (a wait blocks on a condition: no polling).
 
-The agents' state and ack streams and the commands a client puts are each a :class:`Watch`
-of their own kind; a wait blocks on the subscriber's condition (no polling).
+:class:`Heard` is the list and its waits, fed by whatever hears (a subscriber, a reader of a
+process's output); :class:`Watch` feeds one from a Zenoh subscription. The agents' state and
+ack streams, the commands a client puts, a ROS topic and the ROS 2 peer's events are each
+one of these.
 """
 
 from __future__ import annotations
@@ -20,32 +23,29 @@ from support.wait import WAIT_S
 T = TypeVar("T")
 
 
-class Watch(Generic[T]):
-    """Every message put on ``key`` (may be a wildcard) as :meth:`decoded` makes it, in
-    order of arrival."""
+class Heard(Generic[T]):
+    """Items :meth:`add` ed from any thread, in order, with waits on predicates."""
 
-    def __init__(self, session: zenoh.Session, key: str, kind: type[T]) -> None:
+    def __init__(self) -> None:
         self.heard: list[T] = []
-        self._kind = kind
         self._cond = threading.Condition()
-        self._sub = session.declare_subscriber(key, self._on)
 
-    def decoded(self, sample: zenoh.Sample) -> T:
-        return decode(sample.payload, self._kind)
-
-    def _on(self, sample: zenoh.Sample) -> None:
-        item = self.decoded(sample)
+    def add(self, item: T) -> None:
         with self._cond:
             self.heard.append(item)
             self._cond.notify_all()
 
+    def explain(self) -> str:
+        """What a timed-out wait adds to its message."""
+        return f"heard {len(self.heard)}, the last {self.heard[-3:]}"
+
     def wait(self, pred: Callable[[T], bool], what: str, timeout: float = WAIT_S, *,
-             from_latest: bool = False) -> T:
-        """The first message heard so far or from now on that satisfies ``pred`` (with
-        ``from_latest``: the latest one or one from now on)."""
+             start: int = 0) -> T:
+        """The first item from index ``start`` on (negative: counted from the latest), heard
+        so far or from now on, that satisfies ``pred``; ``pred`` may raise to fail at once."""
         deadline = time.monotonic() + timeout
         with self._cond:
-            seen = max(0, len(self.heard) - 1) if from_latest else 0
+            seen = max(0, len(self.heard) + start) if start < 0 else start
             while True:
                 for item in self.heard[seen:]:
                     if pred(item):
@@ -53,8 +53,22 @@ class Watch(Generic[T]):
                 seen = len(self.heard)
                 left = deadline - time.monotonic()
                 if left <= 0 or not self._cond.wait(left):
-                    raise AssertionError(f"timed out waiting for {what}; heard {seen}, the "
-                                         f"last {self.heard[-3:]}")
+                    raise AssertionError(f"no {what} within {timeout:g} s; {self.explain()}")
+
+
+class Watch(Heard[T]):
+    """Every message put on ``key`` (may be a wildcard) as :meth:`decoded` makes it."""
+
+    def __init__(self, session: zenoh.Session, key: str, kind: type[T]) -> None:
+        super().__init__()
+        self._kind = kind
+        self._sub = session.declare_subscriber(key, self._on)
+
+    def decoded(self, sample: zenoh.Sample) -> T:
+        return decode(sample.payload, self._kind)
+
+    def _on(self, sample: zenoh.Sample) -> None:
+        self.add(self.decoded(sample))
 
     def close(self) -> None:
         zconfig.undeclare(self._sub)
