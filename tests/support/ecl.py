@@ -12,7 +12,7 @@ from kinesphere.laban import Direction
 from kinesphere.platforms.frames import pivot
 from kinesphere.platforms.mjcf import PlatformModel, platform_model
 from kinesphere.platforms.platform import Platform, load_platform
-from kinesphere.services.ecl.constraints import tip_point
+from kinesphere.services.ecl.measure import tip_point
 from kinesphere.services.ecl.ecl import Ecl
 from kinesphere.services.ecl.store import PoseRow, write_databank
 from kinesphere.services.ecl.vsam import load_vsam

@@ -8,6 +8,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from kinesphere.services.ecl.measure import cosine
+
+__all__ = ["along_arc", "arc_at", "cosine", "halfway"]
+
 
 def halfway(rest: np.ndarray, d: np.ndarray) -> np.ndarray:
     """The unit direction half-way from the neutral tip direction to d; for opposite
@@ -19,11 +23,6 @@ def halfway(rest: np.ndarray, d: np.ndarray) -> np.ndarray:
     up = np.array([0.0, 0.0, 1.0]) if abs(u[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
     side = up - (up @ u) * u
     return np.asarray(side / np.linalg.norm(side))
-
-
-def cosine(v: np.ndarray, d: np.ndarray) -> float:
-    n = float(np.linalg.norm(v))
-    return float(v @ d) / n if n > 1e-9 else 0.0
 
 
 def along_arc(start: np.ndarray, end: np.ndarray, g: float) -> np.ndarray:

@@ -21,7 +21,7 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from kinesphere.cliargs import add_output, add_platform_list
+from kinesphere.cliargs import add_json, add_output, add_platform_list
 from kinesphere.errors import KinesphereError
 from kinesphere.services.options import (
     SHEET_SIZE,
@@ -67,6 +67,24 @@ def register_build(ecl_sub: Any, top_sub: Any) -> None:
     r.add_argument("--rows", action="store_true",
                    help="also print every row's figures and why each unstable pull toppled")
     r.set_defaults(func=_report)
+
+    a = ecl_sub.add_parser(
+        "audit",
+        help="what the databank's words mean on its body, measured by forward kinematics",
+        description="Measure every stored row by forward kinematics (MuJoCo on the platform's "
+        "model, from the stored joint values alone, not the generator's quality table): per "
+        "(limb, origin) pair the cosine between each row's bearing (tip - origin) and its "
+        "direction (min / 5th percentile / median), each size's tip distance as a fraction of "
+        "far's (median; near/far is the first), cells whose tip gets closer as the size grows, "
+        "cells stopping short of far (sizes removed for stability), every missing pull asked "
+        "at every size (served by a neighbour: how many and the worst measured angle to the "
+        "request; refused), the pulls the neutral pose already points at and how they are "
+        "answered, and the smallest stability margin of any row (centre of mass inside the "
+        "support polygon; none on a fixed base).",
+    )
+    add_platform(a)
+    add_json(a, "every figure")
+    a.set_defaults(func=_audit)
 
     v = ecl_sub.add_parser(
         "coverage",
@@ -262,6 +280,45 @@ def _summary(rows: list[dict[str, Any]]) -> list[str]:
 
 def _fmt(v: float | None) -> str:
     return "-" if v is None else f"{v:.3f}"
+
+
+def _audit(args: argparse.Namespace) -> int:
+    from kinesphere.services.ecl.audit import audit, over_limit
+
+    result = audit(args.platform, args.db)
+    if args.json:
+        sys.stdout.write(result.to_json() + "\n")
+        return 0
+    console = _console()
+    if not result.pairs:
+        console.print(f"{result.platform}: no limbs in its VSAM (only core translations), "
+                      "nothing to measure", highlight=False)
+        return 0
+    table = Table(title=f"{result.platform} audit (version {result.version}, "
+                  f"{result.generator or 'unknown generator'}): measured by forward kinematics")
+    for col in ("limb", "origin", "rule", "pulls", "cosine min/p5/med", "size/far", "inverted",
+                "short of far", "substituted (worst)", "> 45 deg", "refused",
+                "neutral directions", "min margin"):
+        table.add_column(col, justify="left" if col in ("limb", "origin", "rule",
+                                                        "neutral directions") else "right")
+    for p in result.pairs:
+        cos = "/".join(_fmt(v) for v in (p.cosine_min, p.cosine_p5, p.cosine_median))
+        fractions = " ".join(f"{v:.2f}" for _, v in sorted(p.fraction.items())) or "-"
+        worst = p.worst_substitution
+        subs = f"{len(p.substituted)}" + (f" ({worst:.0f} deg)" if worst is not None else "")
+        neutral = "; ".join(f"{d}: {how}" for d, how in p.neutral.items()) or "-"
+        if result.anchored or p.margin_min is None:
+            margin = "fixed base" if result.anchored else "-"
+        else:
+            margin = f"{p.margin_min * 100:.1f} cm" + (
+                f" ({len(p.unstable)} < 1 cm)" if p.unstable else "")
+        table.add_row(p.limb + (f" ({p.alias})" if p.alias else ""), p.origin, p.rule,
+                      str(p.pulls), cos, fractions, str(len(p.inverted)), str(len(p.short)),
+                      subs, str(len(over_limit(p))), str(len(p.refused)), neutral, margin)
+    console.print(table)
+    console.print("size/far: median tip distance of each stored size over far's (near first); "
+                  "substituted and refused count (request, size) pairs", highlight=False)
+    return 0
 
 
 def _coverage(args: argparse.Namespace) -> int:

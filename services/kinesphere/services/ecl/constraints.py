@@ -1,4 +1,4 @@
-"""mink building blocks for the ECL generator: the tip point, its task and two limits.
+"""mink building blocks for the ECL generator: the tip task and two limits.
 
 Why custom limits: mink's CollisionAvoidanceLimit keeps only geom pairs that pass the
 contype/conaffinity test and ignores the model's excluded body pairs; the generator needs
@@ -15,44 +15,13 @@ import mujoco
 import numpy as np
 from mink.limits.collision_avoidance_limit import compute_contact_normal_jacobian
 
+from kinesphere.services.ecl.measure import samples
+
 MAX_STEP = 0.4  # limb spans: the point task's error is clipped so big jumps cannot fly off
 CLEARANCE = 0.01  # metres kept between the limb and other geoms (less if closer at neutral)
 DETECT = 0.08  # metres at which a distance constraint becomes active (> one step)
 GAIN = 0.5  # task gains below 1 damp the period-2 dither of dead-beat steps
 LIMIT_GAIN = 0.85  # fraction of the remaining gap a limit lets one step close
-TIE = 0.01  # metres: geom ends this close to the farthest one count as the same end
-
-
-def tip_point(model: mujoco.MjModel, body: int) -> np.ndarray:
-    """The distal end of a link, in its body frame.
-
-    Each collision geom offers the two ends of its main axis; the end farthest from the body
-    origin wins, and ends within TIE metres of it are averaged, so a symmetric link (a pair
-    of flippers on one axle) gets its end on the plane of symmetry, not on one side. A
-    zero-size frame (no collision geometry) is its own end: the body origin.
-    """
-    ends: list[np.ndarray] = []
-    for g in range(model.ngeom):
-        if model.geom_bodyid[g] != body or model.geom_contype[g] == 0:
-            continue
-        centre, size, kind = model.geom_pos[g], model.geom_size[g], model.geom_type[g]
-        rot = _rotation(model, g)
-        if kind == mujoco.mjtGeom.mjGEOM_SPHERE:
-            norm = float(np.linalg.norm(centre))
-            axis = centre / norm if norm > 1e-9 else np.array([0.0, 0.0, 1.0])
-            half = float(size[0])
-        elif kind == mujoco.mjtGeom.mjGEOM_BOX:
-            k = int(np.argmax(size))
-            axis, half = rot[:, k], float(size[k])
-        else:  # cylinder, capsule, ellipsoid: the local z axis
-            cap = float(size[0]) if kind == mujoco.mjtGeom.mjGEOM_CAPSULE else 0.0
-            axis, half = rot[:, 2], float(size[1]) + cap
-        ends += [centre + axis * half, centre - axis * half]
-    if not ends:
-        return np.zeros(3)
-    norms = np.array([float(np.linalg.norm(e)) for e in ends])
-    chosen = [e for e, n in zip(ends, norms, strict=True) if n >= norms.max() - TIE]
-    return np.asarray(np.mean(chosen, axis=0))
 
 
 class PointTask(mink.Task):
@@ -167,29 +136,3 @@ class FloorLimit(mink.Limit):
         if not rows:
             return mink.Constraint()
         return mink.Constraint(G=np.vstack(rows), h=np.array(bounds))
-
-
-def samples(model: mujoco.MjModel, g: int) -> list[tuple[np.ndarray, float]]:
-    """Points of a geom in its body frame, each with the radius to subtract from its height."""
-    rot = _rotation(model, g)
-    pos, size, kind = model.geom_pos[g], model.geom_size[g], model.geom_type[g]
-    if kind == mujoco.mjtGeom.mjGEOM_SPHERE:
-        return [(pos.copy(), float(size[0]))]
-    if kind == mujoco.mjtGeom.mjGEOM_CAPSULE:
-        return [(pos + s * size[1] * rot[:, 2], float(size[0])) for s in (-1.0, 1.0)]
-    if kind == mujoco.mjtGeom.mjGEOM_CYLINDER:
-        angles = np.linspace(0.0, 2 * np.pi, 8, endpoint=False)
-        return [
-            (pos + rot @ np.array([size[0] * np.cos(a), size[0] * np.sin(a), s * size[1]]), 0.0)
-            for s in (-1.0, 1.0) for a in angles
-        ]
-    half = size if kind == mujoco.mjtGeom.mjGEOM_BOX else np.full(3, float(np.max(size)))
-    signs = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], float)
-    return [(pos + rot @ (s * half), 0.0) for s in signs]
-
-
-def _rotation(model: mujoco.MjModel, g: int) -> np.ndarray:
-    """A geom's orientation in its body frame, as a 3x3 matrix."""
-    flat = np.zeros(9)
-    mujoco.mju_quat2Mat(flat, model.geom_quat[g])
-    return flat.reshape(3, 3)

@@ -443,6 +443,11 @@ class Ecl:
         )
         return self._catalogue
 
+    @property
+    def meta(self) -> dict[str, str]:
+        """The databank's ``meta`` table (platform, eURDF hash, VSAM, generator notes)."""
+        return dict(self._tables.meta)
+
     def dropped(self, kind: str = "dropped") -> dict[str, dict[str, str]]:
         """What the generator left out and why: ``{"limb/origin": {direction: reason}}``;
         ``kind`` "unstable" for the directions dropped for stability (empty for databanks

@@ -26,8 +26,8 @@ from kinesphere.services.ecl.constraints import (
     FloorLimit,
     PairDistanceLimit,
     PointTask,
-    tip_point,
 )
+from kinesphere.services.ecl.measure import tip_point
 
 SOLVER = "daqp"
 DAMPING = 1e-2  # Levenberg-Marquardt damping: keeps stretched (singular) arms calm

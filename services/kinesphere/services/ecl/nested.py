@@ -44,8 +44,9 @@ from kinesphere.platforms.frames import pivot
 from kinesphere.platforms.mjcf import PlatformModel
 from kinesphere.services.ecl.arcs import along_arc, halfway
 from kinesphere.services.ecl.balance import Balance
-from kinesphere.services.ecl.constraints import GAIN, tip_point
+from kinesphere.services.ecl.constraints import GAIN
 from kinesphere.services.ecl.ik import DAMPING, SOLVER, LimbSolver
+from kinesphere.services.ecl.measure import tip_point
 from kinesphere.substitution import MAX_ANGLE_DEG
 
 GRID_POINTS = 1600
