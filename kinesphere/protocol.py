@@ -51,6 +51,7 @@ MAX_BODY_PAYLOAD: Final = 16 * 1024 * 1024
 
 Vec3 = Annotated[list[float], msgspec.Meta(min_length=3, max_length=3)]
 Fraction = Annotated[float, msgspec.Meta(ge=0.0, le=1.0)]
+Degrees = Annotated[float, msgspec.Meta(ge=0.0, le=180.0)]
 SignedFraction = Annotated[float, msgspec.Meta(ge=-1.0, le=1.0)]
 NonNegInt = Annotated[int, msgspec.Meta(ge=0, le=MAX_INT)]
 Int = Annotated[int, msgspec.Meta(ge=-MAX_INT, le=MAX_INT)]
@@ -240,6 +241,11 @@ class Pose(Message, tag="pose", kw_only=True):
     words: Words = []
     """Body-vocabulary words of the request this body answered with another name (a one-armed
     robot's ``right_arm``, any ``upper_arm``), and how."""
+    measured_angle: Degrees | None = None
+    """Degrees between the requested direction and where the served pose points (the tip's
+    bearing from the origin, measured by forward kinematics when the databank was built,
+    blended between stored sizes); None when not measured (neutral, core and compound poses,
+    recorded poses, databanks built before it was)."""
 
     @property
     def is_compound(self) -> bool:

@@ -25,8 +25,15 @@ from pathlib import Path
 from kinesphere.errors import KinesphereError
 
 META_KEYS = ("platform", "eurdf_sha256", "vsam", "generator_version", "created", "joints")
+QUALITY = ("cosine", "reach", "margin", "tip_x", "tip_y", "tip_z")
+"""Per-row measurements: cosine to the direction, fraction of the pull, joint-limit margin,
+and where the tip is (tip - origin in the body frame, metres; forward kinematics at build).
+A databank written before the tip columns existed reads them as unknown (NULL)."""
 
 Values = tuple[float | None, ...]
+Quality = tuple[int, int, float | None, float | None, float | None, float | None,
+                float | None, float | None]
+"""(p_id, k_id, cosine, reach, margin, tip_x, tip_y, tip_z)"""
 
 
 @dataclass(frozen=True)
@@ -37,14 +44,18 @@ class Tables:
     joints: tuple[str, ...]
     vsam: tuple[tuple[int, str, str, str], ...]  # (k_id, origin, limb, direction)
     pose: tuple[tuple[int, int, Values], ...]  # (p_id, k_id, values)
-    quality: tuple[tuple[int, int, float | None, float | None, float | None], ...]
+    quality: tuple[Quality, ...]
+    support: tuple[tuple[int, int, Values], ...] = ()  # (p_id, k_id, values): other limbs
+    """What the rest of the body does to hold a pose (a stance leg under a lifted one), keyed
+    like the pose and NULL for every joint it leaves alone; most poses have none."""
 
     def digest(self) -> str:
         """SHA-256 of the content; ``created`` is left out so identical builds compare equal."""
         meta = {k: v for k, v in self.meta.items() if k != "created"}
         pose = [(p, k, [canon(v) for v in values]) for p, k, values in self.pose]
         quality = [(p, k, *map(canon, q)) for p, k, *q in self.quality]
-        doc = [meta, list(self.joints), self.vsam, pose, quality]
+        support = [(p, k, [canon(v) for v in values]) for p, k, values in self.support]
+        doc = [meta, list(self.joints), self.vsam, pose, quality, support]
         text = json.dumps(doc, sort_keys=True, separators=(",", ":"), allow_nan=False)
         return hashlib.sha256(text.encode("utf-8")).hexdigest()
 
@@ -75,9 +86,11 @@ def _schema(joints: Sequence[str]) -> list[str]:
         "direction TEXT NOT NULL, UNIQUE (limb, origin, direction))",
         "CREATE TABLE pose (p_id INTEGER NOT NULL, k_id INTEGER NOT NULL REFERENCES vsam (k_id), "
         f"{cols}PRIMARY KEY (p_id, k_id))",
-        "CREATE TABLE quality (p_id INTEGER NOT NULL, k_id INTEGER NOT NULL, cosine REAL, "
-        "reach REAL, margin REAL, PRIMARY KEY (p_id, k_id), "
+        "CREATE TABLE quality (p_id INTEGER NOT NULL, k_id INTEGER NOT NULL, "
+        f"{''.join(f'{q} REAL, ' for q in QUALITY)}PRIMARY KEY (p_id, k_id), "
         "FOREIGN KEY (p_id, k_id) REFERENCES pose (p_id, k_id))",
+        f"CREATE TABLE support (p_id INTEGER NOT NULL, k_id INTEGER NOT NULL, {cols}"
+        "PRIMARY KEY (p_id, k_id), FOREIGN KEY (p_id, k_id) REFERENCES pose (p_id, k_id))",
     ]
 
 
@@ -114,7 +127,11 @@ def write_tables(path: str | Path, tables: Tables) -> None:
             conn.executemany(
                 f"INSERT INTO pose VALUES ({marks})", [(p, k, *v) for p, k, v in tables.pose]
             )
-            conn.executemany("INSERT INTO quality VALUES (?, ?, ?, ?, ?)", tables.quality)
+            conn.executemany(f"INSERT INTO quality VALUES ({', '.join('?' * (2 + len(QUALITY)))})",
+                             tables.quality)
+            conn.executemany(
+                f"INSERT INTO support VALUES ({marks})", [(p, k, *v) for p, k, v in tables.support]
+            )
             conn.execute("COMMIT")
             conn.execute("PRAGMA wal_checkpoint(TRUNCATE)")
         except BaseException:
@@ -229,9 +246,17 @@ def read_tables(path: str | Path) -> Tables:
             pose = conn.execute(
                 f"SELECT {', '.join(quote_ident(c) for c in cols)} FROM pose ORDER BY k_id, p_id"
             ).fetchall()
+            have = {r[1] for r in conn.execute("PRAGMA table_info(quality)").fetchall()}
+            picked = ", ".join(q if q in have else "NULL" for q in QUALITY)
             quality = conn.execute(
-                "SELECT p_id, k_id, cosine, reach, margin FROM quality ORDER BY k_id, p_id"
+                f"SELECT p_id, k_id, {picked} FROM quality ORDER BY k_id, p_id"
             ).fetchall()
+            support = []
+            if conn.execute("SELECT 1 FROM sqlite_master WHERE name = 'support'").fetchone():
+                support = conn.execute(
+                    f"SELECT {', '.join(quote_ident(c) for c in cols)} FROM support "
+                    "ORDER BY k_id, p_id"
+                ).fetchall()
             conn.execute("COMMIT")
         finally:
             conn.close()
@@ -250,7 +275,9 @@ def read_tables(path: str | Path) -> Tables:
         joints,
         tuple((int(k), str(o), str(li), str(d)) for k, o, li, d in vsam),
         tuple((int(r[0]), int(r[1]), tuple(_num(v) for v in r[2:])) for r in pose),
-        tuple((int(p_), int(k), _num(c), _num(r), _num(m)) for p_, k, c, r, m in quality),
+        tuple((int(q[0]), int(q[1]), _num(q[2]), _num(q[3]), _num(q[4]), _num(q[5]),
+               _num(q[6]), _num(q[7])) for q in quality),
+        tuple((int(r[0]), int(r[1]), tuple(_num(v) for v in r[2:])) for r in support),
     )
 
 
@@ -270,7 +297,8 @@ def upsert_pose(
     size: int,
     joints: Mapping[str, float],
 ) -> None:
-    """Store one pose (already validated) in one transaction; its quality becomes unknown.
+    """Store one pose (already validated) in one transaction; its quality becomes unknown and
+    any support stored for it is dropped.
 
     ``cell`` is ``(limb, origin, direction)`` in canonical names; a new cell gets a vsam row.
     """
@@ -299,11 +327,15 @@ def upsert_pose(
                 f"ON CONFLICT (p_id, k_id) DO UPDATE SET {sets}",
                 (size, k_id, *(joints.get(j) for j in joint_order)),
             )
+            have = {r[1] for r in conn.execute("PRAGMA table_info(quality)").fetchall()}
             conn.execute(
                 "INSERT INTO quality (p_id, k_id) VALUES (?, ?) ON CONFLICT (p_id, k_id) "
-                "DO UPDATE SET cosine = NULL, reach = NULL, margin = NULL",
+                f"DO UPDATE SET {', '.join(f'{q} = NULL' for q in QUALITY if q in have)}",
                 (size, k_id),
             )
+            # a recorded pose is the super-user's own: no stance is known to hold it
+            if conn.execute("SELECT 1 FROM sqlite_master WHERE name = 'support'").fetchone():
+                conn.execute("DELETE FROM support WHERE p_id = ? AND k_id = ?", (size, k_id))
             conn.execute("COMMIT")
         except BaseException:
             conn.execute("ROLLBACK")

@@ -43,6 +43,7 @@ from kinesphere.vocabulary import CORE_WORDS, LOCATION_WORDS, vocabulary
 
 if TYPE_CHECKING:  # imported when first needed: mink and the model cost a second
     from kinesphere.services.ecl.nested import Nested
+from kinesphere.substitution import MAX_ANGLE_DEG
 
 log = logging.getLogger(__name__)
 _DB_SUFFIXES = (".sqlite", ".sqlite3", ".db")
@@ -110,7 +111,7 @@ class Ecl:
         if t.meta["eurdf_sha256"] != e.sha256:
             log.warning("%s was built from another version of %s.eurdf", self.db_path, plat.name)
         vsam = vsam_from_dict(json.loads(t.meta["vsam"]), plat, f"{self.db_path} meta")
-        cells = build_cells(plat, t, self.db_path)
+        cells = build_cells(plat, t, self.db_path, _rest_tips(t.meta))
         limb_origins: dict[str, list[str]] = {}
         for limb, origin in cells:
             limb_origins.setdefault(limb, []).append(origin)
@@ -127,7 +128,8 @@ class Ecl:
         self._read_words(served)
         self._chains = {p.name: p.index for p in e.limbs}
         self._neutral = {li: limb_neutral(plat, li) for li in e.L}
-        self._quality = {(p, k): (c, r, m) for p, k, c, r, m in t.quality}
+        self._quality = {(q[0], q[1]): q[2:] for q in t.quality}
+        self._own = {li: frozenset(e.limb_joints(li)) for li in e.L}
         self._max_size = vsam.max_size
         self._core = frozenset(e.C)
         self._catalogue: Catalogue | None = None
@@ -189,7 +191,9 @@ class Ecl:
                         k_id=cell.k_id if cell is not None else NO_ID, words=words)
         substitutions: list[Substitution] = []
         if cell is None:
-            cell, sub = nearest_cell(lname, oname, cells, slug, exact or lname in self._core)
+            cell, sub = nearest_cell(
+                lname, oname, cells, slug, exact or lname in self._core,
+                lambda c: (a := _angle(c.tip_at(s), slug)) is None or a <= MAX_ANGLE_DEG)
             substitutions.append(sub)
         translation: list[float] | None = None
         p_id: int | None = None
@@ -212,7 +216,8 @@ class Ecl:
             translation = self._translate(cell.slug, s - knots[-1])
         return Pose(platform=self._name, limb=lname, origin=oname, direction=cell.slug, size=s,
                     joints=joints, translation=translation, k_id=cell.k_id, p_id=p_id,
-                    substitutions=substitutions, words=words)
+                    substitutions=substitutions, words=words,
+                    measured_angle=_angle(cell.tip_at(s), slug) if cell.joints else None)
 
     def _slug_size(self, direction: object, size: object) -> tuple[str, float]:
         """The canonical slug and a checked size (cached spellings cost a dict hit)."""
@@ -450,10 +455,17 @@ class Ecl:
 
     def dropped(self, kind: str = "dropped") -> dict[str, dict[str, str]]:
         """What the generator left out and why: ``{"limb/origin": {direction: reason}}``;
-        ``kind`` "unstable" for the directions dropped for stability (empty for databanks
-        built before this was recorded, or imported without it)."""
+        ``kind`` "unstable" for the directions dropped for stability, "short" for kept ones
+        whose largest sizes stability removed."""
+        return self.notes(kind)
+
+    def notes(self, key: str) -> dict[str, Any]:
+        """One of the generator's notes in ``meta``, JSON ``{"limb/origin": ...}``:
+        ``dropped``, ``unstable``, ``short``, ``size_rules`` ("reach"/"swing"), ``swung``
+        (pulls a reach limb swings), ``neutral_tips``; empty for databanks built before it
+        was recorded, or imported without it."""
         try:
-            notes = json.loads(self._tables.meta.get(kind, "{}"))
+            notes = json.loads(self._tables.meta.get(key, "{}"))
         except json.JSONDecodeError:
             return {}
         return notes if isinstance(notes, dict) else {}
@@ -476,12 +488,16 @@ class Ecl:
                 c.limb, c.origin, c.direction
             ):
                 continue
+            own = self._own.get(c.limb, frozenset())
             for i, s in enumerate(c.sizes):
-                cos, reach, margin = self._quality.get((s, c.k_id), (None, None, None))
+                cos, reach, margin, *tip = self._quality.get((s, c.k_id), (None,) * 6)
+                stored = c.stored[i + 1]
                 out.append({"k_id": c.k_id, "p_id": s, "limb": c.limb, "origin": c.origin,
                             "direction": c.direction.slug, "size": s,
-                            "joints": dict(c.stored[i + 1]), "cosine": cos, "reach": reach,
-                            "margin": margin})
+                            "joints": {j: v for j, v in stored.items() if j in own},
+                            "support": {j: v for j, v in stored.items() if j not in own},
+                            "cosine": cos, "reach": reach, "margin": margin,
+                            "tip": None if None in tip else tuple(tip)})
         return out
 
     # -- super-user writes -------------------------------------------------------------------
@@ -512,6 +528,28 @@ class Ecl:
         write_tables(self.db_path, transfer.tables_from_json(self.platform,
                                                              transfer.read_json(path)))
         self.reload()
+
+
+_UNITS = {d.slug: d.vector for d in Direction}
+
+
+def _angle(tip: tuple[float, float, float] | None, slug: str) -> float | None:
+    """Degrees between a measured tip offset and a direction (None: unmeasured, or place)."""
+    d = _UNITS[slug]
+    n = math.sqrt(tip[0] ** 2 + tip[1] ** 2 + tip[2] ** 2) if tip is not None else 0.0
+    if tip is None or n < 1e-9 or not any(d):
+        return None
+    c = (tip[0] * d[0] + tip[1] * d[1] + tip[2] * d[2]) / n
+    return round(math.degrees(math.acos(max(-1.0, min(1.0, c)))), 3)
+
+
+def _rest_tips(meta: Mapping[str, str]) -> dict[str, tuple[float, float, float]]:
+    """Where each "limb/origin" points at neutral (``meta.neutral_tips``), for blending."""
+    try:
+        raw = json.loads(meta.get("neutral_tips", "{}"))
+        return {str(k): (float(v[0]), float(v[1]), float(v[2])) for k, v in raw.items()}
+    except (ValueError, TypeError, KeyError, IndexError, AttributeError):
+        return {}
 
 
 def _names(parts: Sequence[Any], keep: set[str]) -> dict[str, str]:

@@ -5,11 +5,15 @@ PackBot's arm no left-low). Rather than leave them silent, the ECL serves the ne
 the limb has by the one rule the gamepad client uses too
 (:func:`kinesphere.substitution.nearest_direction`: never from the opposite side, smallest
 angle, ties toward the front), within the same :data:`kinesphere.substitution.MAX_ANGLE_DEG`
-(45 degrees), and says so in the answer. A command that asks for the exact direction gets
-``direction_unavailable`` instead.
+(45 degrees), and says so in the answer. The label is not enough: the served pose itself
+must point (its tip's measured bearing from the origin) within the same 45 degrees of the
+request, so a neighbour that points too far off is passed over for the next one by the rule.
+A command that asks for the exact direction gets ``direction_unavailable`` instead.
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable
 
 from kinesphere.errors import KinesphereError
 from kinesphere.laban import Direction
@@ -18,10 +22,12 @@ from kinesphere.services.ecl.cells import Cell
 from kinesphere.substitution import MAX_ANGLE_DEG, nearest_direction
 
 
-def nearest_cell(limb: str, origin: str, cells: dict[str, Cell], slug: str, exact: bool
-                 ) -> tuple[Cell, Substitution]:
+def nearest_cell(limb: str, origin: str, cells: dict[str, Cell], slug: str, exact: bool,
+                 points: Callable[[Cell], bool] = lambda _: True) -> tuple[Cell, Substitution]:
     """The cell serving ``slug`` for a pair whose ``cells`` lack it, and the substitution to
-    report; ``direction_unavailable`` when ``exact`` or nothing lies within the limit."""
+    report; ``direction_unavailable`` when ``exact`` or nothing lies within the limit.
+    ``points(cell)``: whether the cell's pose, as it would be served, points within the limit
+    of the request (measured); a neighbour that does not is passed over."""
     have = [d for d in Direction if d.slug in cells]
     valid = ", ".join(d.slug for d in have)
     if exact:
@@ -29,12 +35,19 @@ def nearest_cell(limb: str, origin: str, cells: dict[str, Cell], slug: str, exac
             "direction_unavailable", f"({limb}, {origin}) has no direction {slug} and the "
             f"command asked for it exactly; it has: {valid}",
         )
-    choice = nearest_direction(Direction.parse(slug), have, MAX_ANGLE_DEG)
-    if choice is None:
-        raise KinesphereError(
-            "direction_unavailable", f"({limb}, {origin}) has no direction {slug} nor one "
-            f"within {MAX_ANGLE_DEG:g} degrees on the same side; it has: {valid}",
-        )
+    requested = Direction.parse(slug)
+    pool = list(have)
+    while True:
+        choice = nearest_direction(requested, pool, MAX_ANGLE_DEG)
+        if choice is None:
+            raise KinesphereError(
+                "direction_unavailable", f"({limb}, {origin}) has no direction {slug} nor one "
+                f"within {MAX_ANGLE_DEG:g} degrees on the same side whose pose points within "
+                f"{MAX_ANGLE_DEG:g} degrees of it; it has: {valid}",
+            )
+        if points(cells[choice.direction.slug]):
+            break
+        pool.remove(choice.direction)
     served = choice.direction.slug
     sub = Substitution(limb=limb, origin=origin, requested=slug, served=served,
                        angle=round(choice.angle, 3))

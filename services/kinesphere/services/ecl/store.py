@@ -14,13 +14,13 @@ import json
 import math
 import numbers
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from kinesphere.errors import KinesphereError
 from kinesphere.laban import Direction
 from kinesphere.platforms.platform import Platform
-from kinesphere.services.ecl.db import Tables, Values, canon, write_tables
+from kinesphere.services.ecl.db import Quality, Tables, Values, canon, write_tables
 from kinesphere.services.ecl.vsam import Vsam
 from kinesphere.sizes import parse_size
 
@@ -29,7 +29,9 @@ LIMIT_TOLERANCE = 1e-9
 """Values this close outside a joint limit are IK round-off: they are clamped, not rejected."""
 @dataclass(frozen=True)
 class PoseRow:
-    """One stored pose: ``joints`` holds exactly the limb's joints (empty for core rows)."""
+    """One stored pose: ``joints`` holds exactly the limb's joints (empty for core rows);
+    ``support`` the joints of other limbs that hold the body while it does (a stance leg),
+    usually none; ``tip`` where the limb's tip is (tip - origin, body frame, metres)."""
 
     limb: str
     origin: str
@@ -39,6 +41,8 @@ class PoseRow:
     cosine: float | None = None
     reach: float | None = None
     margin: float | None = None
+    support: dict[str, float] = field(default_factory=dict)
+    tip: tuple[float, float, float] | None = None
 
 
 def default_db_path(platform: Platform | str) -> Path:
@@ -83,6 +87,28 @@ def check_joints(
     if complete and missing:
         raise KinesphereError("malformed", f"pose for {limb} lacks joints: {', '.join(missing)}")
     return {j: out[j] for j in own if j in out}
+
+
+def check_support(platform: Platform, limb: str, joints: Mapping[str, object]
+                  ) -> dict[str, float]:
+    """Validate a pose's support: joints of P outside the limb, finite, inside limits."""
+    e = platform.eurdf
+    own = set(e.limb_joints(limb))
+    out: dict[str, float] = {}
+    for name, raw in joints.items():
+        if name in own or name not in e.limits:
+            raise KinesphereError(
+                "malformed", f"support joint {name!r} must be a joint of P outside {limb}")
+        if isinstance(raw, bool) or not isinstance(raw, numbers.Real):
+            raise KinesphereError("malformed", f"support joint {name} must be a number")
+        value, lim = float(raw), e.limits[name]
+        if not (math.isfinite(value)
+                and lim.lower - LIMIT_TOLERANCE <= value <= lim.upper + LIMIT_TOLERANCE):
+            raise KinesphereError(
+                "malformed", f"support joint {name}={value:g} is outside its limits "
+                f"[{lim.lower:g}, {lim.upper:g}]")
+        out[name] = lim.clamp(value) + 0.0
+    return {j: out[j] for j in e.joint_names if j in out}
 
 
 def check_record(
@@ -177,9 +203,16 @@ def write_databank(
         size = int(row.size)
         if size in by_size:
             raise KinesphereError("conflict", f"two rows for ({limb}, {origin}, {d.slug}, {size})")
-        by_size[size] = dataclasses.replace(row, size=size, joints=joints,
+        try:
+            support = check_support(platform, limb, row.support)
+        except KinesphereError as exc:
+            where = f"({row.limb}, {row.origin}, {row.direction}, {row.size})"
+            raise KinesphereError(exc.code, f"row {where}: {exc.message}") from None
+        tip = None if row.tip is None or not all(map(math.isfinite, row.tip)) else (
+            float(row.tip[0]) + 0.0, float(row.tip[1]) + 0.0, float(row.tip[2]) + 0.0)
+        by_size[size] = dataclasses.replace(row, size=size, joints=joints, support=support,
                                             cosine=canon(row.cosine), reach=canon(row.reach),
-                                            margin=canon(row.margin))
+                                            margin=canon(row.margin), tip=tip)
     for entry in vsam.entries:
         for d in entry.directions:
             if entry.is_core or d is Direction.PLACE_MIDDLE:
@@ -190,7 +223,8 @@ def write_databank(
     names = platform.eurdf.joint_names
     vsam_rows: list[tuple[int, str, str, str]] = []
     pose_rows: list[tuple[int, int, Values]] = []
-    quality_rows: list[tuple[int, int, float | None, float | None, float | None]] = []
+    quality_rows: list[Quality] = []
+    support_rows: list[tuple[int, int, Values]] = []
     for entry in vsam.entries:
         for d in entry.directions:
             cell = cells.get((entry.limb, entry.origin, d))
@@ -201,7 +235,10 @@ def write_databank(
             for s in sorted(cell):
                 r = cell[s]
                 pose_rows.append((s, k_id, tuple(r.joints.get(j) for j in names)))
-                quality_rows.append((s, k_id, r.cosine, r.reach, r.margin))
+                x, y, z = r.tip if r.tip is not None else (None, None, None)
+                quality_rows.append((s, k_id, r.cosine, r.reach, r.margin, x, y, z))
+                if r.support:
+                    support_rows.append((s, k_id, tuple(r.support.get(j) for j in names)))
     meta = {
         "platform": platform.name,
         "eurdf_sha256": platform.eurdf.sha256,
@@ -214,7 +251,8 @@ def write_databank(
         if key in meta:
             raise KinesphereError("malformed", f"extra meta key {key!r} is reserved")
         meta[str(key)] = str(value)
-    tables = Tables(meta, names, tuple(vsam_rows), tuple(pose_rows), tuple(quality_rows))
+    tables = Tables(meta, names, tuple(vsam_rows), tuple(pose_rows), tuple(quality_rows),
+                    tuple(support_rows))
     write_tables(path, tables)
     return tables.digest()
 

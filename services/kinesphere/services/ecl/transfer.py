@@ -14,27 +14,33 @@ from typing import Any
 from kinesphere.errors import KinesphereError
 from kinesphere.laban import Direction
 from kinesphere.platforms.platform import Platform
-from kinesphere.services.ecl.db import META_KEYS, Tables
-from kinesphere.services.ecl.store import check_joints
+from kinesphere.services.ecl.db import META_KEYS, QUALITY, Quality, Tables
+from kinesphere.services.ecl.store import check_joints, check_support
 from kinesphere.services.ecl.vsam import vsam_from_dict
 
 FORMAT = "kinesphere-ecl"
-FORMAT_VERSION = 1
-_QUALITY = ("cosine", "reach", "margin")
+FORMAT_VERSION = 2
+READS = (1, 2)  # version 1: quality without the tip columns, no support
 
 
 def to_json(tables: Tables) -> str:
     """The export text: stable key order, one trailing newline."""
-    quality = {(p, k): (c, r, m) for p, k, c, r, m in tables.quality}
+    quality = {(q[0], q[1]): q[2:] for q in tables.quality}
+    support = {(p, k): values for p, k, values in tables.support}
     pose = []
     for p_id, k_id, values in tables.pose:
         q = quality.get((p_id, k_id))
-        pose.append({
+        entry: dict[str, Any] = {
             "k_id": k_id,
             "p_id": p_id,
             "joints": {j: v for j, v in zip(tables.joints, values, strict=True) if v is not None},
-            "quality": None if q is None else dict(zip(_QUALITY, q, strict=True)),
-        })
+            "quality": None if q is None else dict(zip(QUALITY, q, strict=True)),
+        }
+        held = support.get((p_id, k_id))
+        if held is not None:
+            entry["support"] = {j: v for j, v in zip(tables.joints, held, strict=True)
+                                if v is not None}
+        pose.append(entry)
     doc = {
         "format": FORMAT,
         "format_version": FORMAT_VERSION,
@@ -63,10 +69,11 @@ def read_json(path: str | Path) -> dict[str, Any]:
         raise KinesphereError("malformed", f"{p} is not JSON: {exc}") from None
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         raise KinesphereError("malformed", f"{p} is not a kinesphere ECL export")
-    if doc.get("format_version") != FORMAT_VERSION:
+    if doc.get("format_version") not in READS:
         raise KinesphereError(
             "incompatible_version",
-            f"{p} has format_version {doc.get('format_version')!r}; this reads {FORMAT_VERSION}",
+            f"{p} has format_version {doc.get('format_version')!r}; this reads "
+            f"{', '.join(map(str, READS))}",
         )
     return doc
 
@@ -111,7 +118,8 @@ def tables_from_json(plat: Platform, doc: dict[str, Any]) -> Tables:
             raise KinesphereError("malformed", f"vsam entry {i} repeats k_id or cell {cell}")
         vsam_rows[k_id] = cell
     pose: dict[tuple[int, int], tuple[float | None, ...]] = {}
-    quality = []
+    quality: list[Quality] = []
+    support: dict[tuple[int, int], tuple[float | None, ...]] = {}
     for i, row in enumerate(_list(doc, "pose"), start=1):
         k_id = _pos_int(row.get("k_id"), f"pose entry {i} k_id")
         p_id = _pos_int(row.get("p_id"), f"pose entry {i} p_id")
@@ -135,16 +143,27 @@ def tables_from_json(plat: Platform, doc: dict[str, Any]) -> Tables:
         pose[(p_id, k_id)] = tuple(values.get(j) for j in joints)
         q = row.get("quality")
         if q is not None:
-            if not isinstance(q, dict) or set(q) != set(_QUALITY):
-                raise KinesphereError("malformed", f"pose entry {i}: quality needs {_QUALITY}")
-            c, r, m = (_opt_float(q[k], f"pose entry {i} {k}") for k in _QUALITY)
-            quality.append((p_id, k_id, c, r, m))
+            if not isinstance(q, dict) or not set(QUALITY[:3]) <= set(q) <= set(QUALITY):
+                raise KinesphereError("malformed", f"pose entry {i}: quality needs {QUALITY}")
+            c, r, m, x, y, z = (_opt_float(q.get(k), f"pose entry {i} {k}") for k in QUALITY)
+            quality.append((p_id, k_id, c, r, m, x, y, z))
+        held = row.get("support")
+        if held is not None:
+            if not isinstance(held, dict) or limb in e.C:
+                raise KinesphereError("malformed", f"pose entry {i}: support must be an "
+                                      "object of a limb's pose")
+            try:
+                kept = check_support(plat, limb, held)
+            except KinesphereError as exc:
+                raise KinesphereError(exc.code, f"pose entry {i}: {exc.message}") from None
+            support[(p_id, k_id)] = tuple(kept.get(j) for j in joints)
     return Tables(
         dict(sorted(meta.items())),
         joints,
         tuple(vsam_rows[k] for k in sorted(vsam_rows)),
         tuple((p, k, pose[(p, k)]) for p, k in sorted(pose, key=lambda pk: (pk[1], pk[0]))),
         tuple(sorted(quality, key=lambda r: (r[1], r[0]))),
+        tuple((p, k, support[(p, k)]) for p, k in sorted(support, key=lambda pk: (pk[1], pk[0]))),
     )
 
 
