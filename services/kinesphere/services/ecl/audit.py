@@ -23,7 +23,6 @@ import json
 import statistics
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -36,6 +35,9 @@ from kinesphere.substitution import MAX_ANGLE_DEG
 
 STABLE = 0.01
 """metres: the margin a stored row keeps inside the support polygon to count as stable."""
+ROUNDING = 0.01
+"""degrees: stored joint values and tips are rounded to 1e-6, so a substitution the databank
+served at exactly 45 degrees measures a hair over; this much is not counted against it."""
 
 
 @dataclass(frozen=True)
@@ -95,7 +97,7 @@ def audit(platform: str | Path, db: str | Path | None = None) -> Audit:
     """Measure a databank (the platform's shipped or own one, or ``db``)."""
     ecl = Ecl.open(platform, db=db)
     fk = Fk(model_of(ecl.platform))
-    rules = _meta_json(ecl, "size_rules")
+    rules = ecl.notes("size_rules")
     aliases = {p.name: p.alias or "" for p in ecl.platform.eurdf.limbs}
     pairs = [
         _pair(ecl, fk, e.limb, e.origin, aliases.get(e.limb, ""),
@@ -114,10 +116,11 @@ def _pair(ecl: Ecl, fk: Fk, limb: str, origin: str, alias: str, rule: str) -> Pa
     cosines: list[float] = []
     margins: list[tuple[float, str]] = []
     for r in rows:
-        offset = fk.offset(limb, origin, r["joints"])
+        joints = r["joints"] | r.get("support", {})
+        offset = fk.offset(limb, origin, joints)
         cells.setdefault(r["direction"], {})[r["size"]] = offset
         cosines.append(cosine(offset, np.array(Direction.parse(r["direction"]).vector)))
-        margin = fk.com_margin(r["joints"])
+        margin = fk.com_margin(joints)
         if margin is not None:
             margins.append((margin, f"{r['direction']} {r['size']}"))
     fraction: dict[int, float] = {}
@@ -175,14 +178,7 @@ def _requests(ecl: Ecl, fk: Fk, limb: str, origin: str, stored: set[str]
     return substituted, refused
 
 
-def _meta_json(ecl: Ecl, key: str) -> dict[str, Any]:
-    try:
-        value = json.loads(ecl.meta.get(key, "{}"))
-    except json.JSONDecodeError:
-        return {}
-    return value if isinstance(value, dict) else {}
-
-
 def over_limit(pair: PairAudit) -> list[Served]:
     """Substitutions pointing more than MAX_ANGLE_DEG away from the request (measured)."""
-    return [s for s in pair.substituted if s.angle is not None and s.angle > MAX_ANGLE_DEG]
+    return [s for s in pair.substituted
+            if s.angle is not None and s.angle > MAX_ANGLE_DEG + ROUNDING]

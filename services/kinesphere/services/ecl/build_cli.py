@@ -56,12 +56,17 @@ def register_build(ecl_sub: Any, top_sub: Any) -> None:
 
     r = ecl_sub.add_parser(
         "report",
-        help="quality of a databank: pulls kept, medians of cosine, reach, joint margin",
-        description="Summarise the generator's quality figures per limb and overall: pulls "
-        "kept of Laban's 26, cosine between the direction and the tip's offset from the "
-        "origin, reach as a fraction of the limb's farthest reach, the smallest distance to a "
-        "joint limit (rad), and the directions dropped for stability (the whole-body centre "
-        "of mass would leave the support polygon).",
+        help="quality of a databank: size rules, pulls kept, medians of cosine, reach, margin",
+        description="Summarise the generator's quality figures per limb and overall: the size "
+        "rule each limb follows (reach: near, mid and far are the tip's distance from the "
+        "origin as growing fractions of far's, the bearing held; swing: the size scales the "
+        "angle of the pull from neutral, for a limb whose extension cannot change; a leg that "
+        "cannot fold along a direction swings along it), pulls kept of Laban's 26, cosine "
+        "between the direction and the tip's offset from the origin, reach as the fraction of "
+        "the pull a size is, the smallest distance to a joint limit (rad), the kept directions "
+        "whose largest sizes stability removed and the directions dropped for stability (the "
+        "whole-body centre of mass would leave the support polygon even at near). For figures "
+        "measured independently of the generator, see 'ecl audit'.",
     )
     add_platform(r)
     r.add_argument("--rows", action="store_true",
@@ -240,20 +245,30 @@ def _report(args: argparse.Namespace) -> int:
                           *(_fmt(r[q]) for q in ("cosine", "reach", "margin")))
         console.print(table)
     table = Table(title=f"{ecl.platform.name} ECL quality (version {ecl.version}): medians")
-    for col in ("limb", "alias", "pulls of 26", "rows", "cosine", "min cosine", "reach",
-                "margin (rad)", "unstable"):
-        table.add_column(col, justify="left" if col in ("limb", "alias") else "right")
+    for col in ("limb", "alias", "size rule", "pulls of 26", "rows", "cosine", "min cosine",
+                "reach", "margin (rad)", "short of far", "unstable"):
+        table.add_column(col, justify="left" if col in ("limb", "alias", "size rule")
+                         else "right")
     aliases = {p.name: p.alias or "" for p in ecl.platform.eurdf.limbs}
     groups: dict[str, list[dict[str, Any]]] = {e.limb: [] for e in ecl.vsam.entries
                                                if not e.is_core}
     for r in rows:
         groups.setdefault(r["limb"], []).append(r)
-    unstable = ecl.dropped("unstable")
+    unstable, short = ecl.dropped("unstable"), ecl.dropped("short")
+    rules, swung = ecl.notes("size_rules"), ecl.notes("swung")
+
+    def per_limb(notes: dict[str, Any], limb: str) -> int:
+        return sum(len(v) for k, v in notes.items() if k.split("/")[0] == limb)
+
     for limb, items in groups.items():
-        toppled = sum(len(v) for k, v in unstable.items() if k.split("/")[0] == limb)
-        table.add_row(limb, aliases.get(limb, ""), *_summary(items), str(toppled))
-    table.add_row("all", "", *_summary(rows), str(sum(len(v) for v in unstable.values())),
-                  end_section=True)
+        pair = next((k for k in rules if k.split("/")[0] == limb), "")
+        rule = str(rules.get(pair, "-"))
+        if swung.get(pair):
+            rule += f" ({len(swung[pair])} swing)"
+        table.add_row(limb, aliases.get(limb, ""), rule, *_summary(items),
+                      str(per_limb(short, limb)), str(per_limb(unstable, limb)))
+    table.add_row("all", "", "", *_summary(rows), str(sum(len(v) for v in short.values())),
+                  str(sum(len(v) for v in unstable.values())), end_section=True)
     console.print(table)
     for pair, lost in unstable.items():
         if lost:
@@ -262,6 +277,11 @@ def _report(args: argparse.Namespace) -> int:
             if args.rows:
                 for slug, why in lost.items():
                     console.print(f"  {slug}: {why}", highlight=False, markup=False)
+    for pair, cut in short.items():
+        if cut:
+            sizes = ", ".join(f"{slug} ({why.split(':')[0]} up)" for slug, why in cut.items())
+            console.print(f"{pair} sizes removed for stability: {sizes}", highlight=False,
+                          markup=False)
     return 0
 
 

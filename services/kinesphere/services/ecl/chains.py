@@ -1,74 +1,84 @@
-"""The sizes of one pull: from neutral through near and mid to far, each a step along d.
+"""The sizes of one pull: near, mid and far, by one of two rules a person would recognise.
 
-A pull's far pose is found first (``generate``); the smaller sizes are what this module adds.
-Two candidate chains, tried in order:
+A pull's far pose is found first (``generate``: the farthest the tip gets along d with its
+bearing held); the smaller sizes are what this module adds, by the limb's **size rule**:
 
-* the **IK chain**: each smaller size is an IK solve, warm-started from the size below, that
-  puts the tip at an evenly spaced projection on d, on the ray from the origin when the limb
-  can shorten (an arm bending its elbow), else on the arc of its swing toward far (a head, a
-  forearm turning about its elbow); a posture pull toward the straight joint-space way from
-  neutral to far keeps the sizes in one family of postures.
-* **segment chains**: the sizes on the straight joint-space segment from neutral to far, near
-  where the tip first points at d well enough (one chain per NEAR_COSINES) and the sizes
-  evenly spaced along d from there. That is the path f_SB interpolates, so they can neither
-  flip nor overshoot far. The chosen chain's smaller sizes are then *nudged* toward the ray,
-  each held near its own posture, when that points them better.
+* **reach** (a limb whose extension can change: an arm or a leg with a bending joint):
+  each size is the tip on d's ray at an increasing fraction of far's distance from the
+  origin, NEAR_FRACTION for near (the elbow bent, the hand close to the body) up to 1 for far,
+  the bearing held (cosine >= HONEST) at every size. Each size is an IK solve from the size
+  above it, held near that posture, so the limb folds back along the ray the way it came: no
+  flips between sizes. A limb that cannot fold that far gets the closest it can (NAO's arm:
+  its elbow bends 88 degrees) and the sizes between are spread evenly again.
+* **swing** (a limb whose extension cannot change: a head, a wrist, a one-joint segment):
+  the size scales the angle of the pull, each size turning the bearing an even share of the
+  way from neutral toward far (slerp), so near is a glance and far looks all the way.
 
-A chain is *honest* when the tip advances along d from neutral through every size (near at
-least MIN_ADVANCE ahead of neutral, then MIN_GAP of the even spacing up to far apart), every
-smaller size points within COS_SIZE of d, no pose touches anything or topples, every size is
-reachable from neutral without touching anything (the agent's planner, waypoints allowed), no
-joint turns back more than DETOUR_SLACK on its way from neutral through the sizes to far, and
-none moves between two successive sizes more than STEP_SLACK beyond its even share of its way
-from near to far (no wrist flips between sizes). Deterministic: no randomness, fixed iteration
-caps, values rounded.
+A direction the neutral pose already points at (cosine >= HONEST with the neutral bearing) is
+answered by neutral at near and by extending along it at the larger sizes; a limb that is
+already fully extended that way (NAO's straight leg, place-low) holds neutral at every size.
+
+A chain is *honest* when the tip's distance from the origin grows with the size (reach) or its
+bearing turns toward d with the size (swing), every size of a reach chain points within HONEST
+of d, no pose touches anything, every size is reachable from neutral without touching anything
+(the agent's planner, waypoints allowed), no joint turns back more than DETOUR_SLACK on its way
+from near through the sizes to far, and none moves between two successive sizes more than
+STEP_SLACK beyond its even share of its way from near to far (no wrist flips between sizes).
+Whether each size *stands* (static balance) is decided by the caller: stability removes sizes
+from the top, not directions. Deterministic: no randomness, fixed iteration caps, values
+rounded.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
 
 from kinesphere.platforms.clearance import Clearance, Touch
-from kinesphere.services.ecl.arcs import along_arc, arc_at, cosine
-from kinesphere.services.ecl.balance import Balance
+from kinesphere.services.ecl.arcs import along_arc, cosine
 from kinesphere.services.ecl.ik import LimbSolver
+from kinesphere.services.ecl.measure import HONEST
 
-COS_FAR = 0.85  # the far pose must point within ~32 degrees of d
-COS_SIZE = 0.3  # smaller sizes of a limb that can only swing may point less exactly
-NEAR_FRACTION = 0.4  # a ray's near reach: no closer than 40% of the far projection along d
-SHORTEN = 0.2  # the ray family needs the tip to come back along d by 20% of far
-MIN_ADVANCE = 0.02  # near is at least 2% of the limb's span ahead of neutral along d
+COS_FAR = HONEST  # the far pose (and every size of a reach chain) points within ~32 degrees
+REACH = "reach"
+SWING = "swing"
+BENDS = 0.85  # a limb whose tip can come this close (fraction of its farthest) can reach
+NEAR_FRACTION = 0.5  # a reach chain's near: half of far's distance from the origin
+CLOSER_TRIES = 4  # a near the limb cannot fold to is retried this many times, each further out
+CLOSER_STEP = 0.05  # ... by this fraction of far's distance
+MIN_SPREAD = 0.02  # near must fold the tip at least this fraction of far's distance closer
 MIN_GAP = 0.25  # consecutive sizes differ by at least 25% of their even spacing near..far
-DETOUR_SLACK = 1.5  # rad a joint may turn back, in all, from neutral through the sizes to far
+HELD = 0.02  # a pull along which the limb extends less than this (of its span) holds neutral
+DETOUR_SLACK = 1.5  # rad a joint may turn back, in all, from near through the sizes to far
 STEP_SLACK = 0.75  # rad a joint may move between two sizes beyond its even share
-SIZE_POSTURE = 0.1  # posture weight per radian toward the straight joint-space way
-NUDGE_POSTURE = 1.0  # ... and toward a segment pose being nudged onto the ray
+SIZE_POSTURE = 0.1  # posture weight per radian toward the size above (reach) or the way (swing)
+NEAR_POSTURE = 0.02  # ... and toward the family's posture while folding to near: fold fully
 SIZE_ITERATIONS = 80
-SEGMENT_GRID = 64  # samples of the straight segment before bisection
-NEAR_COSINES = (COS_FAR, 0.7, 0.5)  # a segment chain's near: where the tip first points so
 ROUND_DIGITS = 6
+
+
+@dataclass(frozen=True)
+class Chain:
+    """An honest pull: its poses near..far and the size rule they follow."""
+
+    poses: list[LimbPose]
+    rule: str
 
 
 @dataclass(frozen=True)
 class LimbPose:
     """A limb pose and where it puts the tip: offset from the origin (body frame), its
-    projection on d and its cosine with d."""
+    projection on d, its distance from the origin and its cosine with d."""
 
-    values: np.ndarray  # limb joints, rounded
+    values: np.ndarray  # the solver's joints, rounded
     offset: np.ndarray
     proj: float
     cosine: float
 
-
-@dataclass(frozen=True)
-class Beyond:
-    """A smaller size reached past far: far was a local optimum and this pose shows better."""
-
-    reason: str
-    pose: LimbPose
+    @property
+    def distance(self) -> float:
+        return float(np.linalg.norm(self.offset))
 
 
 def rounded(x: float) -> float:
@@ -76,7 +86,7 @@ def rounded(x: float) -> float:
 
 
 def measure(solver: LimbSolver, values: np.ndarray, d: np.ndarray) -> LimbPose:
-    """Round and clip limb values and see where they put the tip."""
+    """Round and clip joint values and see where they put the tip."""
     values = np.array([rounded(v) for v in np.clip(values, solver.lower, solver.upper)])
     offset = solver.reach(solver.full_q(values)).offset
     proj = float(offset @ d)
@@ -84,8 +94,8 @@ def measure(solver: LimbSolver, values: np.ndarray, d: np.ndarray) -> LimbPose:
 
 
 def joint_detour(chain: list[np.ndarray]) -> float:
-    """Radians the worst joint travels along a chain (neutral, near, ..., far) beyond its
-    straight way from the first pose to the last: 0 when every joint moves one way only."""
+    """Radians the worst joint travels along a chain (near, ..., far) beyond its straight way
+    from the first pose to the last: 0 when every joint moves one way only."""
     q = np.array(chain, dtype=float)
     travelled = np.abs(np.diff(q, axis=0)).sum(axis=0)
     return float(np.max(travelled - np.abs(q[-1] - q[0]), initial=0.0))
@@ -102,50 +112,216 @@ def joint_jump(sizes: list[np.ndarray]) -> float:
     return float(np.max(np.abs(np.diff(q, axis=0)) - share, initial=0.0))
 
 
+def size_rule(solver: LimbSolver) -> str:
+    """REACH when a joint past the origin's own moves the tip closer to the origin than
+    BENDS of its farthest (an elbow, a knee, PackBot's elbows), else SWING (a head, a wrist
+    whose axes all meet at the origin, a one-joint segment): each such joint is swept through
+    its range with the rest at neutral."""
+    own = set(solver.pm.platform.eurdf.origin(solver.origin_label).joints)
+    neutral = solver.neutral[solver.qadr]
+    distances = [float(np.linalg.norm(solver.neutral_reach().offset))]
+    for i, joint in enumerate(solver.joints[: solver.limb_count]):
+        if joint in own or not solver.moving[i]:
+            continue
+        for v in np.linspace(solver.lower[i], solver.upper[i], 17):
+            values = neutral.copy()
+            values[i] = v
+            distances.append(float(np.linalg.norm(solver.reach(solver.full_q(values)).offset)))
+    return REACH if min(distances) < BENDS * max(distances) else SWING
+
+
 class Sizes:
     """Size chains of one (limb, origin) pair; ``sizes`` are the VSAM's (near ... far)."""
 
-    def __init__(self, solver: LimbSolver, balance: Balance, sizes: tuple[int, ...]) -> None:
+    def __init__(self, solver: LimbSolver, sizes: tuple[int, ...], rule: str) -> None:
         self.solver = solver
-        self.balance = balance
         self.sizes = sizes
+        self.rule = rule
         self.neutral_values = solver.neutral[solver.qadr]
         self.clearance = Clearance(solver.pm)
         names = solver.pm.platform.joint_names
         self._in_p = np.array([names.index(j) for j in solver.joints], dtype=int)
 
-    def candidates(self, far: LimbPose, d: np.ndarray) -> Iterator[list[LimbPose] | str | Beyond]:
-        """The IK chain, then segment chains whose near starts where the tip first points at
-        d with each of NEAR_COSINES: each a list of poses near..far, or why not, computed
-        only when asked for."""
-        yield self._ik_chain(far, d)
-        a, b = self.neutral_values, far.values
-        grid = [measure(self.solver, a + t * (b - a), d)
-                for t in np.linspace(0.0, 1.0, SEGMENT_GRID + 1)]
-        for start in NEAR_COSINES:
-            yield self._segment_chain(far, d, start, grid)
+    def neutral(self, d: np.ndarray) -> LimbPose:
+        return measure(self.solver, self.neutral_values, d)
 
-    def check(self, chain: list[LimbPose], d: np.ndarray) -> str | None:
-        """Why a chain (near..far) is not honest, or None; see the module."""
+    def chain(self, far: LimbPose, d: np.ndarray, at_rest: bool) -> Chain | str:
+        """The honest poses near..far (see :meth:`check`) and the rule they follow, or why
+        there are none; ``at_rest``: d is a direction the neutral pose already points at,
+        answered by neutral at near. A reach chain is tried in three families, near folded
+        from neutral's posture, from far's and from half-way between, the first honest one
+        kept; a leg (a limb with a stance) that cannot fold along d swings instead, the way a
+        dancer's leg gestures (an arm then has no such size: the direction is dropped)."""
+        neutral = self.neutral(d)
+        if at_rest and far.distance - neutral.distance < HELD * self.solver.span:
+            if self.rule == REACH or far.cosine - neutral.cosine < 1e-3:
+                return Chain([neutral] * len(self.sizes), self.rule)  # fully extended: hold
+        if self.rule != REACH:
+            return self._swung(far, d, neutral, at_rest)
+        rest = neutral if at_rest and neutral.distance < far.distance else None
+        why = ""
+        for start in (self.neutral_values, far.values, (far.values + self.neutral_values) / 2):
+            found = self._reach(far, d, rest, start)
+            if isinstance(found, str):
+                why = found
+            else:
+                why = self.check(found, d, at_rest, REACH) or ""
+                if not why:
+                    return Chain(found, REACH)
+            if rest is not None:
+                break  # near is neutral: the families differ only in near
+        if self.solver.stance:
+            swung = self._swung(far, d, neutral, at_rest)
+            return swung if isinstance(swung, Chain) else why
+        return why
+
+    def _swung(self, far: LimbPose, d: np.ndarray, neutral: LimbPose, at_rest: bool) -> Chain | str:
+        chain = self._swing(far, d, neutral, at_rest)
+        return self.check(chain, d, at_rest, SWING) or Chain(chain, SWING)
+
+    # -- reach: the tip on the ray at growing fractions of far's distance --------------------
+    def _reach(self, far: LimbPose, d: np.ndarray, rest: LimbPose | None, start: np.ndarray
+               ) -> list[LimbPose] | str:
+        """Near first (the tip NEAR_FRACTION of far's distance out on the ray, or as close as
+        the limb folds, solved from ``start`` and held near it; neutral when it already points
+        at d), then the sizes between at evenly spaced distances, each folded back from the
+        size above."""
+        n = len(self.sizes)
+        if n == 1:
+            return [far]
+        world = self.solver.body_rot @ d
+        spread = MIN_SPREAD * far.distance
+        held = measure(self.solver, start, d)
+        near = rest if rest is not None else self._land(
+            start, held, far, d, world, NEAR_FRACTION, far.distance - spread, CLOSER_TRIES,
+            NEAR_POSTURE)
+        if near is None:
+            return (f"size {self.sizes[0]}: the limb does not fold along it (no clean pose on "
+                    f"the ray within {1 - MIN_SPREAD:.0%} of far's {far.distance:.3f} m "
+                    f"pointing within {COS_FAR})")
+        chain = [far]
+        for i in range(n - 2, 0, -1):  # the sizes between, from the top down
+            aim = near.distance + (far.distance - near.distance) * i / (n - 1)
+            above = chain[-1]
+            slack = MIN_GAP * (far.distance - near.distance) / (n - 1)
+            pose = self._middle(near, above, far, d, world, aim, slack)
+            if pose is None:
+                return (f"size {self.sizes[i]}: no clean pose on the ray {aim:.3f} m out "
+                        f"pointing within {COS_FAR} without a flip")
+            chain.append(pose)
+        return [near, *chain[::-1]]
+
+    def _middle(self, near: LimbPose, above: LimbPose, far: LimbPose, d: np.ndarray,
+                world: np.ndarray, aim: float, slack: float) -> LimbPose | None:
+        """A size between near and the one above it, ``aim`` metres out: the first candidate
+        at least ``slack`` from both without a flip, of the pose folded back from above
+        onto the ray, half-way between the two in joint space, and that half-way posture
+        moved onto the ray."""
+        def fits(p: LimbPose | None) -> bool:
+            return (p is not None
+                    and near.distance + slack <= p.distance <= above.distance - slack
+                    and joint_jump([near.values, p.values, above.values]) <= STEP_SLACK)
+
+        folded = self._fold(above, far, d, world, aim / far.distance, above.distance - slack, 1)
+        if fits(folded):
+            return folded
+        between = self._between(near, above, d)
+        if fits(between):
+            return between
+        halfway = measure(self.solver, (near.values + above.values) / 2, d)
+        moved = self._land(halfway.values, halfway, far, d, world, aim / far.distance,
+                           above.distance - slack, 1)
+        return moved if fits(moved) else None
+
+    def _between(self, near: LimbPose, above: LimbPose, d: np.ndarray) -> LimbPose | None:
+        """Half-way between near and the size above in joint space, when it points within
+        COS_FAR and touches nothing (a limb that folds only a little along d: the IK cannot
+        land between two poses that close, the straight way can)."""
         s = self.solver
-        neutral = measure(s, self.neutral_values, d)
-        near, far = chain[0], chain[-1]
-        if near.proj < neutral.proj + MIN_ADVANCE * s.span:
-            return (f"size {self.sizes[0]}: tip {near.proj:.3f} m along d, not ahead of "
-                    f"neutral ({neutral.proj:.3f} m)")
-        gap = MIN_GAP * (far.proj - near.proj) / max(len(chain) - 1, 1)
-        for size, pose, below in zip(self.sizes[1:], chain[1:], chain, strict=False):
-            if pose.proj < below.proj + gap:
-                return (f"size {size}: tip {pose.proj:.3f} m along d, not {gap:.3f} m ahead "
-                        f"of the size below ({below.proj:.3f} m)")
+        pose = measure(s, (near.values + above.values) / 2, d)
+        clean = pose.cosine >= COS_FAR and s.collides(s.full_q(pose.values)) is None
+        return pose if clean and near.distance < pose.distance < above.distance else None
+
+    def _fold(self, above: LimbPose, far: LimbPose, d: np.ndarray, world: np.ndarray,
+              fraction: float, at_most: float, tries: int) -> LimbPose | None:
+        """A clean pose with the tip on the ray ``fraction`` of far's distance out (further
+        out on each retry when the limb cannot fold that far) pointing within COS_FAR, no
+        farther than ``at_most``: solved from the size above, held near its posture, and,
+        since a stretched limb is singular along its own length, from half-way back to
+        neutral and from neutral (its bent posture) when that fails."""
+        for start in (above.values, (above.values + self.neutral_values) / 2,
+                      self.neutral_values):
+            pose = self._land(start, above, far, d, world, fraction, at_most, tries)
+            if pose is not None:
+                return pose
+        return None
+
+    def _land(self, start: np.ndarray, above: LimbPose, far: LimbPose, d: np.ndarray,
+              world: np.ndarray, fraction: float, at_most: float, tries: int,
+              posture: float = SIZE_POSTURE) -> LimbPose | None:
+        s = self.solver
+        for _ in range(tries):
+            aim = fraction * far.distance
+            pose = measure(s, s.solve(start, s.origin + aim * world, SIZE_ITERATIONS,
+                                      posture, above.values), d)
+            clean = pose.cosine >= COS_FAR and s.collides(s.full_q(pose.values)) is None
+            if clean and pose.distance <= at_most:
+                return pose
+            fraction = max(fraction, pose.distance / far.distance) + CLOSER_STEP
+            if fraction * far.distance > at_most:
+                return None
+        return None
+
+    # -- swing: the bearing turns an even share of the way toward far per size ---------------
+    def _swing(self, far: LimbPose, d: np.ndarray, neutral: LimbPose, at_rest: bool
+               ) -> list[LimbPose]:
+        s, n = self.solver, len(self.sizes)
+        a, b = self.neutral_values, far.values
+        chain: list[LimbPose] = [neutral] if at_rest else []
+        below = neutral
+        first = len(chain)
+        for i in range(first + 1, n):
+            g = (i - first) / (n - first)
+            goal = s.origin + s.body_rot @ along_arc(neutral.offset, far.offset, g)
+            toward = a + (b - a) * g
+            pose = measure(s, s.solve(below.values, goal, SIZE_ITERATIONS, SIZE_POSTURE, toward),
+                           d)
+            if s.collides(s.full_q(pose.values)) is not None:
+                pose = measure(s, toward, d)  # the straight way itself
+            chain.append(pose)
+            below = pose
+        return [*chain, far]
+
+    # -- checks ------------------------------------------------------------------------------
+    def check(self, chain: list[LimbPose], d: np.ndarray, at_rest: bool, rule: str
+              ) -> str | None:
+        """Why a chain (near..far) is not honest, or None; see the module. A chain from rest
+        (near is neutral) need only not shrink: the limb may barely extend further that way."""
+        s = self.solver
+        far = chain[-1]
+        if all(p is chain[0] for p in chain):
+            return None  # neutral held at every size
+        if rule == REACH:
+            gap = -1e-3 if at_rest else (
+                MIN_GAP * (far.distance - chain[0].distance) / max(len(chain) - 1, 1))
+            for size, pose, below in zip(self.sizes[1:], chain[1:], chain, strict=False):
+                if pose.distance < below.distance + gap:
+                    return (f"size {size}: tip {pose.distance:.3f} m from the origin, not "
+                            f"{gap:.3f} m beyond the size below ({below.distance:.3f} m)")
+            for size, pose in zip(self.sizes, chain, strict=True):
+                if pose.cosine < COS_FAR:
+                    return f"size {size}: cosine {pose.cosine:.2f} < {COS_FAR}"
+        else:
+            neutral = self.neutral(d)
+            for size, pose, below in zip(self.sizes, chain, [neutral, *chain], strict=False):
+                if pose is not below and pose.cosine <= below.cosine - (1e-3 if at_rest else 0):
+                    return (f"size {size}: bearing does not turn toward d (cosine "
+                            f"{pose.cosine:.2f} after {below.cosine:.2f})")
         for size, pose in zip(self.sizes, chain, strict=True):
-            if pose is not far and pose.cosine < COS_SIZE:
-                return f"size {size}: cosine {pose.cosine:.2f} < {COS_SIZE}"
-            q = s.full_q(pose.values)
-            why = s.collides(q) or self.balance.check(q)
+            why = s.collides(s.full_q(pose.values))
             if why is not None:
                 return f"size {size}: {why}"
-        detour = joint_detour([self.neutral_values, *(p.values for p in chain)])
+        detour = joint_detour([p.values for p in chain])
         if detour > DETOUR_SLACK:
             return f"a joint turns back {detour:.2f} rad on the way to far (> {DETOUR_SLACK})"
         jump = joint_jump([p.values for p in chain])
@@ -159,7 +335,7 @@ class Sizes:
         agent's own planner (:mod:`kinesphere.platforms.clearance`, waypoints allowed) must find
         a clear way to every stored pose, so no stored pose is blocked from neutral."""
         start = self.clearance.neutral
-        for size, pose in zip(self.sizes, chain, strict=True):
+        for size, pose in zip(self.sizes, chain, strict=False):
             goal = start.copy()
             goal[self._in_p] = pose.values
             route = self.clearance.route(start, goal)
@@ -170,138 +346,9 @@ class Sizes:
     def path(self, chain: list[LimbPose]) -> str | None:
         """What f_SB's straight interpolation neutral -> near -> ... -> far touches, or None."""
         values = [self.neutral_values, *(p.values for p in chain)]
-        for i, size in enumerate(self.sizes):
+        for i, size in enumerate(self.sizes[: len(chain)]):
             why = self.solver.path_touches(values[i], values[i + 1])
             if why is not None:
                 below = f"size {self.sizes[i - 1]}" if i else "neutral"
                 return f"path from {below} to size {size}: {why}"
         return None
-
-    # -- the IK chain -----------------------------------------------------------------------
-    def _ik_chain(self, far: LimbPose, d: np.ndarray) -> list[LimbPose] | str | Beyond:
-        s, n = self.solver, len(self.sizes)
-        world = s.body_rot @ d
-        neutral = measure(s, self.neutral_values, d)
-        probe = measure(s, s.solve(self.neutral_values, _ray(s, NEAR_FRACTION * far.proj, world),
-                                   SIZE_ITERATIONS), d)
-        lo = max(NEAR_FRACTION * far.proj, probe.proj, neutral.proj)
-        ray = probe.cosine >= COS_FAR and lo <= (1.0 - SHORTEN) * far.proj
-        arc_start = _honest_start(neutral.offset, far.offset, d)
-        p0 = max(float(arc_start @ d), neutral.proj)
-        found: list[LimbPose] = []
-        for i in range(1, n):
-            toward = self.neutral_values + (far.values - self.neutral_values) * i / n
-            below = found[-1] if found else neutral
-            arc_proj = p0 + (far.proj - p0) * i / n
-            targets = [s.origin + s.body_rot @ arc_at(arc_start, far.offset, d, arc_proj)]
-            if ray:
-                first = neutral.proj + (far.proj - neutral.proj) / n
-                near = max(lo, first)
-                targets.insert(0, _ray(s, near + (far.proj - near) * (i - 1) / (n - 1), world))
-            pose = self._first(below, far, targets, toward, d)
-            if isinstance(pose, Beyond):
-                return Beyond(f"size {self.sizes[i - 1]}: {pose.reason}", pose.pose)
-            if isinstance(pose, str):
-                return f"size {self.sizes[i - 1]}: {pose}"
-            found.append(pose)
-        return [*found, far]
-
-    def _first(self, below: LimbPose, far: LimbPose, targets: list[np.ndarray], toward: np.ndarray,
-               d: np.ndarray) -> LimbPose | str | Beyond:
-        """The first target whose solve lands ahead of ``below`` and short of far, cleanly."""
-        s = self.solver
-        why: str | Beyond = "no target"
-        for target in targets:
-            pose = measure(s, s.solve(below.values, target, SIZE_ITERATIONS, SIZE_POSTURE,
-                                      toward), d)
-            hit = s.collides(s.full_q(pose.values))
-            if pose.proj > far.proj and pose.cosine >= COS_FAR and hit is None:
-                why = Beyond(f"reach {pose.proj:.3f} m beyond far {far.proj:.3f} m", pose)
-            elif not below.proj < pose.proj < far.proj:
-                why = (f"reach {pose.proj:.3f} m not between {below.proj:.3f} and "
-                       f"{far.proj:.3f} m")
-            elif hit is not None:
-                why = hit
-            else:
-                return pose
-        return why
-
-    def nudged(self, chain: list[LimbPose], d: np.ndarray) -> list[LimbPose] | None:
-        """The smaller sizes of a chain pulled toward d's ray (or the arc to far) at their
-        projections, each held near its own posture: the same smoothness, better pointing.
-        None when no size points better that way (or a nudged pose touches something)."""
-        s, far = self.solver, chain[-1]
-        world = s.body_rot @ d
-        neutral = measure(s, self.neutral_values, d)
-        arc_start = _honest_start(neutral.offset, far.offset, d)
-        out: list[LimbPose] = []
-        for pose in chain[:-1]:
-            target = _ray(s, pose.proj, world) if pose.proj > 0 else (
-                s.origin + s.body_rot @ arc_at(arc_start, far.offset, d, pose.proj))
-            moved = measure(s, s.solve(pose.values, target, SIZE_ITERATIONS, NUDGE_POSTURE,
-                                       pose.values), d)
-            if s.collides(s.full_q(moved.values)) is not None:
-                return None
-            out.append(moved if moved.cosine > pose.cosine else pose)
-        return [*out, far] if any(a is not b for a, b in zip(out, chain, strict=False)) else None
-
-    # -- the segment chain ------------------------------------------------------------------
-    def _segment_chain(self, far: LimbPose, d: np.ndarray, start: float, grid: list[LimbPose]
-                       ) -> list[LimbPose] | str:
-        s, n = self.solver, len(self.sizes)
-        a, b = self.neutral_values, far.values
-        neutral = measure(s, a, d)
-
-        def at(t: float) -> LimbPose:
-            return measure(s, a + t * (b - a), d)
-
-        # near: a step of the even spacing from neutral, or where the tip first points
-        # toward d with cosine ``start`` if that comes later (``grid``: the segment sampled)
-        pointing = next((p.proj for p in grid if p.cosine >= start), far.proj)
-        near = max(neutral.proj + (far.proj - neutral.proj) / n, pointing)
-        chain: list[LimbPose] = []
-        for i in range(n - 1):
-            goal = near + (far.proj - near) * i / (n - 1)
-            t = _first_reaching(lambda x: at(x).proj, goal, [p.proj for p in grid])
-            if t is None:
-                return (f"size {self.sizes[i]}: the straight way to far never reaches "
-                        f"{goal:.3f} m")
-            chain.append(at(t))
-        return [*chain, far]
-
-
-def _first_reaching(proj: Callable[[float], float], goal: float, sampled: list[float]
-                    ) -> float | None:
-    """The smallest t in [0, 1] where ``proj(t)`` reaches ``goal``: the first of the evenly
-    spaced samples ``sampled`` (proj at SEGMENT_GRID + 1 points) that does, then bisection."""
-    grid = np.linspace(0.0, 1.0, SEGMENT_GRID + 1)
-    hit = next((float(t) for t, p in zip(grid, sampled, strict=True) if p >= goal), None)
-    if hit is None:
-        return None
-    lo, hi = max(hit - 1.0 / SEGMENT_GRID, 0.0), hit
-    for _ in range(30):
-        mid = (lo + hi) / 2
-        if proj(mid) < goal:
-            lo = mid
-        else:
-            hi = mid
-    return hi
-
-
-def _ray(solver: LimbSolver, t: float, world: np.ndarray) -> np.ndarray:
-    return np.asarray(solver.origin + t * world)
-
-
-def _honest_start(neutral: np.ndarray, far: np.ndarray, d: np.ndarray) -> np.ndarray:
-    """Where the swing from neutral to far starts to point honestly toward d (cosine
-    COS_FAR), or neutral itself if it already does: the swing family's size 0."""
-    if cosine(neutral, d) >= COS_FAR:
-        return neutral
-    lo, hi = 0.0, 1.0
-    for _ in range(30):
-        mid = (lo + hi) / 2
-        if cosine(along_arc(neutral, far, mid), d) >= COS_FAR:
-            hi = mid
-        else:
-            lo = mid
-    return along_arc(neutral, far, hi)

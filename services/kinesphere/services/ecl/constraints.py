@@ -19,6 +19,7 @@ from kinesphere.services.ecl.measure import samples
 
 MAX_STEP = 0.4  # limb spans: the point task's error is clipped so big jumps cannot fly off
 CLEARANCE = 0.01  # metres kept between the limb and other geoms (less if closer at neutral)
+FOLD_CLEARANCE = 0.002  # metres kept between two links of the limb itself (an elbow folding)
 DETECT = 0.08  # metres at which a distance constraint becomes active (> one step)
 GAIN = 0.5  # task gains below 1 damp the period-2 dither of dead-beat steps
 LIMIT_GAIN = 0.85  # fraction of the remaining gap a limit lets one step close
@@ -56,6 +57,41 @@ class PointTask(mink.Task):
         return self._jac
 
 
+class OverSoleTask(mink.Task):
+    """Hold the whole-body centre of mass over the middle of the stance soles (x, y).
+
+    Both ends move: the stance leg shifts the body over its foot, which (the torso being the
+    model's fixed root) shows as the foot sliding under the centre of mass. So the error is
+    centre of mass minus sole centre, and its Jacobian the difference of theirs (mink's
+    ComTask has a fixed target, which would roll the stance leg the wrong way).
+    """
+
+    def __init__(self, model: mujoco.MjModel, soles: list[tuple[int, np.ndarray]],
+                 cost: float) -> None:
+        super().__init__(cost=np.full(2, cost), gain=GAIN, lm_damping=1e-3)
+        self.soles = soles
+        self._jac = np.zeros((3, model.nv))
+        self._com = np.zeros((3, model.nv))
+
+    def _centre(self, data: mujoco.MjData) -> np.ndarray:
+        return np.asarray(np.mean(
+            [data.xpos[b] + data.xmat[b].reshape(3, 3) @ p for b, p in self.soles], axis=0))
+
+    def compute_error(self, configuration: mink.Configuration) -> np.ndarray:
+        data = configuration.data
+        return np.asarray((data.subtree_com[1] - self._centre(data))[:2])
+
+    def compute_jacobian(self, configuration: mink.Configuration) -> np.ndarray:
+        model, data = configuration.model, configuration.data
+        mujoco.mj_jacSubtreeCom(model, data, self._com, 1)
+        sole = np.zeros_like(self._com)
+        for body, point in self.soles:
+            world = data.xpos[body] + data.xmat[body].reshape(3, 3) @ point
+            mujoco.mj_jac(model, data, self._jac, None, world, body)
+            sole += self._jac / len(self.soles)
+        return np.asarray((self._com - sole)[:2])
+
+
 class PairDistanceLimit(mink.Limit):
     """Keep listed geom pairs apart, like mink's CollisionAvoidanceLimit.
 
@@ -64,15 +100,20 @@ class PairDistanceLimit(mink.Limit):
     """
 
     def __init__(
-        self, model: mujoco.MjModel, data: mujoco.MjData, pairs: list[tuple[int, int]]
+        self, model: mujoco.MjModel, data: mujoco.MjData, pairs: list[tuple[int, int]],
+        folding: frozenset[int] = frozenset(),
     ) -> None:
         self.model = model
         self.pairs = np.array(pairs, dtype=int).reshape(-1, 2)
         self._rsum = model.geom_rbound[self.pairs[:, 0]] + model.geom_rbound[self.pairs[:, 1]]
         self._fromto = np.zeros(6)
-        self._clearance = np.array([  # pairs already close at neutral keep half that gap
-            min(CLEARANCE, 0.5 * mujoco.mj_geomDistance(model, data, int(a), int(b),
-                                                        CLEARANCE * 2, self._fromto))
+        # pairs already close at neutral keep half that gap; two links of the limb itself
+        # (bodies in ``folding``) only FOLD_CLEARANCE, so an elbow folds as far as it bends
+        self._clearance = np.array([
+            min(FOLD_CLEARANCE if {int(model.geom_bodyid[a]), int(model.geom_bodyid[b])}
+                <= folding else CLEARANCE,
+                0.5 * mujoco.mj_geomDistance(model, data, int(a), int(b), CLEARANCE * 2,
+                                             self._fromto))
             for a, b in self.pairs
         ])
         self._normal = np.zeros(3)

@@ -26,7 +26,9 @@ class Kept:
     origin: str
     alias: str
     pulls: tuple[Direction, ...]
-    unstable: int  # pulls dropped for stability
+    unstable: int  # pulls dropped for stability (even near would topple)
+    rule: str = "-"  # the size rule: "reach" or "swing"
+    short: int = 0  # kept pulls whose largest sizes stability removed
 
 
 def kept(platforms: list[str]) -> list[Kept]:
@@ -35,13 +37,15 @@ def kept(platforms: list[str]) -> list[Kept]:
     for name in platforms:
         ecl = Ecl.open(name)
         aliases = {p.name: p.alias or "" for p in ecl.platform.eurdf.limbs}
-        unstable = ecl.dropped("unstable")
+        unstable, short = ecl.dropped("unstable"), ecl.dropped("short")
+        rules = ecl.notes("size_rules")
         for entry in ecl.catalogue().limbs:
             have = {Direction.parse(d) for d in entry.directions}
             pulls = tuple(d for d in Direction.pulls() if d in have)
-            lost = len(unstable.get(f"{entry.limb}/{entry.origin}", {}))
+            pair = f"{entry.limb}/{entry.origin}"
             out.append(Kept(name, entry.limb, entry.origin, aliases.get(entry.limb, ""), pulls,
-                            lost))
+                            len(unstable.get(pair, {})), str(rules.get(pair, "-")),
+                            len(short.get(pair, {}))))
     return out
 
 
@@ -56,12 +60,12 @@ def markdown(platforms: list[str], limbs: tuple[str, ...] = ("limb_11", "limb_12
              ) -> str:
     """docs/ecl.md's two coverage tables (per pair, then shared per limb label)."""
     rows = kept(platforms)
-    lines = ["| platform | limb (alias) | origin | pulls kept of 26 | dropped for stability |",
-             "|---|---|---|---|---|"]
+    lines = ["| platform | limb (alias) | origin | size rule | pulls kept of 26 | far removed "
+             "for stability | dropped for stability |", "|---|---|---|---|---|---|---|"]
     for r in rows:
         alias = f" ({r.alias})" if r.alias else ""
-        lines.append(f"| {r.platform} | {r.limb}{alias} | {r.origin} | {len(r.pulls)} | "
-                     f"{r.unstable} |")
+        lines.append(f"| {r.platform} | {r.limb}{alias} | {r.origin} | {r.rule} | "
+                     f"{len(r.pulls)} | {r.short} | {r.unstable} |")
     lines += ["", "| limb | bodies | directions every body keeps |", "|---|---|---|"]
     for limb in limbs:
         bodies = [r.platform for r in rows if r.limb == limb]

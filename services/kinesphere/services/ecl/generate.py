@@ -4,27 +4,27 @@ For every VSAM entry (limb l, origin o) and every pull d the limb alone moves (e
 stays at neutral, the base at the origin, a joint that also drives a mimic joint outside the
 limb at neutral too) so that its distal end goes from o toward d. o is the pivot of the joint
 location (``kinesphere.platforms.frames``), the distal end the limb's tip (NAO's head: its gaze
-point).
+point); where both are, and where a pose points, is :mod:`measure`'s definition.
 
 * far (k_smax): the tip is pulled toward a point far out on the ray ``o + t * d`` (4 spans,
   so the pull is nearly parallel to d and the IK maximises the reach along d) with a light
   posture task toward neutral. If that ends pointing elsewhere (a local optimum, e.g. a
-  flipper pointing exactly away from d), it is tried once more via the half-way direction.
-* smaller sizes (``chains``): near, mid, ... are steps from neutral toward far along d, an IK
-  chain on the ray or arc, else the straight joint-space segment to far.
+  flipper pointing exactly away from d), it is tried once more via the half-way direction;
+  if the ray is blocked (the floor under a low pull), a limb that can fold takes the farthest
+  point on the ray it reaches with its bearing held (FAR_HOLD).
+* smaller sizes (``chains``): by the limb's size rule, reach (the tip on the ray at growing
+  fractions of far's distance, near with the elbow bent) or swing (the bearing turning an even
+  share of the way toward far per size); the rule of every pair is stored in the databank.
+* a direction the neutral pose already points at (cosine >= HONEST) is never dropped: near is
+  neutral and the larger sizes extend along it, or hold neutral when the limb cannot.
 
-A direction is kept only if it is honest: the far tip lies within COS_FAR of d (cosine of d and
-tip - origin; 0.85 is about 32 degrees), the tip advances along d from neutral through every
-size, no joint flips between sizes, and no pose touches another part of the robot, dips below
-the floor or topples (``balance``: the whole-body centre of mass stays over what still touches
-the floor), and the agent's planner finds a way from neutral to every size that touches nothing
-(``kinesphere.platforms.clearance``). Everything else is dropped and reported, toppling apart
-("unstable").
-Among honest chains the one pointing best (highest mean cosine) whose f_SB interpolation
-(straight in joint space between sizes) stays clear is kept; if none stays clear, the pull is
-kept and the report names what its path touches. A smaller size that reaches past far shows
-far was a local optimum: far climbs on from there (CLIMBS times at most) instead of the
-direction being dropped for a millimetre.
+A direction is kept only if it is honest (``chains``: pointing, sizes in order, no flips, no
+pose touching another part of the robot or the floor, every size reachable from neutral by the
+agent's planner). Stability removes sizes, not directions: sizes are kept from near up while
+the body stands (``balance``: the whole-body centre of mass at least 1 cm inside what still
+touches the floor), so a PackBot reaching far to its side keeps near and mid; a direction
+whose near would topple the body is dropped and reported ("unstable"). A kept pull whose f_SB
+interpolation (straight in joint space between sizes) touches something is kept and reported.
 The same inputs give the same rows: no randomness, no clock, fixed iteration caps, values
 rounded to ROUND_DIGITS.
 """
@@ -45,27 +45,30 @@ from kinesphere.services.ecl.arcs import halfway
 from kinesphere.services.ecl.balance import Balance
 from kinesphere.services.ecl.chains import (
     COS_FAR,
-    COS_SIZE,
+    REACH,
     ROUND_DIGITS,
-    Beyond,
     LimbPose,
     Sizes,
     measure,
     rounded,
+    size_rule,
 )
 from kinesphere.services.ecl.ik import LimbSolver
 from kinesphere.services.ecl.store import PoseRow
 from kinesphere.services.ecl.vsam import Vsam, VsamEntry, load_vsam
 
-__all__ = ["COS_FAR", "COS_SIZE", "GENERATOR_VERSION", "ROUND_DIGITS", "EntryReport",
-           "GenerationReport", "generate", "generate_entry", "pulls", "report_meta"]
+__all__ = ["COS_FAR", "GENERATOR_VERSION", "ROUND_DIGITS", "EntryReport", "GenerationReport",
+           "generate", "generate_entry", "pulls", "report_meta"]
 
-GENERATOR_VERSION = "mink-ik-2"
+GENERATOR_VERSION = "mink-ik-3"
 MIN_SPAN = 0.01  # metres: a distal end closer than this to its origin cannot point anywhere
-MIN_TRAVEL = 0.05  # the far tip must move toward d by 5% of the limb's span
 FAR_TARGET = 4.0  # spans out along d: far enough that pulling toward it maximises reach
 FAR_ITERATIONS = 200
-CLIMBS = 2
+FAR_HOLD = 0.9  # a blocked ray: the farthest point on it whose bearing keeps this cosine
+HOLD_SCAN = (0.8, 0.6, 0.45, 0.3)  # ... tried at these fractions of the span
+HOLD_REFINE = 3  # bisection steps between the farthest held fraction and the next one out
+BLOCKED = 0.7  # a far pull pointing this well (or better) may be a blocked ray, not a wrong one
+ON_FLOOR = 0.05  # metres: ... blocked by the floor when its tip ends this low
 
 Progress = Callable[[str, int, int], None]
 """progress(label, done, total): called once per direction."""
@@ -73,16 +76,21 @@ Progress = Callable[[str, int, int], None]
 
 @dataclass
 class EntryReport:
-    """What one (limb, origin) pair got: kept pulls, why the others were dropped (toppling
-    apart, in ``unstable``), and kept pulls whose f_SB interpolation (straight in joint space
-    between sizes) touches something on the way although every stored pose is clean."""
+    """What one (limb, origin) pair got: its size rule, kept pulls, why the others were
+    dropped (toppling apart, in ``unstable``), the sizes stability removed from kept pulls
+    (``short``), and kept pulls whose f_SB interpolation (straight in joint space between
+    sizes) touches something on the way although every stored pose is clean."""
 
     limb: str
     origin: str
+    rule: str = REACH
+    rest: tuple[float, float, float] = (0.0, 0.0, 0.0)  # where the tip is at neutral
     kept: list[str] = field(default_factory=list)
     dropped: dict[str, str] = field(default_factory=dict)
     unstable: dict[str, str] = field(default_factory=dict)
+    short: dict[str, str] = field(default_factory=dict)
     paths: dict[str, str] = field(default_factory=dict)
+    swung: list[str] = field(default_factory=list)  # pulls a reach limb (a leg) swings
 
 
 @dataclass
@@ -100,6 +108,18 @@ class GenerationReport:
 class _Drop:
     reason: str
     unstable: bool = False
+
+
+@dataclass(frozen=True)
+class _Kept:
+    """A kept pull: its sizes from near up (fewer than the VSAM's when stability removed the
+    top ones), far as the limb reaches it, and what its path touches / why it is short."""
+
+    poses: list[LimbPose]
+    far: LimbPose
+    touched: str | None = None
+    short: str | None = None
+    rule: str = REACH
 
 
 def generate(
@@ -139,32 +159,46 @@ def generate_entry(
         raise ValueError(f"({limb}, {origin}) is no limb entry of {platform.name}'s VSAM")
     pm = platform_model(platform_name)
     solver = LimbSolver(pm, entry.limb, entry.origin)
-    sizes = Sizes(solver, Balance(pm), vsam.sizes)
-    report = EntryReport(entry.limb, entry.origin)
-    cells: dict[Direction, list[LimbPose]] = {}
+    balance = Balance(pm)
+    rule = size_rule(solver)
+    sizes = Sizes(solver, vsam.sizes, rule)
+    at_rest = set(balance.fk.neutral_directions(entry.limb, entry.origin))
+    rest = balance.fk.neutral_offset(entry.limb, entry.origin)
+    report = EntryReport(entry.limb, entry.origin, rule, (rounded(rest[0]), rounded(rest[1]),
+                                                          rounded(rest[2])))
+    cells: dict[Direction, _Kept] = {}
     todo = pulls(entry)
     for i, d in enumerate(todo, start=1):
-        result = _direction(solver, sizes, d)
+        result = _direction(solver, sizes, balance, d, d in at_rest)
         if isinstance(result, _Drop):
             (report.unstable if result.unstable else report.dropped)[d.slug] = result.reason
         else:
-            cells[d], path = result
+            cells[d] = result
             report.kept.append(d.slug)
-            if path is not None:
-                report.paths[d.slug] = path
+            if result.touched is not None:
+                report.paths[d.slug] = result.touched
+            if result.short is not None:
+                report.short[d.slug] = result.short
+            if result.rule != rule:
+                report.swung.append(d.slug)
         if progress is not None:
             progress(f"{entry.limb}/{entry.origin} {d.slug}", i, len(todo))
-    return _rows(solver, entry, vsam, cells), report
+    return _rows(solver, sizes, balance, entry, vsam, cells), report
 
 
 def report_meta(report: GenerationReport) -> dict[str, str]:
-    """The databank's record of what was dropped (``meta.dropped``, ``meta.unstable``: JSON
-    ``{"limb/origin": {direction: reason}}``), for ``ecl report`` and the coverage tables."""
+    """The databank's record of the run, for ``ecl report``, ``ecl audit`` and the coverage
+    tables, each JSON ``{"limb/origin": ...}``: ``dropped`` and ``unstable`` (direction ->
+    reason), ``short`` (kept directions whose top sizes would topple -> reason) and
+    ``size_rules`` ("reach" or "swing"), ``swung`` (pulls a reach limb swings: a leg that
+    cannot fold along them) and ``neutral_tips`` (where the tip is at neutral, for f_SB's
+    measured angle below near)."""
     def table(attr: str) -> str:
         return json.dumps({f"{e.limb}/{e.origin}": getattr(e, attr) for e in report.entries},
                           sort_keys=True, separators=(",", ":"))
 
-    return {"dropped": table("dropped"), "unstable": table("unstable")}
+    return {"dropped": table("dropped"), "unstable": table("unstable"), "short": table("short"),
+            "size_rules": table("rule"), "swung": table("swung"), "neutral_tips": table("rest")}
 
 
 def pulls(entry: VsamEntry) -> list[Direction]:
@@ -172,121 +206,139 @@ def pulls(entry: VsamEntry) -> list[Direction]:
     return [d for d in entry.directions if d is not Direction.PLACE_MIDDLE]
 
 
-def _rows(
-    solver: LimbSolver, entry: VsamEntry, vsam: Vsam, cells: dict[Direction, list[LimbPose]]
-) -> list[PoseRow]:
-    best = max((p.proj for poses in cells.values() for p in poses), default=1.0)
+def _rows(solver: LimbSolver, sizes: Sizes, balance: Balance, entry: VsamEntry, vsam: Vsam,
+          cells: dict[Direction, _Kept]) -> list[PoseRow]:
+    """The stored rows: the limb's joints, its support's (a stance leg), and the figures
+    measured on the stored values (:mod:`measure`)."""
     out = []
-    for d, poses in cells.items():
-        for size, pose in zip(vsam.sizes, poses, strict=True):
+    n = solver.limb_count
+    for d, kept in cells.items():
+        rest = sizes.neutral(np.array(d.vector))
+        for size, pose in zip(vsam.sizes, kept.poses, strict=False):
+            values = dict(zip(solver.joints, map(float, pose.values), strict=True))
+            tip = balance.fk.offset(entry.limb, entry.origin, values)
             out.append(
                 PoseRow(
                     limb=entry.limb,
                     origin=entry.origin,
                     direction=d.slug,
                     size=size,
-                    joints={j: float(v) for j, v in zip(solver.joints, pose.values, strict=True)},
+                    joints={j: values[j] for j in solver.joints[:n]},
                     cosine=rounded(pose.cosine),
-                    reach=rounded(pose.proj / best),
+                    reach=rounded(_fraction(kept.rule, rest, pose, kept.far)),
                     margin=rounded(solver.margin(pose.values)),
+                    support={j: values[j] for j, go in zip(solver.joints[n:], solver.moving[n:],
+                                                           strict=True) if go},
+                    tip=(rounded(tip[0]), rounded(tip[1]), rounded(tip[2])),
                 )
             )
     return out
 
 
-def _direction(solver: LimbSolver, sizes: Sizes, direction: Direction
-               ) -> tuple[list[LimbPose], str | None] | _Drop:
-    """All sizes of one pull, smallest first, with what its interpolation path touches (None
-    when clear); or why it is dropped."""
+def _fraction(rule: str, rest: LimbPose, pose: LimbPose, far: LimbPose) -> float:
+    """How much of the pull a size is: its tip distance over far's (reach), or the angle its
+    bearing turned from neutral over far's (swing); 1 for a limb holding neutral."""
+    if rule == REACH:
+        return pose.distance / far.distance if far.distance > 0 else 1.0
+    whole = _angle(rest.offset, far.offset)
+    return _angle(rest.offset, pose.offset) / whole if whole > 1e-6 else 1.0
+
+
+def _angle(a: np.ndarray, b: np.ndarray) -> float:
+    na, nb = float(np.linalg.norm(a)), float(np.linalg.norm(b))
+    if na < 1e-12 or nb < 1e-12:
+        return 0.0
+    return float(np.arccos(np.clip(float(a @ b) / (na * nb), -1.0, 1.0)))
+
+
+def _direction(solver: LimbSolver, sizes: Sizes, balance: Balance, direction: Direction,
+               at_rest: bool) -> _Kept | _Drop:
+    """All sizes of one pull that stand, smallest first; or why it is dropped. A pull the
+    neutral pose points at (``at_rest``) is never dropped: at worst it holds neutral."""
     d = np.array(direction.vector)
-    world = solver.body_rot @ d
     if solver.span < MIN_SPAN:
         return _Drop(f"its distal end sits on the origin ({solver.span * 100:.1f} cm away)")
+    neutral = sizes.neutral(d)
+    held = _Kept([neutral] * len(sizes.sizes), neutral, rule=sizes.rule)
+    far = _far(solver, sizes, d)
+    if far.cosine < COS_FAR:
+        return held if at_rest else _Drop(f"far cosine {far.cosine:.2f} < {COS_FAR}")
+    hit = solver.collides(solver.full_q(far.values))
+    if hit is not None:  # the solver keeps poses clean, so this is a safety net
+        return held if at_rest else _Drop(f"far pose collides ({hit})")
+    found = sizes.chain(far, d, at_rest)
+    if isinstance(found, str):
+        return held if at_rest else _Drop(found)
+    chain, rule = found.poses, found.rule
+    if solver.stance:  # a leg: the stance leg keeps the body over its sole at every size
+        chain = [measure(solver, solver.balanced(p.values), d) for p in chain]
+    stand: list[LimbPose] = []
+    short: str | None = None
+    for size, pose in zip(sizes.sizes, chain, strict=True):
+        q = solver.full_q(pose.values)
+        toppling = solver.collides(q) or balance.check(q)
+        if toppling is not None:
+            short = f"size {size}: {toppling}"
+            break
+        stand.append(pose)
+    if not stand:
+        return _Drop(short or "unstable", unstable=True)
+    blocked = sizes.reachable(stand)
+    if blocked is not None:
+        return held if at_rest else _Drop(blocked)
+    return _Kept(stand, far, sizes.path(stand), short, rule)
+
+
+def _far(solver: LimbSolver, sizes: Sizes, d: np.ndarray) -> LimbPose:
+    """The farthest reach toward d: pulled toward a point far out on the ray (via the half-way
+    direction if that ends elsewhere); on a ray the floor blocks, a limb that folds takes the
+    farthest point of the ray it reaches pointing within FAR_HOLD."""
+    world = solver.body_rot @ d
     neutral = solver.neutral[solver.qadr]
-    far = _far(solver, neutral, d, world)
+    far = _pulled(solver, neutral, d, world)
     if far.cosine < COS_FAR:  # maybe a local optimum: go round via the half-way direction
         via = halfway(solver.neutral_reach().offset, d)
         start = solver.solve(neutral, _ray(solver, solver.span, solver.body_rot @ via),
                              FAR_ITERATIONS)
-        detour = _far(solver, start, d, world)
+        detour = _pulled(solver, start, d, world)
         far = detour if detour.cosine > far.cosine else far
-    if far.cosine < COS_FAR:
-        return _Drop(f"far cosine {far.cosine:.2f} < {COS_FAR}")
-    hit = solver.collides(solver.full_q(far.values))
-    if hit is not None:  # the solver keeps poses clean, so this is a safety net
-        return _Drop(f"far pose collides ({hit})")
-    travel = float((far.offset - solver.neutral_reach().offset) @ d)
-    if travel < MIN_TRAVEL * solver.span:
-        return _Drop(f"no travel toward it ({travel * 100:.1f} cm from neutral)")
-    toppling = sizes.balance.check(solver.full_q(far.values))
-    if toppling is not None:
-        return _Drop(f"far pose: {toppling}", unstable=True)
-    why = "no honest sizes"
-    for _ in range(CLIMBS + 1):
-        result = _chain(solver, sizes, far, d)
-        if not isinstance(result, Beyond):
-            return result
-        why = result.reason
-        better = _far(solver, result.pose.values, d, world)
-        q = solver.full_q(better.values)
-        if not (better.proj > far.proj and better.cosine >= COS_FAR
-                and solver.collides(q) is None and sizes.balance.check(q) is None):
-            break
-        far = better  # far was a local optimum: climb on from the size that got farther
-    return _Drop(why)
+    if far.cosine >= COS_FAR or far.cosine < BLOCKED or sizes.rule != REACH:
+        return far
+    # from the blocked pull (the limb already out that way, e.g. lying on the floor), and,
+    # when the floor is what blocks it, from neutral too
+    held = _on_ray(solver, d, world, far.values)
+    if held is None and solver.reach(solver.full_q(far.values)).tip[2] <= ON_FLOOR:
+        held = _on_ray(solver, d, world, neutral)
+    return held if held is not None and held.cosine >= COS_FAR else far
 
 
-def _chain(solver: LimbSolver, sizes: Sizes, far: LimbPose, d: np.ndarray
-           ) -> tuple[list[LimbPose], str | None] | _Drop | Beyond:
-    """The honest chain up to ``far`` that points best (highest mean cosine), among those
-    whose path is clear if any (else with what its path touches); a Beyond when the IK chain
-    overshot far and nothing else was honest; else why not."""
-    honest: list[list[LimbPose]] = []
-    whys: list[str] = []
-    beyond: Beyond | None = None
-    for chain in sizes.candidates(far, d):
-        if isinstance(chain, Beyond):
-            beyond = beyond or chain
+def _on_ray(solver: LimbSolver, d: np.ndarray, world: np.ndarray, start: np.ndarray
+            ) -> LimbPose | None:
+    """The farthest pose with the tip aimed at a point of the ray (a fraction of the span out)
+    that points within FAR_HOLD of d and touches nothing; None if no fraction does."""
+    def at(fraction: float) -> LimbPose | None:
+        pose = measure(solver, solver.solve(start, _ray(solver, fraction * solver.span, world),
+                                            FAR_ITERATIONS), d)
+        clean = solver.collides(solver.full_q(pose.values)) is None
+        return pose if pose.cosine >= FAR_HOLD and clean else None
+
+    for i, fraction in enumerate(HOLD_SCAN):
+        best = at(fraction)
+        if best is None:
             continue
-        why = chain if isinstance(chain, str) else sizes.check(chain, d)
-        if why is not None or isinstance(chain, str):
-            whys.append(str(why))
-            continue
-        honest.append(chain)
-    touching: list[tuple[list[LimbPose], str]] = []
-    for chain in sorted(honest, key=_pointing, reverse=True):  # stable: ties keep their order
-        blocked = sizes.reachable(chain)
-        if blocked is not None:
-            whys.append(blocked)
-            continue
-        touched = sizes.path(chain)
-        if touched is None:
-            return _nudge(sizes, chain, None, d)
-        touching.append((chain, touched))
-    if touching:  # every pose is clean; only the way between them is not: keep, report
-        return _nudge(sizes, *touching[0], d)
-    if beyond is not None:
-        return beyond
-    unstable = [w for w in whys if "unstable" in w]
-    return _Drop(unstable[0], unstable=True) if unstable else _Drop(whys[0])
+        lo, hi = fraction, HOLD_SCAN[i - 1] if i else 1.0
+        for _ in range(HOLD_REFINE):
+            mid = (lo + hi) / 2
+            pose = at(mid)
+            if pose is not None and pose.distance > best.distance:
+                best, lo = pose, mid
+            else:
+                hi = mid
+        return best
+    return None
 
 
-def _nudge(sizes: Sizes, chain: list[LimbPose], touched: str | None, d: np.ndarray
-           ) -> tuple[list[LimbPose], str | None]:
-    """The chosen chain, nudged toward d when that keeps it honest and no worse on its way."""
-    better = sizes.nudged(chain, d)
-    if better is None or _pointing(better) <= _pointing(chain) or sizes.check(better, d):
-        return chain, touched
-    way = sizes.path(better)
-    return (better, way) if way is None or touched is not None else (chain, touched)
-
-
-def _pointing(chain: list[LimbPose]) -> float:
-    """Mean cosine of a chain's sizes (the first candidate wins ties: max keeps it)."""
-    return sum(p.cosine for p in chain) / len(chain)
-
-
-def _far(solver: LimbSolver, start: np.ndarray, d: np.ndarray, world: np.ndarray) -> LimbPose:
+def _pulled(solver: LimbSolver, start: np.ndarray, d: np.ndarray, world: np.ndarray) -> LimbPose:
     """The farthest reach toward d from ``start``: pulled toward a point far out on the ray."""
     target = _ray(solver, FAR_TARGET * solver.span, world)
     return measure(solver, solver.solve(start, target, FAR_ITERATIONS), d)

@@ -24,10 +24,11 @@ from kinesphere.platforms.mjcf import PlatformModel
 from kinesphere.services.ecl.constraints import (
     GAIN,
     FloorLimit,
+    OverSoleTask,
     PairDistanceLimit,
     PointTask,
 )
-from kinesphere.services.ecl.measure import tip_point
+from kinesphere.services.ecl.measure import TOUCH, Fk, samples, tip_point
 
 SOLVER = "daqp"
 DAMPING = 1e-2  # Levenberg-Marquardt damping: keeps stretched (singular) arms calm
@@ -41,6 +42,11 @@ PATH_CLEARANCE = 0.0  # m kept along straight joint-space paths (0: they must no
 PATH_STEP = 0.05  # rad between the samples of such a path
 DITHER = 0.1  # a step this close to minus the previous one means a period-2 bounce
 RETRIES = (0.5, 0.25)  # fractions of a step tried when the full step would touch something
+COM = 50.0  # weight per metre of the centre of mass off the stance soles' centre
+STANCE_HEIGHT = 200.0  # weight per metre of a stance sole lifting or sinking ...
+STANCE_TILT = 20.0  # ... and per radian of its tilting: it stays flat on the floor
+BALANCE_ITERATIONS = 60
+JOINED = 0.004  # metres: a link this close to its grandparent at neutral is joined to it
 
 
 @dataclass(frozen=True)
@@ -76,16 +82,24 @@ class LimbSolver:
         model, eurdf = pm.model, pm.platform.eurdf
         self.pm = pm
         self.model = model
-        self.joints = eurdf.limb_joints(limb)
+        links = set(eurdf.limb(limb).links)
+        stance, chain = _stance(pm, links)
+        support = _actuated(pm, chain)
+        # the limb's own joints first; then, for a leg that bears weight at neutral, the
+        # joints of the other legs, which keep the body over the stance foot (``support``)
+        self.joints = eurdf.limb_joints(limb) + support
+        self.limb_count = len(eurdf.limb_joints(limb))
+        self.origin_label = origin
         self.qadr = np.array([pm.qpos_index[j] for j in self.joints], dtype=int)
         self.lower = np.array([eurdf.limits[j].lower for j in self.joints])
         self.upper = np.array([eurdf.limits[j].upper for j in self.joints])
-        links = set(eurdf.limb(limb).links)
         # a joint that also drives a mimic joint outside the limb (NAO's hip yaw-pitch turns
         # both hips) would move another limb: it stays at neutral in this limb's poses
+        held = {model.body(b).name for b in chain}
         self.moving = np.array([
-            all(eurdf.urdf.joint_map[f].child in links for f in eurdf.followers(j))
-            for j in self.joints
+            all(eurdf.urdf.joint_map[f].child in (links if i < self.limb_count else held)
+                for f in eurdf.followers(j))
+            for i, j in enumerate(self.joints)
         ], dtype=bool)
         self._mimics = [
             (pm.qpos_index[m.joint], self.joints.index(m.leader), m)
@@ -93,6 +107,9 @@ class LimbSolver:
         ]
         dofs = [pm.dof_index[j] for j, go in zip(self.joints, self.moving, strict=True) if go]
         self._dof_adr = np.array(dofs, dtype=int)
+        limb_dofs = [pm.dof_index[j] for j, go in
+                     zip(self.joints[: self.limb_count], self.moving, strict=False) if go]
+        support_dofs = [d for d in dofs if d not in limb_dofs]
         self.neutral = pm.neutral_qpos()
         self.config = mink.Configuration(model, self.neutral.copy())
         data = self.config.data
@@ -100,13 +117,16 @@ class LimbSolver:
         self.tip_task = PointTask(model, tip_body, tip_point(model, tip_body))
         self.body_rot = data.xmat[model.body(eurdf.root_link).id].reshape(3, 3).copy()
         self.origin = pivot(model, data, eurdf.origin(origin).joints)
-        self.bodies = frozenset(model.body(name).id for name in links)
+        self.limb_bodies = frozenset(model.body(name).id for name in links)
+        self.bodies = self.limb_bodies | chain  # everything that moves
         self._neutral_reach = self.reach(self.neutral)
         self.span = self._span()
         scale = max(self.span, 1e-3)  # a tip on its origin cannot point; generate drops it
         self.tip_task = PointTask(model, tip_body, self.tip_task.point, scale=scale)
         self._posture_mask = np.zeros(model.nv)
-        self._posture_mask[dofs] = 1.0
+        self._posture_mask[limb_dofs] = 1.0
+        self._support_mask = np.zeros(model.nv)
+        self._support_mask[support_dofs] = 1.0
         self.posture = mink.PostureTask(model, cost=self._posture_mask * POSTURE, gain=GAIN)
         self.posture.set_target(self.neutral)
         self._floor = model.geom("floor").id
@@ -117,35 +137,71 @@ class LimbSolver:
             dtype=int,
         )
         moving = [j for j, go in zip(self.joints, self.moving, strict=True) if go]
-        self.limits: list[mink.Limit] = [
-            mink.ConfigurationLimit(model, gain=0.9, min_distance_from_limits=LIMIT_MARGIN),
-            mink.VelocityLimit(model, {j: JOINT_STEP for j in moving}),
-            FloorLimit(model, [int(g) for g in self._limb_geoms]),
-        ]
-        pairs = self._distance_pairs()
-        if pairs:
-            self.limits.append(PairDistanceLimit(model, data, pairs))
-        frozen = [i for i in range(model.nv) if i not in dofs]
+        # the limb's solves watch the limb's geoms, the balance solves the stance legs' (a
+        # frozen body's rows would be all zero): the same limits, each on what moves
+        self.limits = self._limits(self.limb_bodies, moving)
+        self._balance_limits = self._limits(chain, moving) if stance else []
+        frozen = [i for i in range(model.nv) if i not in limb_dofs]
         self.constraints = [mink.DofFreezingTask(model, frozen)] if frozen else []
+        still = [i for i in range(model.nv) if i not in support_dofs]
+        self._balance_constraints = [mink.DofFreezingTask(model, still)] if still else []
+        self.stance = stance
+        self._balance_tasks: list[mink.Task] = []
+        if stance:
+            self.config.update(self.neutral)
+            soles = [(body, _sole_centre(model, data, body)) for body in stance]
+            self._balance_tasks.append(OverSoleTask(model, soles, COM))
+            for body in stance:
+                sole = mink.FrameTask(model.body(body).name, "body",
+                                      position_cost=[0.0, 0.0, STANCE_HEIGHT],
+                                      orientation_cost=STANCE_TILT, gain=GAIN)
+                sole.set_target_from_configuration(self.config)
+                self._balance_tasks.append(sole)
         self.iterations = 0
         self._path_checker()
 
-    def _distance_pairs(self) -> list[tuple[int, int]]:
-        """Geom pairs (limb vs robot) that MuJoCo would collide in the compiled model."""
+    def _limits(self, bodies: frozenset[int], moving: list[str]) -> list[mink.Limit]:
+        """Joint limits, a joint step limit, the floor and distance limits for ``bodies``."""
+        model = self.model
+        geoms = [int(g) for g in self._limb_geoms if model.geom_bodyid[g] in bodies]
+        limits: list[mink.Limit] = [
+            mink.ConfigurationLimit(model, gain=0.9, min_distance_from_limits=LIMIT_MARGIN),
+            mink.VelocityLimit(model, {j: JOINT_STEP for j in moving}),
+            FloorLimit(model, geoms),
+        ]
+        pairs = self._distance_pairs(geoms)
+        if pairs:
+            limits.append(PairDistanceLimit(model, self.config.data, pairs, self.bodies))
+        return limits
+
+    def _distance_pairs(self, geoms: list[int]) -> list[tuple[int, int]]:
+        """Geom pairs (limb vs robot) that MuJoCo would collide in the compiled model, but
+        for a link and its grandparent already touching at neutral (NAO's hip motor in its
+        torso socket): linearised, turning the joint between them looks like closing in, so
+        they are left to the contact test of every step, which lets the joint turn as long as
+        neither presses into the other."""
         m = self.model
+        data = mujoco.MjData(m)
+        data.qpos[:] = self.neutral
+        mujoco.mj_kinematics(m, data)
         excluded = {frozenset(p) for p in self.pm.excluded_pairs}
         colliding = [g for g in range(m.ngeom) if m.geom_contype[g] and g != self._floor]
         weld, parent = m.body_weldid, m.body_parentid
         pairs: list[tuple[int, int]] = []
-        for a in self._limb_geoms:
+        mine = set(geoms)
+        for a in geoms:
             for b in colliding:
                 ba, bb = int(m.geom_bodyid[a]), int(m.geom_bodyid[b])
-                if bb in self.bodies and b <= a:
-                    continue  # limb-limb pairs once
+                if b in mine and b <= a:
+                    continue  # pairs among the watched geoms once
                 wa, wb = weld[ba], weld[bb]
                 if wa == wb or weld[parent[wa]] == wb or weld[parent[wb]] == wa:
                     continue  # same rigid body or parent/child: MuJoCo never collides them
                 if frozenset((m.body(ba).name, m.body(bb).name)) in excluded:
+                    continue
+                if (weld[parent[parent[wa]]] == wb or weld[parent[parent[wb]]] == wa) and (
+                        mujoco.mj_geomDistance(m, data, int(a), b, JOINED, self._fromto)
+                        < JOINED):
                     continue
                 pairs.append((int(a), b))
         return pairs
@@ -281,6 +337,37 @@ class LimbSolver:
         self.config.update(q)
         return np.asarray(q[self.qadr].copy())
 
+    def balanced(self, values: np.ndarray, iterations: int = BALANCE_ITERATIONS) -> np.ndarray:
+        """``values`` with the stance legs moved so the centre of mass sits over the middle
+        of the stance soles, which stay flat on the floor (OverSoleTask and a mink FrameTask
+        per sole, the limb held still): how a person keeps balance on one leg. Unchanged for a
+        limb without a stance (anything but a leg that bears weight at neutral)."""
+        if not self.stance:
+            return values
+        self.posture.set_cost(self._support_mask * POSTURE)
+        self.posture.set_target(self.neutral)
+        q = self.full_q(values)
+        self.config.update(q)
+        for _ in range(iterations):
+            try:
+                v = mink.solve_ik(
+                    self.config, [*self._balance_tasks, self.posture], dt=1.0, solver=SOLVER,
+                    damping=DAMPING, limits=self._balance_limits,
+                    constraints=self._balance_constraints,
+                )
+            except mink.NoSolutionFound:
+                break
+            step = np.zeros(len(self.joints))
+            step[self.moving] = v[self._dof_adr]
+            nxt = self._clean_step(q, step)
+            if nxt is None:
+                break
+            q = nxt
+            if float(np.max(np.abs(v))) < CONVERGED:
+                break
+        self.config.update(q)
+        return np.asarray(q[self.qadr].copy())
+
     def _clean_step(self, q: np.ndarray, dq: np.ndarray) -> np.ndarray | None:
         """``q`` advanced by ``dq`` (limb joints, hinge/slide only), or by a fraction of it,
         clamped to the limits and free of contacts; None if no fraction is clean."""
@@ -290,3 +377,45 @@ class LimbSolver:
             if self.collides(nxt) is None:
                 return nxt  # collides() left the configuration at nxt
         return None
+
+
+def _stance(pm: PlatformModel, links: set[str]) -> tuple[tuple[int, ...], frozenset[int]]:
+    """For a limb that bears weight at neutral on a mobile base (a leg): the other bodies
+    bearing weight (the stance soles) and every body between them and the core (the stance
+    legs), which hold the body over the soles while the limb moves; nothing for any other
+    limb."""
+    if not pm.platform.base.mobile:
+        return (), frozenset()
+    model, eurdf = pm.model, pm.platform.eurdf
+    _, bearing = Fk(pm).margin(pm.neutral_qpos())
+    if not set(bearing) & links:
+        return (), frozenset()
+    core = {name for part in eurdf.core for name in part.links}
+    stance = tuple(model.body(name).id for name in bearing if name not in links)
+    chain: set[int] = set()
+    for body in stance:
+        while body > 0 and model.body(body).name not in core:
+            chain.add(body)
+            body = int(model.body_parentid[body])
+    return stance, frozenset(chain)
+
+
+def _actuated(pm: PlatformModel, bodies: frozenset[int]) -> tuple[str, ...]:
+    """The joints of P on ``bodies``, in P order."""
+    model = pm.model
+    names = {model.joint(j).name for b in bodies
+             for j in range(model.body_jntadr[b], model.body_jntadr[b] + model.body_jntnum[b])}
+    return tuple(j for j in pm.platform.eurdf.joint_names if j in names)
+
+
+def _sole_centre(model: mujoco.MjModel, data: mujoco.MjData, body: int) -> np.ndarray:
+    """The middle of what a stance body rests on (its collision points within TOUCH of the
+    floor at neutral), in the body's frame."""
+    rot, pos = data.xmat[body].reshape(3, 3), data.xpos[body]
+    down: list[np.ndarray] = []
+    for g in range(model.ngeom):
+        if model.geom_bodyid[g] == body and model.geom_contype[g]:
+            for p, r in samples(model, g):
+                if (pos + rot @ p)[2] - r < TOUCH:
+                    down.append(p)
+    return np.mean(down, axis=0) if down else np.zeros(3)
