@@ -36,6 +36,10 @@ MAX_TTL_MS: Final = 60_000
 """Largest command watchdog; a robot never moves on one message for longer than a minute."""
 MAX_HEADING: Final = 1000.0
 """Largest ``Command.heading`` magnitude in radians (any yaw, wound many times)."""
+MAX_DIRECTIONS: Final = 27
+"""Laban's 26 pulls and place-middle."""
+MAX_SIZES: Final = 64
+"""Stored sizes of one direction in a catalogue's ``tips``."""
 MAX_INT: Final = 2**63 - 1
 """Every integer on the wire fits SQLite's and C's int64."""
 MAX_PAYLOAD: Final = 64 * 1024
@@ -179,12 +183,19 @@ class BodyJoint(msgspec.Struct, forbid_unknown_fields=False):
 
 
 class LimbEntry(msgspec.Struct, forbid_unknown_fields=False):
-    """A ``(limb, origin)`` pair of the VSAM with the directions and sizes that have poses."""
+    """A ``(limb, origin)`` pair of the VSAM with the directions and sizes that have poses.
+
+    ``tips``: where each stored direction's poses point, one ``[x, y, z]`` (tip - origin, body
+    frame, metres) per stored size, so a client substitutes by the databank's own rule
+    (:mod:`kinesphere.substitution`); empty from older databanks.
+    """
 
     limb: str
     origin: str
     directions: list[str]
     sizes: list[Int]
+    tips: Annotated[dict[Name, Annotated[list[Vec3], msgspec.Meta(max_length=MAX_SIZES)]],
+                    msgspec.Meta(max_length=MAX_DIRECTIONS)] = {}
 
 
 class Drive(msgspec.Struct, forbid_unknown_fields=False):

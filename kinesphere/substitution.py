@@ -14,6 +14,12 @@ what the robot acknowledges agree:
 
 ``place-middle`` is the neutral pose, not a pull: it is served only by itself.
 
+A label is not enough: a stored direction serves as a replacement only if its poses *point*
+within the same limit of the request, i.e. every stored size's tip (tip - origin, measured by
+forward kinematics when the databank was built, published in the catalogue) lies within
+:data:`MAX_ANGLE_DEG` of it (:func:`points_within`); one that does not is passed over for the
+next by the rule. Unmeasured directions (an older databank) are judged by their label alone.
+
 :data:`MAX_ANGLE_DEG` bounds how far a replacement may be from the request: past it the served
 direction has hardly any component along the one asked for (place-low served by a high pull,
 a sideways push by forward), which is a different movement, not a substitute.
@@ -22,7 +28,7 @@ a sideways push by forward), which is a different movement, not a substitute.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from typing import Final, NamedTuple
 
 from kinesphere.laban import Direction
@@ -65,10 +71,49 @@ def _admissible(requested: Direction, candidates: list[Direction]) -> list[Direc
     return neutral + ahead
 
 
+ROUNDING_DEG: Final = 0.001
+"""Stored tips are rounded to a micrometre: an angle this far past the limit is on it."""
+
+
+Tips = Mapping[Direction, Sequence[Sequence[float]]]
+"""Where each stored direction's poses point: one tip offset (x, y, z, body frame) per size."""
+
+
+def pointing_angle(tip: Sequence[float], requested: Direction) -> float | None:
+    """Degrees between a measured tip offset and a direction; None for a tip on the origin or
+    place-middle (no bearing to compare)."""
+    d = requested.vector
+    n = math.sqrt(sum(v * v for v in tip))
+    if n < 1e-9 or not any(d):
+        return None
+    cos = sum(a * b for a, b in zip(tip, d, strict=True)) / n
+    return math.degrees(math.acos(max(-1.0, min(1.0, cos))))
+
+
+def points_within(tips: Sequence[Sequence[float]] | None, requested: Direction,
+                  max_angle: float = MAX_ANGLE_DEG) -> bool:
+    """Whether every measured size of a direction points within ``max_angle`` of
+    ``requested`` (True when unmeasured: nothing to judge but the label)."""
+    for tip in tips or ():
+        angle = pointing_angle(tip, requested)
+        if angle is not None and angle > max_angle + ROUNDING_DEG:
+            return False
+    return True
+
+
+def pointing(tips: Sequence[Tips], requested: Direction) -> Callable[[Direction], bool]:
+    """A candidate's test for :func:`nearest_direction`: its poses point within the limit of
+    ``requested`` on every body in ``tips`` (one mapping per body)."""
+    return lambda c: all(points_within(t.get(c), requested) for t in tips)
+
+
 def nearest_direction(
-    requested: Direction, available: Iterable[Direction], max_angle: float = 180.0
+    requested: Direction, available: Iterable[Direction], max_angle: float = 180.0,
+    points: Callable[[Direction], bool] | None = None,
 ) -> Choice | None:
-    """``requested`` itself when available, else the replacement by the module's rule.
+    """``requested`` itself when available, else the replacement by the module's rule;
+    ``points(candidate)``: whether the candidate's poses point close enough to the request
+    (:func:`pointing`), else it is passed over for the next one.
 
     None when nothing admissible lies within ``max_angle`` degrees (the caller then answers
     ``direction_unavailable``).
@@ -90,6 +135,10 @@ def nearest_direction(
             _ORDER[d],
         )
 
-    best = min(candidates, key=rank)
-    angle = angle_between(requested, best)
-    return Choice(best, angle) if angle <= max_angle + 1e-9 else None
+    for best in sorted(candidates, key=rank):
+        angle = angle_between(requested, best)
+        if angle > max_angle + 1e-9:
+            return None
+        if points is None or points(best):
+            return Choice(best, angle)
+    return None

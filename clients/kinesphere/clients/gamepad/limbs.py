@@ -22,7 +22,7 @@ from kinesphere.clients.link import RobotLink
 from kinesphere.errors import KinesphereError
 from kinesphere.laban import Direction
 from kinesphere.protocol import Catalogue
-from kinesphere.substitution import MAX_ANGLE_DEG, nearest_direction
+from kinesphere.substitution import MAX_ANGLE_DEG, Tips, nearest_direction, pointing
 
 log = logging.getLogger(__name__)
 
@@ -55,6 +55,15 @@ def direction_sets(
             if (e.limb, e.origin) == (limb, origin)]
 
 
+def tips_of(catalogues: Sequence[Catalogue], limb: str, origin: str) -> list[Tips]:
+    """Where each platform's stored directions for (limb, origin) point (the catalogue's
+    measured tips), one mapping per catalogue that knows the pair, in
+    :func:`direction_sets` order: the databank substitutes only directions whose poses point
+    within the limit of the request, and so does the client."""
+    return [{d: e.tips[slug] for slug in e.tips for d in _directions([slug])}
+            for c in catalogues for e in c.limbs if (e.limb, e.origin) == (limb, origin)]
+
+
 def available_directions(sets: Sequence[frozenset[Direction]]) -> frozenset[Direction] | None:
     """Directions with poses on every platform that has the pair (:func:`direction_sets`).
 
@@ -73,27 +82,32 @@ def _directions(slugs: Iterable[str]) -> Iterator[Direction]:
             log.debug("catalogue direction %r unknown to this client: skipped", slug)
 
 
-def served(asked: Direction, available: frozenset[Direction] | None) -> Direction:
+def served(asked: Direction, available: frozenset[Direction] | None,
+           tips: Sequence[Tips] = ()) -> Direction:
     """What to send for ``asked``: itself, or its replacement by the core substitution rule.
 
     The rule (:mod:`kinesphere.substitution`) is the one the ECL uses too: nearest by angle,
-    never a front request served from behind, at most ``MAX_ANGLE_DEG`` away. With no
-    catalogue yet, or nothing admissible, ``asked`` goes out unchanged and the robot answers
-    for it (``direction_unavailable``).
+    never a front request served from behind, at most ``MAX_ANGLE_DEG`` away, and pointing
+    (``tips``, :func:`tips_of`) within that of the request on every body. With no catalogue
+    yet, or nothing admissible, ``asked`` goes out unchanged and the robot answers for it
+    (``direction_unavailable``).
     """
     if available is None:
         return asked
-    choice = nearest_direction(asked, available, MAX_ANGLE_DEG)
+    choice = nearest_direction(asked, available, MAX_ANGLE_DEG, pointing(tips, asked))
     return asked if choice is None else choice.direction
 
 
-def servable(asked: Direction, sets: Sequence[frozenset[Direction]]) -> bool:
-    """Whether some body with the pair (:func:`direction_sets`) has ``asked`` or a substitute
-    for it within ``MAX_ANGLE_DEG`` (what its ECL would serve). False: every targeted robot
+def servable(asked: Direction, sets: Sequence[frozenset[Direction]],
+             tips: Sequence[Tips] = ()) -> bool:
+    """Whether some body with the pair (:func:`direction_sets`, with its :func:`tips_of`) has
+    ``asked`` or a substitute for it that its ECL would serve. False: every targeted robot
     would refuse the part (``direction_unavailable``), and with it the rest of the command.
     True when no catalogue knows the pair (nothing to go by: the robot answers)."""
+    own = list(tips) or [{}] * len(sets)
     return not sets or any(
-        nearest_direction(asked, have, MAX_ANGLE_DEG) is not None for have in sets)
+        nearest_direction(asked, have, MAX_ANGLE_DEG, pointing([t], asked)) is not None
+        for have, t in zip(sets, own, strict=True))
 
 
 def aliases_of(catalogues: Sequence[Catalogue]) -> dict[str, str]:

@@ -40,6 +40,7 @@ from kinesphere.clients.gamepad.limbs import (
     pairs_of,
     servable,
     served,
+    tips_of,
 )
 from kinesphere.clients.gamepad.mapfile import MapFile
 from kinesphere.clients.gamepad.mapping import (
@@ -199,11 +200,12 @@ class Teleop:
         self.selection.update(pairs_of(cats))
         self._aliases = aliases_of(cats)
         sets = direction_sets(cats, self.selection.limb, self.selection.origin)
+        tips = tips_of(cats, self.selection.limb, self.selection.origin)
         self._available = available_directions(sets)
         asked = self.intent.direction
-        snapped = served(asked, self._available)
+        snapped = served(asked, self._available, tips)
         self._asked = asked if snapped is not asked else None
-        self._limb_holds = not servable(asked, sets)
+        self._limb_holds = not servable(asked, sets, tips)
         if snapped is not asked:
             self.intent = replace(self.intent, direction=snapped)
         remote = self._remote_estop()

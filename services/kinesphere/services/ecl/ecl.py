@@ -43,7 +43,6 @@ from kinesphere.vocabulary import CORE_WORDS, LOCATION_WORDS, vocabulary
 
 if TYPE_CHECKING:  # imported when first needed: mink and the model cost a second
     from kinesphere.services.ecl.nested import Nested
-from kinesphere.substitution import MAX_ANGLE_DEG
 
 log = logging.getLogger(__name__)
 _DB_SUFFIXES = (".sqlite", ".sqlite3", ".db")
@@ -191,9 +190,7 @@ class Ecl:
                         k_id=cell.k_id if cell is not None else NO_ID, words=words)
         substitutions: list[Substitution] = []
         if cell is None:
-            cell, sub = nearest_cell(
-                lname, oname, cells, slug, exact or lname in self._core,
-                lambda c: (a := _angle(c.tip_at(s), slug)) is None or a <= MAX_ANGLE_DEG)
+            cell, sub = nearest_cell(lname, oname, cells, slug, exact or lname in self._core)
             substitutions.append(sub)
         translation: list[float] | None = None
         p_id: int | None = None
@@ -428,8 +425,10 @@ class Ecl:
                 core_dirs = [d.slug for d in self.directions(limb, origin)]
                 continue
             sizes = sorted({s for c in cells.values() for s in c.sizes})
+            tips = {c.slug: [list(t) for t in c.tips[1:] if t is not None]
+                    for c in cells.values() if any(t is not None for t in c.tips[1:])}
             limbs.append(LimbEntry(limb, origin, [d.slug for d in self.directions(limb, origin)],
-                                   sizes))
+                                   sizes, tips))
         step = self.vsam.translation_step
         self._catalogue = Catalogue(
             platform=self.platform.name,
