@@ -15,7 +15,7 @@ import mujoco
 import numpy as np
 from mink.limits.collision_avoidance_limit import compute_contact_normal_jacobian
 
-from kinesphere.services.ecl.measure import samples
+from kinesphere.services.ecl.measure import sample_points
 
 MAX_STEP = 0.4  # limb spans: the point task's error is clipped so big jumps cannot fly off
 CLEARANCE = 0.01  # metres kept between the limb and other geoms (less if closer at neutral)
@@ -149,15 +149,7 @@ class FloorLimit(mink.Limit):
     """Keep sample points of the limb's geoms at or above z = 0 (corners, rims, lowest points)."""
 
     def __init__(self, model: mujoco.MjModel, geoms: list[int]) -> None:
-        bodies, points, offsets = [], [], []
-        for g in geoms:
-            for p, r in samples(model, g):
-                bodies.append(int(model.geom_bodyid[g]))
-                points.append(p)
-                offsets.append(r)
-        self.bodies = np.array(bodies, dtype=int)
-        self.points = np.array(points, dtype=float).reshape(-1, 3)
-        self.offsets = np.array(offsets, dtype=float)
+        self.bodies, self.points, self.offsets = sample_points(model, geoms)
         self._jac = np.zeros((3, model.nv))
 
     def compute_qp_inequalities(

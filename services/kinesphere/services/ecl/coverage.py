@@ -60,8 +60,8 @@ def markdown(platforms: list[str], limbs: tuple[str, ...] = ("limb_11", "limb_12
              ) -> str:
     """docs/ecl.md's two coverage tables (per pair, then shared per limb label)."""
     rows = kept(platforms)
-    lines = ["| platform | limb (alias) | origin | size rule | pulls kept of 26 | far removed "
-             "for stability | dropped for stability |", "|---|---|---|---|---|---|---|"]
+    lines = ["| platform | limb (alias) | origin | size rule | pulls kept of 26 | top sizes "
+             "removed for stability | dropped for stability |", "|---|---|---|---|---|---|---|"]
     for r in rows:
         alias = f" ({r.alias})" if r.alias else ""
         lines.append(f"| {r.platform} | {r.limb}{alias} | {r.origin} | {r.rule} | "

@@ -84,6 +84,20 @@ def samples(model: mujoco.MjModel, g: int) -> list[tuple[np.ndarray, float]]:
     return [(pos + rot @ (s * half), 0.0) for s in signs]
 
 
+def sample_points(model: mujoco.MjModel, geoms: list[int]
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`samples` of several geoms as arrays: each point's body, the point in that body's
+    frame, and the radius to subtract from its height."""
+    bodies, points, radii = [], [], []
+    for g in geoms:
+        for p, r in samples(model, g):
+            bodies.append(int(model.geom_bodyid[g]))
+            points.append(p)
+            radii.append(r)
+    return (np.array(bodies, dtype=int), np.array(points, dtype=float).reshape(-1, 3),
+            np.array(radii, dtype=float))
+
+
 def _rotation(model: mujoco.MjModel, g: int) -> np.ndarray:
     """A geom's orientation in its body frame, as a 3x3 matrix."""
     flat = np.zeros(9)
@@ -122,16 +136,8 @@ class Fk:
         self._origins: dict[str, np.ndarray] = {}
         self._tips: dict[str, tuple[int, np.ndarray]] = {}
         floor = m.geom("floor").id
-        bodies, points, radii = [], [], []
-        for g in range(m.ngeom):
-            if m.geom_contype[g] and g != floor:
-                for p, r in samples(m, g):
-                    bodies.append(int(m.geom_bodyid[g]))
-                    points.append(p)
-                    radii.append(r)
-        self._bodies = np.array(bodies, dtype=int)
-        self._points = np.array(points, dtype=float).reshape(-1, 3)
-        self._radii = np.array(radii, dtype=float)
+        self._bodies, self._points, self._radii = sample_points(
+            m, [g for g in range(m.ngeom) if m.geom_contype[g] and g != floor])
         self._neutral_offsets: dict[tuple[str, str], np.ndarray] = {}
 
     def _kinematics(self, qpos: np.ndarray) -> mujoco.MjData:
