@@ -18,6 +18,7 @@ from kinesphere.clients.gamepad.limbs import (
     pairs_of,
     servable,
     served,
+    tips_of,
 )
 from kinesphere.clients.gamepad.mapping import MapperState, map_controls
 from kinesphere.clients.gamepad.state import ControllerState
@@ -66,13 +67,14 @@ def test_stick_headings_keep_their_side_on_every_shipped_limb(
     name: str, cat: Catalogue, limb: str, origin: str
 ) -> None:
     available = available_directions(direction_sets([cat], limb, origin))
+    tips = tips_of([cat], limb, origin)
     assert available, name
     signs = {forward_sign(d) for d in available if d is not Direction.PLACE_MIDDLE}
     for k, horizontal in enumerate(RING):
         for level in Level:
             asked = pushed(k * 45.0, level)
             assert asked == Direction((horizontal.value, level.value)), "the mapping itself"
-            got = served(asked, available)
+            got = served(asked, available, tips)
             where = (name, asked.slug, got.slug)
             if asked in available:
                 assert got is asked, where
@@ -92,27 +94,50 @@ def test_the_client_drops_a_part_exactly_when_the_databank_would_refuse_it(
 ) -> None:
     """``servable`` (the client sends the drive alone when it is False) agrees with the real
     ECL on every stick heading and level: a part is dropped only when the databank would
-    answer ``direction_unavailable``, never when it would serve it or a substitute."""
+    answer ``direction_unavailable``, never when it would serve it or a substitute; and what
+    the client sends instead is what the databank would serve (both judge by the catalogue's
+    measured tips)."""
     sets = direction_sets([cat], limb, origin)
+    tips = tips_of([cat], limb, origin)
     ecl = ECLS[cat.platform]
     for k in range(len(RING)):
         for level in Level:
             asked = pushed(k * 45.0, level)
             try:
-                ecl.query(limb, origin, asked.slug, 3, False)
+                pose = ecl.query(limb, origin, asked.slug, 3, False)
                 answered = True
             except KinesphereError as exc:
                 assert exc.code == "direction_unavailable", (name, asked.slug, exc)
                 answered = False
-            assert servable(asked, sets) is answered, (name, asked.slug)
+            assert servable(asked, sets, tips) is answered, (name, asked.slug)
+            if answered:
+                got = served(asked, available_directions(sets), tips)
+                assert got.slug == pose.direction, (name, asked.slug)
 
 
-def test_the_packbot_sweep_is_served_in_front() -> None:
-    """The headline gesture: low + stick left/right on the PackBot arm (it has no left-low)."""
-    arm = available_directions(direction_sets([CATALOGUES["packbot"]], "limb_11", "distal_11"))
-    assert arm is not None and Direction.LEFT_LOW not in arm
-    assert served(pushed(90, Level.LOW), arm) is Direction.LEFT_FORWARD_LOW
-    assert served(pushed(-90, Level.LOW), arm) is Direction.RIGHT_FORWARD_LOW
+def test_the_packbot_sweep_is_served_as_asked() -> None:
+    """The headline gesture: low + stick left/right on the PackBot arm, which reaches low to
+    either side: sent as asked, no substitute."""
+    pb = [CATALOGUES["packbot"]]
+    arm = available_directions(direction_sets(pb, "limb_11", "distal_11"))
+    tips = tips_of(pb, "limb_11", "distal_11")
+    assert arm is not None and Direction.LEFT_LOW in arm
+    assert served(pushed(90, Level.LOW), arm, tips) is Direction.LEFT_LOW
+    assert served(pushed(-90, Level.LOW), arm, tips) is Direction.RIGHT_LOW
+
+
+def test_a_neighbour_that_points_elsewhere_is_no_substitute() -> None:
+    """NAO's head has forward-high, 45 degrees from place-high by label, but the neck tilts
+    38.5 degrees only: its poses look 51 degrees away from straight up, so the client, like
+    the databank, does not send it for place-high."""
+    nao = [CATALOGUES["nao"]]
+    head = direction_sets(nao, "limb_51", "distal_51")
+    tips = tips_of(nao, "limb_51", "distal_51")
+    available = available_directions(head)
+    assert available is not None and Direction.FORWARD_HIGH in available
+    assert served(Direction.PLACE_HIGH, available) is Direction.FORWARD_HIGH  # by label
+    assert served(Direction.PLACE_HIGH, available, tips) is Direction.PLACE_HIGH  # as asked
+    assert not servable(Direction.PLACE_HIGH, head, tips)
 
 
 def test_without_a_catalogue_the_stick_goes_out_as_asked() -> None:

@@ -392,11 +392,12 @@ def packbot_operator(session: zenoh.Session, link: RobotLink, inp: pad.PygameInp
         yield op
 
 
-def test_a_direction_the_limb_lacks_is_served_in_front(
+def test_the_sweep_goes_out_as_asked(
     hub: tuple[zenoh.Session, str], link: RobotLink, inboxes: dict[str, Inbox],
     inp: pad.PygameInput,
 ) -> None:
-    """The PackBot arm (real databank) has no left-low: low + stick left sends left-forward-low."""
+    """The PackBot arm (real databank) reaches low to either side: low + stick left sends
+    left-low, stick right right-low, no substitute."""
     with packbot_operator(hub[0], link, inp) as op:
         p = Pad()
         p.deadman()
@@ -406,39 +407,39 @@ def test_a_direction_the_limb_lacks_is_served_in_front(
         p.right(1.0, 0.0)
         right = op.tick(inp.poll())
     assert (left.limb, left.origin) == ("limb_11", "distal_11")
-    assert left.asked is Direction.LEFT_LOW and left.intent.direction is Direction.LEFT_FORWARD_LOW
-    assert right.asked is Direction.RIGHT_LOW
-    assert right.intent.direction is Direction.RIGHT_FORWARD_LOW
-    assert left.available is not None and Direction.LEFT_LOW not in left.available
+    assert left.asked is None and left.intent.direction is Direction.LEFT_LOW
+    assert right.asked is None and right.intent.direction is Direction.RIGHT_LOW
+    assert left.available is not None and Direction.LEFT_LOW in left.available
     settle(link, inboxes)
     assert [c.parts[0].direction for c in inboxes["r2"].commands()[-2:]] == [
-        "left-forward-low", "right-forward-low"]
+        "left-low", "right-low"]
 
 
 def test_a_direction_no_body_has_near_sends_the_drive_alone(
     hub: tuple[zenoh.Session, str], link: RobotLink, inboxes: dict[str, Inbox],
     inp: pad.PygameInput,
 ) -> None:
-    """PackBot's arm (shipped databank) has nothing within 45 degrees of plain left-middle:
-    stick left while driving forward sends the drive alone (a robot would refuse the whole
-    command for the part), the limb holds and the view says so; a servable push sends its
-    part again."""
+    """PackBot's arm (shipped databank) has no pose pointing within 45 degrees of back-low
+    (its shoulder cannot point below the deck behind it): stick back and low while driving
+    forward sends the drive alone (a robot would refuse the whole command for the part), the
+    limb holds and the view says so; a servable push sends its part again."""
     with packbot_operator(hub[0], link, inp) as op:
         p = Pad()
         p.deadman()
         p.left(0.0, -0.6)  # base: forward
-        p.right(-1.0, 0.0)  # arm: left, middle level
+        p.axis(pygame.CONTROLLER_AXIS_TRIGGERLEFT, 1.0)  # low
+        p.right(0.0, 1.0)  # arm: back, low
         held = op.tick(inp.poll())
-        p.axis(pygame.CONTROLLER_AXIS_TRIGGERLEFT, 1.0)  # low: the sweep, served in front
+        p.right(-1.0, 0.0)  # left, low: the sweep
         swept = op.tick(inp.poll())
-    assert held.intent.direction is Direction.LEFT_MIDDLE and held.limb_holds
-    assert held.available is not None and Direction.LEFT_MIDDLE not in held.available
-    assert not swept.limb_holds and swept.intent.direction is Direction.LEFT_FORWARD_LOW
+    assert held.intent.direction is Direction.BACK_LOW and held.limb_holds
+    assert held.available is not None and Direction.BACK_LOW not in held.available
+    assert not swept.limb_holds and swept.intent.direction is Direction.LEFT_LOW
     settle(link, inboxes)
     drive_only, sweep = inboxes["r2"].commands()[-2:]
     assert drive_only.parts == [] and drive_only.drive is not None
     assert drive_only.drive.forward > 0
-    assert [s.direction for s in sweep.parts] == ["left-forward-low"]
+    assert [s.direction for s in sweep.parts] == ["left-low"]
     assert sweep.drive is not None and sweep.drive.forward > 0
 
 

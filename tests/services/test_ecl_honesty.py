@@ -1,7 +1,7 @@
 """The shipped databanks keep what the paper asks and nothing dishonest: NAO's head by gaze,
 Baxter's wrists with the paper's three directions, one hip motor on NAO, no pose that topples,
-sizes that step from neutral toward the direction without flipping, origins at pivots, and the
-coverage tables of docs/ecl.md."""
+sizes that grow by the limb's rule without flipping, origins at pivots, and the coverage
+tables of docs/ecl.md."""
 
 from __future__ import annotations
 
@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from kinesphere.cli import main
+from kinesphere.errors import KinesphereError
 from kinesphere.laban import Direction
 from kinesphere.platforms.frames import pivot
 from kinesphere.platforms.mjcf import platform_model
@@ -23,7 +24,7 @@ from kinesphere.services.ecl.chains import COS_FAR, DETOUR_SLACK, STEP_SLACK
 from kinesphere.services.ecl.coverage import markdown
 from kinesphere.services.ecl.db import read_tables
 from kinesphere.services.ecl.store import default_db_path
-from support.ecl import configure, gaze, origin_of, shipped, tip_world
+from support.ecl import configure, full, gaze, origin_of, shipped, tip_world
 from support.paths import ROOT
 
 ARTICULATED = ("baxter", "nao", "youbot", "packbot")
@@ -75,7 +76,7 @@ def test_no_stored_pose_topples(name: str) -> None:
     pm = platform_model(name)
     for r in shipped(name).rows():
         if r["joints"]:
-            margin, bearing = balance.margin(pm.qpos(r["joints"]))
+            margin, bearing = balance.margin(pm.qpos(full(r)))
             assert margin >= MARGIN, (r["limb"], r["direction"], r["size"], margin, bearing)
 
 
@@ -84,7 +85,7 @@ def test_the_balance_check_sees_a_lifted_leg_topple() -> None:
     balance = Balance(pm)
     margin, bearing = balance.margin(pm.neutral_qpos())
     assert margin > 0.05 and bearing == ("l_ankle", "r_ankle")  # standing on both soles
-    lifted = pm.qpos({"LHipPitch": -0.8, "LKneePitch": 0.8})  # left foot up and forward
+    lifted = pm.qpos({"LHipPitch": -0.8, "LKneePitch": 1.4})  # left knee up, the foot lifted
     margin, bearing = balance.margin(lifted)
     assert bearing == ("r_ankle",) and margin < 0  # the centre of mass is not over the right
     assert "unstable" in (balance.check(lifted) or "")
@@ -102,32 +103,39 @@ def test_the_balance_check_sees_a_lifted_leg_topple() -> None:
     assert anchored.check(baxter.neutral_qpos()) is None
 
 
-def test_nao_legs_keep_only_stable_directions_and_the_report_says_why(
+def test_nao_legs_lose_sizes_not_directions_and_the_report_says_so(
     capsys: pytest.CaptureFixture[str],
 ) -> None:
-    unstable = shipped("nao").dropped("unstable")
-    assert unstable["limb_31/distal_31"] and unstable["limb_41/distal_41"]
-    assert all("unstable" in why for pulls in unstable.values() for why in pulls.values())
+    """With the stance leg carrying the body, no leg direction is dropped for stability; where
+    the largest sizes would still topple, only they go, and ``ecl report`` names them."""
+    unstable, short = shipped("nao").dropped("unstable"), shipped("nao").dropped("short")
+    for pair in ("limb_31/distal_31", "limb_41/distal_41"):
+        assert not unstable[pair] and short[pair], pair
+        assert all(why.startswith("size ") and "unstable" in why for why in short[pair].values())
     assert main(["ecl", "report", "nao"]) == 0
     out = capsys.readouterr().out
-    assert "limb_41/distal_41 dropped for stability:" in out
-    assert "forward-middle" in out.split("limb_41/distal_41 dropped for stability:")[1]
+    assert "size rule" in out and "reach" in out and "swing" in out
+    assert "limb_41/distal_41 sizes removed for stability:" in out
 
 
 def test_nao_head_looks_where_it_is_told() -> None:
     ecl = shipped("nao")
     have = {d.slug for d in ecl.directions("limb_51", "distal_51")}
     assert {"place-middle", "left-middle", "right-middle"} <= have  # the paper's five, ...
+    assert "forward-middle" in have  # where it looks at rest: answered by itself
     assert not {"place-high", "place-low"} & have  # ... but its neck tilts only 38/30 degrees
     left = gaze("nao", ecl.query("head", "neck", "left-middle", 3).joints)
     right = gaze("nao", ecl.query("head", "neck", "right-middle", 3).joints)
     assert left[1] > 0.95 and right[1] < -0.95
     assert gaze("nao", ecl.query("head", "neck", "place-middle", 3).joints)[0] > 0.99
-    up = ecl.query("head", "neck", "place-high", 3)  # served by the nearest: look up
-    assert up.direction == "forward-high" and up.substitutions[0].requested == "place-high"
+    ahead = ecl.query("head", "neck", "forward-middle", 1)
+    assert not ahead.substitutions and gaze("nao", ahead.joints)[0] > 0.99
+    for slug in ("place-high", "place-low"):  # the nearest pose looks 51/60 degrees away:
+        with pytest.raises(KinesphereError) as err:  # not a substitute
+            ecl.query("head", "neck", slug, 3)
+        assert err.value.code == "direction_unavailable"
+    up = ecl.query("head", "neck", "forward-high", 3)
     assert gaze("nao", up.joints)[2] > 0.5
-    down = ecl.query("head", "neck", "place-low", 3)
-    assert down.direction == "forward-low" and gaze("nao", down.joints)[2] < -0.4
 
 
 # -- Baxter's wrists: the paper's three per wrist -------------------------------------------------
@@ -143,38 +151,46 @@ def test_baxter_wrists_keep_the_papers_directions(limb: str, paper: tuple[str, .
         assert rows[-1]["cosine"] >= COS_FAR
 
 
-# -- sizes: steps from neutral toward the direction, no flips ----------------------------------
+# -- sizes: grow by the limb's rule, no flips --------------------------------------------------
 @pytest.mark.parametrize("name", ARTICULATED)
-def test_near_is_ahead_of_neutral_and_every_size_further(name: str) -> None:
+def test_sizes_grow_by_the_limbs_rule(name: str) -> None:
+    """Reach: the tip gets no closer to the origin from near to far; swing: the bearing turns
+    no further from the direction (a cell holding neutral at every size does neither)."""
     pm = platform_model(name)
     e = pm.platform.eurdf
     neutral = configure(pm, {})
     rot = neutral.xmat[pm.model.body(e.root_link).id].reshape(3, 3)
+    rules, swung = shipped(name).notes("size_rules"), shipped(name).notes("swung")
     rows = [r for r in shipped(name).rows() if r["joints"] and r["direction"] != "place-middle"]
-    cells: dict[tuple[str, str, str], list[float]] = {}
+    cells: dict[tuple[str, str, str], list[np.ndarray]] = {}
     for r in rows:
         origin = origin_of(pm, neutral, r["origin"])
-        d = np.array(Direction.parse(r["direction"]).vector)
-        key = (r["limb"], r["origin"], r["direction"])
-        if key not in cells:
-            cells[key] = [float(rot.T @ (tip_world(pm, neutral, r["limb"]) - origin) @ d)]
-        tip = tip_world(pm, configure(pm, r["joints"]), r["limb"])
-        cells[key].append(float(rot.T @ (tip - origin) @ d))
+        tip = tip_world(pm, configure(pm, full(r)), r["limb"])
+        cells.setdefault((r["limb"], r["origin"], r["direction"]), []).append(
+            rot.T @ (tip - origin))
     assert cells
-    for key, proj in cells.items():
-        assert len(proj) == 4 and all(a < b for a, b in zip(proj, proj[1:], strict=False)), (
-            key, proj)
+    for (limb, origin, slug), tips in cells.items():
+        pair = f"{limb}/{origin}"
+        d = np.array(Direction.parse(slug).vector)
+        if rules[pair] == "reach" and slug not in swung.get(pair, []):
+            grows = [float(np.linalg.norm(t)) for t in tips]
+        else:
+            grows = [float(t @ d / np.linalg.norm(t)) for t in tips]
+        assert all(a <= b + 1e-6 for a, b in zip(grows, grows[1:], strict=False)), (
+            limb, slug, grows)
 
 
 @pytest.mark.parametrize("name", ARTICULATED)
 def test_successive_sizes_stay_close_in_joint_space(name: str) -> None:
     for key, chain in chains(name).items():
-        q = np.array(chain)
+        q = np.array(chain[1:])  # near .. far: near may fold further than neutral
+        if len(q) < 2:
+            continue
         steps = np.abs(np.diff(q, axis=0))
         turned_back = steps.sum(axis=0) - np.abs(q[-1] - q[0])
         assert turned_back.max() <= DETOUR_SLACK + 1e-9, (key, np.round(q, 3))
-        share = np.abs(q[-1] - q[1]) / (len(q) - 2)  # even steps from near to far
-        assert (steps[1:] - share).max() <= STEP_SLACK + 1e-9, (key, np.round(q, 3))
+        share = np.abs(q[-1] - q[0]) / (len(q) - 1)  # even steps from near to far
+        assert (steps - share).max() <= STEP_SLACK + 1e-9, (key, np.round(q, 3))
 
 
 # -- origins ---------------------------------------------------------------------------------

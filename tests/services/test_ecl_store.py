@@ -36,7 +36,7 @@ def test_schema_is_the_papers(tmp_path: Path) -> None:
     db = tmp_path / "toy.sqlite"
     build(db)
     tables = {r[0] for r in _sql(db, "SELECT name FROM sqlite_master WHERE type = 'table'")}
-    assert tables == {"meta", "vsam", "pose", "quality"}
+    assert tables == {"meta", "vsam", "pose", "quality", "support"}
     cols = [(r[1], r[2], r[5]) for r in _sql(db, "PRAGMA table_info(pose)")]
     assert cols == [("p_id", "INTEGER", 1), ("k_id", "INTEGER", 2), ("yaw", "REAL", 0),
                     ("elbow", "REAL", 0), ("wrist", "REAL", 0), ("tail_joint", "REAL", 0)]
@@ -44,6 +44,11 @@ def test_schema_is_the_papers(tmp_path: Path) -> None:
         "k_id", "origin", "limb", "direction"]
     assert _sql(db, "PRAGMA foreign_key_list(pose)")[0][2:5] == ("vsam", "k_id", "k_id")
     assert {r[3] for r in _sql(db, "PRAGMA foreign_key_list(quality)")} == {"p_id", "k_id"}
+    assert [r[1] for r in _sql(db, "PRAGMA table_info(quality)")] == [
+        "p_id", "k_id", "cosine", "reach", "margin", "tip_x", "tip_y", "tip_z"]
+    support = [(r[1], r[2], r[5]) for r in _sql(db, "PRAGMA table_info(support)")]
+    assert support == cols  # keyed like pose, a column per joint of P
+    assert {r[3] for r in _sql(db, "PRAGMA foreign_key_list(support)")} == {"p_id", "k_id"}
     assert _sql(db, "PRAGMA journal_mode") == [("wal",)]
 
 

@@ -12,8 +12,8 @@ from kinesphere.laban import Direction
 from kinesphere.platforms.frames import pivot
 from kinesphere.platforms.mjcf import PlatformModel, platform_model
 from kinesphere.platforms.platform import Platform, load_platform
-from kinesphere.services.ecl.measure import tip_point
 from kinesphere.services.ecl.ecl import Ecl
+from kinesphere.services.ecl.measure import tip_point
 from kinesphere.services.ecl.store import PoseRow, write_databank
 from kinesphere.services.ecl.vsam import load_vsam
 from support.paths import TOY
@@ -28,6 +28,11 @@ def tip_world(pm: PlatformModel, data: mujoco.MjData, limb: str) -> np.ndarray:
     body = pm.model.body(pm.platform.eurdf.tip_link(limb)).id
     point = tip_point(pm.model, body)
     return np.asarray(data.xpos[body] + data.xmat[body].reshape(3, 3) @ point)
+
+
+def full(row: dict) -> dict[str, float]:
+    """A stored row's joints and its support (a stance leg)."""
+    return {**row["joints"], **row.get("support", {})}
 
 
 def configure(pm: PlatformModel, joints: dict[str, float]) -> mujoco.MjData:
