@@ -7,7 +7,8 @@ change to the generator shows its effect in numbers. Per (limb, origin) pair:
 * **pointing**: the cosine between each stored row's bearing (tip - origin) and its direction,
   min / 5th percentile / median over every stored size;
 * **reach**: each size's tip distance from the origin as a fraction of the far tip's (median
-  over the cells that store far), and the cells whose tip gets closer as the size grows;
+  over the cells that store far), and the cells whose sizes go backwards (the tip closer as
+  the size grows; for a limb that swings, its bearing turning away from the direction);
 * **sizes**: cells that stop short of the largest size (removed for stability);
 * **substitution**: every pull the pair does not store, asked at every size as a fleet command
   (not exact), and the measured angle between the request and where the served pose points;
@@ -65,7 +66,7 @@ class PairAudit:
     cosine_p5: float | None
     cosine_median: float | None
     fraction: dict[int, float]  # size -> median tip distance / far tip distance
-    inverted: list[str]  # cells whose tip gets closer to the origin as the size grows
+    disordered: list[str]  # cells whose sizes go backwards (see _disordered)
     short: dict[str, list[int]]  # cells stopping short of the largest size: their sizes
     substituted: list[Served]  # requests served by another direction (every size)
     refused: list[Served]
@@ -130,9 +131,9 @@ def _pair(ecl: Ecl, fk: Fk, limb: str, origin: str, alias: str, rule: str) -> Pa
                   and np.linalg.norm(c[largest]) > 1e-9]
         if ratios:
             fraction[s] = statistics.median(ratios)
-    inverted = sorted(d for d, c in cells.items()
-                      if any(np.linalg.norm(c[b]) < np.linalg.norm(c[a]) - 1e-3
-                             for a, b in zip(sorted(c), sorted(c)[1:], strict=False)))
+    swung = set(ecl.notes("swung").get(f"{limb}/{origin}", []))
+    disordered = sorted(d for d, c in cells.items()
+                        if _disordered(c, Direction.parse(d), rule == "swing" or d in swung))
     short = {d: sorted(c) for d, c in cells.items() if largest not in c}
     substituted, refused = _requests(ecl, fk, limb, origin, set(cells))
     neutral = {}
@@ -150,11 +151,22 @@ def _pair(ecl: Ecl, fk: Fk, limb: str, origin: str, alias: str, rule: str) -> Pa
         cosine_min=qs[0] if qs else None,
         cosine_p5=float(np.percentile(qs, 5)) if qs else None,
         cosine_median=statistics.median(qs) if qs else None,
-        fraction=fraction, inverted=inverted, short=short, substituted=substituted,
+        fraction=fraction, disordered=disordered, short=short, substituted=substituted,
         refused=refused, neutral=neutral,
         margin_min=min(m for m, _ in margins) if margins else None,
         unstable=[where for m, where in margins if m < STABLE],
     )
+
+
+def _disordered(cell: dict[int, np.ndarray], d: Direction, swing: bool) -> bool:
+    """Whether a bigger size of a cell reaches less: its tip closer to the origin (by more
+    than a millimetre), or, for a limb that swings, its bearing turned away from d."""
+    sizes = sorted(cell)
+    def grows(x: np.ndarray) -> float:
+        return cosine(x, np.array(d.vector)) if swing else float(np.linalg.norm(x))
+    slack = 1e-3
+    return any(grows(cell[b]) < grows(cell[a]) - slack
+               for a, b in zip(sizes, sizes[1:], strict=False))
 
 
 def _requests(ecl: Ecl, fk: Fk, limb: str, origin: str, stored: set[str]

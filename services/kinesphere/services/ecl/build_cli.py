@@ -80,7 +80,8 @@ def register_build(ecl_sub: Any, top_sub: Any) -> None:
         "model, from the stored joint values alone, not the generator's quality table): per "
         "(limb, origin) pair the cosine between each row's bearing (tip - origin) and its "
         "direction (min / 5th percentile / median), each size's tip distance as a fraction of "
-        "far's (median; near/far is the first), cells whose tip gets closer as the size grows, "
+        "far's (median; near/far is the first), cells whose sizes go backwards (the tip closer, "
+        "or for a swinging limb the bearing turned away, as the size grows), "
         "cells stopping short of far (sizes removed for stability), every missing pull asked "
         "at every size (served by a neighbour: how many and the worst measured angle to the "
         "request; refused), the pulls the neutral pose already points at and how they are "
@@ -316,7 +317,7 @@ def _audit(args: argparse.Namespace) -> int:
         return 0
     table = Table(title=f"{result.platform} audit (version {result.version}, "
                   f"{result.generator or 'unknown generator'}): measured by forward kinematics")
-    for col in ("limb", "origin", "rule", "pulls", "cosine min/p5/med", "size/far", "inverted",
+    for col in ("limb", "origin", "rule", "pulls", "cosine min/p5/med", "size/far", "backwards",
                 "short of far", "substituted (worst)", "> 45 deg", "refused",
                 "neutral directions", "min margin"):
         table.add_column(col, justify="left" if col in ("limb", "origin", "rule",
@@ -333,7 +334,7 @@ def _audit(args: argparse.Namespace) -> int:
             margin = f"{p.margin_min * 100:.1f} cm" + (
                 f" ({len(p.unstable)} < 1 cm)" if p.unstable else "")
         table.add_row(p.limb + (f" ({p.alias})" if p.alias else ""), p.origin, p.rule,
-                      str(p.pulls), cos, fractions, str(len(p.inverted)), str(len(p.short)),
+                      str(p.pulls), cos, fractions, str(len(p.disordered)), str(len(p.short)),
                       subs, str(len(over_limit(p))), str(len(p.refused)), neutral, margin)
     console.print(table)
     console.print("size/far: median tip distance of each stored size over far's (near first); "
