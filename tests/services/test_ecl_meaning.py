@@ -153,6 +153,10 @@ def test_nao_stands_on_one_leg_while_the_other_gestures(limb: str, origin: str) 
     assert lifted, "a lifted leg is held by the other one"
     stance = {"limb_31": "L", "limb_41": "R"}[limb]
     assert all(j.startswith(stance) for r in lifted for j in r["support"])
+    home = ecl("nao").query(limb, origin, "place-middle", 1).joints  # both legs stand again
+    held = {j for r in lifted for j in r["support"]}
+    neutral = platform_model("nao").platform.neutral
+    assert held <= set(home) and all(home[j] == neutral.get(j, 0.0) for j in held)
 
 
 @pytest.mark.parametrize("name", ["nao", "youbot", "packbot"])  # Baxter is bolted down

@@ -126,7 +126,13 @@ class Ecl:
         self._vocabulary = vocabulary(e)
         self._read_words(served)
         self._chains = {p.name: p.index for p in e.limbs}
+        # a limb's neutral, and its stance leg's when it has one: back at place-middle, the
+        # leg that held the body over its foot stands as before too
         self._neutral = {li: limb_neutral(plat, li) for li in e.L}
+        for cell in (c for cs in cells.values() for c in cs.values()):
+            if cell.limb in self._neutral:
+                held = [j for j in cell.joints if j not in self._neutral[cell.limb]]
+                self._neutral[cell.limb].update({j: plat.neutral.get(j, 0.0) for j in held})
         self._quality = {(q[0], q[1]): q[2:] for q in t.quality}
         self._own = {li: frozenset(e.limb_joints(li)) for li in e.L}
         self._max_size = vsam.max_size
