@@ -7,8 +7,9 @@ to the target against the MuJoCo model's collision geometry (kinematics only: ``
 and ``mj_collision`` every PATH_STEP radians of the largest joint motion). When it touches,
 the move goes via waypoints, tried in a fixed order: the moving joints' neutral, the proximal
 or the distal half of the moving joints first, then a short seeded search in the space of the
-moving joints. Every leg of a route is clear; a target no route reaches is refused with the
-link pair that touches. Deterministic: the same start and goal give the same route.
+moving joints, last through neutral (the moving joints', then also every joint below them).
+Every leg of a route is clear; a target no route reaches is refused with the link pair that
+touches. Deterministic: the same start and goal give the same route.
 """
 
 from __future__ import annotations
@@ -68,6 +69,12 @@ class Clearance:
         finite = np.isfinite(lo) & np.isfinite(hi)
         self.lower = np.where(finite, lo + margin, self.neutral - np.pi)
         self.upper = np.where(finite, hi - margin, self.neutral + np.pi)
+        # below[i]: the joints on the bodies below joint i's (what turns when it turns)
+        m = self.model
+        body = np.array([m.jnt_bodyid[m.joint(j).id] for j in names])
+        self._below = np.array([[j != i and self._descends(int(body[j]), int(body[i]))
+                                 for j in range(len(names))] for i in range(len(names))],
+                               dtype=bool).reshape(len(names), len(names))
 
     def touching(self, q: np.ndarray, allowed: frozenset[tuple[str, str]] = frozenset()
                  ) -> tuple[str, str] | None:
@@ -114,17 +121,29 @@ class Clearance:
         home = self._home(a, b)
         if np.allclose(home, a) or np.allclose(home, b):
             return direct
-        back, ahead = self._search(home, a), self._search(home, b)
-        if back is None or ahead is None:
-            return direct
-        return [*(list(reversed(back[:-1]))), home, *ahead]
+        for via in (home, self._home(a, b, below=True)):
+            back, ahead = self._search(via, a), self._search(via, b)
+            if back is not None and ahead is not None:
+                return [*(list(reversed(back[:-1]))), via, *ahead]
+        return direct
 
-    def _home(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        """``a`` with the joints that move on the way to ``b`` at neutral."""
+    def _home(self, a: np.ndarray, b: np.ndarray, below: bool = False) -> np.ndarray:
+        """``a`` with the joints that move on the way to ``b`` at neutral; ``below``: and every
+        joint beneath them (two poses of a forearm may share a folded elbow that neutral does
+        not have: each was planned from neutral, so they are joined there)."""
         moving = np.abs(b - a) > STILL
+        if below:
+            moving = moving | self._below[moving].any(axis=0)
         home = a.copy()
         home[moving] = self.neutral[moving]
         return home
+
+    def _descends(self, body: int, ancestor: int) -> bool:
+        while body > 0:
+            if body == ancestor:
+                return True
+            body = int(self.model.body_parentid[body])
+        return False
 
     def _search(self, a: np.ndarray, b: np.ndarray) -> list[np.ndarray] | None:
         """The direct way or the first clear one through the candidate waypoints, or None."""
