@@ -270,8 +270,10 @@ def _direction(solver: LimbSolver, sizes: Sizes, balance: Balance, direction: Di
     if isinstance(found, str):
         return held if at_rest else _Drop(found)
     chain, rule = found.poses, found.rule
-    if solver.stance:  # a leg: the stance leg keeps the body over its sole at every size
-        chain = [measure(solver, solver.balanced(p.values), d) for p in chain]
+    if solver.stance:  # a leg: where the body would topple, the stance leg carries it over
+        chain = [measure(solver, solver.balanced(p.values), d)  # its sole (a person shifts
+                 if balance.check(solver.full_q(p.values)) else p  # weight only then)
+                 for p in chain]
     stand: list[LimbPose] = []
     short: str | None = None
     for size, pose in zip(sizes.sizes, chain, strict=True):
