@@ -255,8 +255,9 @@ class Pose(Message, tag="pose", kw_only=True):
     measured_angle: Degrees | None = None
     """Degrees between the requested direction and where the served pose points (the tip's
     bearing from the origin, measured by forward kinematics when the databank was built,
-    blended between stored sizes); None when not measured (neutral, core and compound poses,
-    recorded poses, databanks built before it was)."""
+    blended between stored sizes; a compound's worst part, a nested answer's worst segment as
+    the solver measured it); None when not measured (neutral and core poses, recorded poses,
+    databanks built before it was)."""
 
     @property
     def is_compound(self) -> bool:
@@ -417,7 +418,7 @@ class Ack(Message, tag="ack", kw_only=True):
     ``(sender, session, seq)`` name the command; ``stage`` is an :class:`AckStage`; ``code``
     an error code when ``rejected`` (``lease_held``, ``estopped``, ``stale``, ``expired``,
     ``direction_unavailable``...). ``lease_holder`` is who holds the robot's lease now;
-    ``substitutions`` and ``words`` what the command meant on this body.
+    ``substitutions``, ``words`` and ``measured_angle`` what the command meant on this body.
     """
 
     robot_id: Name
@@ -436,6 +437,10 @@ class Ack(Message, tag="ack", kw_only=True):
     """For a command with ``arrive_ms``: how much later than asked the robot reaches its
     target, in the sender's milliseconds; planned in ``moving``, as it happened in the final
     stage (``superseded`` before arriving: how late the command that replaced it found it)."""
+    measured_angle: Degrees | None = None
+    """Degrees between what was asked and where the pose the robot follows points, as its
+    answer (:attr:`Pose.measured_angle`) measured it; the worst part's for several parts; None
+    when not measured."""
 
 
 class BodyModel(Message, tag="body_model", kw_only=True):

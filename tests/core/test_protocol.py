@@ -298,3 +298,14 @@ def test_robot_state_fields_are_bounded(fields: dict[str, Any], what: str) -> No
           "status": "idle", "last_command_seq": -1}
     assert pr.decode(raw(ok), pr.RobotState).robot_id == "r"
     assert what in malformed(raw({**ok, **fields}), pr.RobotState)
+
+
+@pytest.mark.parametrize("angle", [-0.5, 180.5, float("nan"), "far"])
+def test_an_acks_measured_angle_is_degrees_or_nothing(angle: object) -> None:
+    """What the robot says its pose points away from the request: 0 to 180 degrees, absent
+    from a robot that did not measure it (or an older one)."""
+    ok = {"type": "ack", "robot_id": "r", "sender": "s", "seq": 1, "stage": "accepted",
+          "stamp_ns": 1}
+    assert pr.decode(raw(ok), pr.Ack).measured_angle is None
+    assert pr.decode(raw({**ok, "measured_angle": 38.2}), pr.Ack).measured_angle == 38.2
+    assert "measured_angle" in malformed(raw({**ok, "measured_angle": angle}), pr.Ack)

@@ -13,12 +13,14 @@ import sys
 import threading
 from pathlib import Path
 
+import numpy as np
 import pytest
 import zenoh
 
 from kinesphere import zconfig
 from kinesphere.cli import main
 from kinesphere.errors import KinesphereError
+from kinesphere.laban import Direction
 from kinesphere.platforms.mjcf import platform_model
 from kinesphere.protocol import Catalogue, SpatialCommand
 from kinesphere.robots.agent.fleet import (
@@ -30,6 +32,7 @@ from kinesphere.robots.agent.fleet import (
 )
 from kinesphere.robots.agent.mujoco_body import MujocoBody
 from kinesphere.robots.agent.runtime import AgentOptions
+from kinesphere.services.ecl.measure import Fk, angle_deg
 from support.agents import (
     AckWatch,
     Databank,
@@ -244,10 +247,12 @@ def test_fleet_command_line_errors(tmp_path: Path) -> None:
 
 
 def test_send_all_moves_every_body_exact_or_substituted(
-    hub: tuple[zenoh.Session, str], databank: Databank
+    hub: tuple[zenoh.Session, str], databank: Databank, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """A fleet command in a direction only some bodies keep: every robot moves, the others by
-    the nearest direction they have, each robot reporting what it was served."""
+    the nearest direction they have, each robot reporting what it was served and how far from
+    the request its pose points; that angle is where the robot's arm ends up pointing,
+    measured by forward kinematics of the joints it reports."""
     session, endpoint = hub
     robots = [RobotSpec(p, f"s-{p}") for p in ("baxter", "nao", "packbot", "youbot")]
     pose = ("limb_11", "distal_11", "left-low", 3)
@@ -256,19 +261,30 @@ def test_send_all_moves_every_body_exact_or_substituted(
               for rid, a in answers.items()}
     assert served == {"s-baxter": [], "s-youbot": [], "s-packbot": [],
                       "s-nao": [("left-low", "left-forward-low")]}
+    left_low = np.array(Direction.LEFT_LOW.vector) / np.linalg.norm(Direction.LEFT_LOW.vector)
     acks = AckWatch(session, "*")
     with running_fleet_host(endpoint, robots) as (_fleet, watches):
         assert main(["send", "all", *map(str, pose), "--connect", endpoint,
                      "--prefix", KEYS.prefix, "--wait", str(WAIT_S)]) == 0
-        for rid, watch in watches.items():
+        said = {ln.split(":")[0]: ln for ln in capsys.readouterr().out.splitlines()}
+        for r in robots:
+            rid, watch = r.robot_id, watches[r.robot_id]
             want = answers[rid].substitutions
             accepted = acks.wait(lambda a, rid=rid: (a.robot_id, a.stage) == (rid, "accepted"),
                                  f"{rid} accepting the command")
             assert accepted.substitutions == want, rid
+            angle = accepted.measured_angle
+            assert angle is not None and angle == answers[rid].measured_angle, rid
             watch.wait(lambda st, rid=rid: joints_close(st, answers[rid].joints, 0.02),
                        f"{rid} at its {answers[rid].direction} pose")
             acks.wait(lambda a, rid=rid: (a.robot_id, a.stage) == (rid, "reached"),
                       f"{rid} reaching its pose")
             moving = [st.substitutions for st in watch.states if st.status == "moving"]
             assert moving and all(subs == want for subs in moving), rid
+            st = watch.states[-1]
+            offset = Fk(platform_model(r.platform)).offset(
+                "limb_11", "distal_11", dict(zip(st.joint_names, st.q, strict=True)))
+            assert angle_deg(offset, left_low) == pytest.approx(angle, abs=2.0), rid
+            pointing = f"pointing {angle:.0f}° from the request (measured)"
+            assert (pointing in said[rid]) == bool(want), said[rid]
     acks.close()

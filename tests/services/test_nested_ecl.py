@@ -63,8 +63,11 @@ def test_baxters_forearm_points_where_told_whatever_the_upper_arm_does(baxter: E
     for d1, d2 in (("forward-high", "left-forward-middle"), ("right-middle", "forward-low"),
                    ("right-forward-low", "right-high")):
         pose = baxter.compound(arm_pair(d1, d2))
-        assert degrees(measured(body, pose.joints, UPPER_ARM), unit(Direction.parse(d1))) < 15
-        assert degrees(measured(body, pose.joints, FOREARM), unit(Direction.parse(d2))) < 15
+        upper = float(degrees(measured(body, pose.joints, UPPER_ARM), unit(Direction.parse(d1))))
+        fore = float(degrees(measured(body, pose.joints, FOREARM), unit(Direction.parse(d2))))
+        assert upper < 15 and fore < 15
+        # the answer says how far its worst segment points from what was asked
+        assert pose.measured_angle == pytest.approx(max(upper, fore), abs=6)
         limits = body.eurdf.limits
         assert all(limits[j].lower <= v <= limits[j].upper for j, v in pose.joints.items())
         assert [w.word for w in pose.words] == ["right_upper_arm"]
@@ -113,8 +116,10 @@ def test_sizes_turn_a_segment_part_of_the_way_from_neutral(baxter: Ecl) -> None:
         want = sized(rest, Direction.FORWARD_MIDDLE, size, 3)
         assert degrees(want, rest) == pytest.approx(share * full, abs=0.5)
         assert degrees(got, want) < 8, size
+        assert pose.measured_angle == pytest.approx(float(degrees(got, target)), abs=8), size
     neutral = baxter.query("right_upper_arm", "right_shoulder", "place-middle", 3)
     assert degrees(measured(body, neutral.joints, UPPER_ARM), rest) < 3
+    assert neutral.measured_angle is None  # place-middle has no bearing to compare
 
 
 def test_directions_a_segment_cannot_take_and_toppling_poses_are_refused(nao: Ecl) -> None:

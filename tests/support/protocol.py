@@ -85,6 +85,7 @@ SAMPLES: list[pr.Message] = [
         substitutions=[pr.Substitution("limb_11", "distal_11", "left-low", "left-forward-low",
                                        45.0)],
         lease_holder="pad-2",
+        measured_angle=41.5,
     ),
     pr.BodyModel(
         platform="youbot",

@@ -84,6 +84,13 @@ class Outcome:
         return list(seen.values())
 
     @property
+    def measured_angle(self) -> float | None:
+        """The largest angle between what was asked and where the robot's pose points, as its
+        acks measured it (None when none did)."""
+        return max((a.measured_angle for a in self.acks if a.measured_angle is not None),
+                   default=None)
+
+    @property
     def words(self) -> list[BodyWord]:
         """The body words the robot answered with another name (once each)."""
         seen: dict[tuple[str, str, str], BodyWord] = {}
@@ -157,7 +164,10 @@ def line(o: Outcome, timeout: float, sent: int = 1) -> str:
         words.append(f"named {body_words(said)}")
     subs = o.substitutions
     if subs:
-        words.append(f"substituted {substitution_text(subs)}")
+        measured = o.measured_angle
+        words.append(f"substituted {substitution_text(subs)}" + (
+            f", pointing {measured:.0f}° from the request (measured)"
+            if measured is not None else ""))
     if last.lease_holder:
         words.append(f"control: {last.lease_holder}")
     return f"{o.robot}: " + "; ".join(words)

@@ -83,15 +83,16 @@ class AckLimiter:
 
 class Meaning(NamedTuple):
     """What a command meant on this body, told in its acks: the parts served with another
-    direction, and the body words it answers with another name (``right_arm``: the only
-    arm)."""
+    direction, the body words it answers with another name (``right_arm``: the only arm), and
+    how far from the request the pose points (the answer's measured angle)."""
 
     substitutions: tuple[Substitution, ...] = ()
     words: tuple[BodyWord, ...] = ()
+    measured_angle: float | None = None
 
     @classmethod
     def of(cls, pose: Pose) -> Meaning:
-        return cls(tuple(pose.substitutions), tuple(pose.words))
+        return cls(tuple(pose.substitutions), tuple(pose.words), pose.measured_angle)
 
 
 PLAIN = Meaning()
@@ -235,4 +236,4 @@ def make_ack(robot_id: str, cmd: Command, stage: AckStage, *, code: str = "", de
         code=code, detail=detail[:MAX_TEXT],
         stamp_ns=time.time_ns() if stamp_ns is None else stamp_ns,
         substitutions=list(meaning.substitutions), words=list(meaning.words),
-        lease_holder=lease_holder, late_ms=late_ms))
+        measured_angle=meaning.measured_angle, lease_holder=lease_holder, late_ms=late_ms))

@@ -92,7 +92,8 @@ def groups(parts: Sequence[Part], last_wins: bool) -> list[tuple[Part, ...]]:
 
 def join(platform: str, answered: Sequence[Answered], last_wins: bool = False) -> Pose:
     """The groups' poses joined joint-wise; translations add (at most MAX_TRANSLATION metres
-    in all), substitutions and words are collected in the request's order.
+    in all), substitutions and words are collected in the request's order, the measured angle
+    is the worst part's.
 
     A joint set by two groups to different values (a motor two chains share) is a
     ``conflict`` unless ``last_wins``.
@@ -133,8 +134,10 @@ def join(platform: str, answered: Sequence[Answered], last_wins: bool = False) -
             f"in all; one answer moves it at most {MAX_TRANSLATION:g} m",
         )
     parts = [c for _, c in sorted(served, key=lambda x: x[0])]
+    measured = [a.pose.measured_angle for a in answered if a.pose.measured_angle is not None]
     return Pose(platform=platform, limb=COMPOUND, origin=COMPOUND,
                 direction=COMPOUND, size=max(p.size for p in parts), joints=joints,
                 translation=translation, k_id=NO_ID, parts=parts,
                 substitutions=[s for _, s in sorted(substitutions, key=lambda x: x[0])],
-                words=[w for _, w in sorted(words, key=lambda x: x[0])])
+                words=[w for _, w in sorted(words, key=lambda x: x[0])],
+                measured_angle=max(measured, default=None))

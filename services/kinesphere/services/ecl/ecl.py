@@ -326,7 +326,8 @@ class Ecl:
         return self._solved(group)
 
     def _solved(self, group: tuple[Part, ...]) -> Pose:
-        """Nested parts (or a cut limb) pointed together by the nested solver."""
+        """Nested parts (or a cut limb) pointed together by the nested solver; the measured
+        angle is the worst segment's."""
         from kinesphere.services.ecl.nested import Segment
 
         solver = self.nested()
@@ -339,10 +340,12 @@ class Ecl:
                 t = self._translate(p.direction, p.size - self.vsam.k_smax)
                 translation = [a + b for a, b in zip(translation or [0.0] * 3, t, strict=True)]
         first = group[0]
+        measured = [a for a in solution.measured if a is not None]
         return Pose(platform=self._name, limb=first.limb, origin=first.origin,
                     direction=first.direction, size=max(p.size for p in group),
                     joints=dict(solution.joints), translation=translation, k_id=NO_ID,
-                    words=[w for p in group for w in p.words])
+                    words=[w for p in group for w in p.words],
+                    measured_angle=max(measured, default=None))
 
     def nested(self) -> Nested:
         """The nested solver of this platform, made when first needed (compiles the model)."""

@@ -94,12 +94,16 @@ class Segment:
 @dataclass(frozen=True)
 class Solution:
     """The outermost limb's joints and, per segment, the angle in degrees between where it
-    points and where it was sent (its direction turned by its size); ``topples`` says why the
-    pose would tip a standing body over (:mod:`balance`), None when it stands."""
+    points and where it was sent (its direction turned by its size); ``measured``, per
+    segment, the angle between where it points and the direction asked (what
+    ``Pose.measured_angle`` reports; None for Place-Middle, which has no bearing);
+    ``topples`` says why the pose would tip a standing body over (:mod:`balance`), None when
+    it stands."""
 
     joints: dict[str, float]
     angles: tuple[float, ...]
     topples: str | None = None
+    measured: tuple[float | None, ...] = ()
 
 
 class _Point:
@@ -176,6 +180,15 @@ def sized(neutral: np.ndarray, d: Direction, size: float, k_smax: float) -> np.n
 
 def degrees(a: np.ndarray, b: np.ndarray) -> float:
     return math.degrees(math.acos(max(-1.0, min(1.0, float(a @ b)))))
+
+
+def _measured(unit: np.ndarray, d: Direction) -> float | None:
+    """Degrees between a segment's bearing (a unit vector, body frame) and the direction
+    asked; None for Place-Middle (no bearing to compare)."""
+    if d is Direction.PLACE_MIDDLE:
+        return None
+    v = np.asarray(d.vector, dtype=float)
+    return round(degrees(unit, v / np.linalg.norm(v)), 3)
 
 
 class ChainSolver:
@@ -391,10 +404,12 @@ class ChainSolver:
         data = self._scratch
         data.qpos[:] = ls.full_q(values)
         mujoco.mj_kinematics(self.model, data)
-        angles = tuple(round(degrees(t.unit(data)[0], g), 3)
-                       for t, g in zip(tasks, targets, strict=True))
+        units = [t.unit(data)[0] for t in tasks]
+        angles = tuple(round(degrees(u, g), 3) for u, g in zip(units, targets, strict=True))
+        measured = tuple(_measured(rot.T @ u, s.direction) for u, s in zip(units, segments,
+                                                                            strict=True))
         joints = {j: round(float(v), 6) for j, v in zip(ls.joints, values, strict=True)}
-        return Solution(joints, angles, self.balance.check(ls.full_q(values)))
+        return Solution(joints, angles, self.balance.check(ls.full_q(values)), measured)
 
     def _refine(self, tasks: list[SegmentTask], targets: list[np.ndarray], start: np.ndarray,
                 iterations: int) -> np.ndarray:
