@@ -25,7 +25,9 @@ from kinesphere.errors import KinesphereError
 from kinesphere.laban import Direction
 from kinesphere.platforms.mjcf import platform_model
 from kinesphere.protocol import Pose
-from kinesphere.services.ecl.measure import Fk, angle_deg, cosine
+from kinesphere.services.ecl.arcs import swing
+from kinesphere.services.ecl.measure import Fk, angle_deg, cosine, points_along
+from kinesphere.services.ecl.nested import sized
 from kinesphere.substitution import MAX_ANGLE_DEG
 from support.ecl import full
 from support.ecl import shipped as ecl
@@ -71,6 +73,51 @@ def test_an_arm_that_bends_reaches_near_mid_and_far(name: str, limb: str, origin
         for size, offset in c.items():
             assert cosine(offset, np.array(Direction.parse(d).vector)) >= 0.85, (d, size)
     assert ecl(name).notes("size_rules")[f"{limb}/{origin}"] == "reach"
+
+
+@pytest.mark.parametrize("name", ARTICULATED)
+def test_a_part_that_swings_turns_by_the_one_size_rule(name: str) -> None:
+    """A limb whose length cannot change (and a leg's pull it swings along) turns its bearing
+    size / k_smax of the way from neutral toward far, over the rule the nested solver's
+    segments follow too (arcs.swing): each stored near and mid, measured, points where the
+    rule says (median within 2 degrees, every one within 15)."""
+    e, body = ecl(name), fk(name)
+    rules, swung = e.notes("size_rules"), e.notes("swung")
+    off: list[float] = []
+    for limb, origin in pairs(name):
+        key = f"{limb}/{origin}"
+        rest = body.neutral_offset(limb, origin)
+        for d, cell in tips(name, limb, origin).items():
+            if rules[key] != "swing" and d not in swung.get(key, []) or 3 not in cell:
+                continue
+            unit = np.array(Direction.parse(d).vector) / np.linalg.norm(Direction.parse(d).vector)
+            for size in (1, 2):
+                if size in cell:
+                    want = swing(rest, cell[3], size, (1, 2, 3), points_along(rest, unit))
+                    off.append(angle_deg(cell[size], want.offset / np.linalg.norm(want.offset)))
+    assert off, name
+    assert statistics.median(off) <= 2.0 and max(off) <= 15.0, (name, sorted(off)[-5:])
+
+
+def test_the_swing_rule_turns_by_size_holds_at_rest_and_goes_over_the_top() -> None:
+    """The rule itself (the generator's stored swings and the nested segments call it)."""
+    down, forward, up = np.array([0.0, 0, -1]), np.array([1.0, 0, 0]), np.array([0.0, 0, 1])
+    for size, share in ((0, 0.0), (1, 1 / 3), (2, 2 / 3), (3, 1.0), (4.5, 1.0)):
+        got = swing(down, forward, size, (1, 2, 3), at_rest=False)
+        assert got.share == pytest.approx(share)
+        assert angle_deg(got.offset, down) == pytest.approx(90 * share, abs=1e-6)
+    near, mid = (swing(down, forward, s, (1, 2, 3), at_rest=True) for s in (1, 2))
+    assert near.share == 0.0 and angle_deg(near.offset, down) < 1e-6  # rest itself
+    assert angle_deg(mid.offset, down) == pytest.approx(45.0)
+    over = swing(down, up, 1.5, (1, 2, 3), at_rest=False).offset  # opposite: over the top
+    assert angle_deg(over, forward) < 1e-6
+    long = swing(2 * down, 4 * forward, 1.5, (1, 2, 3), at_rest=False).offset
+    assert np.linalg.norm(long) == pytest.approx(3.0)  # the length is lerped
+    # a nested segment resting along the direction asked holds neutral at near, as a limb does
+    rest = np.array([0.6, 0.0, -0.8])
+    assert np.allclose(sized(rest, Direction.FORWARD_LOW, 1, (1, 2, 3)), rest)
+    assert angle_deg(sized(rest, Direction.FORWARD_LOW, 3, (1, 2, 3)),
+                     np.array(Direction.FORWARD_LOW.vector)) < 1e-6
 
 
 @pytest.mark.parametrize("name", ARTICULATED)

@@ -102,18 +102,27 @@ def test_a_cut_limb_alone_is_answered_on_its_pose_key(nao: Ecl) -> None:
                            ("left_forearm", "left_elbow", "forward-high", 3)])
 
 
-def test_sizes_turn_a_segment_part_of_the_way_from_neutral(baxter: Ecl) -> None:
+@pytest.mark.parametrize(("direction", "shares"), [
+    ("forward-low", (1 / 3, 2 / 3, 1.0)),  # 60 degrees from where the upper arm rests
+    ("forward-middle", (0.0, 1 / 2, 1.0)),  # 21 degrees: it already points that way
+])
+def test_sizes_turn_a_segment_part_of_the_way_from_neutral(
+    baxter: Ecl, direction: str, shares: tuple[float, float, float],
+) -> None:
     """A segment's length cannot change: near and mid turn it a third and two thirds of the
-    way from its neutral direction toward the one asked, far all the way."""
+    way from its neutral direction toward the one asked, far all the way; a segment already
+    pointing that way holds neutral at near and turns half-way at mid, as a stored limb that
+    swings does (one rule, ``arcs.swing``)."""
     body = Body("baxter")
     body.pose({})
     rest = body.direction(UPPER_ARM)
-    target = unit(Direction.FORWARD_MIDDLE)
+    d = Direction.parse(direction)
+    target = unit(d)
     full = float(degrees(rest, target))
-    for size, share in ((1, 1 / 3), (2, 2 / 3), (3, 1.0)):
-        pose = baxter.query("right_upper_arm", "right_shoulder", "forward-middle", size)
+    for size, share in zip((1, 2, 3), shares, strict=True):
+        pose = baxter.query("right_upper_arm", "right_shoulder", direction, size)
         got = measured(body, pose.joints, UPPER_ARM)
-        want = sized(rest, Direction.FORWARD_MIDDLE, size, 3)
+        want = sized(rest, d, size, (1, 2, 3))
         assert degrees(want, rest) == pytest.approx(share * full, abs=0.5)
         assert degrees(got, want) < 8, size
         assert pose.measured_angle == pytest.approx(float(degrees(got, target)), abs=8), size

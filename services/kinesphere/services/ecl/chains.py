@@ -36,7 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from kinesphere.platforms.clearance import Clearance, Touch
-from kinesphere.services.ecl.arcs import along_arc, cosine
+from kinesphere.services.ecl.arcs import cosine, swing
 from kinesphere.services.ecl.ik import LimbSolver
 from kinesphere.services.ecl.measure import HONEST
 
@@ -275,14 +275,13 @@ class Sizes:
     # -- swing: the bearing turns an even share of the way toward far per size ---------------
     def _swing(self, far: LimbPose, d: np.ndarray, neutral: LimbPose, at_rest: bool
                ) -> list[LimbPose]:
-        s, n = self.solver, len(self.sizes)
+        s = self.solver
         a, b = self.neutral_values, far.values
         chain: list[LimbPose] = [neutral] if at_rest else []
         below = neutral
-        first = len(chain)
-        for i in range(first + 1, n):
-            g = (i - first) / (n - first)
-            goal = s.origin + s.body_rot @ along_arc(neutral.offset, far.offset, g)
+        for size in self.sizes[len(chain):-1]:
+            g, offset = swing(neutral.offset, far.offset, size, self.sizes, at_rest)
+            goal = s.origin + s.body_rot @ offset
             toward = a + (b - a) * g
             pose = measure(s, s.solve(below.values, goal, SIZE_ITERATIONS, SIZE_POSTURE, toward),
                            d)

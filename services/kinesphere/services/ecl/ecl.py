@@ -138,7 +138,7 @@ class Ecl:
         self._max_size = vsam.max_size
         self._core = frozenset(e.C)
         self._catalogue: Catalogue | None = None
-        if self._nested is not None and self._nested.k_smax != vsam.k_smax:
+        if self._nested is not None and self._nested.sizes != vsam.sizes:
             self._nested = None
 
     def _read_words(self, served: set[str]) -> None:
@@ -354,7 +354,7 @@ class Ecl:
                 from kinesphere.platforms.mjcf import model_of
                 from kinesphere.services.ecl.nested import Nested
 
-                self._nested = Nested(model_of(self.platform), self.vsam.k_smax)
+                self._nested = Nested(model_of(self.platform), self.vsam.sizes)
             return self._nested
 
     # -- names and errors --------------------------------------------------------------------

@@ -111,6 +111,12 @@ def cosine(v: np.ndarray, d: np.ndarray) -> float:
     return float(v @ d) / n if n > 1e-9 else 0.0
 
 
+def points_along(v: np.ndarray, d: np.ndarray) -> bool:
+    """Whether a bearing points toward a unit direction (cosine at least HONEST): what makes a
+    pull one a limb already points at in its neutral pose."""
+    return cosine(v, d) >= HONEST
+
+
 def angle_deg(v: np.ndarray, d: np.ndarray) -> float:
     """Degrees between a vector and a unit direction (90 for a zero vector)."""
     return float(np.degrees(np.arccos(np.clip(cosine(v, d), -1.0, 1.0))))
@@ -187,7 +193,7 @@ class Fk:
         """The pulls the limb already points at in its neutral pose (cosine >= HONEST), in
         Laban order: a limb at rest answers these without moving (near)."""
         rest = self.neutral_offset(limb, origin)
-        return [d for d in Direction.pulls() if cosine(rest, np.array(d.vector)) >= HONEST]
+        return [d for d in Direction.pulls() if points_along(rest, np.array(d.vector))]
 
     def margin(self, qpos: np.ndarray) -> tuple[float, tuple[str, ...]]:
         """Metres from the centre of mass to the support polygon's edge (negative: outside),

@@ -21,9 +21,12 @@ How, deterministically (no randomness, no clock, fixed caps):
    :class:`~kinesphere.services.ecl.ik.LimbSolver`): a few steps from each of the best seeds,
    then the best of them until the segments stop turning.
 
-Sizes follow the rule of a part whose length cannot change: the segment turns from its neutral
-direction toward the requested one by ``size / k_smax`` of the angle (far points exactly);
-Place-Middle is the neutral direction.
+Sizes follow the rule of a part whose length cannot change, the one the generator's swinging
+limbs follow too (:func:`kinesphere.services.ecl.arcs.swing`): the segment turns from its
+neutral direction toward the requested one by ``size / k_smax`` of the angle (far points
+exactly; a segment already pointing that way holds neutral at near and the sizes above share
+the turn, as a stored limb resting along its direction does); Place-Middle is the neutral
+direction.
 """
 
 from __future__ import annotations
@@ -42,11 +45,11 @@ from kinesphere.laban import Direction
 from kinesphere.lru import Lru
 from kinesphere.platforms.frames import pivot
 from kinesphere.platforms.mjcf import PlatformModel
-from kinesphere.services.ecl.arcs import along_arc, halfway
+from kinesphere.services.ecl.arcs import swing
 from kinesphere.services.ecl.balance import Balance
 from kinesphere.services.ecl.constraints import GAIN
 from kinesphere.services.ecl.ik import DAMPING, SOLVER, LimbSolver
-from kinesphere.services.ecl.measure import tip_point
+from kinesphere.services.ecl.measure import points_along, tip_point
 from kinesphere.substitution import MAX_ANGLE_DEG
 
 GRID_POINTS = 1600
@@ -165,17 +168,18 @@ class _Table:
     units: np.ndarray  # (n, 3)
 
 
-def sized(neutral: np.ndarray, d: Direction, size: float, k_smax: float) -> np.ndarray:
-    """Where a part of fixed length points at ``size``: its neutral direction turned toward
-    ``d`` by ``size / k_smax`` of the angle (at far and beyond, ``d`` itself; from the
-    opposite direction, over the top); Place-Middle is the neutral direction."""
+def sized(neutral: np.ndarray, d: Direction, size: float, sizes: Sequence[float]
+          ) -> np.ndarray:
+    """Where a segment (a part of fixed length, unit ``neutral`` bearing) points at ``size``:
+    the swing rule of the stored sizes too (:func:`kinesphere.services.ecl.arcs.swing`, far
+    being ``d`` itself): turned toward ``d`` by ``size / k_smax`` of the angle, over the top
+    from the opposite direction; a segment already pointing that way holds neutral at the
+    smallest size. Place-Middle is the neutral direction."""
     if d is Direction.PLACE_MIDDLE:
         return neutral
     v = np.asarray(d.vector, dtype=float)
     v = v / np.linalg.norm(v)
-    g = min(max(size / k_smax, 0.0), 1.0)
-    mid = halfway(neutral, v)
-    return along_arc(neutral, mid, 2 * g) if g <= 0.5 else along_arc(mid, v, 2 * g - 1)
+    return swing(neutral, v, size, sizes, points_along(neutral, v)).offset
 
 
 def degrees(a: np.ndarray, b: np.ndarray) -> float:
@@ -383,11 +387,11 @@ class ChainSolver:
         rot = self.limb.body_rot
         return [rot.T @ t.unit(data)[0] for t in tasks]
 
-    def solve(self, segments: Sequence[Segment], k_smax: float) -> Solution:
+    def solve(self, segments: Sequence[Segment], sizes: Sequence[float]) -> Solution:
         ls = self.limb
         tasks = self.tasks(segments)
         rot = ls.body_rot
-        targets = [rot @ sized(n, s.direction, s.size, k_smax)
+        targets = [rot @ sized(n, s.direction, s.size, sizes)
                    for n, s in zip(self.neutral_units(tasks), segments, strict=True)]
         seeds = self._seeds(segments, tasks, targets) or [ls.neutral[ls.qadr].copy()]
         seeds.sort(key=lambda q: self._score(tasks, targets, q))
@@ -458,10 +462,11 @@ class Nested:
     when first asked, and the solutions already found (bounded, least recently used first
     out). One solve at a time (the databank runs them on one worker thread anyway)."""
 
-    def __init__(self, pm: PlatformModel, k_smax: float, max_angle: float = MAX_ANGLE_DEG
-                 ) -> None:
+    def __init__(self, pm: PlatformModel, sizes: Sequence[int],
+                 max_angle: float = MAX_ANGLE_DEG) -> None:
         self.pm = pm
-        self.k_smax = k_smax
+        self.sizes = tuple(sizes)
+        """The VSAM's sizes, near to far (k_smax): a segment's size rule."""
         self.max_angle = max_angle
         self._chains: dict[tuple[str, str], ChainSolver] = {}
         self._solutions: Lru[tuple[Segment, ...], Solution] = Lru(SOLUTIONS)
@@ -483,7 +488,7 @@ class Nested:
                 if chain is None:
                     chain = self._chains[(outer.limb, outer.origin)] = ChainSolver(
                         self.pm, outer.limb, outer.origin)
-                hit = chain.solve(segments, self.k_smax)
+                hit = chain.solve(segments, self.sizes)
                 self.solves += 1
                 self._solutions.put(tuple(segments), hit)
         for s, angle in zip(segments, hit.angles, strict=True):
