@@ -436,7 +436,7 @@ class Ack(Message, tag="ack", kw_only=True):
     late_ms: NonNegInt = 0
     """For a command with ``arrive_ms``: how much later than asked the robot reaches its
     target, in the sender's milliseconds; planned in ``moving``, as it happened in the final
-    stage (``superseded`` before arriving: how late the command that replaced it found it)."""
+    stage (``superseded`` before arriving: when it would have arrived, as last planned)."""
     measured_angle: Degrees | None = None
     """Degrees between what was asked and where the pose the robot follows points, as its
     answer (:attr:`Pose.measured_angle`) measured it; the worst part's for several parts; None

@@ -137,3 +137,20 @@ def test_a_time_or_heading_out_of_bounds_is_malformed(field: str, value: float,
         decode(msgspec.msgpack.encode(raw), Command)
     assert err.value.code == "malformed" and bound in err.value.message
     assert f"$.{field}" in err.value.message
+
+
+def test_a_motion_replaced_under_way_says_how_late_it_would_have_arrived(
+        youbot: tuple[Agent, list[Ack]]) -> None:
+    agent, said = youbot
+    ctrl = agent.controller
+    agent.receive(command(1, math.radians(180), 200))  # half a turn in 0.2 s: late
+    agent.tick()
+    planned = stages(said, 1)["moving"].late_ms
+    assert planned > 200
+    for _ in range(50):
+        agent.tick()
+    assert ctrl.moving
+    agent.receive(command(2, 0.0, 1000))  # the next keyframe takes over before it arrived
+    agent.tick()
+    replaced = stages(said, 1)["superseded"]
+    assert abs(replaced.late_ms - planned) <= 2 * 1e3 * ctrl.dt

@@ -122,6 +122,8 @@ class Motion:
     moved: bool = False
     due: float | None = None
     """When the motion is to arrive (robot seconds; a command's ``arrive_ms``), else None."""
+    eta: float = 0.0
+    """When a timed motion under way would arrive, as last planned (robot seconds)."""
 
 
 class Acks:

@@ -138,6 +138,12 @@ class Conduct:
         if moving:
             self._moved_at = ctrl.time
         changed = False
+        motion = self.acks.motion
+        if motion is not None and motion.due is not None and motion.moved:
+            guard = ctrl.guard
+            if moving or (guard is not None and (guard.legs or guard.pending)):
+                # under way (or braked while the guard finds a way): not there before this
+                motion.eta = ctrl.time + max(ctrl.remaining, ctrl.dt)
         fault = ctrl.fault()
         if fault != self._fault:
             self._fault, changed = fault, True
@@ -290,12 +296,15 @@ class Conduct:
 
     def _late(self, motion: Motion, planned: bool) -> int:
         """Milliseconds (the sender's) by which ``motion`` arrives after its due time: as
-        planned when it starts, else as it went (still under way: late by now, at least)."""
+        planned when it starts, else as it went; a motion replaced before it arrived by when
+        it would have arrived, as last planned (a route around a contact: its waypoints too)."""
         ctrl = self.controller
         if motion.due is None:
             return 0
         if planned:
             arrival = ctrl.time + ctrl.dt + ctrl.remaining
+        elif motion.eta > ctrl.time:  # replaced under way
+            arrival = motion.eta
         else:
             arrival = ctrl.time if ctrl.moving else self._moved_at
         late = max(0.0, arrival - motion.due - ctrl.dt) / self.time_scale

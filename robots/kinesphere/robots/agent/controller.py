@@ -67,9 +67,14 @@ class Controller:
 
     @property
     def remaining(self) -> float:
-        """Seconds until the joints and the base arrive, as planned (0 at rest)."""
+        """Seconds until the joints and the base arrive, as planned (0 at rest); a route
+        around a contact adds its waypoints still to go, at the least time each can take."""
         base = self.base.remaining if self.base is not None else 0.0
-        return max(self.joints.remaining, base)
+        joints, at = self.joints.remaining, self.joints.target
+        for leg in self.guard.legs if self.guard is not None else []:
+            joints += self.joints.least_time(at, leg)
+            at = leg
+        return max(joints, base)
 
     def step(self) -> None:
         """One control cycle: trajectories forward, body commanded, body stepped."""

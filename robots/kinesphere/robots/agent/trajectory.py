@@ -148,6 +148,13 @@ class JointTrajectory:
         """Seconds until the motion under way arrives, as planned (0 at rest)."""
         return self.generator.remaining if self.generator.active else 0.0
 
+    def least_time(self, a: np.ndarray, b: np.ndarray) -> float:
+        """Seconds a move from ``a`` to ``b`` (every joint) takes at least: the slowest joint
+        at its full velocity all the way (a bound from below, for waypoints not yet planned)."""
+        if not self.dof:
+            return 0.0
+        return float(np.max(np.abs(np.asarray(b) - np.asarray(a)) / self.max_velocity))
+
     def clamp(self, joints: Mapping[str, float]) -> tuple[dict[str, float], list[Clamp]]:
         """``joints`` inside the limits with margin, and the joints that had to move."""
         out: dict[str, float] = {}
