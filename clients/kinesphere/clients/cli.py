@@ -194,16 +194,36 @@ def register(sub: Any) -> None:
     p = sub.add_parser(
         "play",
         formatter_class=fmt,
-        help="play a movement phrase (TOML) on a robot, a group or all",
+        help="play a movement phrase (TOML) or a Labanotation score (JSON) on robots",
         description="Play a phrase: steps of spatial commands (and drives) with durations, "
         "streamed at --rate, then the deadman is let go. PHRASE is a file or a shipped phrase "
         "name: left_high, tour_guide, packbot_sweep, packbot_retreat. Prints one line per "
-        "addressed robot and exits 1 unless every one accepted every step.",
+        "addressed robot and exits 1 unless every one accepted every step.\n\n"
+        "Or play a Labanotation score (LabanotationSuite's JSON: a .json file, or the name of "
+        "a score shipped in clients/scores/, e.g. big2): every gesture in it (or --gesture "
+        "NAME), "
+        "keyframe by keyframe at the score's times (--speed scales them), each body "
+        "performing the head, upper arms and forearms it has (a one-armed body the right-arm "
+        "columns; --check prints what each body performs and stops). After each keyframe the "
+        "robots' reported joint states are notated back with LabanEditor's rule: one line "
+        "per robot with the share of cells that come back as written; --report FILE.json "
+        "writes every cell.",
     )
-    p.add_argument("phrase", metavar="PHRASE", help="phrase file (TOML) or shipped name")
+    p.add_argument("phrase", metavar="PHRASE|SCORE",
+                   help="phrase file (TOML), score file (JSON) or a shipped name")
     add_target(p)
-    add_rate(p, "while the phrase plays")
-    _sends(p, _play, f"the phrase's ttl_ms, else {STREAM.ttl_ms}", (SEND, "after the phrase"))
+    add_rate(p, "while the phrase or score plays")
+    p.add_argument("--gesture", metavar="NAME", help="a score: play only this gesture")
+    p.add_argument("--speed", type=float, metavar="X",
+                   help="a score: play X times as fast (default 1: the score's own times)")
+    p.add_argument("--check", action="store_true",
+                   help="a score: print what each body performs (and which cells its databank "
+                   "cannot) and move nothing")
+    p.add_argument("--report", metavar="FILE.json",
+                   help="a score: write every keyframe's measured cells per robot to FILE.json")
+    _sends(p, _play, f"the phrase's ttl_ms, else {STREAM.ttl_ms}",
+           (SEND, "after the phrase (a score: also the longest wait for a body's catalogue, "
+            "and for the starting pose)"))
 
     e = sub.add_parser(
         "estop",

@@ -142,6 +142,8 @@ class Sequencer:
         stop: bool = False,
         release: bool = False,
         lease: LeaseAction = LeaseAction.NONE,
+        arrive_ms: int = 0,
+        heading: float | None = None,
     ) -> Command:
         cmd = Command(
             seq=self.seq,
@@ -157,6 +159,8 @@ class Sequencer:
             session=self.session,
             lease=lease,
             clock=self.clock,
+            arrive_ms=arrive_ms,
+            heading=heading,
         )
         self.seq += 1
         return cmd

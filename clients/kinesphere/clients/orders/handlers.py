@@ -15,11 +15,12 @@ import sys
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
+from pathlib import Path
 
 from kinesphere.clients import targets
 from kinesphere.clients.link import RobotLink, Sequencer, link_for, reachable, signals
 from kinesphere.clients.options import TeleopOptions
-from kinesphere.clients.orders import answers, phrases
+from kinesphere.clients.orders import answers, notated, phrases, score_play
 from kinesphere.clients.orders.answers import Outcome
 from kinesphere.errors import KinesphereError
 from kinesphere.protocol import AckStage, LeaseAction, SpatialCommand
@@ -90,7 +91,17 @@ def send(args: argparse.Namespace) -> int:
     return _finish(found, args.timeout, f"the command ({seq.seq - first} sent)", seq.seq - first)
 
 
+SCORE_ONLY = (("gesture", None), ("speed", None), ("check", False), ("report", None))
+"""``play`` options that only a score takes, with their unset values."""
+
+
 def play(args: argparse.Namespace) -> int:
+    if score_play.is_score(args.phrase):
+        return play_score(args)
+    given = [name for name, unset in SCORE_ONLY if getattr(args, name, unset) != unset]
+    if given:
+        raise KinesphereError("malformed", f"--{given[0]} applies to a score (SCORE.json), "
+                              f"not to the phrase {args.phrase}")
     phrase = phrases.load_phrase(args.phrase)
     target = targets.parse_target(args.target)
     ttl = args.ttl_ms if args.ttl_ms is not None else (phrase.ttl_ms or TeleopOptions.ttl_ms)
@@ -172,3 +183,72 @@ def lease(args: argparse.Namespace) -> int:
         link.put(keys, seq.lease(LeaseAction.RELEASE))
         found = answers.wait(link, last, robots, args.timeout, lambda o: o.final_for(last))
     return _finish(found, args.timeout, "lease release")
+
+
+def play_score(args: argparse.Namespace) -> int:
+    """``play SCORE.json`` (:mod:`~kinesphere.clients.orders.score_play`): the casting and
+    the cells each body cannot perform on stdout, then (unless ``--check``) the score
+    performed and notated back, one line per robot; ``--report`` writes every cell."""
+    score = score_play.load(args.phrase)
+    gestures = [score.gesture(args.gesture)] if args.gesture else list(score.gestures)
+    speed = 1.0 if args.speed is None else args.speed
+    if not 0.01 <= speed <= 100:
+        raise KinesphereError("malformed", f"--speed must be 0.01..100, got {speed:g}")
+    report_path = Path(args.report) if args.report else None
+    if report_path is not None and not report_path.parent.is_dir():
+        raise KinesphereError("malformed", f"--report {report_path}: no folder "
+                              f"{report_path.parent} to write it in")
+    target = targets.parse_target(args.target)
+    ttl = args.ttl_ms if args.ttl_ms is not None else TeleopOptions.ttl_ms
+    tempo = score_play.Tempo(speed, args.rate, ttl, args.timeout)
+    stop = _Interrupt()
+    with link_for(args) as link:
+        reachable(link, target, args.wait)
+        robots = answers.addressed(link, target)
+        if not robots:
+            raise KinesphereError("unavailable", f"no robot answers as {target.label}")
+        performers = score_play.cast_robots(link, robots, args.timeout)
+        for line in score_play.casting_lines(performers):
+            print(line)
+        score_play.check(link, performers, gestures)
+        for line in score_play.refusal_lines(performers, gestures):
+            print(line)
+        if args.check:
+            return 0
+        missing = link.wait_subscribers([p.key for p in performers], args.wait)
+        if missing:
+            raise KinesphereError("unavailable", f"no robot listens on {', '.join(missing)}")
+        seq = link.sequencer(ttl)
+        last: dict[str, int] = {}
+        with signals(stop):
+            try:
+                for g in gestures:
+                    print(f"playing {g.name} ({len(g.keyframes)} keyframes, "
+                          f"{g.duration_ms / 1e3 / speed:g} s) on {target.label}",
+                          file=sys.stderr)
+                    score_play.play(link, performers, g, seq, tempo, lambda: stop.set,
+                                    score_play.progress)
+                    if stop.set:
+                        break
+            finally:
+                for p in performers:
+                    if not p.idle:
+                        cmd = seq.let_go()
+                        link.put([p.key], cmd)
+                        last[p.robot] = cmd.seq
+        let_go = min(last.values(), default=seq.seq)
+        found = answers.wait(link, let_go, list(last), args.timeout,
+                             lambda o: o.final_for(last.get(o.robot, -1)))
+    report = notated.ScoreReport(score.source, [g.name for g in gestures], speed,
+                                 [p.report for p in performers])
+    for r in report.robots:
+        notated.summarise(r)
+        print(notated.robot_line(r))
+    silent = [o for o in found.values() if not o.acks]
+    for o in silent:
+        print(answers.line(o, args.timeout, 0))
+    if report_path is not None:
+        notated.write(report, report_path)
+        print(f"report written to {report_path}", file=sys.stderr)
+    failed = any(k.said for r in report.robots for k in r.keyframes)
+    return 130 if stop.set else int(failed or bool(silent))

@@ -1,0 +1,196 @@
+"""``kinesphere play SCORE.json``: LabanotationSuite gestures performed by Baxter, NAO, youBot
+and PackBot agents through the real databank (Zenoh on loopback), and what they did notated
+back by others' code.
+
+The measure is independent of everything that made the motion: the joint states each robot
+reported at each keyframe (kept in ``--report``) go through yourdfpy's forward kinematics of
+the platform's eURDF (:mod:`support.nested`, not kinesphere's kinematics nor the solver), and
+each part's direction is written as a cell by LabanEditor's own ``labanProcessor.py``
+(vendored unchanged). The score is read with the standard library's ``json``, not with
+kinesphere's reader.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+from importlib import resources
+from pathlib import Path
+from types import ModuleType
+
+import mujoco
+import numpy as np
+import pytest
+import zenoh
+
+from kinesphere.cli import main
+from kinesphere.errors import KinesphereError
+from kinesphere.platforms.mjcf import platform_model
+from kinesphere.protocol import CompoundRequest, Pose, SpatialCommand, encode
+from kinesphere.query import get_one
+from kinesphere.robots.agent.fleet import RobotSpec
+from kinesphere.vocabulary import lookup, vocabulary
+from support.agents import Databank, running_fleet_host
+from support.nested import Body, Segment, degrees
+from support.network import KEYS
+from support.paths import ROOT
+from support.wait import WAIT_S
+
+ORACLE = ROOT / "tests" / "data" / "labanotationsuite" / "labanProcessor.py"
+GESTURES = ("big2", "think_d_high_s")
+ROBOTS = [RobotSpec("baxter", "lab-baxter"), RobotSpec("nao", "lab-nao"),
+          RobotSpec("youbot", "lab-youbot"), RobotSpec("packbot", "lab-packbot")]
+PARTS = {"right elbow": ("right_upper_arm", "right_shoulder"),
+         "right wrist": ("right_forearm", "right_elbow"),
+         "left elbow": ("left_upper_arm", "left_shoulder"),
+         "left wrist": ("left_forearm", "left_elbow")}
+"""Score column -> the body words (limb, origin) of the part: the segment measured runs from
+the origin's pivot to where the limb ends (the next location, or the limb's tip link)."""
+AS_WRITTEN, WITHIN = 0.9, 45.0
+SPEED = "0.5"
+LATE_MS = 100
+"""A keyframe reached this late (a few control steps on a loaded machine) counts as reached."""
+
+
+@pytest.fixture(scope="module")
+def editor() -> ModuleType:
+    spec = importlib.util.spec_from_file_location("labanProcessor", ORACLE)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def shipped_score(name: str) -> dict[str, dict[str, dict[str, list[str]]]]:
+    res = resources.files("kinesphere.clients.orders").joinpath(f"scores/{name}.json")
+    data: dict[str, dict[str, dict[str, list[str]]]] = json.loads(res.read_text())
+    return data
+
+
+def player_vector(direction: str, level: str) -> np.ndarray:
+    """The score's direction as the suite's player draws it (labanotation.js: levels at 45,
+    90, 135 degrees from the vertical, horizontals every 45 degrees; Place is vertical)."""
+    if direction == "Place":
+        return np.array([0.0, 0.0, 1.0 if level == "High" else -1.0])
+    phi = np.radians({"Forward": 0, "Left Forward": 45, "Left": 90, "Left Backward": 135,
+                      "Backward": 180, "Right Backward": -135, "Right": -90,
+                      "Right Forward": -45}[direction])
+    theta = np.radians({"High": 45, "Normal": 90, "Low": 135}[level])
+    return np.array([np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.cos(theta)])
+
+
+def segments(body: Body) -> dict[str, Segment]:
+    """Score column -> the segment the body's vocabulary names for it."""
+    words = lookup(vocabulary(body.eurdf))
+    out = {}
+    for column, (limb, origin) in PARTS.items():
+        if words[limb].label and words[origin].label:
+            out[column] = Segment(words[origin].label, words[limb].end or words[limb].label)
+    return out
+
+
+def side_of(column: str) -> str:
+    return column.split()[0]
+
+
+def target_cells(session: zenoh.Session, platform: str, body: Body, parts: dict[str, Segment],
+                 editor: ModuleType, raw: dict[str, list[str]]) -> dict[str, tuple[str, str]]:
+    """Each arm column's cell in the databank's own pose for the keyframe (asked as the robot
+    asks it, every performed part at once), notated by LabanEditor on yourdfpy's kinematics;
+    none when that pose has the arms touching something (MuJoCo's contacts): the evidence
+    that the body has the cells, independently of the robot's motion."""
+    columns = list(parts)
+    request = CompoundRequest(parts=[
+        SpatialCommand(PARTS[c][0], PARTS[c][1], performed_slug(*raw[c]), 3) for c in columns])
+    try:
+        pose = get_one(session, KEYS.compound(platform), Pose, encode(request), timeout=WAIT_S)
+    except KinesphereError:
+        return {}  # refused: the body does not have the keyframe
+    if touches(platform, body, pose.joints):
+        return {}
+    body.pose(pose.joints)
+    out: dict[str, tuple[str, str]] = {}
+    for c in columns:
+        _, theta, phi = editor.to_sphere(body.direction(parts[c]))
+        out[c] = tuple(editor.coordinate2laban(theta, phi))
+    return out
+
+
+def touches(platform: str, body: Body, joints: dict[str, float]) -> bool:
+    """Whether an arm touches anything in ``joints`` (MuJoCo's contact detection)."""
+    pm = platform_model(platform)
+    m, data = pm.model, mujoco.MjData(pm.model)
+    words = lookup(vocabulary(body.eurdf))
+    arms = {m.body(link).id for word in ("right_arm", "left_arm") if words[word].label
+            for link in body.eurdf.limb(words[word].label).links}
+    data.qpos[:] = pm.qpos(joints)
+    mujoco.mj_kinematics(m, data)
+    mujoco.mj_collision(m, data)
+    return bool(arms & set(m.geom_bodyid[data.contact.geom[: data.ncon]].ravel().tolist()))
+
+
+def performed_slug(direction: str, level: str) -> str:
+    """The kinesphere direction a cell is sent as (the score's horizontal and level)."""
+    horizontal = {"Left Backward": "left-back", "Right Backward": "right-back",
+                  "Backward": "back"}.get(direction, direction.lower().replace(" ", "-"))
+    return f"{horizontal}-{dict(High='high', Normal='middle', Low='low')[level]}"
+
+
+def test_play_scores_on_four_bodies_notated_back_by_labaneditor(
+    hub: tuple[zenoh.Session, str], databank: Databank, tmp_path: Path,
+    capsys: pytest.CaptureFixture[str], editor: ModuleType,
+) -> None:
+    session, endpoint = hub
+    zenoh_args = ["--connect", endpoint, "--prefix", KEYS.prefix, "--wait", str(WAIT_S),
+                  "--timeout", str(WAIT_S)]
+    reports = {}
+    with running_fleet_host(endpoint, ROBOTS, speed=2.0):
+        assert main(["play", "--check", GESTURES[0], "--target", "all", *zenoh_args]) == 0
+        check = capsys.readouterr().out
+        for name in GESTURES:
+            report = tmp_path / f"{name}.json"
+            code = main(["play", name, "--target", "all", "--report", str(report), "--speed",
+                         SPEED, *zenoh_args])
+            out = capsys.readouterr().out
+            reports[name] = json.loads(report.read_text())
+            failed = [k["said"] for r in reports[name]["robots"] for k in r["keyframes"]
+                      if k["said"]]
+            assert code == (1 if failed else 0), out  # a blocked keyframe is no success
+            print(out)
+    assert "head         not performed: no head" in check.split("lab-nao")[0]
+    assert "rotation     not performed: a fixed base" in check.split("lab-nao")[0]
+    for spec in ROBOTS:
+        body = Body(spec.platform)
+        parts = segments(body)
+        cells = had = same = 0
+        angles = []
+        for name in GESTURES:
+            written = next(iter(shipped_score(name).values()))
+            robot = next(r for r in reports[name]["robots"] if r["robot"] == spec.robot_id)
+            performs = [c for c in robot["performs"] if c in parts]
+            if spec.platform in ("youbot", "packbot"):  # one arm: the right-arm columns
+                assert performs == ["right elbow", "right wrist"], robot["performs"]
+            for kf in robot["keyframes"]:
+                raw = written[kf["keyframe"]]
+                assert kf["q"], (spec.robot_id, kf["keyframe"], kf["said"])
+                has = target_cells(session, spec.platform, body, parts, editor, raw)
+                body.pose(dict(zip(kf["joint_names"], kf["q"], strict=True)))
+                for column in performs:
+                    cell = tuple(raw[column])
+                    if cell == ("Place", "Normal"):
+                        continue  # no direction: LabanEditor never writes it
+                    cells += 1
+                    if has.get(column) != cell or kf["said"] or kf["late_ms"] > LATE_MS:
+                        continue  # the body has no pose in the cell, or said it did not
+                        # get there (blocked, or late: reported, measured on the way)
+                    had += 1
+                    v = body.direction(parts[column])
+                    _, theta, phi = editor.to_sphere(v)
+                    same += tuple(editor.coordinate2laban(theta, phi)) == cell
+                    angles.append(float(degrees(v, player_vector(*cell))))
+        print(f"{spec.platform}: {had} of {cells} arm cells the body has; {same} of them "
+              f"notated back as written, worst angle {max(angles, default=0):.0f} degrees")
+        if spec.platform in ("baxter", "nao"):
+            assert had >= cells / 4, (spec.platform, had, cells)  # not vacuous
+            assert same >= AS_WRITTEN * had, (spec.platform, same, had)
+            assert max(angles) <= WITHIN, (spec.platform, angles)
