@@ -156,7 +156,18 @@ def test_play_scores_on_four_bodies_notated_back_by_labaneditor(
             failed = [k["said"] for r in reports[name]["robots"] for k in r["keyframes"]
                       if k["said"]]
             assert code == (1 if failed else 0), out  # a blocked keyframe is no success
+            if name == "think_d_high_s":  # it turns the body: a fixed base says it did not
+                assert "lab-baxter (baxter): " in out and "rotation not performed (a fixed " \
+                    "base)" in next(ln for ln in out.splitlines()
+                                    if ln.startswith("lab-baxter (baxter): "))
             print(out)
+    turning = [(r["platform"], k) for r in reports["think_d_high_s"]["robots"]
+               for k in r["keyframes"]]
+    for platform, kf in turning:  # the score turns the body 60 degrees right, then back
+        if platform == "baxter":
+            assert kf["base_yaw"] is None
+        elif kf["late_ms"] == 0 or kf["index"] == 2:  # on time, or the turn held a second
+            assert abs(np.degrees(kf["base_yaw"]) - kf["turn_deg"]) < 2, (platform, kf)
     assert "head         not performed: no head" in check.split("lab-nao")[0]
     assert "rotation     not performed: a fixed base" in check.split("lab-nao")[0]
     for spec in ROBOTS:
