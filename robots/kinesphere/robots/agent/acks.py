@@ -112,6 +112,14 @@ class Pending(NamedTuple):
     late_ms: int = 0
 
 
+class Due(NamedTuple):
+    """A moment by two clocks: the robot's (its control loop's time, which a loop that falls
+    behind real time slows) and the host's monotonic one (the senders' seconds go by it)."""
+
+    robot: float
+    wall: float
+
+
 @dataclass
 class Motion:
     """The command being followed and what the robot said about it."""
@@ -120,10 +128,10 @@ class Motion:
     target: Hashable
     meaning: Meaning = PLAIN
     moved: bool = False
-    due: float | None = None
-    """When the motion is to arrive (robot seconds; a command's ``arrive_ms``), else None."""
-    eta: float = 0.0
-    """When a timed motion under way would arrive, as last planned (robot seconds)."""
+    due: Due | None = None
+    """When the motion is to arrive (a command's ``arrive_ms``), else None."""
+    eta: Due = Due(0.0, 0.0)
+    """When a timed motion under way would arrive, as last planned."""
 
 
 class Acks:
@@ -189,7 +197,7 @@ class Acks:
         return list(self.motion.meaning.substitutions) if self.motion is not None else []
 
     def follow(self, cmd: Command, target: Hashable, meaning: Meaning = PLAIN,
-               due: float | None = None) -> None:
+               due: Due | None = None) -> None:
         """``cmd`` is now followed (to arrive at ``due``); another motion it replaced is
         ``superseded``. A stream of one target keeps the arrival time of its first command
         (its copies count down to the same moment)."""

@@ -23,7 +23,7 @@ from kinesphere.errors import KinesphereError
 from kinesphere.lru import Lru
 from kinesphere.protocol import AckStage, Command, LeaseAction, Pose, Status
 from kinesphere.ratelog import RateLog
-from kinesphere.robots.agent.acks import Acks, Meaning, Motion
+from kinesphere.robots.agent.acks import Acks, Due, Meaning, Motion
 from kinesphere.robots.agent.base import drive_base
 from kinesphere.robots.agent.controller import BLOCKED_TOL, Controller
 from kinesphere.robots.agent.inbox import Resolved
@@ -82,10 +82,12 @@ class Conduct:
         self._body_fault = False
         self._ratelog = RateLog(log)
         self._moved_at = 0.0
+        self._moved_wall = 0.0
+        """When the joints or base last moved, by the host's monotonic clock."""
         self._aims: Lru[int, tuple[Pose, Aim]] = Lru(AIMS_KEPT)
-        self._started: tuple[Command, Pose, PartsKey, list[Clamp], float | None] | None = None
+        self._started: tuple[Command, Pose, PartsKey, list[Clamp], Due | None] | None = None
         """The move started this step, its status and acks not yet said (:meth:`_settle`)."""
-        self._waiting_due: float | None = None
+        self._waiting_due: Due | None = None
         """When the command waiting for the databank is to arrive (robot seconds)."""
 
     def watch(self, now: float) -> None:
@@ -120,6 +122,19 @@ class Conduct:
         """A step along a followed trajectory went as planned: all :meth:`after_step` would
         have done (a fleet host's lean step, ``Agent.followed``)."""
         self._moved_at = self.controller.time
+        self._moved_wall = time.monotonic()
+        self._track(True)
+
+    def _track(self, under_way: bool) -> None:
+        """A timed motion under way (or braked while the guard finds a way): when it would
+        arrive, as planned now (:meth:`_late` of one replaced before it arrived)."""
+        motion, ctrl = self.acks.motion, self.controller
+        if motion is None or motion.due is None or not motion.moved:
+            return
+        guard = ctrl.guard
+        if under_way or (guard is not None and (guard.legs or guard.pending)):
+            left = max(ctrl.remaining, ctrl.dt)
+            motion.eta = Due(ctrl.time + left, time.monotonic() + left / self.time_scale)
 
     def commanded(self) -> None:
         """The step's setpoints went to the body: the first toward a new target is the moment
@@ -138,12 +153,9 @@ class Conduct:
         if moving:
             self._moved_at = ctrl.time
         changed = False
-        motion = self.acks.motion
-        if motion is not None and motion.due is not None and motion.moved:
-            guard = ctrl.guard
-            if moving or (guard is not None and (guard.legs or guard.pending)):
-                # under way (or braked while the guard finds a way): not there before this
-                motion.eta = ctrl.time + max(ctrl.remaining, ctrl.dt)
+        self._track(moving)
+        if moving:
+            self._moved_wall = time.monotonic()
         fault = ctrl.fault()
         if fault != self._fault:
             self._fault, changed = fault, True
@@ -286,28 +298,36 @@ class Conduct:
         else:
             self._move(cmd, self._due(cmd, now_ns - item.mono_ns))
 
-    def _due(self, cmd: Command, age_ns: int) -> float | None:
-        """When ``cmd`` is to arrive in robot time: ``arrive_ms`` after it was sent (its age
-        here counts as gone), None when it sets no time."""
+    def _due(self, cmd: Command, age_ns: int) -> Due | None:
+        """When ``cmd`` is to arrive: ``arrive_ms`` after it was sent (its age here counts as
+        gone), None when it sets no time."""
         if cmd.arrive_ms <= 0:
             return None
         left = max(0.0, cmd.arrive_ms / 1e3 - age_ns / 1e9)
-        return self.controller.time + left * self.time_scale
+        return Due(self.controller.time + left * self.time_scale, time.monotonic() + left)
 
     def _late(self, motion: Motion, planned: bool) -> int:
         """Milliseconds (the sender's) by which ``motion`` arrives after its due time: as
         planned when it starts, else as it went; a motion replaced before it arrived by when
-        it would have arrived, as last planned (a route around a contact: its waypoints too)."""
+        it would have arrived, as last planned (a route around a contact: its waypoints too).
+        Late by either clock: the robot's own, or the host's when the loop fell behind."""
         ctrl = self.controller
-        if motion.due is None:
+        due = motion.due
+        if due is None:
             return 0
+        now = time.monotonic()
         if planned:
-            arrival = ctrl.time + ctrl.dt + ctrl.remaining
-        elif motion.eta > ctrl.time:  # replaced under way
+            left = ctrl.dt + ctrl.remaining
+            arrival = Due(ctrl.time + left, now + left / self.time_scale)
+        elif motion.eta.robot > ctrl.time:  # replaced under way
             arrival = motion.eta
+        elif ctrl.moving:
+            arrival = Due(ctrl.time, now)
         else:
-            arrival = ctrl.time if ctrl.moving else self._moved_at
-        late = max(0.0, arrival - motion.due - ctrl.dt) / self.time_scale
+            arrival = Due(self._moved_at, self._moved_wall)
+        step = ctrl.dt / self.time_scale
+        late = max(0.0, (arrival.robot - due.robot) / self.time_scale - step,
+                   arrival.wall - due.wall - step)
         return round(late * 1e3)
 
     def _latched(self, cmd: Command) -> str:
@@ -329,7 +349,7 @@ class Conduct:
                           code="lease_held")
         self._holders = {self.lease.holder: cmd}
 
-    def _move(self, cmd: Command, due: float | None = None) -> None:
+    def _move(self, cmd: Command, due: Due | None = None) -> None:
         ctrl = self.controller
         base = ctrl.base
         if cmd.heading is not None:
@@ -368,12 +388,12 @@ class Conduct:
                 self.acks.send(overtaken.cmd, AckStage.SUPERSEDED, "a newer command arrived first")
             self.resolver.submit(ticket, key, self._on_resolved)
 
-    def _duration(self, due: float | None) -> float | None:
+    def _duration(self, due: Due | None) -> float | None:
         """Robot seconds from now until ``due`` (None: as fast as the limits allow)."""
-        return None if due is None else max(0.0, due - self.controller.time)
+        return None if due is None else max(0.0, due.robot - self.controller.time)
 
     def _apply_pose(self, pose: Pose, yaw: float | None, cmd: Command,
-                    key: PartsKey | None = None, due: float | None = None) -> None:
+                    key: PartsKey | None = None, due: Due | None = None) -> None:
         ctrl = self.controller
         key = parts_key(cmd.parts) if key is None else key
         if pose.platform != self.platform:
