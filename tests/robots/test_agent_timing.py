@@ -154,3 +154,20 @@ def test_a_motion_replaced_under_way_says_how_late_it_would_have_arrived(
     agent.tick()
     replaced = stages(said, 1)["superseded"]
     assert abs(replaced.late_ms - planned) <= 2 * 1e3 * ctrl.dt
+
+
+def test_a_loop_behind_real_time_arrives_late_by_the_hosts_clock(
+        youbot: tuple[Agent, list[Ack]], monkeypatch: pytest.MonkeyPatch) -> None:
+    agent, said = youbot
+    ctrl = agent.controller
+    agent.receive(command(1, math.radians(30), 3000))
+    agent.tick()
+    assert stages(said, 1)["moving"].late_ms == 0  # on time by the robot's plan
+    stalled = time.monotonic() + 10.0  # the loop stalls 10 s of the host's time
+    monkeypatch.setattr("kinesphere.robots.agent.conduct.time.monotonic", lambda: stalled)
+    while ctrl.moving:
+        agent.tick()
+    for _ in range(200):
+        agent.tick()
+    late = stages(said, 1)["reached"].late_ms
+    assert 6000 < late < 7200, late  # the robot's clock alone says on time
