@@ -1,6 +1,7 @@
 """Nested parts in the ECL: a limb and a limb inside it pointed together, each segment where
 told, measured by forward kinematics with yourdfpy (not the solver's MuJoCo model); the same
-part twice still a conflict; sizes, refusals, toppling, limits, determinism and the cache."""
+part twice still a conflict; sizes, refusals, a lifted leg standing on the other one (or refused
+when it cannot), limits, determinism and the cache."""
 
 from __future__ import annotations
 
@@ -11,20 +12,29 @@ import pytest
 
 from kinesphere.errors import KinesphereError
 from kinesphere.laban import Direction
+from kinesphere.platforms.mjcf import platform_model
 from kinesphere.platforms.platform import load_platform
 from kinesphere.protocol import NO_ID, SpatialCommand
 from kinesphere.services.ecl.ecl import Ecl
+from kinesphere.services.ecl.measure import Fk
 from kinesphere.services.ecl.nested import sized
 from support.ecl import build
 from support.nested import Body, Segment, degrees, unit
 from support.paths import TOY
 
 UPPER_ARM, FOREARM = Segment("distal_11", "distal_12"), Segment("distal_12", "limb_12")
+THIGH, SHIN = Segment("distal_31", "distal_32"), Segment("distal_32", "limb_32")
+LIFTED = frozenset(load_platform("nao").eurdf.limb_joints("limb_31"))
 
 
 def arm_pair(d1: str, d2: str, size: float = 3) -> list[SpatialCommand]:
     return [SpatialCommand("right_upper_arm", "right_shoulder", d1, size),
             SpatialCommand("right_forearm", "right_elbow", d2, size)]
+
+
+def leg_pair(thigh: str, shin: str, size: float = 3) -> list[SpatialCommand]:
+    return [SpatialCommand("right_thigh", "right_hip", thigh, size),
+            SpatialCommand("right_shin", "right_knee", shin, size)]
 
 
 def measured(body: Body, joints: dict[str, float], seg: Segment) -> np.ndarray:
@@ -136,10 +146,39 @@ def test_directions_a_segment_cannot_take_and_toppling_poses_are_refused(nao: Ec
         nao.query("right_upper_arm", "right_shoulder", "left-middle", 3)
     assert err.value.code == "direction_unavailable"
     assert "limb_11 from distal_11 to distal_12 points" in err.value.message
-    with pytest.raises(KinesphereError) as err:  # a leg kicked forward, standing on the other
-        nao.compound([SpatialCommand("right_thigh", "right_hip", "forward-middle", 3),
-                      SpatialCommand("right_shin", "right_knee", "forward-middle", 3)])
+    with pytest.raises(KinesphereError) as err:  # thigh forward, shin back: no stance holds it
+        nao.compound(leg_pair("forward-low", "back-low"))
     assert err.value.code == "direction_unavailable" and "tip the body over" in err.value.message
+
+
+@pytest.mark.parametrize(("thigh", "shin", "size"), [
+    ("forward-middle", "forward-middle", 3),  # a kick forward
+    ("right-low", "back-low", 3),
+    ("left-forward-low", "forward-middle", 3),  # crossing in front
+    ("right-forward-middle", "forward-middle", 2),
+])
+def test_a_lifted_leg_and_its_shin_stand_on_the_other_leg(
+    nao: Ecl, thigh: str, shin: str, size: int,
+) -> None:
+    """The support rule of stored leg rows at query time: where the lifted leg alone would tip
+    the body (measured: the centre of mass less than 1 cm inside the support polygon with the
+    other leg at neutral), the other leg carries the body over its foot; the answer stands with
+    at least 1 cm to spare and each segment points as the nested solve put it."""
+    fk = Fk(platform_model("nao"))
+    pose = nao.compound(leg_pair(thigh, shin, size))
+    lifted = {j: v for j, v in pose.joints.items() if j in LIFTED}
+    stance = {j: v for j, v in pose.joints.items() if j not in LIFTED}
+    alone = fk.com_margin(lifted)
+    assert alone is not None and alone < 0.01, "the lifted leg alone would stand: no test"
+    neutral = load_platform("nao").neutral
+    assert max(abs(v - neutral.get(j, 0.0)) for j, v in stance.items()) > 0.01  # it moved
+    margin = fk.com_margin(pose.joints)
+    assert margin is not None and margin >= 0.01, margin
+    body = Body("nao")
+    body.pose(pose.joints)
+    worst = max(float(degrees(body.direction(THIGH), unit(Direction.parse(thigh)))),
+                float(degrees(body.direction(SHIN), unit(Direction.parse(shin)))))
+    assert pose.measured_angle == pytest.approx(worst, abs=6)
 
 
 def test_answers_are_deterministic_and_remembered(tmp_path: Path) -> None:

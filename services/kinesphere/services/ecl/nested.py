@@ -404,7 +404,7 @@ class ChainSolver:
             if tried[-1][0][0] <= GOOD_DEG:
                 break
         _, best = min(tried, key=lambda t: t[0])
-        values = self._refine(tasks, targets, best, ITERATIONS)
+        values = self._stood(self._refine(tasks, targets, best, ITERATIONS))
         data = self._scratch
         data.qpos[:] = ls.full_q(values)
         mujoco.mj_kinematics(self.model, data)
@@ -414,6 +414,17 @@ class ChainSolver:
                                                                             strict=True))
         joints = {j: round(float(v), 6) for j, v in zip(ls.joints, values, strict=True)}
         return Solution(joints, angles, self.balance.check(ls.full_q(values)), measured)
+
+    def _stood(self, values: np.ndarray) -> np.ndarray:
+        """``values`` as they stand: a leg lifted so far that the body would topple on the
+        foot left down gets its stance leg carrying the body over that foot, by the support
+        rule of stored leg rows (:meth:`LimbSolver.balanced`: a centre-of-mass task, the sole
+        flat on the floor, the pointed segments still); anything that stands, or has no stance
+        leg, as it is. What still topples is refused by :meth:`Nested.solve`."""
+        ls = self.limb
+        if not ls.stance or self.balance.check(ls.full_q(values)) is None:
+            return values
+        return ls.balanced(values)
 
     def _refine(self, tasks: list[SegmentTask], targets: list[np.ndarray], start: np.ndarray,
                 iterations: int) -> np.ndarray:
