@@ -21,7 +21,7 @@ import pytest
 
 from kinesphere import zconfig
 from kinesphere.procs import Supervisor
-from support.agents import Databank
+from support.agents import DatabankProcess
 from support.network import Hub
 from support.system import supervisor
 
@@ -43,10 +43,10 @@ def hub() -> Iterator[Hub]:
 
 
 @pytest.fixture(scope="session")
-def databank(hub: Hub) -> Iterator[Databank]:
+def databank(hub: Hub) -> Iterator[DatabankProcess]:
     """The real databank process serving every shipped platform on the hub (one per test
     session; stopped before the hub)."""
-    bank = Databank(hub.endpoint, hub.session)
+    bank = DatabankProcess(hub.endpoint, hub.session)
     bank.start()
     try:
         yield bank

@@ -18,7 +18,7 @@ from kinesphere.cli import main
 from kinesphere.clients.gamepad.inputs import ticks
 from kinesphere.clients.gamepad.state import Action, ControllerState
 from kinesphere.protocol import AckStage, Command, Substitution
-from support.clients import Inbox, Reply, StandIn, usual
+from support.clients import CommandInbox, Reply, StandIn, usual
 from support.network import OWN_KEYS
 
 ROBOTS = ("c1", "c2", "c3")
@@ -140,7 +140,7 @@ def test_send_to_a_group_with_a_drive_held(
 def test_a_group_named_like_a_robot_is_suggested(
     hub: tuple[zenoh.Session, str], capsys: pytest.CaptureFixture[str]
 ) -> None:
-    field = Inbox(hub[0], OWN_KEYS.group_command("field"))
+    field = CommandInbox(hub[0], OWN_KEYS.group_command("field"))
     try:
         assert cli(hub[1], "send", "field", "a", "b", "left", "1", "--wait", "0.5") == 2
     finally:

@@ -25,7 +25,7 @@ from kinesphere.clients.gamepad.readout import Readout
 from kinesphere.clients.gamepad.state import Action, ControllerState
 from kinesphere.clients.gamepad.teleop import Teleop
 from kinesphere.protocol import AckStage
-from support.client_fleet import PB, PLATFORMS, Fleet, Heard, operator
+from support.client_fleet import PB, PLATFORMS, ClientFleet, Heard, operator
 from support.paths import ROOT
 from support.wait import WAIT_S
 
@@ -55,12 +55,12 @@ def tick_together(ops: list[tuple[Teleop, ControllerState]], seconds: float) -> 
     return views[len(ops) - 1 :: len(ops)]
 
 
-def lease_of(fleet: Fleet, after: float) -> str:
+def lease_of(fleet: ClientFleet, after: float) -> str:
     return fleet.track.wait(PB, lambda h: True, "a state", after=after).state.lease_holder
 
 
 @pytest.fixture
-def free(fleet: Fleet) -> Iterator[Fleet]:
+def free(fleet: ClientFleet) -> Iterator[ClientFleet]:
     """The fleet with no lease held and no e-stop latched before and after the test."""
     assert main(["estop", "--release", "--target", "all", "--connect", fleet.endpoint]) == 0
     fleet.track.wait(PB, lambda h: not h.state.lease_holder and h.state.status != "estop",
@@ -70,7 +70,7 @@ def free(fleet: Fleet) -> Iterator[Fleet]:
 
 
 def test_send_to_a_robot_that_rejects_exits_1_with_the_code(
-    free: Fleet, capsys: pytest.CaptureFixture[str]
+    free: ClientFleet, capsys: pytest.CaptureFixture[str]
 ) -> None:
     code = main(["send", PB, "limb_99", "distal_99", "left-high", "3",
                  "--connect", free.endpoint])
@@ -81,7 +81,7 @@ def test_send_to_a_robot_that_rejects_exits_1_with_the_code(
 
 
 def test_estop_is_acknowledged_by_every_robot_and_released_by_target(
-    free: Fleet, capsys: pytest.CaptureFixture[str]
+    free: ClientFleet, capsys: pytest.CaptureFixture[str]
 ) -> None:
     start = time.monotonic()
     assert main(["estop", "--connect", free.endpoint, "--sender", "carol"]) == 0
@@ -100,7 +100,7 @@ def test_estop_is_acknowledged_by_every_robot_and_released_by_target(
 
 
 def test_two_operators_only_the_lease_holder_moves_the_robot(
-    free: Fleet, pygame_up: None
+    free: ClientFleet, pygame_up: None
 ) -> None:
     with ExitStack() as stack:
         alice, _ = stack.enter_context(operator(free, tg.robot(PB), sender="alice"))
@@ -124,7 +124,7 @@ def test_two_operators_only_the_lease_holder_moves_the_robot(
 
 
 def test_a_killed_holders_lease_lapses_on_time_and_the_other_operator_gets_it(
-    free: Fleet, pygame_up: None, tmp_path: Path
+    free: ClientFleet, pygame_up: None, tmp_path: Path
 ) -> None:
     rec = tmp_path / "alice.mcap"
     ticks.save(rec, [(k / 10, LEFT_LOW) for k in range(600)])  # a minute
@@ -164,7 +164,7 @@ def test_a_killed_holders_lease_lapses_on_time_and_the_other_operator_gets_it(
 
 
 def test_an_estop_from_the_operator_without_the_lease_stops_the_robot_at_once(
-    free: Fleet, pygame_up: None
+    free: ClientFleet, pygame_up: None
 ) -> None:
     with ExitStack() as stack:
         alice, _ = stack.enter_context(operator(free, tg.robot(PB), sender="alice"))

@@ -28,7 +28,17 @@ from kinesphere.clients.gamepad.readout import Readout
 from kinesphere.clients.gamepad.state import Action, ControllerState
 from kinesphere.clients.gamepad.teleop import run
 from kinesphere.laban import Direction
-from support.client_fleet import PB, PLATFORMS, TTL_MS, YB, Fleet, Heard, at_rest, operator, speeds
+from support.client_fleet import (
+    PB,
+    PLATFORMS,
+    TTL_MS,
+    YB,
+    ClientFleet,
+    Heard,
+    at_rest,
+    operator,
+    speeds,
+)
 from support.clients import Pad, Script, VirtualPad
 from support.paths import ROOT
 
@@ -41,7 +51,7 @@ unfolded arm across, from beside the robot on its left to its right (3.2 rad), a
 turret's 1 rad/s."""
 
 
-def assert_sweep(fleet: Fleet, t0: float, released: float) -> None:
+def assert_sweep(fleet: ClientFleet, t0: float, released: float) -> None:
     """The PackBot sweep as the operator means it: the turret swings across the front of the
     robot, out to its left then its right (perpendicular to the path, as the paper's sweep),
     while the base advances; after the deadman is let go the robot holds within the TTL and
@@ -69,7 +79,7 @@ def assert_sweep(fleet: Fleet, t0: float, released: float) -> None:
 
 
 def test_sweep_gesture_translates_the_base_while_the_arm_sweeps(
-    fleet: Fleet, pygame_up: None
+    fleet: ClientFleet, pygame_up: None
 ) -> None:
     """Posted events (what a pad would send): deadman + LT + right stick left, then right,
     left stick forward."""
@@ -103,7 +113,7 @@ class SdlRun:
     released: float  # the deadman let go
 
 
-def through_sdl(fleet: Fleet, robot: str, steps: dict[int, Callable[[VirtualPad], None]],
+def through_sdl(fleet: ClientFleet, robot: str, steps: dict[int, Callable[[VirtualPad], None]],
                 release_at: int) -> SdlRun:
     """Play ``steps`` (tick -> what to do on the pad) on an SDL virtual GameController
     driving a gamepad client aimed at ``robot``, let go of the deadman at ``release_at``."""
@@ -127,7 +137,7 @@ def through_sdl(fleet: Fleet, robot: str, steps: dict[int, Callable[[VirtualPad]
     return SdlRun(views, t0, released[0])
 
 
-def test_sweep_gesture_through_sdls_real_joystick_path(fleet: Fleet, pygame_up: None) -> None:
+def test_sweep_gesture_through_sdls_real_joystick_path(fleet: ClientFleet, pygame_up: None) -> None:
     """The same gesture from an SDL virtual GameController: SDL's device, mapping and event
     path, as a USB pad would drive it."""
 
@@ -149,7 +159,7 @@ def test_sweep_gesture_through_sdls_real_joystick_path(fleet: Fleet, pygame_up: 
 
 
 def test_a_direction_no_body_has_near_drives_alone_through_sdls_joystick_path(
-    fleet: Fleet, pygame_up: None
+    fleet: ClientFleet, pygame_up: None
 ) -> None:
     """PackBot's arm (shipped databank) has no pose within 45 degrees of back-low (its
     shoulder cannot point below the deck behind it). From an SDL virtual GameController, right
@@ -182,7 +192,7 @@ def test_a_direction_no_body_has_near_drives_alone_through_sdls_joystick_path(
     assert max(abs(h.state.q[j] - hs[0].state.q[j]) for h in hs for j in arm) < 0.01
 
 
-def test_deadman_release_stops_within_the_ttl(fleet: Fleet, pygame_up: None) -> None:
+def test_deadman_release_stops_within_the_ttl(fleet: ClientFleet, pygame_up: None) -> None:
     p = Pad()
     released: list[float] = []
 
@@ -205,7 +215,7 @@ def test_deadman_release_stops_within_the_ttl(fleet: Fleet, pygame_up: None) -> 
     assert (rest.state.stamp_ns - halted.state.stamp_ns) / 1e9 < 3.0
 
 
-def gesture(fleet: Fleet, robot: str, press: Callable[[Pad], None], ticks: int
+def gesture(fleet: ClientFleet, robot: str, press: Callable[[Pad], None], ticks: int
             ) -> tuple[list[Heard], Heard]:
     """Hold the deadman and ``press`` for ``ticks`` at 30 Hz, let go; the robot's states from
     the first tick to rest, and the state at rest."""
@@ -241,7 +251,7 @@ def body_motion(hs: list[Heard], rest: Heard) -> tuple[float, float, float]:
 
 
 def test_the_gamepad_turns_a_youbot_in_place_and_drives_it_diagonally_while_its_arm_moves(
-    fleet: Fleet, pygame_up: None
+    fleet: ClientFleet, pygame_up: None
 ) -> None:
     hs, rest = gesture(fleet, YB, lambda p: p.button(pygame.CONTROLLER_BUTTON_DPAD_LEFT), 45)
     forward, left, turned = body_motion(hs, rest)
@@ -258,7 +268,7 @@ def test_the_gamepad_turns_a_youbot_in_place_and_drives_it_diagonally_while_its_
     assert any(drove.get(h.state.stamp_ns / 1e9, 0.0) > 0.05 for h in arm), "at the same time"
 
 
-def test_the_gamepad_arcs_a_packbot(fleet: Fleet, pygame_up: None) -> None:
+def test_the_gamepad_arcs_a_packbot(fleet: ClientFleet, pygame_up: None) -> None:
     """Forward on the stick and a turn on the d-pad (or, once the catalogue says 'skid', the
     stick alone): forward and yaw together, an arc to the left."""
     press = lambda p: (p.left(0.0, -1.0), p.button(pygame.CONTROLLER_BUTTON_DPAD_LEFT))  # noqa: E731
@@ -268,7 +278,7 @@ def test_the_gamepad_arcs_a_packbot(fleet: Fleet, pygame_up: None) -> None:
 
 
 def test_a_killed_client_leaves_its_robots_stopping_on_their_own(
-    fleet: Fleet, tmp_path: Path
+    fleet: ClientFleet, tmp_path: Path
 ) -> None:
     rec = tmp_path / "drive.mcap"
     # driving only: the right stick alone (Left-Middle) is a pull PackBot's arm lacks, with no
@@ -301,7 +311,8 @@ def test_a_killed_client_leaves_its_robots_stopping_on_their_own(
     at_rest(PB, fleet.track, halted.at)
 
 
-def test_groups_reach_their_members_only_and_estop_halts_all(fleet: Fleet, pygame_up: None) -> None:
+def test_groups_reach_their_members_only_and_estop_halts_all(fleet: ClientFleet,
+                                                             pygame_up: None) -> None:
     p = Pad()
     fleet.track.wait(YB, lambda h: True, "a youbot state")
     before = fleet.track.since(YB, 0.0)[-1].state.last_command_seq  # the latest, not the first

@@ -14,7 +14,7 @@ from kinesphere.clients.link import Sequencer
 from kinesphere.clients.orders import phrases
 from kinesphere.errors import KinesphereError
 from kinesphere.laban import Direction
-from support.clients import Inbox, client_link, sentinel
+from support.clients import CommandInbox, client_link, sentinel
 from support.network import OWN_KEYS
 from support.wait import WAIT_S
 
@@ -76,15 +76,15 @@ def test_an_unknown_phrase_lists_the_shipped_ones() -> None:
 
 
 @pytest.fixture
-def boxes(hub: tuple[zenoh.Session, str]) -> Iterator[dict[str, Inbox]]:
-    b = {r: Inbox(hub[0], OWN_KEYS.command(r)) for r in ("p1", "p2")}
+def boxes(hub: tuple[zenoh.Session, str]) -> Iterator[dict[str, CommandInbox]]:
+    b = {r: CommandInbox(hub[0], OWN_KEYS.command(r)) for r in ("p1", "p2")}
     yield b
     for x in b.values():
         x.close()
 
 
 def test_play_streams_each_step_for_its_duration(
-    hub: tuple[zenoh.Session, str], boxes: dict[str, Inbox], tmp_path: Path
+    hub: tuple[zenoh.Session, str], boxes: dict[str, CommandInbox], tmp_path: Path
 ) -> None:
     f = tmp_path / "two.toml"
     f.write_text(

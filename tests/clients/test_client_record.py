@@ -20,20 +20,20 @@ from kinesphere.clients.gamepad.teleop import Teleop, run
 from kinesphere.clients.options import TeleopOptions
 from kinesphere.clients.recording.traffic import replay
 from kinesphere.errors import KinesphereError
-from support.clients import Inbox, Pad, Script, client_link, sentinel
+from support.clients import CommandInbox, Pad, Script, client_link, sentinel
 from support.network import OWN_KEYS
 from support.wait import WAIT_S
 
 
 @pytest.fixture
-def box(hub: tuple[zenoh.Session, str]) -> Iterator[Inbox]:
-    inbox = Inbox(hub[0], OWN_KEYS.command("rec"))
+def box(hub: tuple[zenoh.Session, str]) -> Iterator[CommandInbox]:
+    inbox = CommandInbox(hub[0], OWN_KEYS.command("rec"))
     yield inbox
     inbox.close()
 
 
 def test_a_replay_sends_what_the_recorded_session_sent(
-    hub: tuple[zenoh.Session, str], box: Inbox, pygame_up: None, tmp_path: Path
+    hub: tuple[zenoh.Session, str], box: CommandInbox, pygame_up: None, tmp_path: Path
 ) -> None:
     pygame.event.clear()
     inp = pad.PygameInput(mapfile.load())

@@ -23,8 +23,8 @@ from kinesphere.clients.options import TeleopOptions
 from kinesphere.laban import Direction
 from kinesphere.protocol import Catalogue, LimbEntry, SpatialCommand
 from support.clients import (
+    CommandInbox,
     FakeRobot,
-    Inbox,
     Pad,
     Script,
     await_catalogue,
@@ -41,16 +41,16 @@ ROBOTS = ("r1", "r2", "r3")
 
 
 @pytest.fixture
-def inboxes(hub: tuple[zenoh.Session, str]) -> Iterator[dict[str, Inbox]]:
+def inboxes(hub: tuple[zenoh.Session, str]) -> Iterator[dict[str, CommandInbox]]:
     session, _ = hub
-    boxes = {r: Inbox(session, OWN_KEYS.command(r)) for r in ROBOTS}
+    boxes = {r: CommandInbox(session, OWN_KEYS.command(r)) for r in ROBOTS}
     yield boxes
     for b in boxes.values():
         b.close()
 
 
 @pytest.fixture
-def link(hub: tuple[zenoh.Session, str], inboxes: dict[str, Inbox]) -> Iterator[RobotLink]:
+def link(hub: tuple[zenoh.Session, str], inboxes: dict[str, CommandInbox]) -> Iterator[RobotLink]:
     _, endpoint = hub
     with client_link(endpoint) as lk:
         assert lk.wait_subscribers([OWN_KEYS.command(r) for r in ROBOTS], WAIT_S) == []
@@ -67,13 +67,13 @@ def teleop(link: RobotLink, target: tg.Target, **options: object) -> Teleop:
     return Teleop(link, mapfile.load(), target, TeleopOptions(**options))  # type: ignore[arg-type]
 
 
-def settle(link: RobotLink, boxes: dict[str, Inbox]) -> None:
+def settle(link: RobotLink, boxes: dict[str, CommandInbox]) -> None:
     """Everything sent so far has arrived at every robot."""
     sentinel(link, [OWN_KEYS.command(r) for r in boxes], list(boxes.values()))
 
 
 def test_stream_content_rate_ttl_and_final_stop(
-    link: RobotLink, inboxes: dict[str, Inbox], inp: pad.PygameInput
+    link: RobotLink, inboxes: dict[str, CommandInbox], inp: pad.PygameInput
 ) -> None:
     p = Pad()
 
@@ -109,7 +109,7 @@ def test_stream_content_rate_ttl_and_final_stop(
 
 
 def test_nothing_moves_without_the_deadman(
-    link: RobotLink, inboxes: dict[str, Inbox], inp: pad.PygameInput
+    link: RobotLink, inboxes: dict[str, CommandInbox], inp: pad.PygameInput
 ) -> None:
     p = Pad()
     op = teleop(link, tg.robot("r1"))
@@ -123,7 +123,7 @@ def test_nothing_moves_without_the_deadman(
 
 
 def test_without_a_deadman_a_deflected_stick_streams(
-    link: RobotLink, inboxes: dict[str, Inbox], inp: pad.PygameInput
+    link: RobotLink, inboxes: dict[str, CommandInbox], inp: pad.PygameInput
 ) -> None:
     p = Pad()
     op = teleop(link, tg.robot("r1"), deadman_required=False)
@@ -152,12 +152,12 @@ def engage(op: Teleop, inp: pad.PygameInput, p: Pad, ticks: int = 2) -> None:
 
 
 def test_group_and_all_reach_every_intended_robot_and_no_other(
-    hub: tuple[zenoh.Session, str], link: RobotLink, inboxes: dict[str, Inbox],
+    hub: tuple[zenoh.Session, str], link: RobotLink, inboxes: dict[str, CommandInbox],
     inp: pad.PygameInput,
 ) -> None:
     session, _ = hub
     # what r1 and r2, run with --group arms, hear
-    arms = Inbox(session, OWN_KEYS.group_command("arms"))
+    arms = CommandInbox(session, OWN_KEYS.group_command("arms"))
     try:
         assert link.wait_subscribers([OWN_KEYS.group_command("arms")], WAIT_S) == []
         p = Pad()
@@ -207,7 +207,7 @@ def test_target_button_cycles_robots_then_the_groups_they_report_then_all(
 
 
 def test_switching_target_stops_the_old_one(
-    link: RobotLink, inboxes: dict[str, Inbox], inp: pad.PygameInput
+    link: RobotLink, inboxes: dict[str, CommandInbox], inp: pad.PygameInput
 ) -> None:
     p = Pad()
     op = teleop(link, tg.robot("r3"))
@@ -223,7 +223,7 @@ def test_switching_target_stops_the_old_one(
 
 
 def test_estop_goes_to_all_latches_and_start_releases_only_what_it_latched(
-    hub: tuple[zenoh.Session, str], link: RobotLink, inboxes: dict[str, Inbox],
+    hub: tuple[zenoh.Session, str], link: RobotLink, inboxes: dict[str, CommandInbox],
     inp: pad.PygameInput,
 ) -> None:
     session, _ = hub
@@ -265,7 +265,7 @@ def test_estop_goes_to_all_latches_and_start_releases_only_what_it_latched(
 
 
 def test_unplugging_sends_a_final_stop_and_replugging_needs_the_deadman_again(
-    link: RobotLink, inboxes: dict[str, Inbox], inp: pad.PygameInput
+    link: RobotLink, inboxes: dict[str, CommandInbox], inp: pad.PygameInput
 ) -> None:
     p = Pad()
     p.plug()
@@ -285,7 +285,7 @@ def test_unplugging_sends_a_final_stop_and_replugging_needs_the_deadman_again(
 
 
 def test_leaving_the_loop_sends_a_final_stop(
-    link: RobotLink, inboxes: dict[str, Inbox], inp: pad.PygameInput
+    link: RobotLink, inboxes: dict[str, CommandInbox], inp: pad.PygameInput
 ) -> None:
     p = Pad()
     script = Script(inp, {0: lambda: (p.deadman(), p.right(0.0, -1.0)), 3: lambda: None})
@@ -297,7 +297,7 @@ def test_leaving_the_loop_sends_a_final_stop(
 
 
 def test_an_estop_reported_by_a_robot_pauses_the_stream(
-    hub: tuple[zenoh.Session, str], link: RobotLink, inboxes: dict[str, Inbox],
+    hub: tuple[zenoh.Session, str], link: RobotLink, inboxes: dict[str, CommandInbox],
     inp: pad.PygameInput,
 ) -> None:
     """Robots release a latch on any deadman command: never stream into someone's e-stop."""
@@ -332,7 +332,7 @@ FAKEBOT = Catalogue(
 
 
 def test_shoulder_cycling_follows_the_robots_catalogue(
-    hub: tuple[zenoh.Session, str], link: RobotLink, inboxes: dict[str, Inbox],
+    hub: tuple[zenoh.Session, str], link: RobotLink, inboxes: dict[str, CommandInbox],
     inp: pad.PygameInput,
 ) -> None:
     session, _ = hub
@@ -393,7 +393,7 @@ def packbot_operator(session: zenoh.Session, link: RobotLink, inp: pad.PygameInp
 
 
 def test_the_sweep_goes_out_as_asked(
-    hub: tuple[zenoh.Session, str], link: RobotLink, inboxes: dict[str, Inbox],
+    hub: tuple[zenoh.Session, str], link: RobotLink, inboxes: dict[str, CommandInbox],
     inp: pad.PygameInput,
 ) -> None:
     """The PackBot arm (real databank) reaches low to either side: low + stick left sends
@@ -416,7 +416,7 @@ def test_the_sweep_goes_out_as_asked(
 
 
 def test_a_direction_no_body_has_near_sends_the_drive_alone(
-    hub: tuple[zenoh.Session, str], link: RobotLink, inboxes: dict[str, Inbox],
+    hub: tuple[zenoh.Session, str], link: RobotLink, inboxes: dict[str, CommandInbox],
     inp: pad.PygameInput,
 ) -> None:
     """PackBot's arm (shipped databank) has no pose pointing within 45 degrees of back-low

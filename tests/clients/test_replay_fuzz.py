@@ -30,7 +30,7 @@ from kinesphere.clients.recording.traffic import replay
 from kinesphere.errors import KinesphereError
 from kinesphere.keyexpr import Keys
 from support.network import OWN_KEYS as KEYS
-from support.soak import MIB, SCALE, Tally, mib, rss
+from support.soak import MIB, SCALE, FloodTally, mib, rss
 from support.wait import WAIT_S, until
 
 MESSAGES = 20_000 * SCALE
@@ -167,7 +167,7 @@ def test_a_long_recording_streams_in_bounded_memory(tmp_path: Path) -> None:
         until(lambda: got[0] >= MESSAGES, WAIT_S, f"{MESSAGES} messages delivered",
               explain=lambda: got[0])
         zconfig.undeclare(sub)
-    tally = Tally("replay stream")
+    tally = FloodTally("replay stream")
     tally.sent = done.sent
     tally.extra.update({"delivered": got[0], "file": mib(path.stat().st_size),
                         "RSS growth": mib(grew),
@@ -199,7 +199,7 @@ def _mutate(data: bytes, rng: random.Random) -> bytes:
 def test_mutated_recordings_are_refused_by_name(tmp_path: Path) -> None:
     source = _recording(tmp_path / "src.mcap", 40).read_bytes()
     rng = random.Random(29)
-    tally = Tally("replay fuzz")
+    tally = FloodTally("replay fuzz")
     path = tmp_path / "mutant.mcap"
     before = _rss()
     with zconfig.loopback_hub() as (hub, endpoint), \

@@ -26,6 +26,7 @@ from kinesphere.clients.gamepad.inputs.ros2_joy import JoyInput  # noqa: E402
 from kinesphere.clients.gamepad.state import Action  # noqa: E402
 from kinesphere.clients.options import JoyOptions  # noqa: E402
 from kinesphere.errors import KinesphereError  # noqa: E402
+from support.clock import ManualClock
 from support.ros2 import JAZZY, RosPublisher  # noqa: E402
 from support.wait import WAIT_S  # noqa: E402
 
@@ -46,18 +47,10 @@ def joy(axes: list[float], pressed: tuple[int, ...] = (), n_buttons: int = 15) -
                                      dtype=np.int32))
 
 
-class Clock:
-    def __init__(self) -> None:
-        self.t = 100.0
-
-    def __call__(self) -> float:
-        return self.t
-
-
 @contextmanager
-def joy_rig(layout: str = "controller") -> Iterator[tuple[RosPublisher, JoyInput, Clock]]:
+def joy_rig(layout: str = "controller") -> Iterator[tuple[RosPublisher, JoyInput, ManualClock]]:
     init_pygame(headless=True)
-    clock = Clock()
+    clock = ManualClock(100.0)
     try:
         with zconfig.loopback_pair() as (ros_side, ours):
             inp = JoyInput(ours, PygameInput(mapfile.load(None)), "/joy",
@@ -95,9 +88,9 @@ def test_game_controller_node_drives_the_default_mapping() -> None:
         send(pub, inp, joy([0.0] * 6, (LB, B)))
         cs = inp.poll()
         assert cs.was_pressed(Action.ESTOP) and not cs.was_pressed(Action.LIMB_NEXT)
-        clock.t += 0.4
+        clock.now += 0.4
         assert inp.poll().connected  # within the timeout
-        clock.t += 0.2
+        clock.now += 0.2
         cs = inp.poll()
         assert not cs.connected and not cs.is_held(Action.DEADMAN), "silence = unplugged"
         send(pub, inp, joy([0.0] * 6, (LB,)))  # back, deadman still down: not held yet

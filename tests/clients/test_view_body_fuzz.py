@@ -23,7 +23,7 @@ from kinesphere.errors import KinesphereError
 from kinesphere.platforms.platform import load_platform, platform_names
 from kinesphere.services.databank.body import body_model
 from support.hostile import model
-from support.soak import SCALE, Tally, mib, rss
+from support.soak import SCALE, FloodTally, mib, rss
 
 BODIES = 150 * SCALE
 NUMBERS = ("nan", "inf", "-inf", "1e308", "-1e308", "abc", "", "1 2", "1 2 3 4", "0x10",
@@ -75,7 +75,7 @@ def test_fuzzed_bodies_are_drawn_or_refused_by_name() -> None:
     shipped = [body_model(load_platform(name)).eurdf for name in platform_names()]
     rng = random.Random(29)
     bodies = Bodies()
-    tally = Tally("view body fuzz")
+    tally = FloodTally("view body fuzz")
     slowest = 0.0
     before = rss(os.getpid())
     half = before

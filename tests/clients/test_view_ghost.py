@@ -29,7 +29,7 @@ RID = "baxter-1"
 
 
 @dataclass(frozen=True)
-class Seen:
+class ViewFrame:
     """One frame of the view: Baxter's reported status, the body's and the ghost's joints.
 
     ``around`` holds the statuses just before and just after the frame: the frame draws
@@ -67,7 +67,7 @@ def test_the_target_ghost_shows_while_a_robot_moves(sup: Supervisor) -> None:
         target = query_pose(obs.session, "baxter", *POSE).joints
         sup.spawn("send", ["send", RID, *map(str, POSE), "--connect", endpoint, "--mode",
                            "client", "--wait", "20"], expect_exit=True)
-        seen: list[Seen] = []
+        seen: list[ViewFrame] = []
 
         def frame_until_back_at_rest() -> bool:
             before = v.fleet.snapshot()[RID].state
@@ -76,7 +76,7 @@ def test_the_target_ghost_shows_while_a_robot_moves(sup: Supervisor) -> None:
             assert before is not None and robot.state is not None
             ghost = drawing.ghost
             assert drawing.solid.q is not None
-            seen.append(Seen(robot.state.status, bool(ghost.root.visible),
+            seen.append(ViewFrame(robot.state.status, bool(ghost.root.visible),
                              drawing.solid.q.copy(), None if ghost.q is None else ghost.q.copy(),
                              (before.status, robot.state.status)))
             # at rest before the frame too: a state that arrives while a frame draws leaves

@@ -15,7 +15,7 @@ from typing import Any
 from kinesphere import protocol as pr
 from kinesphere.errors import ERROR_CODES, KinesphereError
 from support.protocol import SAMPLES
-from support.soak import SCALE, Tally
+from support.soak import SCALE, FloodTally
 
 N = 20_000 * SCALE
 TYPES: list[Any] = [*pr.MESSAGE_TYPES, pr.AnyMessage]
@@ -50,7 +50,7 @@ def mutate(rng: random.Random, data: bytes, pool: list[bytes]) -> bytes:
 def test_decode_never_raises_anything_but_a_kinesphere_error() -> None:
     rng = random.Random(12)
     pool = [pr.encode(m) for m in SAMPLES]
-    tally = Tally("protocol fuzz")
+    tally = FloodTally("protocol fuzz")
     decoded: Counter[str] = Counter()
     start = time.perf_counter()
     for _ in range(N):

@@ -7,18 +7,11 @@ import logging
 import pytest
 
 from kinesphere.ratelog import RateLog
-
-
-class Clock:
-    def __init__(self) -> None:
-        self.now = 0.0
-
-    def __call__(self) -> float:
-        return self.now
+from support.clock import ManualClock
 
 
 def test_repeats_are_counted_into_the_next_line(caplog: pytest.LogCaptureFixture) -> None:
-    clock = Clock()
+    clock = ManualClock()
     rl = RateLog(logging.getLogger("t.ratelog"), every=10.0, clock=clock)
     caplog.set_level(logging.INFO, logger="t.ratelog")
     assert rl("a", "denied %s", "x")
@@ -32,7 +25,7 @@ def test_repeats_are_counted_into_the_next_line(caplog: pytest.LogCaptureFixture
 
 
 def test_keys_are_bounded_oldest_first() -> None:
-    clock = Clock()
+    clock = ManualClock()
     rl = RateLog(logging.getLogger("t.ratelog"), max_keys=100, clock=clock)
     for i in range(10_000):
         rl(f"key-{i}", "x")
@@ -42,7 +35,7 @@ def test_keys_are_bounded_oldest_first() -> None:
 
 
 def test_a_burst_per_key_then_a_count(caplog: pytest.LogCaptureFixture) -> None:
-    clock = Clock()
+    clock = ManualClock()
     rl = RateLog(logging.getLogger("t.ratelog"), every=10.0, burst=3, clock=clock)
     caplog.set_level(logging.INFO, logger="t.ratelog")
     logged = [rl("who", "line %d", i) for i in range(100)]

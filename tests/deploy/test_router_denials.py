@@ -10,6 +10,7 @@ import time
 from kinesphere.deploy import denials as dn
 from kinesphere.deploy.router import endpoint_ports
 from kinesphere.deploy.sockets import ClosedPeers, parse_destroyed
+from support.clock import ManualClock
 
 ACL = "zenoh::net::routing::interceptor::access_control"
 
@@ -17,14 +18,6 @@ ACL = "zenoh::net::routing::interceptor::access_control"
 def line(msg: str, target: str = ACL, level: str = "TRACE", thread: str = "rx-0 ThreadId(9)"
          ) -> str:
     return f"2026-01-01T00:00:00.000000Z {level} {thread} {target}: {msg}"
-
-
-class Clock:
-    def __init__(self) -> None:
-        self.now = 0.0
-
-    def __call__(self) -> float:
-        return self.now
 
 
 def deny(f: dn.DenialFilter, zid: str, cn: str | None, key: str) -> None:
@@ -36,7 +29,7 @@ def deny(f: dn.DenialFilter, zid: str, cn: str | None, key: str) -> None:
 
 def test_a_flood_of_distinct_keys_is_bounded_per_identity() -> None:
     """Before: 3,000 distinct keys -> 3,000 lines, and per-key records never pruned."""
-    clock, lines = Clock(), []
+    clock, lines = ManualClock(), []
     f = dn.DenialFilter(report=lines.append, passthrough=lambda _: None, clock=clock)
     for i in range(3000):
         deny(f, "abc1", "nao-1", f"kinesphere/robot/x{i}/state")
@@ -51,7 +44,7 @@ def test_a_flood_of_distinct_keys_is_bounded_per_identity() -> None:
 
 
 def test_sessions_without_certificates_share_one_total_budget() -> None:
-    clock, lines = Clock(), []
+    clock, lines = ManualClock(), []
     f = dn.DenialFilter(report=lines.append, passthrough=lambda _: None, clock=clock)
     for i in range(3000):
         deny(f, f"{i:x}ff", None, f"k/{i}")

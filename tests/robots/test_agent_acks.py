@@ -13,11 +13,18 @@ import zenoh
 from kinesphere.errors import KinesphereError
 from kinesphere.laban import Direction
 from kinesphere.protocol import SpatialCommand
-from support.agents import AckWatch, Databank, Operator, far, joints_close, running_agent
+from support.agents import (
+    AckWatch,
+    CommandSender,
+    DatabankProcess,
+    far,
+    joints_close,
+    running_agent,
+)
 
 
 def test_a_command_is_accepted_moves_and_is_reached_or_superseded(
-    hub: tuple[zenoh.Session, str], databank: Databank
+    hub: tuple[zenoh.Session, str], databank: DatabankProcess
 ) -> None:
     session, endpoint = hub
     cat = databank.catalogue("baxter")
@@ -25,7 +32,7 @@ def test_a_command_is_accepted_moves_and_is_reached_or_superseded(
     target = databank.query("baxter", SpatialCommand(*second))
     acks = AckWatch(session, "baxter")
     with running_agent(endpoint, "baxter", speed=2.0) as (agent, watch):
-        op = Operator(session, agent.robot_id, sender="ann", client_session="s-1")
+        op = CommandSender(session, agent.robot_id, sender="ann", client_session="s-1")
         seq = op.send(first)
         assert acks.of("ann", seq, "accepted").session == "s-1"
         acks.of("ann", seq, "moving")
@@ -49,15 +56,15 @@ def test_a_command_is_accepted_moves_and_is_reached_or_superseded(
 
 
 def test_commands_that_move_nothing_get_one_ack_and_the_state_names_who(
-    hub: tuple[zenoh.Session, str], databank: Databank
+    hub: tuple[zenoh.Session, str], databank: DatabankProcess
 ) -> None:
     session, endpoint = hub
     cat = databank.catalogue("youbot")
     acks = AckWatch(session, "yb-acks")
     with running_agent(endpoint, "youbot", robot_id="yb-acks", speed=2.0,
                        groups=("field",)) as (agent, watch):
-        op = Operator(session, agent.robot_id, sender="ann", client_session="a")
-        panic = Operator(session, agent.robot_id, sender="bob", client_session="b")
+        op = CommandSender(session, agent.robot_id, sender="ann", client_session="a")
+        panic = CommandSender(session, agent.robot_id, sender="bob", client_session="b")
 
         seq = op.send(lease="acquire")
         assert acks.of("ann", seq, "leased").lease_holder == "ann"
@@ -97,7 +104,7 @@ def test_commands_that_move_nothing_get_one_ack_and_the_state_names_who(
 
 
 def test_substitutions_and_databank_errors_are_relayed_as_the_databank_said(
-    hub: tuple[zenoh.Session, str], databank: Databank
+    hub: tuple[zenoh.Session, str], databank: DatabankProcess
 ) -> None:
     """A direction a limb lacks: whatever the databank answers (the nearest direction it has,
     or ``direction_unavailable``), the robot's ack and state say the same."""
@@ -112,7 +119,7 @@ def test_substitutions_and_databank_errors_are_relayed_as_the_databank_said(
         answer = exc
     acks = AckWatch(session, "bx-subs")
     with running_agent(endpoint, "baxter", robot_id="bx-subs", speed=2.0) as (agent, watch):
-        op = Operator(session, agent.robot_id, sender="ann")
+        op = CommandSender(session, agent.robot_id, sender="ann")
         seq = op.send(part)
         first = acks.wait(lambda a: a.seq == seq and a.stage in ("accepted", "rejected"),
                           "the verdict on a missing direction")
@@ -127,7 +134,7 @@ def test_substitutions_and_databank_errors_are_relayed_as_the_databank_said(
 
 
 def test_a_translation_beyond_the_robots_maximum_is_refused_and_nothing_moves(
-    hub: tuple[zenoh.Session, str], databank: Databank
+    hub: tuple[zenoh.Session, str], databank: DatabankProcess
 ) -> None:
     """Whoever refuses a huge size (the databank past its ``max_size``, or the robot past its
     maximum translation per command), the base does not move and state keeps flowing."""
@@ -138,7 +145,7 @@ def test_a_translation_beyond_the_robots_maximum_is_refused_and_nothing_moves(
     acks = AckWatch(session, "yb-far")
     with running_agent(endpoint, "youbot", robot_id="yb-far", speed=2.0,
                        max_translation_m=1.0) as (agent, watch):
-        op = Operator(session, agent.robot_id, sender="ann")
+        op = CommandSender(session, agent.robot_id, sender="ann")
         for size in (1e10, 1e7, 1e4, 1.5 / step):
             seq = op.send((core, core, "forward-middle", size), ttl_ms=0)
             refused = acks.of("ann", seq, "rejected", f"size {size:g} refused")

@@ -26,7 +26,7 @@ from kinesphere.robots.agent.otg import Otg
 from kinesphere.robots.agent.pacing import STALL_NS
 from kinesphere.robots.agent.resolver import parts_key
 from kinesphere.robots.agent.runtime import Agent, AgentOptions
-from support.agents import Databank, far
+from support.agents import DatabankProcess, far
 
 DT = 0.002
 
@@ -146,7 +146,7 @@ def payload(seq: int, parts: list[tuple[str, str, str, float]] | None = None,
 
 
 def test_a_fleet_robot_steps_exactly_like_a_lone_agent(
-    hub: tuple[zenoh.Session, str], databank: Databank
+    hub: tuple[zenoh.Session, str], databank: DatabankProcess
 ) -> None:
     """The same commands at the same steps to robots of a fleet host (lean steps, followers,
     batched stops) and to lone agents (their whole cycle every step) from the same state:

@@ -26,7 +26,7 @@ from kinesphere.robots.agent.bodies import BODIES, make_body
 from kinesphere.robots.agent.body import Body, Reading
 from kinesphere.robots.agent.options import BODY_KINDS
 from kinesphere.robots.agent.runtime import Agent, AgentOptions
-from support.agents import Databank, Operator, StateWatch, joints_close
+from support.agents import CommandSender, DatabankProcess, StateWatch, joints_close
 
 
 class KinematicBody(Body):
@@ -64,7 +64,7 @@ class KinematicBody(Body):
         self.qd[:] = 0.0
 
 
-class FailingBody(KinematicBody):
+class DriverLostBody(KinematicBody):
     """Fails every step from step ``after`` on, like a body whose driver died."""
 
     def __init__(self, platform: str, dt: float, after: int) -> None:
@@ -108,7 +108,7 @@ def test_the_watchdog_runs_on_the_wall_clock_through_a_stalled_step(
         watch = StateWatch(s, "stalling")
         agent.start()
         try:
-            op = Operator(session, agent.robot_id, sender="ann", client_session="a")
+            op = CommandSender(session, agent.robot_id, sender="ann", client_session="a")
             seq = op.send(drive=Drive(forward=0.5), ttl_ms=300)
             watch.after(seq, lambda st: st.base_pose[0] > 0.001, "driving")
             body.stall_at = body.steps + 2
@@ -123,7 +123,7 @@ def test_the_watchdog_runs_on_the_wall_clock_through_a_stalled_step(
 
 
 def test_an_agent_drives_a_kinematic_body_over_the_wire(
-    hub: tuple[zenoh.Session, str], databank: Databank
+    hub: tuple[zenoh.Session, str], databank: DatabankProcess
 ) -> None:
     session, endpoint = hub
     cat = databank.catalogue("youbot")
@@ -139,7 +139,7 @@ def test_an_agent_drives_a_kinematic_body_over_the_wire(
         watch = StateWatch(s, "kinematic")
         agent.start()
         try:
-            op = Operator(session, agent.robot_id)
+            op = CommandSender(session, agent.robot_id)
             target, _ = agent.controller.joints.clamp(pose.joints)
             seq = op.send((reach.limb, reach.origin, reach.direction, reach.size))
             watch.after(seq, lambda st: st.status == "idle" and joints_close(st, target, 1e-9),
@@ -163,7 +163,7 @@ def test_an_agent_drives_a_kinematic_body_over_the_wire(
 
 def test_a_body_that_fails_never_stops_the_state_stream(hub: tuple[zenoh.Session, str]) -> None:
     _, endpoint = hub
-    body = FailingBody("baxter", 1.0 / 500.0, after=50)
+    body = DriverLostBody("baxter", 1.0 / 500.0, after=50)
     with zconfig.session(config=zconfig.loopback_config(endpoint)) as s:
         agent = Agent("baxter", "failing", s, AgentOptions(speed=0.0), body=body)
         watch = StateWatch(s, "failing")

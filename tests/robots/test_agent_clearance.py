@@ -20,7 +20,7 @@ from kinesphere.robots.agent.controller import Controller
 from kinesphere.robots.agent.guard import CHECK_GAP_S, Guard, make_guard
 from kinesphere.robots.agent.mujoco_body import MujocoBody
 from kinesphere.services.ecl.ecl import Ecl
-from support.agents import AckWatch, Databank, Operator, running_agent
+from support.agents import AckWatch, CommandSender, DatabankProcess, running_agent
 from support.wait import WAIT_S
 
 DT = 0.002
@@ -337,7 +337,7 @@ class HoldOut:
 
 
 def test_a_halted_target_sent_again_is_blocked_again_and_nothing_moves(
-    hub: tuple[zenoh.Session, str], databank: Databank
+    hub: tuple[zenoh.Session, str], databank: DatabankProcess
 ) -> None:
     """Over the wire: the contact halt ends the command ``blocked`` with the pair; the same
     target streamed again is ``accepted`` then ``blocked`` with the same reason, never
@@ -352,7 +352,7 @@ def test_a_halted_target_sent_again_is_blocked_again_and_nothing_moves(
         assert isinstance(body, MujocoBody)
         hold = HoldOut(body, block.joints)
         agent.controller.on_step = hold
-        op = Operator(session, "guarded", sender="op")
+        op = CommandSender(session, "guarded", sender="op")
         first = op.send(part)
         halted = acks.of("op", first, "blocked").detail
         assert halted.startswith("contact left_") and "during motion; halted" in halted

@@ -11,7 +11,7 @@ import pytest
 import zenoh
 
 from kinesphere import zconfig
-from support.agents import Databank, Operator, StateWatch
+from support.agents import CommandSender, DatabankProcess, StateWatch
 from support.network import KEYS
 from support.paths import ROOT
 from support.wait import WAIT_S
@@ -20,7 +20,7 @@ pytestmark = pytest.mark.processes
 
 
 def test_agent_process_obeys_its_group_and_stops_on_sigterm(
-    hub: tuple[zenoh.Session, str], databank: Databank
+    hub: tuple[zenoh.Session, str], databank: DatabankProcess
 ) -> None:
     session, endpoint = hub
     alive, gone = threading.Event(), threading.Event()
@@ -43,7 +43,7 @@ def test_agent_process_obeys_its_group_and_stops_on_sigterm(
         assert first.last_command_seq == -1
 
         entry = databank.catalogue("youbot").limbs[0]
-        group = Operator(session, key=KEYS.group_command("arms"))
+        group = CommandSender(session, key=KEYS.group_command("arms"))
         seq = group.send((entry.limb, entry.origin, entry.directions[-1], 2.0))
         watch.after(seq, lambda s: s.status in ("moving", "idle", "clamped"), "group command")
         group.close()

@@ -17,8 +17,8 @@ from kinesphere.laban import Direction
 from kinesphere.protocol import Drive, RobotState, SpatialCommand
 from kinesphere.robots.agent.base import rotate
 from support.agents import (
-    Databank,
-    Operator,
+    CommandSender,
+    DatabankProcess,
     StateWatch,
     Trace,
     finite_jerk,
@@ -30,7 +30,7 @@ from support.agents import (
 TTL_MS = 2000
 
 
-def stream(op: Operator, watch: StateWatch, until: Callable[[RobotState], bool], what: str,
+def stream(op: CommandSender, watch: StateWatch, until: Callable[[RobotState], bool], what: str,
            *parts: tuple[str, str, str, float], drive: Drive | None = None,
            limit: int = 3000) -> list[RobotState]:
     """Send the command once per state until a state satisfies ``until``; the states seen."""
@@ -45,7 +45,7 @@ def stream(op: Operator, watch: StateWatch, until: Callable[[RobotState], bool],
 
 
 def test_youbot_turns_in_place_then_drives_diagonally_while_its_arm_moves(
-    hub: tuple[zenoh.Session, str], databank: Databank
+    hub: tuple[zenoh.Session, str], databank: DatabankProcess
 ) -> None:
     session, endpoint = hub
     entry = databank.catalogue("youbot").limbs[0]
@@ -54,7 +54,7 @@ def test_youbot_turns_in_place_then_drives_diagonally_while_its_arm_moves(
     pose = databank.query("youbot", part)
     trace = Trace()
     with running_agent(endpoint, "youbot", speed=2.0, trace=trace) as (agent, watch):
-        op = Operator(session, agent.robot_id)
+        op = CommandSender(session, agent.robot_id)
         turning = stream(op, watch, lambda s: s.base_pose[2] > 1.0, "turned 1 rad",
                          drive=Drive(yaw=0.8))
         assert max(math.hypot(*s.base_pose[:2]) for s in turning) < 2e-3, "turned in place"
@@ -90,7 +90,7 @@ def test_packbot_arcs_on_forward_and_yaw_and_never_slides(
     trace = Trace()
     with running_agent(endpoint, "packbot", speed=2.0, trace=trace) as (agent, watch):
         spec = agent.controller.platform.base
-        op = Operator(session, agent.robot_id)
+        op = CommandSender(session, agent.robot_id)
         arc = Drive(forward=0.4, yaw=0.4)
         states = stream(op, watch, lambda s: s.base_pose[2] > 2.0, "turned 2 rad on the arc",
                         drive=arc)

@@ -26,8 +26,8 @@ from kinesphere.robots.agent.inbox import MAX_PENDING, PER_SENDER
 from kinesphere.robots.agent.ordering import MAX_SENDERS
 from support.agents import (
     AckWatch,
-    Databank,
-    Operator,
+    CommandSender,
+    DatabankProcess,
     StateWatch,
     agent_process,
     far,
@@ -41,7 +41,7 @@ pytestmark = pytest.mark.processes
 
 
 def test_commands_queued_while_the_agent_was_frozen_never_run(
-    hub: tuple[zenoh.Session, str], databank: Databank
+    hub: tuple[zenoh.Session, str], databank: DatabankProcess
 ) -> None:
     """SIGSTOP a real agent while an operator streams at 30 Hz (ttl 300 ms), switch to another
     target while it is frozen, stop streaming, SIGCONT: nothing moves, the commands are
@@ -52,7 +52,7 @@ def test_commands_queued_while_the_agent_was_frozen_never_run(
     pose = databank.query("baxter", SpatialCommand(*here))
     watch = StateWatch(session, "frozen")
     acks = AckWatch(session, "frozen")
-    op = Operator(session, "frozen", sender="ann", client_session="a")
+    op = CommandSender(session, "frozen", sender="ann", client_session="a")
     try:
         with agent_process(endpoint, "baxter", "frozen") as proc:
             watch.wait(lambda s: True, "the agent is up")
@@ -89,7 +89,7 @@ def test_commands_queued_while_the_agent_was_frozen_never_run(
 
 
 def test_a_flood_cannot_delay_an_estop_and_every_table_stays_bounded(
-    hub: tuple[zenoh.Session, str], databank: Databank
+    hub: tuple[zenoh.Session, str], databank: DatabankProcess
 ) -> None:
     session, endpoint = hub
     cat = databank.catalogue("youbot")
@@ -100,7 +100,7 @@ def test_a_flood_cannot_delay_an_estop_and_every_table_stays_bounded(
         rss = psutil.Process(os.getpid()).memory_info().rss
         flood = session.declare_publisher(KEYS.command("flooded"))
         zconfig.wait_matching(flood)
-        estop = Operator(session, "flooded", sender="panic", client_session="p")
+        estop = CommandSender(session, "flooded", sender="panic", client_session="p")
         n = 20_000
         done = threading.Event()
 
@@ -143,7 +143,7 @@ def test_a_flood_cannot_delay_an_estop_and_every_table_stays_bounded(
 
 
 def test_garbage_is_malformed_in_one_log_line_and_a_forged_clock_silences_nobody(
-    hub: tuple[zenoh.Session, str], databank: Databank, caplog: pytest.LogCaptureFixture,
+    hub: tuple[zenoh.Session, str], databank: DatabankProcess, caplog: pytest.LogCaptureFixture,
     capfd: pytest.CaptureFixture[str],
 ) -> None:
     session, endpoint = hub
@@ -153,7 +153,7 @@ def test_garbage_is_malformed_in_one_log_line_and_a_forged_clock_silences_nobody
     oversized = msgspec.msgpack.encode({"type": "command", "pad": "x" * 70_000})
     with caplog.at_level(logging.WARNING, logger="kinesphere.robots.agent"), \
             running_agent(endpoint, "youbot", robot_id="garbage", speed=2.0) as (agent, watch):
-        op = Operator(session, "garbage", sender="victim")
+        op = CommandSender(session, "garbage", sender="victim")
         for _ in range(100):
             for payload in (deep, oversized, b"\x93not a command"):
                 op.raw(payload)

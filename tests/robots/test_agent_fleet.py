@@ -35,8 +35,8 @@ from kinesphere.robots.agent.runtime import AgentOptions
 from kinesphere.services.ecl.measure import Fk, angle_deg
 from support.agents import (
     AckWatch,
-    Databank,
-    Operator,
+    CommandSender,
+    DatabankProcess,
     joints_close,
     running_fleet_host,
 )
@@ -55,7 +55,7 @@ def far(cat: Catalogue, k: int) -> tuple[str, str, str, float]:
 
 
 def test_robots_of_several_platforms_obey_their_own_commands(
-    hub: tuple[zenoh.Session, str], databank: Databank
+    hub: tuple[zenoh.Session, str], databank: DatabankProcess
 ) -> None:
     session, endpoint = hub
     poses = {r.robot_id: far(databank.catalogue(r.platform), i % 2)
@@ -65,7 +65,7 @@ def test_robots_of_several_platforms_obey_their_own_commands(
     with running_fleet_host(endpoint, ROBOTS) as (fleet, watches):
         assert fleet.stepper.threads == 2
         start = {rid: w.states[-1] for rid, w in watches.items()}
-        ops = {r.robot_id: Operator(session, r.robot_id, sender=f"op-{r.robot_id}")
+        ops = {r.robot_id: CommandSender(session, r.robot_id, sender=f"op-{r.robot_id}")
                for r in ROBOTS}
         # one robot moves; the others, stepped by the same loop, do not
         first = ROBOTS[0].robot_id
@@ -82,7 +82,7 @@ def test_robots_of_several_platforms_obey_their_own_commands(
             watches[rid].after(seq, lambda st, rid=rid: joints_close(st, targets[rid], 0.02),
                                f"{rid} at its pose")
         # a group command reaches its member only
-        group = Operator(session, key=KEYS.group_command("bases"), sender="grp")
+        group = CommandSender(session, key=KEYS.group_command("bases"), sender="grp")
         seq = group.send(poses[first], stop=True)
         watches["f-youbot"].after(seq, lambda st: st.status == "stopped", "youbot stopped")
         assert watches["f-baxter"].states[-1].status != "stopped"
@@ -91,7 +91,7 @@ def test_robots_of_several_platforms_obey_their_own_commands(
 
 
 def test_one_robots_estop_does_not_stop_the_others(
-    hub: tuple[zenoh.Session, str], databank: Databank
+    hub: tuple[zenoh.Session, str], databank: DatabankProcess
 ) -> None:
     session, endpoint = hub
     robots = ROBOTS[:2]
@@ -99,8 +99,8 @@ def test_one_robots_estop_does_not_stop_the_others(
     acks = AckWatch(session, "*")
     with running_fleet_host(endpoint, robots) as (_fleet, watches):
         stopped, other = (r.robot_id for r in robots)
-        op_s = Operator(session, stopped, sender="op-s")
-        op_o = Operator(session, other, sender="op-o")
+        op_s = CommandSender(session, stopped, sender="op-s")
+        op_o = CommandSender(session, other, sender="op-o")
         seq = op_s.send(estop=True)
         acks.of("op-s", seq, "estopped")
         watches[stopped].after(seq, lambda st: st.status == "estop" and st.estop_by == "op-s",
@@ -121,7 +121,7 @@ def test_one_robots_estop_does_not_stop_the_others(
     acks.close()
 
 
-class FailingBody(MujocoBody):
+class CrashingMujocoBody(MujocoBody):
     """A MuJoCo body whose physics fails after ``ok`` steps (a crashed simulator)."""
 
     def __init__(self, platform: str, dt: float, ok: int) -> None:
@@ -141,7 +141,7 @@ def test_a_failing_body_holds_its_robot_alone(hub: tuple[zenoh.Session, str]) ->
     with zconfig.session(config=zconfig.loopback_config(endpoint)) as s:
         fleet = FleetHost(robots, s, AgentOptions(speed=0.0), helpers=1)
         bad, fine = fleet.agents
-        bad.controller.body = FailingBody("youbot", bad.controller.dt, ok=50)
+        bad.controller.body = CrashingMujocoBody("youbot", bad.controller.dt, ok=50)
         fleet.declare()
         try:
             for _ in range(200):
@@ -247,7 +247,7 @@ def test_fleet_command_line_errors(tmp_path: Path) -> None:
 
 
 def test_send_all_moves_every_body_exact_or_substituted(
-    hub: tuple[zenoh.Session, str], databank: Databank, capsys: pytest.CaptureFixture[str]
+    hub: tuple[zenoh.Session, str], databank: DatabankProcess, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """A fleet command in a direction only some bodies keep: every robot moves, the others by
     the nearest direction they have, each robot reporting what it was served and how far from

@@ -22,7 +22,7 @@ from kinesphere.errors import KinesphereError
 from kinesphere.keyexpr import KEYS
 from kinesphere.procs import Supervisor
 from kinesphere.zconfig import loopback_config, loopback_hub
-from support.soak import MIB, SCALE, Tally, mib, rss
+from support.soak import MIB, SCALE, FloodTally, mib, rss
 from support.system import Observer
 from support.wait import WAIT_S, until
 
@@ -161,7 +161,7 @@ def test_a_flood_of_malformed_commands_moves_nothing(sup: Supervisor) -> None:
             rng = random.Random(3)
             base = pr.encode(drive(seq + 1))
             payloads = [malformed(rng, base) for _ in range(500)]
-            tally = Tally("agent flood")
+            tally = FloodTally("agent flood")
             marks = Marks(obs.session, pub)
             before, start = rss(agent.pid), time.monotonic()
             n = 5000 * SCALE

@@ -13,12 +13,13 @@ import zenoh
 
 from kinesphere.protocol import Drive
 from kinesphere.robots.agent.lease import LEASE_TIMEOUT_S
-from support.agents import AckWatch, Databank, Operator, StateWatch, running_agent
+from support.agents import AckWatch, CommandSender, DatabankProcess, StateWatch, running_agent
 
 TTL_MS = 500
 
 
-def streams(ann: Operator, bob: Operator, watch: StateWatch, n: int) -> tuple[list[int], list[int]]:
+def streams(ann: CommandSender, bob: CommandSender, watch: StateWatch, n: int
+            ) -> tuple[list[int], list[int]]:
     """Both operators stream: Ann drives forward, Bob drives back; one command each per
     state received."""
     a_seqs, b_seqs = [], []
@@ -30,13 +31,13 @@ def streams(ann: Operator, bob: Operator, watch: StateWatch, n: int) -> tuple[li
 
 
 def test_two_operators_only_the_holder_moves_the_robot(
-    hub: tuple[zenoh.Session, str], databank: Databank
+    hub: tuple[zenoh.Session, str], databank: DatabankProcess
 ) -> None:
     session, endpoint = hub
     acks = AckWatch(session, "yb-lease")
     with running_agent(endpoint, "youbot", robot_id="yb-lease", speed=1.0) as (agent, watch):
-        ann = Operator(session, agent.robot_id, sender="ann", client_session="a1")
-        bob = Operator(session, agent.robot_id, sender="bob", client_session="b1")
+        ann = CommandSender(session, agent.robot_id, sender="ann", client_session="a1")
+        bob = CommandSender(session, agent.robot_id, sender="bob", client_session="b1")
         a_seqs, b_seqs = streams(ann, bob, watch, 40)
         state = watch.after(a_seqs[-1], lambda s: True, "after both streams")
         assert state.lease_holder == "ann" and state.base_pose[0] > 0.02, "Ann drove forward"

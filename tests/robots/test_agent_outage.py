@@ -16,7 +16,7 @@ import zenoh
 from kinesphere import zconfig
 from kinesphere.protocol import RecordRequest, SpatialCommand, encode
 from kinesphere.services.ecl.store import DATA_DIR
-from support.agents import Databank, Operator, joints_close, running_agent
+from support.agents import CommandSender, DatabankProcess, joints_close, running_agent
 from support.network import KEYS
 from support.wait import WAIT_S, until
 
@@ -31,9 +31,9 @@ def own_hub() -> Iterator[tuple[zenoh.Session, str]]:
 
 
 @pytest.fixture
-def own_databank(own_hub: tuple[zenoh.Session, str]) -> Iterator[Databank]:
+def own_databank(own_hub: tuple[zenoh.Session, str]) -> Iterator[DatabankProcess]:
     session, endpoint = own_hub
-    bank = Databank(endpoint, session)
+    bank = DatabankProcess(endpoint, session)
     bank.start()
     try:
         yield bank
@@ -42,7 +42,7 @@ def own_databank(own_hub: tuple[zenoh.Session, str]) -> Iterator[Databank]:
 
 
 def test_outage_keeps_last_pose_and_recovers_without_restart(
-    own_hub: tuple[zenoh.Session, str], own_databank: Databank
+    own_hub: tuple[zenoh.Session, str], own_databank: DatabankProcess
 ) -> None:
     session, endpoint = own_hub
     entry = own_databank.catalogue("baxter").limbs[0]
@@ -53,7 +53,7 @@ def test_outage_keeps_last_pose_and_recovers_without_restart(
     with running_agent(endpoint, "baxter", speed=4.0) as (agent, watch):
         target1, _ = agent.controller.joints.clamp(pose1.joints)
         target2, _ = agent.controller.joints.clamp(pose2.joints)
-        op = Operator(session, agent.robot_id)
+        op = CommandSender(session, agent.robot_id)
         seq = op.send((first.limb, first.origin, first.direction, first.size))
         watch.after(seq, lambda s: s.status == "idle" and joints_close(s, target1, 5e-3),
                     "at the first pose")
@@ -85,7 +85,7 @@ def test_cache_is_per_databank_version(
     session, endpoint = own_hub
     db = tmp_path / "youbot.sqlite"
     shutil.copy(DATA_DIR / "youbot.sqlite", db)
-    bank = Databank(endpoint, session, ["--db", f"youbot={db}", "--allow-writes"])
+    bank = DatabankProcess(endpoint, session, ["--db", f"youbot={db}", "--allow-writes"])
     bank.start()
     try:
         entry = bank.catalogue("youbot").limbs[0]
@@ -93,7 +93,7 @@ def test_cache_is_per_databank_version(
         part = (entry.limb, entry.origin, direction, 2.0)
         old = bank.query("youbot", SpatialCommand(*part))
         with running_agent(endpoint, "youbot", speed=4.0) as (agent, watch):
-            op = Operator(session, agent.robot_id)
+            op = CommandSender(session, agent.robot_id)
             for _ in range(3):
                 seq = op.send(part)
                 watch.after(seq, lambda s: s.status == "idle"

@@ -13,7 +13,14 @@ import zenoh
 
 from kinesphere.protocol import Catalogue, Pose, RobotState, SpatialCommand
 from kinesphere.robots.agent.runtime import Agent
-from support.agents import Databank, Operator, Trace, finite_jerk, joints_close, running_agent
+from support.agents import (
+    CommandSender,
+    DatabankProcess,
+    Trace,
+    finite_jerk,
+    joints_close,
+    running_agent,
+)
 
 PLATFORMS = ["baxter", "nao", "youbot", "packbot", "khepera"]
 TOL = 5e-3
@@ -56,7 +63,7 @@ def check_limits(trace: Trace, agent: Agent) -> None:
 
 @pytest.mark.parametrize("platform", PLATFORMS)
 def test_one_command_reaches_the_ecl_pose(
-    hub: tuple[zenoh.Session, str], databank: Databank, platform: str
+    hub: tuple[zenoh.Session, str], databank: DatabankProcess, platform: str
 ) -> None:
     session, endpoint = hub
     cat = databank.catalogue(platform)
@@ -67,7 +74,7 @@ def test_one_command_reaches_the_ecl_pose(
     pose = databank.query(platform, part)
     trace = Trace()
     with running_agent(endpoint, platform, speed=4.0, trace=trace) as (agent, watch):
-        op = Operator(session, agent.robot_id)
+        op = CommandSender(session, agent.robot_id)
         seq = op.send(as_tuple(part))
         state = watch.after(seq, reached(agent, pose), f"{platform} at {pose}")
         op.close()
@@ -80,7 +87,7 @@ def test_one_command_reaches_the_ecl_pose(
 
 
 def test_retarget_mid_motion_stays_continuous(
-    hub: tuple[zenoh.Session, str], databank: Databank
+    hub: tuple[zenoh.Session, str], databank: DatabankProcess
 ) -> None:
     session, endpoint = hub
     cat = databank.catalogue("baxter")
@@ -89,7 +96,7 @@ def test_retarget_mid_motion_stays_continuous(
     first, second = far_part(cat, pulls[0]), far_part(cat, pulls[-1])
     trace = Trace()
     with running_agent(endpoint, "baxter", speed=2.0, trace=trace) as (agent, watch):
-        op = Operator(session, agent.robot_id)
+        op = CommandSender(session, agent.robot_id)
         seq = op.send(as_tuple(first))
         watch.after(seq, lambda s: max(map(abs, s.qd)) > 0.3, "baxter under way")
         at_retarget = len(trace.t)
@@ -103,7 +110,7 @@ def test_retarget_mid_motion_stays_continuous(
 
 
 def test_wildcard_command_moves_every_robot_to_its_own_pose(
-    hub: tuple[zenoh.Session, str], databank: Databank
+    hub: tuple[zenoh.Session, str], databank: DatabankProcess
 ) -> None:
     session, endpoint = hub
     robots = ["baxter", "nao", "youbot"]
@@ -118,7 +125,7 @@ def test_wildcard_command_moves_every_robot_to_its_own_pose(
     poses = {r: databank.query(r, part) for r in robots}
     with ExitStack() as stack:
         running = {r: stack.enter_context(running_agent(endpoint, r, speed=2.0)) for r in robots}
-        op = Operator(session, "*")
+        op = CommandSender(session, "*")
         seq = op.send(as_tuple(part))
         for r, (agent, watch) in running.items():
             watch.after(seq, reached(agent, poses[r]), f"{r} at its own pose")

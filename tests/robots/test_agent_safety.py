@@ -14,7 +14,7 @@ import zenoh
 from kinesphere.protocol import Command, RobotState, encode
 from kinesphere.robots.agent.runtime import Agent
 from kinesphere.robots.agent.safety import DRIVE_TTL_S
-from support.agents import Databank, Operator, Trace, running_agent
+from support.agents import CommandSender, DatabankProcess, Trace, running_agent
 
 
 def status(*names: str) -> Callable[[RobotState], bool]:
@@ -51,7 +51,7 @@ def test_deadman_release_stops_the_base(hub: tuple[zenoh.Session, str]) -> None:
     session, endpoint = hub
     trace = Trace()
     with running_agent(endpoint, "youbot", speed=1.0, trace=trace) as (agent, watch):
-        op = Operator(session, agent.robot_id)
+        op = CommandSender(session, agent.robot_id)
         seq = op.send(drive=("forward", 1.0), ttl_ms=10_000)
         watch.after(seq, driving(0.05), "youbot driving")
         seq = op.send(drive=("forward", 1.0), deadman=False, ttl_ms=10_000)
@@ -69,7 +69,7 @@ def test_ttl_expiry_stops_a_drive_when_the_client_goes_quiet(
     session, endpoint = hub
     trace = Trace()
     with running_agent(endpoint, "packbot", speed=1.0, trace=trace) as (agent, watch):
-        op = Operator(session, agent.robot_id)
+        op = CommandSender(session, agent.robot_id)
         seq = op.send(drive=("forward", 0.6), ttl_ms=300)
         watch.after(seq, driving(0.02), "packbot driving")
         op.close()  # the client dies: no stop, no deadman release, just silence
@@ -83,7 +83,7 @@ def test_ttl_expiry_stops_a_drive_when_the_client_goes_quiet(
 def test_drive_without_ttl_still_needs_fresh_commands(hub: tuple[zenoh.Session, str]) -> None:
     session, endpoint = hub
     with running_agent(endpoint, "youbot", speed=4.0) as (agent, watch):
-        op = Operator(session, agent.robot_id)
+        op = CommandSender(session, agent.robot_id)
         seq = op.send(drive=("left", 0.5), ttl_ms=0)
         watch.after(seq, status("holding"), "holding after the default drive watchdog")
         op.close()
@@ -91,7 +91,7 @@ def test_drive_without_ttl_still_needs_fresh_commands(hub: tuple[zenoh.Session, 
 
 
 def test_estop_halts_every_robot_latches_and_releases(
-    hub: tuple[zenoh.Session, str], databank: Databank,
+    hub: tuple[zenoh.Session, str], databank: DatabankProcess,
 ) -> None:
     session, endpoint = hub
     cat = databank.catalogue("baxter")
@@ -101,9 +101,9 @@ def test_estop_halts_every_robot_latches_and_releases(
     with ExitStack() as stack:
         baxter, bw = stack.enter_context(running_agent(endpoint, "baxter", speed=1.0))
         youbot, yw = stack.enter_context(running_agent(endpoint, "youbot", speed=1.0))
-        arm = Operator(session, "baxter", sender="arm")
-        base = Operator(session, "youbot", sender="base")
-        everyone = Operator(session, "*", sender="panic")
+        arm = CommandSender(session, "baxter", sender="arm")
+        base = CommandSender(session, "youbot", sender="base")
+        everyone = CommandSender(session, "*", sender="panic")
         seq = arm.send(reach)
         bw.after(seq, lambda s: max(map(abs, s.qd)) > 0.2, "baxter moving")
         seq = base.send(drive=("forward", 1.0), ttl_ms=10_000)
@@ -126,7 +126,7 @@ def test_estop_halts_every_robot_latches_and_releases(
         seq = base.send(drive=("forward", 1.0), ttl_ms=10_000, release=True)
         yw.after(seq, status("estop"), "youbot still latched: base cannot release panic's")
         # panic's release (to the youBot alone) clears its latch and moves nothing
-        panic = Operator(session, "youbot", sender="panic")
+        panic = CommandSender(session, "youbot", sender="panic")
         seq = panic.send(drive=("forward", 1.0), ttl_ms=10_000, release=True, seq=seq + 1)
         yw.after(seq, status("idle"), "youbot released")
         assert not youbot.controller.moving
@@ -138,11 +138,11 @@ def test_estop_halts_every_robot_latches_and_releases(
 
 
 def test_bad_commands_are_reported_and_the_loop_goes_on(
-    hub: tuple[zenoh.Session, str], databank: Databank
+    hub: tuple[zenoh.Session, str], databank: DatabankProcess
 ) -> None:
     session, endpoint = hub
     with running_agent(endpoint, "baxter", speed=4.0) as (agent, watch):
-        op = Operator(session, agent.robot_id)
+        op = CommandSender(session, agent.robot_id)
         op.raw(b"\x93not a command")
         bad = watch.wait(status("error"), "malformed payload reported")
         assert "malformed" in bad.detail

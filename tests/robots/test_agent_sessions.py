@@ -26,7 +26,7 @@ from kinesphere.robots.agent.ordering import REBASE_S, SEQ_WINDOW, Ordering, Rec
 from kinesphere.robots.agent.safety import Safety, Verdict
 from support.agents import (
     AckWatch,
-    Databank,
+    DatabankProcess,
     StateWatch,
     agent_process,
     far,
@@ -224,7 +224,7 @@ def test_a_client_told_stale_starts_a_fresh_session(hub: tuple[zenoh.Session, st
 
 
 def test_a_new_sessions_command_queued_while_the_robot_was_frozen_never_runs(
-    hub: tuple[zenoh.Session, str], databank: Databank
+    hub: tuple[zenoh.Session, str], databank: DatabankProcess
 ) -> None:
     """The operator was heard before (one session); the robot is frozen; a new session (the
     next `send`) and a sender never heard each put a command; 1.5 s later the robot thaws:

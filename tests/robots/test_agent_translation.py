@@ -9,11 +9,18 @@ import zenoh
 
 from kinesphere.laban import Direction
 from kinesphere.protocol import SpatialCommand
-from support.agents import Databank, Operator, Trace, joints_close, overlap, running_agent
+from support.agents import (
+    CommandSender,
+    DatabankProcess,
+    Trace,
+    joints_close,
+    overlap,
+    running_agent,
+)
 
 
 def test_translation_and_articulation_overlap_in_time(
-    hub: tuple[zenoh.Session, str], databank: Databank
+    hub: tuple[zenoh.Session, str], databank: DatabankProcess
 ) -> None:
     session, endpoint = hub
     cat = databank.catalogue("youbot")
@@ -27,7 +34,7 @@ def test_translation_and_articulation_overlap_in_time(
     trace = Trace()
     with running_agent(endpoint, "youbot", speed=4.0, trace=trace) as (agent, watch):
         target, _ = agent.controller.joints.clamp(pose.joints)
-        op = Operator(session, agent.robot_id)
+        op = CommandSender(session, agent.robot_id)
         seq = op.send((part.limb, part.origin, part.direction, part.size))
         done = watch.after(
             seq,
@@ -41,7 +48,8 @@ def test_translation_and_articulation_overlap_in_time(
     assert end - start > 0.2, f"joints and base should move together, overlap {start}..{end}"
 
 
-def test_drive_while_the_arm_sweeps(hub: tuple[zenoh.Session, str], databank: Databank) -> None:
+def test_drive_while_the_arm_sweeps(hub: tuple[zenoh.Session, str],
+                                    databank: DatabankProcess) -> None:
     """The PackBot sweep: drive forward while the arm goes low left, then low right."""
     session, endpoint = hub
     sweeps = [(e, pair) for pair in (("left-low", "right-low"),
@@ -51,7 +59,7 @@ def test_drive_while_the_arm_sweeps(hub: tuple[zenoh.Session, str], databank: Da
     entry, lows = sweeps[0]
     trace = Trace()
     with running_agent(endpoint, "packbot", speed=2.0, trace=trace) as (agent, watch):
-        op = Operator(session, agent.robot_id)
+        op = CommandSender(session, agent.robot_id)
         for d in (lows[0], lows[-1]):
             pose = databank.query("packbot", SpatialCommand(entry.limb, entry.origin, d, 2.0))
             target, _ = agent.controller.joints.clamp(pose.joints)
@@ -71,7 +79,7 @@ def test_drive_while_the_arm_sweeps(hub: tuple[zenoh.Session, str], databank: Da
 
 
 def test_limbless_robot_follows_a_core_command(
-    hub: tuple[zenoh.Session, str], databank: Databank
+    hub: tuple[zenoh.Session, str], databank: DatabankProcess
 ) -> None:
     session, endpoint = hub
     cat = databank.catalogue("khepera")
@@ -80,7 +88,7 @@ def test_limbless_robot_follows_a_core_command(
     pose = databank.query("khepera", part)
     assert pose.translation is not None
     with running_agent(endpoint, "khepera", speed=4.0) as (agent, watch):
-        op = Operator(session, agent.robot_id)
+        op = CommandSender(session, agent.robot_id)
         seq = op.send((part.limb, part.origin, part.direction, part.size))
         done = watch.after(
             seq, lambda s: s.status == "idle"

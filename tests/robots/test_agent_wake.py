@@ -19,7 +19,7 @@ from kinesphere import zconfig
 from kinesphere.protocol import Catalogue
 from kinesphere.robots.agent.pacing import LoopStats, Wake, run_paced
 from kinesphere.robots.agent.runtime import Agent, AgentOptions
-from support.agents import Databank, Operator
+from support.agents import CommandSender, DatabankProcess
 from support.wait import WAIT_S
 
 RATE = 4.0  # Hz: a quarter of a second between scheduled steps makes the order unmistakable
@@ -32,7 +32,7 @@ def far(cat: Catalogue, k: int) -> tuple[str, str, str, float]:
 
 
 @dataclass(frozen=True)
-class Step:
+class LoopStep:
     woken: bool  # started by something arriving, not by its slot
     moved: int  # commands whose first setpoint went out so far
     status: str
@@ -43,16 +43,16 @@ class Recorder:
 
     def __init__(self, agent: Agent) -> None:
         self.agent = agent
-        self.steps: list[Step] = []
+        self.steps: list[LoopStep] = []
         self.cond = threading.Condition()
 
     def __call__(self) -> None:
         a = self.agent
         with self.cond:
-            self.steps.append(Step(a.stats.woken, len(a.conduct.latencies), a.status()[0]))
+            self.steps.append(LoopStep(a.stats.woken, len(a.conduct.latencies), a.status()[0]))
             self.cond.notify_all()
 
-    def after(self, n: int) -> Step:
+    def after(self, n: int) -> LoopStep:
         """The first step after the first ``n`` (waiting for it)."""
         with self.cond:
             assert self.cond.wait_for(lambda: len(self.steps) > n, WAIT_S), "the loop stopped"
@@ -68,7 +68,7 @@ class Recorder:
 
 @pytest.mark.parametrize("strict", [False, True], ids=["reacts", "strict-period"])
 def test_a_command_is_applied_before_the_next_scheduled_step(
-    hub: tuple[zenoh.Session, str], databank: Databank, strict: bool
+    hub: tuple[zenoh.Session, str], databank: DatabankProcess, strict: bool
 ) -> None:
     session, endpoint = hub
     cat = databank.catalogue("baxter")
@@ -81,7 +81,7 @@ def test_a_command_is_applied_before_the_next_scheduled_step(
         agent.declare()
         loop = threading.Thread(target=agent.run, args=(stop, rec), daemon=True)
         loop.start()
-        op = Operator(session, agent.robot_id, sender="wake")
+        op = CommandSender(session, agent.robot_id, sender="wake")
         try:
             for pose in poses:  # resolve both poses once: later commands hit the cache
                 moved = len(agent.conduct.latencies)

@@ -26,7 +26,7 @@ from kinesphere.errors import KinesphereError
 from kinesphere.protocol import SpatialCommand
 from kinesphere.robots.agent.fleet import RobotSpec
 from kinesphere.robots.agent.workers import check_listen, deal, share, worker_flag
-from support.agents import AckWatch, Databank, Operator, StateWatch, far, joints_close
+from support.agents import AckWatch, CommandSender, DatabankProcess, StateWatch, far, joints_close
 from support.network import KEYS
 from support.paths import ROOT
 from support.wait import WAIT_S
@@ -126,7 +126,7 @@ def workers(proc: subprocess.Popen[bytes]) -> dict[int, psutil.Process]:
 
 
 def test_workers_run_robots_of_their_own_and_one_killed_takes_only_its_robots(
-    tmp_path: Path, hub: tuple[zenoh.Session, str], databank: Databank
+    tmp_path: Path, hub: tuple[zenoh.Session, str], databank: DatabankProcess
 ) -> None:
     session, endpoint = hub
     specs = [RobotSpec(p, rid) for rid, p in ROBOTS.items()]
@@ -137,7 +137,7 @@ def test_workers_run_robots_of_their_own_and_one_killed_takes_only_its_robots(
     alive = Alive(session)
     acks = AckWatch(session, "*")
     watches = {rid: StateWatch(session, rid) for rid in ROBOTS}
-    ops = {rid: Operator(session, rid, sender=f"op-{rid}") for rid in poses}
+    ops = {rid: CommandSender(session, rid, sender=f"op-{rid}") for rid in poses}
     try:
         with fleet_host(tmp_path, endpoint) as proc:
             alive.wait(lambda ids: set(ROBOTS) <= ids, "every robot up")

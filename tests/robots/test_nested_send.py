@@ -22,8 +22,8 @@ import zenoh
 from kinesphere.cli import main
 from kinesphere.laban import Direction
 from kinesphere.robots.agent.fleet import RobotSpec
-from support.agents import Databank, running_fleet_host
-from support.nested import Body, Segment, degrees, reach, unit
+from support.agents import DatabankProcess, running_fleet_host
+from support.nested import MeasuredBody, SegmentEnds, degrees, reach, unit
 from support.network import KEYS
 from support.wait import WAIT_S
 
@@ -31,7 +31,7 @@ DIRECTIONS = [d for d in Direction if d.horizontal.value != "place"]
 PAIRS = [(DIRECTIONS[k], DIRECTIONS[(5 * k + 3) % 24]) for k in range(24)]
 """Every direction once for the upper arm and once for the forearm."""
 ROBOTS = [RobotSpec("baxter", "nest-baxter"), RobotSpec("nao", "nest-nao")]
-UPPER_ARM, FOREARM = Segment("distal_11", "distal_12"), Segment("distal_12", "limb_12")
+UPPER_ARM, FOREARM = SegmentEnds("distal_11", "distal_12"), SegmentEnds("distal_12", "limb_12")
 CAN_REACH = 20.0
 MEDIAN, WORST = 20.0, 35.0
 
@@ -42,10 +42,10 @@ def test_pairs_cover_every_direction_once_per_segment() -> None:
 
 
 def test_send_points_the_upper_arm_and_the_forearm_each_where_told(
-    hub: tuple[zenoh.Session, str], databank: Databank, capsys: pytest.CaptureFixture[str],
+    hub: tuple[zenoh.Session, str], databank: DatabankProcess, capsys: pytest.CaptureFixture[str],
 ) -> None:
     _, endpoint = hub
-    bodies = {r.robot_id: Body(r.platform) for r in ROBOTS}
+    bodies = {r.robot_id: MeasuredBody(r.platform) for r in ROBOTS}
     reaches = {r.robot_id: reach(r.platform, "limb_11", (UPPER_ARM, FOREARM)) for r in ROBOTS}
     measured: dict[str, list[tuple[float, float]]] = {r.robot_id: [] for r in ROBOTS}
     zenoh_args = ["--connect", endpoint, "--prefix", KEYS.prefix, "--wait", str(WAIT_S),

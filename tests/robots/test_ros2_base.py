@@ -20,6 +20,7 @@ from kinesphere.errors import KinesphereError
 from kinesphere.platforms.platform import load_platform
 from kinesphere.robots.agent.options import Ros2BodyOptions
 from kinesphere.robots.agent.ros2_body import Ros2Body
+from support.clock import ManualClock
 from support.ros2 import JAZZY, RosPublisher, RosTap
 
 NS = "/pk"
@@ -51,14 +52,6 @@ def _odometry(x: float, y: float, yaw: float) -> object:
             angular=t[f"{g}Vector3"](x=0.0, y=0.0, z=0.0)), covariance=np.zeros(36)))
 
 
-class Clock:
-    def __init__(self) -> None:
-        self.t = 100.0
-
-    def __call__(self) -> float:
-        return self.t
-
-
 def test_mobile_base_over_ros2() -> None:
     platform = load_platform("packbot")
     spec = platform.base
@@ -80,7 +73,7 @@ def test_mobile_base_over_ros2() -> None:
         try:
             with pytest.raises(KinesphereError, match=f"no odometry on {NS}/odom .* mobile"):
                 Ros2Body(platform, 0.01, ours, options)
-            clock = Clock()
+            clock = ManualClock(100.0)
             odom_thread_stop = threading.Event()
 
             def base_controller() -> None:  # the base's odometry, at 50 Hz
@@ -100,7 +93,7 @@ def test_mobile_base_over_ros2() -> None:
             # odometry stops: a fault naming it, and the base is sent a zero Twist
             odom_thread_stop.set()
             ot.join(timeout=5)
-            clock.t += options.timeout_s + 0.1
+            clock.now += options.timeout_s + 0.1
             assert body.wait_states(body.states + 2, 30.0), "joint states go on"
             with pytest.raises(KinesphereError, match=f"no odometry on {NS}/odom for"):
                 body.step()

@@ -36,7 +36,7 @@ from kinesphere.platforms.platform import load_platform
 from kinesphere.protocol import Pose, SpatialCommand
 from kinesphere.robots.agent.bodies import make_body
 from kinesphere.robots.agent.options import AgentOptions, Ros2BodyOptions
-from support.agents import Databank, Operator, running_agent
+from support.agents import CommandSender, DatabankProcess, running_agent
 from support.clients import Pad
 from support.network import KEYS
 from support.paths import ROOT
@@ -94,7 +94,7 @@ class Phases:
 
 
 def test_gamepad_moves_the_ros2_robot_to_an_ecl_pose_and_release_stops_it(
-    hub: tuple[zenoh.Session, str], databank: Databank, pygame_up: None
+    hub: tuple[zenoh.Session, str], databank: DatabankProcess, pygame_up: None
 ) -> None:
     _, endpoint = hub
     rid, ns = "baxter-ros", "/baxter_ros"
@@ -183,7 +183,7 @@ def test_gamepad_moves_the_ros2_robot_to_an_ecl_pose_and_release_stops_it(
 
 
 def test_joy_stream_drives_the_ros2_robot(hub: tuple[zenoh.Session, str],
-                                          databank: Databank) -> None:
+                                          databank: DatabankProcess) -> None:
     """A ROS user's joystick: Joy messages at joy's autorepeat rate into ``kinesphere
     gamepad --input ros2:/joy`` (a real process), the robot a ROS 2 one."""
     _, endpoint = hub
@@ -254,7 +254,8 @@ def test_joy_stream_drives_the_ros2_robot(hub: tuple[zenoh.Session, str],
         assert proc.returncode == 0, err
 
 
-def test_ros2_body_faults_and_stops(hub: tuple[zenoh.Session, str], databank: Databank) -> None:
+def test_ros2_body_faults_and_stops(hub: tuple[zenoh.Session, str],
+                                    databank: DatabankProcess) -> None:
     """Wrong robot, no robot, targets past the limits, the forward-controller order, TTL and
     e-stop mid-motion, a robot that goes quiet and comes back."""
     _, endpoint = hub
@@ -293,7 +294,7 @@ def test_ros2_body_faults_and_stops(hub: tuple[zenoh.Session, str], databank: Da
             goal = databank.query(PLATFORM, part).joints
             far = databank.query(PLATFORM, SpatialCommand(LIMB, ORIGIN, "right-low", 3.0)).joints
             with zconfig.session(config=zconfig.loopback_config(endpoint)) as s:
-                operator = Operator(s, "baxter-f")
+                operator = CommandSender(s, "baxter-f")
                 operator.send((LIMB, ORIGIN, "forward-high", 2.0))
                 robot.wait(lambda r: at(r, goal), "reached forward-high mid via commands")
                 for how in ({"ttl_ms": 150}, {"estop": True}):

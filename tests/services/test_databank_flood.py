@@ -25,7 +25,7 @@ from kinesphere.services.databank.replies import DEFAULT_BUDGET, EncodedReply, e
 from kinesphere.zconfig import LOOPBACK_ANY_PORT, close_session, loopback_hub
 from support.databank import Tokens, serve_process
 from support.network import OWN_KEYS, peer
-from support.soak import MIB, SCALE, Tally, mib, rss
+from support.soak import MIB, SCALE, FloodTally, mib, rss
 
 pytestmark = pytest.mark.processes
 
@@ -50,7 +50,7 @@ def growth_bound() -> int:
 class Flood:
     """Pipelined queries (BATCH in flight) with every reply's outcome tallied."""
 
-    def __init__(self, session: zenoh.Session, tally: Tally) -> None:
+    def __init__(self, session: zenoh.Session, tally: FloodTally) -> None:
         self.session = session
         self.tally = tally
         self._pending: list[zenoh.Handler[zenoh.Reply]] = []
@@ -119,7 +119,7 @@ def test_flood_of_invented_keys_and_padded_requests_is_bounded(
 ) -> None:
     client, pid = served
     good = reference(client)
-    tally = Tally("databank flood")
+    tally = FloodTally("databank flood")
     flood = Flood(client, tally)
     for i in range(200):  # warm up: caches, Zenoh buffers, the allocator
         flood.get(OWN_KEYS.pose("baxter", *ARM, 1 + i / 200))
@@ -211,7 +211,7 @@ def test_fuzzed_requests_get_named_errors_and_valid_ones_stay_exact(
         (OWN_KEYS.record("baxter"), pr.encode(record)),  # writes are off: forbidden
     ]
     good = reference(client)
-    tally = Tally("databank fuzz")
+    tally = FloodTally("databank fuzz")
     flood = Flood(client, tally)
     for _ in range(50):  # warm up: caches, Zenoh buffers, the allocator
         for key, payload in valid:

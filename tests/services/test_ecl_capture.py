@@ -11,7 +11,7 @@ import zenoh
 from kinesphere.cli import main
 from kinesphere.services.ecl.ecl import Ecl
 from kinesphere.services.ecl.store import default_db_path
-from support.agents import Operator, running_agent  # noqa: F401
+from support.agents import CommandSender, running_agent  # noqa: F401
 
 LIMB = ("limb_11", "distal_11", "forward-middle", 2)
 
@@ -24,7 +24,7 @@ def test_record_captures_the_running_robots_limb(
     shutil.copy(default_db_path("youbot"), db)
     target = Ecl.open("youbot").query("limb_11", "distal_11", "left-high", 3)
     with running_agent(endpoint, "youbot", "yb-capture") as (_, watch):
-        op = Operator(session, "yb-capture")
+        op = CommandSender(session, "yb-capture")
         seq = op.send(("limb_11", "distal_11", "left-high", 3.0))
         state = watch.after(seq, lambda s: max(map(abs, s.qd)) < 1e-3 and s.status != "moving",
                             "youbot at rest at left-high")

@@ -19,11 +19,11 @@ from kinesphere.services.ecl.ecl import Ecl
 from kinesphere.services.ecl.measure import Fk
 from kinesphere.services.ecl.nested import sized
 from support.ecl import build
-from support.nested import Body, Segment, degrees, unit
+from support.nested import MeasuredBody, SegmentEnds, degrees, unit
 from support.paths import TOY
 
-UPPER_ARM, FOREARM = Segment("distal_11", "distal_12"), Segment("distal_12", "limb_12")
-THIGH, SHIN = Segment("distal_31", "distal_32"), Segment("distal_32", "limb_32")
+UPPER_ARM, FOREARM = SegmentEnds("distal_11", "distal_12"), SegmentEnds("distal_12", "limb_12")
+THIGH, SHIN = SegmentEnds("distal_31", "distal_32"), SegmentEnds("distal_32", "limb_32")
 LIFTED = frozenset(load_platform("nao").eurdf.limb_joints("limb_31"))
 
 
@@ -37,7 +37,7 @@ def leg_pair(thigh: str, shin: str, size: float = 3) -> list[SpatialCommand]:
             SpatialCommand("right_shin", "right_knee", shin, size)]
 
 
-def measured(body: Body, joints: dict[str, float], seg: Segment) -> np.ndarray:
+def measured(body: MeasuredBody, joints: dict[str, float], seg: SegmentEnds) -> np.ndarray:
     body.pose(joints)
     return body.direction(seg)
 
@@ -58,7 +58,7 @@ def test_a_brought_robots_arm_and_forearm_are_pointed_together(tmp_path: Path) -
     db = tmp_path / "toy.sqlite"
     build(db)
     ecl = Ecl.open(str(TOY), db)
-    body = Body(str(TOY))
+    body = MeasuredBody(str(TOY))
     for d in ("forward-middle", "left-high", "right-forward-low"):
         pose = ecl.compound([("arm", "shoulder", "place-high", 3), ("forearm", "elbow_loc", d, 3)])
         assert set(pose.joints) == {"yaw", "elbow", "wrist"}
@@ -69,7 +69,7 @@ def test_a_brought_robots_arm_and_forearm_are_pointed_together(tmp_path: Path) -
 
 def test_baxters_forearm_points_where_told_whatever_the_upper_arm_does(baxter: Ecl) -> None:
     """What last-wins joins got wrong (the forearm's stored row assumes a hanging upper arm)."""
-    body = Body("baxter")
+    body = MeasuredBody("baxter")
     for d1, d2 in (("forward-high", "left-forward-middle"), ("right-middle", "forward-low"),
                    ("right-forward-low", "right-high")):
         pose = baxter.compound(arm_pair(d1, d2))
@@ -104,7 +104,7 @@ def test_a_cut_limb_alone_is_answered_on_its_pose_key(nao: Ecl) -> None:
         "limb_11", "distal_11", "forward-high", NO_ID)
     assert [(w.word, w.label, w.end) for w in pose.words] == [
         ("right_upper_arm", "limb_11", "distal_12")]
-    body = Body("nao")
+    body = MeasuredBody("nao")
     assert degrees(measured(body, pose.joints, UPPER_ARM), unit(Direction.FORWARD_HIGH)) < 15
     assert nao.solves([("right_upper_arm", "right_shoulder", "forward-high", 3)])
     assert nao.solves(arm_pair("forward-high", "left-middle"))
@@ -123,7 +123,7 @@ def test_sizes_turn_a_segment_part_of_the_way_from_neutral(
     way from its neutral direction toward the one asked, far all the way; a segment already
     pointing that way holds neutral at near and turns half-way at mid, as a stored limb that
     swings does (one rule, ``arcs.swing``)."""
-    body = Body("baxter")
+    body = MeasuredBody("baxter")
     body.pose({})
     rest = body.direction(UPPER_ARM)
     d = Direction.parse(direction)
@@ -174,7 +174,7 @@ def test_a_lifted_leg_and_its_shin_stand_on_the_other_leg(
     assert max(abs(v - neutral.get(j, 0.0)) for j, v in stance.items()) > 0.01  # it moved
     margin = fk.com_margin(pose.joints)
     assert margin is not None and margin >= 0.01, margin
-    body = Body("nao")
+    body = MeasuredBody("nao")
     body.pose(pose.joints)
     worst = max(float(degrees(body.direction(THIGH), unit(Direction.parse(thigh)))),
                 float(degrees(body.direction(SHIN), unit(Direction.parse(shin)))))

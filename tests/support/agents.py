@@ -48,7 +48,7 @@ from support.watch import Watch
 # --- the databank ---------------------------------------------------------------------------
 
 
-class Databank:
+class DatabankProcess:
     """The real databank service in a subprocess, connected to the test hub."""
 
     def __init__(self, endpoint: str, watcher: zenoh.Session, args: Sequence[str] = ()) -> None:
@@ -201,7 +201,7 @@ def running_fleet_host(endpoint: str, robots: list[RobotSpec], speed: float = 2.
                 w.close()
 
 
-class Operator:
+class CommandSender:
     """A client putting Commands, as the gamepad client would (``session`` "" is a version-1
     client's): on publishers like ``RobotLink.publisher``'s, never dropped under congestion
     (BLOCK), express, e-stops at REAL_TIME priority and the rest at INTERACTIVE_HIGH."""

@@ -41,7 +41,7 @@ def databank_args() -> list[str]:
     return [a for p in PLATFORMS.values() for a in ("--platform", p)]
 
 
-class Child:
+class FleetProcess:
     """A kinesphere process joined to the hub; ready once its liveliness token appears."""
 
     def __init__(self, hub: zenoh.Session, endpoint: str, args: list[str], token: str,
@@ -78,7 +78,7 @@ class Heard:
     state: RobotState
 
 
-class Track:
+class StateHistory:
     """Every RobotState of every robot, with arrival times and waits on predicates."""
 
     def __init__(self, session: zenoh.Session) -> None:
@@ -126,7 +126,7 @@ def speeds(hs: list[Heard]) -> list[tuple[float, float]]:
     return out
 
 
-def at_rest(robot: str, track: Track, after: float) -> Heard:
+def at_rest(robot: str, track: StateHistory, after: float) -> Heard:
     """The first state after ``after`` where the base has neither moved nor turned since the
     previous one and no joint moves."""
     prev: list[Heard] = []
@@ -142,28 +142,29 @@ def at_rest(robot: str, track: Track, after: float) -> Heard:
 
 
 @dataclass
-class Fleet:
+class ClientFleet:
     hub: zenoh.Session
     endpoint: str
-    track: Track
+    track: StateHistory
 
 
-def running_fleet(logs: Path) -> Iterator[Fleet]:
+def running_fleet(logs: Path) -> Iterator[ClientFleet]:
     """The databank and the two agents as processes on a hub of their own, until closed."""
     args = databank_args()
     with zconfig.loopback_hub() as (hub, endpoint):
-        track = Track(hub)
-        children: list[Child] = []
+        track = StateHistory(hub)
+        children: list[FleetProcess] = []
         try:
-            children.append(Child(hub, endpoint, ["databank", "serve", *args],
+            children.append(FleetProcess(hub, endpoint, ["databank", "serve", *args],
                                   KEYS.alive_databank_all(), logs / "databank.log"))
             for rid, platform in PLATFORMS.items():
                 groups = ["--group", "sweepers"] if rid == PB else []
-                children.append(Child(hub, endpoint, ["agent", platform, "--id", rid, *groups],
-                                      KEYS.alive_robot(rid), logs / f"{rid}.log"))
+                children.append(FleetProcess(hub, endpoint,
+                                             ["agent", platform, "--id", rid, *groups],
+                                             KEYS.alive_robot(rid), logs / f"{rid}.log"))
             for rid in PLATFORMS:
                 track.wait(rid, lambda h: True, "a first state")
-            yield Fleet(hub, endpoint, track)
+            yield ClientFleet(hub, endpoint, track)
         finally:
             for c in reversed(children):
                 c.stop()
@@ -171,7 +172,7 @@ def running_fleet(logs: Path) -> Iterator[Fleet]:
 
 
 @contextmanager
-def operator(fleet: Fleet, target: tg.Target, sender: str | None = None, take: bool = False
+def operator(fleet: ClientFleet, target: tg.Target, sender: str | None = None, take: bool = False
              ) -> Iterator[tuple[Teleop, pad.PygameInput]]:
     """A gamepad client on its own session (as ``sender``), with its catalogues loaded."""
     pygame.event.clear()

@@ -152,7 +152,7 @@ class Got:
     signer: str = ""
 
 
-class Inbox(Watch[Got]):
+class CommandInbox(Watch[Got]):
     """Every Command put on ``key`` (may be a wildcard), signed or not, with arrival times."""
 
     def __init__(self, session: zenoh.Session, key: str) -> None:
@@ -190,7 +190,7 @@ def usual(cmd: Command) -> list[Reply]:
     return [(AckStage.ACCEPTED, "", "", []), (AckStage.REACHED, "", "", [])]
 
 
-class StandIn(Inbox):
+class StandIn(CommandInbox):
     """A robot as a client sees it, speaking the protocol over real Zenoh: a liveliness token,
     a state with its groups, commands on its own and its groups' keys (and the wildcard), and
     the acks ``answer`` gives for each (none for a robot that has lost its ack publisher)."""
@@ -249,7 +249,7 @@ def kind(c: Command) -> str:
 _marks = itertools.count()
 
 
-def sentinel(link: RobotLink, keys: Sequence[str], inboxes: Sequence[Inbox]) -> None:
+def sentinel(link: RobotLink, keys: Sequence[str], inboxes: Sequence[CommandInbox]) -> None:
     """Put a new sentinel behind everything sent so far and wait until every inbox has it.
 
     Only messages of the same priority keep their order (an e-stop may overtake).

@@ -50,14 +50,14 @@ def _rotations(axis: np.ndarray, q: np.ndarray) -> np.ndarray:
 
 
 @dataclass(frozen=True)
-class Segment:
+class SegmentEnds:
     """From a location's pivot (``distal_*``) to another's, or to a limb's tip link."""
 
     start: str
     end: str
 
 
-class Body:
+class MeasuredBody:
     """A platform's eURDF read by yourdfpy, for measuring segments of given joint values."""
 
     def __init__(self, name: str) -> None:
@@ -93,7 +93,7 @@ class Body:
         anchors, axes = np.array([p for p, _ in lines]), np.array([a for _, a in lines])
         return np.asarray(pivot(anchors[None], axes[None])[0])
 
-    def direction(self, seg: Segment) -> np.ndarray:
+    def direction(self, seg: SegmentEnds) -> np.ndarray:
         v = self.point(seg.end) - self.point(seg.start)
         return np.asarray(v / np.linalg.norm(v))
 
@@ -161,11 +161,11 @@ def pivot(anchors: np.ndarray, axes: np.ndarray) -> np.ndarray:
 
 
 @dataclass(frozen=True)
-class Reach:
+class PairReach:
     """What a body can do with two segments: unit directions of n sampled configurations that
     touch nothing, for a witness of any pair of directions."""
 
-    body: Body
+    body: MeasuredBody
     limb: str
     values: dict[str, np.ndarray]
     first: np.ndarray  # (n, 3)
@@ -178,12 +178,12 @@ class Reach:
 
 
 @cache
-def reach(name: str, limb: str, segments: tuple[Segment, Segment], samples: int = 30000,
-          seed: int = 0) -> Reach:
+def reach(name: str, limb: str, segments: tuple[SegmentEnds, SegmentEnds], samples: int = 30000,
+          seed: int = 0) -> PairReach:
     """Sample the limb's joints uniformly inside their limits (a fixed seed: the same samples
     every run), keep the configurations MuJoCo finds free of contacts with the limb, and
     measure both segments in each."""
-    body = Body(name)
+    body = MeasuredBody(name)
     e = body.eurdf
     rng = np.random.default_rng(seed)
     names = e.limb_joints(limb)
@@ -192,10 +192,10 @@ def reach(name: str, limb: str, segments: tuple[Segment, Segment], samples: int 
     second = _units(body, segments[1], values)
     clean = _clean(name, limb, values)
     kept = {j: v[clean] for j, v in values.items()}
-    return Reach(body, limb, kept, first[clean], second[clean])
+    return PairReach(body, limb, kept, first[clean], second[clean])
 
 
-def _units(body: Body, seg: Segment, values: Mapping[str, np.ndarray]) -> np.ndarray:
+def _units(body: MeasuredBody, seg: SegmentEnds, values: Mapping[str, np.ndarray]) -> np.ndarray:
     v = body.batch_point(seg.end, values) - body.batch_point(seg.start, values)
     return np.asarray(v / np.linalg.norm(v, axis=1, keepdims=True))
 

@@ -23,7 +23,7 @@ def rss(pid: int) -> int:
     return int(psutil.Process(pid).memory_info().rss)
 
 
-class Tally:
+class FloodTally:
     """Counts of what a flood sent and what came back, printed as one report line."""
 
     def __init__(self, name: str) -> None:

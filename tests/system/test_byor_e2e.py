@@ -24,7 +24,7 @@ from kinesphere.laban import Direction
 from kinesphere.platforms.mjcf import platform_model
 from kinesphere.platforms.platform import load_platform
 from kinesphere.protocol import SpatialCommand
-from support.agents import Databank, StateWatch, joints_close
+from support.agents import DatabankProcess, StateWatch, joints_close
 from support.byor import PANDA, TALOS, TIAGO, UR5, robot_data
 from support.paths import ROOT
 
@@ -66,13 +66,13 @@ def own_hub() -> Iterator[tuple[zenoh.Session, str]]:
 
 
 @pytest.fixture(scope="module")
-def bank(brought: Path, own_hub: tuple[zenoh.Session, str]) -> Iterator[Databank]:
+def bank(brought: Path, own_hub: tuple[zenoh.Session, str]) -> Iterator[DatabankProcess]:
     """One databank process serving the four brought robots, found by name via --platforms."""
     session, endpoint = own_hub
     args = ["--platforms", str(brought)]
     for name in ROBOTS:
         args += ["--platform", name]
-    b = Databank(endpoint, session, args)
+    b = DatabankProcess(endpoint, session, args)
     b.start()
     yield b
     b.stop()
@@ -102,7 +102,7 @@ def test_platforms_are_found_on_the_search_path_only_when_given(brought: Path) -
 
 @pytest.mark.parametrize("name", list(ROBOTS))
 def test_send_up_left_far_moves_the_tip_up_left_of_the_shoulder(
-    name: str, brought: Path, bank: Databank, own_hub: tuple[zenoh.Session, str]
+    name: str, brought: Path, bank: DatabankProcess, own_hub: tuple[zenoh.Session, str]
 ) -> None:
     session, endpoint = own_hub
     _, limb, origin, direction, _ = ROBOTS[name]

@@ -36,7 +36,7 @@ from kinesphere import zconfig
 from kinesphere.platforms.platform import load_platform
 from kinesphere.protocol import RobotState, SpatialCommand
 from kinesphere.robots.agent.options import Ros2BodyOptions
-from support.agents import Databank, Operator, StateWatch, joints_close, running_agent
+from support.agents import CommandSender, DatabankProcess, StateWatch, joints_close, running_agent
 from support.paths import ROOT
 from support.ros2 import GraphWatch, RosTap
 from support.ros2_peer import JAZZY_ZENOH, SdkPeer
@@ -88,7 +88,7 @@ class Site:
 
     endpoint: str
     watcher: zenoh.Session
-    databank: Databank
+    databank: DatabankProcess
     watches: dict[str, StateWatch]
     bridge_zid: str
     graph: list[str]
@@ -113,7 +113,7 @@ def site() -> Iterator[Site]:
         router.wait_line("up, listening on")
         watcher = stack.enter_context(zconfig.session(
             config=zconfig.loopback_config(router_ep)))
-        bank = Databank(router_ep, watcher)
+        bank = DatabankProcess(router_ep, watcher)
         bank.start()
         stack.callback(bank.stop)
         watches = {}
@@ -125,7 +125,7 @@ def site() -> Iterator[Site]:
         bridge.wait_line("bridging kinesphere robots")
         # the packbot drives a little (its odometry and base frame move), then holds
         with zconfig.session(config=zconfig.loopback_config(router_ep)) as s:
-            op = Operator(s, "packbot")
+            op = CommandSender(s, "packbot")
             seq = op.send(drive=("left-forward", 0.8), ttl_ms=1500)
             watches["packbot"].after(seq, lambda st: abs(st.base_pose[2]) > 0.2,
                                      "the packbot turning")
@@ -315,7 +315,7 @@ def test_ros2_peer_drives_the_gamepad_and_is_driven_by_the_ros2_body(site: Site)
         # a mobile base: cmd_vel out (within the platform's limits), odometry back in
         spec = load_platform("packbot").base
         with zconfig.session(config=zconfig.loopback_config(site.endpoint)) as s:
-            op = Operator(s, base)
+            op = CommandSender(s, base)
             seq = op.send(drive=("forward", 1.0), ttl_ms=1000)
             moved = base_watch.after(seq, lambda st: st.base_pose[0] > 0.1,
                                      "the base moved forward by its odometry")

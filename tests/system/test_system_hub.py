@@ -58,7 +58,7 @@ ESTOP_SENDER = "hub-operator"
 """Who the ``kinesphere estop`` processes of these tests are to the robots."""
 
 
-class Acks:
+class EstopAcks:
     """Every Ack heard, as (robot, sender, stage)."""
 
     def __init__(self, session: zenoh.Session) -> None:
@@ -118,7 +118,7 @@ def test_kill_any_service_and_the_rest_keep_talking(
     alive = {r for r in ROBOTS if r != "khepera-2"}
 
     # a new operator process joins the hub and e-stops every robot still alive; each acks it
-    acks = Acks(demo._session)
+    acks = EstopAcks(demo._session)
     try:
         estop = sup.spawn("estop", ["estop", "--connect", ep, "--mode", "client",
                                     "--sender", ESTOP_SENDER], expect_exit=True)
@@ -249,7 +249,7 @@ def test_the_readme_tour_runs_as_written(
             assert all(r == robots for r in runs), f"{mode}: {runs}"
         sup.kill("databank")
         until(lambda: not obs.alive.databanks, WAIT_S, "the databank's token to go")
-        acks = Acks(obs.session)
+        acks = EstopAcks(obs.session)
         try:
             estop = sup.spawn("estop", ["estop", "--connect", ep, "--sender", ESTOP_SENDER],
                               expect_exit=True)

@@ -30,7 +30,7 @@ from kinesphere.keyexpr import KEYS
 from kinesphere.procs import Supervisor
 from kinesphere.query import get_one
 from kinesphere.zconfig import close_session, undeclare
-from support.soak import SCALE, Tally
+from support.soak import SCALE, FloodTally
 from support.system import databank_args
 from support.wait import WAIT_S, until
 
@@ -47,7 +47,7 @@ OFFICER = "soak-officer"
 """The third operator, who holds no lease and e-stops everyone with ``kinesphere estop``."""
 
 
-class Acks:
+class AckLedger:
     """(sender, session, seq) -> robot -> stages heard; and every ack, in order."""
 
     def __init__(self, session: zenoh.Session) -> None:
@@ -83,7 +83,7 @@ class Acks:
         self._sub.undeclare()  # type: ignore[no-untyped-call]
 
 
-class Operator:
+class SoakOperator:
     """One operator's client: a sender, a session, and every command it sent (seq -> robots)."""
 
     def __init__(self, name: str, session: zenoh.Session) -> None:
@@ -124,7 +124,7 @@ def run_cli(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str]:
     return code, capsys.readouterr().out
 
 
-def estop_round(capsys: pytest.CaptureFixture[str], acks: Acks, endpoint: str,
+def estop_round(capsys: pytest.CaptureFixture[str], acks: AckLedger, endpoint: str,
                 listed: list[int]) -> int:
     """The officer's ``kinesphere estop`` then ``estop --release --target all``; both must
     exit 0 with a line per robot, and every robot must ack each (heard here). Robots that
@@ -160,7 +160,7 @@ def test_two_operators_four_robots_and_a_restarting_databank(
     dbs = databank_args(sorted(set(ROBOTS.values())))
     recorder = StateRecorder(KEYS, history=False)
     alive, subs = watch_alive(z, KEYS)
-    acks = Acks(z)
+    acks = AckLedger(z)
     unleased: Counter[str] = Counter()
 
     def watch_lease(sample: zenoh.Sample) -> None:
@@ -187,7 +187,7 @@ def test_two_operators_four_robots_and_a_restarting_databank(
                                       and set(ROBOTS) <= set(recorder.snapshot())),
               WAIT_S * 2, "the databank and four robots")
         poses = {r: arm_poses(z, ROBOTS[r]) for r in ("yb", "pb")}
-        ops = {name: Operator(name, z) for name in HOLDS}
+        ops = {name: SoakOperator(name, z) for name in HOLDS}
         rng = random.Random(11)
         restarts = [DURATION_S / 3, 2 * DURATION_S / 3]
         estops = [DURATION_S / 4, 3 * DURATION_S / 4]
@@ -231,7 +231,7 @@ def test_two_operators_four_robots_and_a_restarting_databank(
 
         # every command acked by every robot it addressed, or lost
         deadline = time.monotonic() + ACK_WAIT_S
-        tally = Tally("closed loop (2 operators, 4 robots, databank restarted twice)")
+        tally = FloodTally("closed loop (2 operators, 4 robots, databank restarted twice)")
         stages: Counter[str] = Counter()
         lost: list[tuple[str, int, str]] = []
         for op in ops.values():
