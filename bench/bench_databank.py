@@ -26,7 +26,7 @@ from kinesphere.platforms.platform import load_platform
 from kinesphere.services.ecl.ecl import Ecl
 from kinesphere.services.ecl.store import PoseRow, default_db_path, write_databank
 from kinesphere.services.ecl.vsam import load_vsam
-from kinesphere.zconfig import close_session, loopback_endpoint, session_config
+from kinesphere.zconfig import close_session, loopback_endpoint, session_config, undeclare
 
 KEYS = Keys("kbench")
 """The service as ``serve`` runs it by default: it serves every known platform."""
@@ -73,8 +73,8 @@ def serve(endpoint: str, platform: str, db: str, reply_size: int, mode: str = "p
     payload = zenoh.ZBytes(b"\x00" * reply_size)
 
     def echo(query: zenoh.Query) -> None:
-        query.reply(query.key_expr, payload)
-        query.drop()  # type: ignore[no-untyped-call]
+        with query:
+            query.reply(query.key_expr, payload)
 
     ecls = {ecl.platform.name: ecl}
     try:
@@ -85,16 +85,17 @@ def serve(endpoint: str, platform: str, db: str, reply_size: int, mode: str = "p
             floor = session.declare_queryable(f"{FLOOR_PREFIX}/**", echo, complete=True)
             print("ready", flush=True)
             sys.stdin.read()
-            floor.undeclare()  # type: ignore[no-untyped-call]
+            undeclare(floor)
     finally:
         close_session(session)
 
 
 def _first_reply(session: zenoh.Session, key: str) -> bytes | None:
     for reply in session.get(key, consolidation=zenoh.ConsolidationMode.NONE, timeout=5.0):
-        if reply.ok is None:
-            raise RuntimeError(f"{key}: error reply {reply.err.payload.to_bytes()!r}")  # type: ignore[union-attr]
-        return reply.ok.payload.to_bytes()
+        if reply.err is not None:
+            raise RuntimeError(f"{key}: error reply {reply.err.payload.to_bytes()!r}")
+        if reply.ok is not None:
+            return reply.ok.payload.to_bytes()
     return None
 
 

@@ -110,11 +110,13 @@ def relay(hub: zenoh.Session, endpoint: str, key_in: str, key_out: str,
 
     with zconfig.session(config=zconfig.loopback_config(endpoint)) as middle, \
             zconfig.session(config=zconfig.loopback_config(endpoint)) as ros:
+        relay_bridge: Bridge | None = None
+        forwarder: zconfig.Undeclarable | None = None
         if bridge:
-            relay_obj: object = Bridge(middle, KEYS)
+            relay_bridge = Bridge(middle, KEYS)
         else:
             out = middle.declare_publisher(key_out)
-            relay_obj = middle.declare_subscriber(key_in, lambda s: out.put(s.payload))
+            forwarder = middle.declare_subscriber(key_in, lambda s: out.put(s.payload))
         sub = ros.declare_subscriber(key_out, on_out)
         pub = hub.declare_publisher(key_in)
         zconfig.wait_matching(pub)
@@ -130,11 +132,9 @@ def relay(hub: zenoh.Session, endpoint: str, key_in: str, key_out: str,
                 raise RuntimeError(f"message {i} lost on {key_out}")
             time.sleep(SPACING_S)
         zconfig.undeclare(sub, pub)
-        close = getattr(relay_obj, "close", None)
-        if close is not None:
-            close()
-        else:
-            zconfig.undeclare(relay_obj)  # type: ignore[arg-type]
+        if relay_bridge is not None:
+            relay_bridge.close()
+        zconfig.undeclare(forwarder)
     return [(g - s) / 1e3 for s, g in zip(sent, got, strict=True)]
 
 

@@ -61,9 +61,10 @@ def drain(port: int, stop: threading.Event, got: list[int]) -> None:
     """A websocket client reading everything the view sends (no rendering)."""
     import viser
     from websockets.sync.client import connect
+    from websockets.typing import Subprotocol
 
     with connect(f"ws://127.0.0.1:{port}",
-                 subprotocols=[f"viser-v{viser.__version__}"]) as ws:  # type: ignore[list-item]
+                 subprotocols=[Subprotocol(f"viser-v{viser.__version__}")]) as ws:
         while not stop.is_set():
             try:
                 data = ws.recv(timeout=0.2)
