@@ -15,27 +15,28 @@ import sys
 import time
 import xml.etree.ElementTree as ET
 from contextlib import ExitStack
+from functools import partial
 
 import numpy as np
 import pytest
-import zenoh
+from rosbags.typesys.stores.ros2_jazzy import sensor_msgs__msg__JointState as JointState
+from rosbags.typesys.stores.ros2_jazzy import std_msgs__msg__String as String
+from rosbags.typesys.stores.ros2_jazzy import tf2_msgs__msg__TFMessage as TFMessage
 
 from kinesphere import zconfig
 from kinesphere.clients.options import BridgeOptions
 from kinesphere.clients.ros2.bridge import Bridge
 from kinesphere.platforms.platform import load_platform
 from kinesphere.protocol import RobotState, encode
-from support.agents import StateWatch, running_agent
-from support.network import KEYS
+from support.agents import DatabankProcess, StateWatch, running_agent
+from support.network import KEYS, Hub
 from support.paths import ROOT
 from support.ros2 import JAZZY, GraphWatch, RosTap, dds, graph
 from support.wait import WAIT_S
 
 pytestmark = pytest.mark.processes
 
-JS = "sensor_msgs/msg/JointState"
-STRING = "std_msgs/msg/String"
-TF = "tf2_msgs/msg/TFMessage"
+JS, STRING, TF = JointState.__msgtype__, String.__msgtype__, TFMessage.__msgtype__
 
 
 def _state_with_stamp(watch: StateWatch, stamp_ns: int) -> RobotState:
@@ -47,7 +48,15 @@ def _state_with_stamp(watch: StateWatch, stamp_ns: int) -> RobotState:
     return watch.wait(lambda s: s.stamp_ns == stamp_ns, f"the state stamped {stamp_ns}")
 
 
-def test_bridge_shows_every_robot_to_ros(hub: tuple[zenoh.Session, str], databank: object) -> None:
+def _stamped_otherwise(before: JointState, msg: JointState) -> bool:
+    return bool(msg.header.stamp != before.header.stamp)
+
+
+def _tf_to(child: str, msg: TFMessage) -> bool:
+    return msg.transforms[0].child_frame_id == child
+
+
+def test_bridge_shows_every_robot_to_ros(hub: Hub, databank: DatabankProcess) -> None:
     _, endpoint = hub
     robots = {"baxter-1": "baxter", "packbot": "packbot"}
     ros_ids = {"baxter-1": "baxter_1", "packbot": "packbot"}
@@ -58,8 +67,8 @@ def test_bridge_shows_every_robot_to_ros(hub: tuple[zenoh.Session, str], databan
         for rid, platform in robots.items():
             agent, watch = stack.enter_context(running_agent(endpoint, platform, rid, speed=1.0))
             agents[rid], watches[rid] = agent, watch
-        taps = {rid: RosTap(ros, 0, f"/{ros_ids[rid]}/joint_states", JS) for rid in robots}
-        tf = RosTap(ros, 0, "/tf", TF)
+        taps = {rid: RosTap(ros, 0, f"/{ros_ids[rid]}/joint_states", JointState) for rid in robots}
+        tf = RosTap(ros, 0, "/tf", TFMessage)
         bs = stack.enter_context(zconfig.session(config=zconfig.loopback_config(endpoint)))
         bridge = Bridge(bs, KEYS, BridgeOptions())
         stack.callback(bridge.close)
@@ -67,7 +76,7 @@ def test_bridge_shows_every_robot_to_ros(hub: tuple[zenoh.Session, str], databan
         # joint states: names and positions are the robots' own RobotState, bit for bit
         for rid, tap in taps.items():
             first = tap.wait(what=f"JointState of {rid}")
-            later = tap.wait(lambda m, t=first: m.header.stamp != t.msg.header.stamp,
+            later = tap.wait(partial(_stamped_otherwise, first.msg),
                              what=f"a second JointState of {rid}")
             assert later.seq > first.seq >= 1
             assert abs(later.stamp_ns - time.time_ns()) < 60e9 and len(later.gid) == 16
@@ -82,7 +91,8 @@ def test_bridge_shows_every_robot_to_ros(hub: tuple[zenoh.Session, str], databan
 
         # robot_description: the URDF without labels, latched for late subscribers (RViz)
         for rid, platform in robots.items():
-            desc = RosTap(ros, 0, f"/{ros_ids[rid]}/robot_description", STRING, history=True)
+            desc = RosTap(ros, 0, f"/{ros_ids[rid]}/robot_description", String,
+                          history=True)
             urdf = ET.fromstring(desc.wait(what=f"URDF of {rid}").msg.data)
             desc.close()
             assert urdf.get("name") == platform and urdf.findall("body_part") == []
@@ -92,9 +102,7 @@ def test_bridge_shows_every_robot_to_ros(hub: tuple[zenoh.Session, str], databan
         # tf: odom -> ID/<root link>, at the robot's base pose
         for rid, platform in robots.items():
             child = f"{ros_ids[rid]}/{load_platform(platform).eurdf.root_link}"
-            r = tf.wait(lambda m, c=child: m.transforms[0].child_frame_id == c,
-                        what=f"tf of {rid}")
-            t = r.msg.transforms[0]
+            t = tf.wait(partial(_tf_to, child), what=f"tf of {rid}").msg.transforms[0]
             assert t.header.frame_id == "odom"
             stamp = t.header.stamp.sec * 1_000_000_000 + t.header.stamp.nanosec
             x, y, yaw = _state_with_stamp(watches[rid], stamp).base_pose
@@ -119,15 +127,16 @@ def test_bridge_shows_every_robot_to_ros(hub: tuple[zenoh.Session, str], databan
         assert any(f"/MP/%/%/kinesphere_bridge/%tf/{dds(TF)}/" in t for t in tokens)
 
         # a robot that leaves takes its publishers out of the graph
-        watch = GraphWatch(ros, 0)
-        stack.callback(watch.close)
-        watch.wait(lambda ts: any("%packbot%joint_states" in t for t in ts), "packbot")
+        graph_watch = GraphWatch(ros, 0)
+        stack.callback(graph_watch.close)
+        graph_watch.wait(lambda ts: any("%packbot%joint_states" in t for t in ts), "packbot")
         agents["packbot"].close()
-        watch.wait(lambda ts: not any("%packbot%" in t for t in ts), "packbot gone")
+        graph_watch.wait(lambda ts: not any("%packbot%" in t for t in ts), "packbot gone")
         assert "packbot" not in bridge.robots()
-        assert any("%baxter_1%joint_states" in t for t in watch.tokens)
-        for tap in (*taps.values(), tf):
+        assert any("%baxter_1%joint_states" in t for t in graph_watch.tokens)
+        for tap in taps.values():
             tap.close()
+        tf.close()
 
 
 def _fake_state(robot_id: str, seq: int) -> RobotState:
@@ -141,7 +150,7 @@ def test_bridge_cli_domain_namespace_and_bad_input() -> None:
     clashing ROS names refused, clean exit on SIGTERM (graph emptied)."""
     with zconfig.loopback_hub() as (hubs, endpoint), ExitStack() as stack:
         ros = stack.enter_context(zconfig.session(config=zconfig.loopback_config(endpoint)))
-        tap = RosTap(ros, 7, "/lab/nao_1/joint_states", JS)
+        tap = RosTap(ros, 7, "/lab/nao_1/joint_states", JointState)
         stack.callback(tap.close)
         proc = subprocess.Popen(
             [sys.executable, "-m", "kinesphere.cli", "ros2", "bridge", "--connect", endpoint,

@@ -15,6 +15,7 @@ import time
 from contextlib import ExitStack
 
 import zenoh
+from rosbags.typesys.stores.ros2_jazzy import std_msgs__msg__String as String
 
 from kinesphere import zconfig
 from kinesphere.clients.options import BridgeOptions
@@ -28,7 +29,6 @@ from support.network import Hub
 from support.ros2 import RosTap
 from support.wait import WAIT_S
 
-STRING = "std_msgs/msg/String"
 RETRY_S = 0.2
 
 
@@ -52,7 +52,7 @@ def test_a_refused_body_stops_no_other_platform(hub: Hub) -> None:
         stack.callback(zconfig.undeclare, queryable)
         bridge = Bridge(hub.session, KEYS, BridgeOptions(body_retry_s=RETRY_S))
         stack.callback(bridge.close)
-        description = RosTap(ros, 0, "/youbot_1/robot_description", STRING, history=True)
+        description = RosTap(ros, 0, "/youbot_1/robot_description", String, history=True)
 
         def put(rid: str, platform: str, seq: int) -> None:
             robots.put(KEYS.state(rid), encode(RobotState(

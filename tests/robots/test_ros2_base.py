@@ -14,6 +14,8 @@ import time
 
 import numpy as np
 import pytest
+from rosbags.typesys.stores.ros2_jazzy import geometry_msgs__msg__Twist as Twist
+from rosbags.typesys.stores.ros2_jazzy import geometry_msgs__msg__TwistStamped as TwistStamped
 
 from kinesphere import zconfig
 from kinesphere.errors import KinesphereError
@@ -24,8 +26,6 @@ from support.clock import ManualClock
 from support.ros2 import JAZZY, RosPublisher, RosTap
 
 NS = "/pk"
-TWIST = "geometry_msgs/msg/Twist"
-TWIST_STAMPED = "geometry_msgs/msg/TwistStamped"
 
 
 def _joint_state(names: list[str], q: list[float]) -> object:
@@ -61,7 +61,7 @@ def test_mobile_base_over_ros2() -> None:
     with zconfig.loopback_pair() as (ros, ours):
         states = RosPublisher(ros, 0, f"{NS}/joint_states", "sensor_msgs/msg/JointState")
         odom = RosPublisher(ros, 0, f"{NS}/odom", "nav_msgs/msg/Odometry", entity_id=902)
-        cmd_vel = RosTap(ros, 0, f"{NS}/cmd_vel", TWIST)
+        cmd_vel = RosTap(ros, 0, f"{NS}/cmd_vel", Twist)
         stop = threading.Event()
 
         def broadcaster() -> None:  # the robot's joint_state_broadcaster, at 50 Hz
@@ -102,7 +102,7 @@ def test_mobile_base_over_ros2() -> None:
             assert (zero.linear.x, zero.linear.y, zero.angular.z) == (0.0, 0.0, 0.0)
             body.close()
             # Jazzy's diff_drive_controller takes TwistStamped, stamped now, in the base frame
-            stamped = RosTap(ros, 0, f"{NS}/cmd_vel", TWIST_STAMPED)
+            stamped = RosTap(ros, 0, f"{NS}/cmd_vel", TwistStamped)
             ot = threading.Thread(target=base_controller, daemon=True)
             odom_thread_stop.clear()
             ot.start()
@@ -110,10 +110,10 @@ def test_mobile_base_over_ros2() -> None:
                 namespace=NS, start_timeout_s=5.0, cmd_vel_stamped=True))
             body.command(np.array(q), (0.2, 0.0, 0.1))
             body.step()
-            t = stamped.wait(lambda m: m.twist.linear.x > 0, "a TwistStamped").msg
-            assert (t.twist.linear.x, t.twist.angular.z) == (0.2, 0.1)
-            assert t.header.frame_id == platform.eurdf.root_link
-            assert abs(t.header.stamp.sec - time.time()) < 60
+            ts = stamped.wait(lambda m: m.twist.linear.x > 0, "a TwistStamped").msg
+            assert (ts.twist.linear.x, ts.twist.angular.z) == (0.2, 0.1)
+            assert ts.header.frame_id == platform.eurdf.root_link
+            assert abs(ts.header.stamp.sec - time.time()) < 60
             body.close()
             odom_thread_stop.set()
             ot.join(timeout=5)

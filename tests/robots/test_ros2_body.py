@@ -17,11 +17,18 @@ import threading
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from functools import partial
 
 import numpy as np
 import pygame
 import pytest
 import zenoh
+from rosbags.typesys.stores.ros2_jazzy import (
+    std_msgs__msg__Float64MultiArray as Float64MultiArray,
+)
+from rosbags.typesys.stores.ros2_jazzy import (
+    trajectory_msgs__msg__JointTrajectory as JointTrajectory,
+)
 
 from kinesphere import zconfig
 from kinesphere.clients import targets as tg
@@ -33,12 +40,12 @@ from kinesphere.clients.link import RobotLink
 from kinesphere.clients.options import TeleopOptions
 from kinesphere.errors import KinesphereError
 from kinesphere.platforms.platform import load_platform
-from kinesphere.protocol import Pose, SpatialCommand
+from kinesphere.protocol import Pose, RobotState, SpatialCommand
 from kinesphere.robots.agent.bodies import make_body
 from kinesphere.robots.agent.options import AgentOptions, Ros2BodyOptions
 from support.agents import CommandSender, DatabankProcess, running_agent
 from support.clients import Pad
-from support.network import KEYS
+from support.network import KEYS, Hub
 from support.paths import ROOT
 from support.ros2 import JAZZY, GraphWatch, RosPublisher, StandInRobot, dds
 from support.wait import WAIT_S
@@ -58,11 +65,22 @@ def at(robot: StandInRobot, joints: dict[str, float], tol: float = TOL) -> bool:
     return all(abs(robot.q[j] - v) <= tol for j, v in joints.items())
 
 
+def _moved_from(start: dict[str, float], joints: dict[str, float], by: float,
+                robot: StandInRobot) -> bool:
+    """Whether any of ``joints`` moved more than ``by`` from ``start``."""
+    return max(abs(robot.q[j] - start[j]) for j in joints) > by
+
+
+def _in_status(status: str, state: RobotState) -> bool:
+    return state.status == status
+
+
 @contextmanager
-def ros_robot(endpoint: str, ns: str, platform: str = PLATFORM, **kw: object
+def ros_robot(endpoint: str, ns: str, platform: str = PLATFORM, interface: str = "trajectory",
+              controller: str = "joint_trajectory_controller", order: list[str] | None = None
               ) -> Iterator[tuple[zenoh.Session, StandInRobot]]:
     with zconfig.session(config=zconfig.loopback_config(endpoint)) as s:
-        robot = StandInRobot(s, 0, ns, neutral(platform), **kw)  # type: ignore[arg-type]
+        robot = StandInRobot(s, 0, ns, neutral(platform), interface, controller, order)
         try:
             yield s, robot
         finally:
@@ -94,7 +112,7 @@ class Phases:
 
 
 def test_gamepad_moves_the_ros2_robot_to_an_ecl_pose_and_release_stops_it(
-    hub: tuple[zenoh.Session, str], databank: DatabankProcess, pygame_up: None
+    hub: Hub, databank: DatabankProcess, pygame_up: None
 ) -> None:
     _, endpoint = hub
     rid, ns = "baxter-ros", "/baxter_ros"
@@ -177,12 +195,13 @@ def test_gamepad_moves_the_ros2_robot_to_an_ecl_pose_and_release_stops_it(
         lower = {lim.name: lim.lower for lim in load_platform(PLATFORM).eurdf.P}
         upper = {lim.name: lim.upper for lim in load_platform(PLATFORM).eurdf.P}
         for _, msg in robot.received:
+            assert isinstance(msg, JointTrajectory), "the trajectory interface streams these"
             for n, v in zip(msg.joint_names, msg.points[-1].positions.tolist(), strict=True):
                 assert lower[n] <= v <= upper[n], f"{n}={v} streamed outside its limits"
         assert agent.last_state is not None and agent.last_state.status != "error"
 
 
-def test_joy_stream_drives_the_ros2_robot(hub: tuple[zenoh.Session, str],
+def test_joy_stream_drives_the_ros2_robot(hub: Hub,
                                           databank: DatabankProcess) -> None:
     """A ROS user's joystick: Joy messages at joy's autorepeat rate into ``kinesphere
     gamepad --input ros2:/joy`` (a real process), the robot a ROS 2 one."""
@@ -254,8 +273,7 @@ def test_joy_stream_drives_the_ros2_robot(hub: tuple[zenoh.Session, str],
         assert proc.returncode == 0, err
 
 
-def test_ros2_body_faults_and_stops(hub: tuple[zenoh.Session, str],
-                                    databank: DatabankProcess) -> None:
+def test_ros2_body_faults_and_stops(hub: Hub, databank: DatabankProcess) -> None:
     """Wrong robot, no robot, targets past the limits, the forward-controller order, TTL and
     e-stop mid-motion, a robot that goes quiet and comes back."""
     _, endpoint = hub
@@ -282,7 +300,9 @@ def test_ros2_body_faults_and_stops(hub: tuple[zenoh.Session, str],
         body.command(np.array([lim.upper + 5.0 for lim in limits]), (0.0, 0.0, 0.0))
         body.step()  # at 100 Hz with a 10 ms period: every step streams
         robot.wait(lambda r: len(r.received) > n, "got the clamped command")
-        sent = dict(zip(order, robot.received[-1][1].data.tolist(), strict=True))
+        last = robot.received[-1][1]
+        assert isinstance(last, Float64MultiArray), "the forward interface streams these"
+        sent = dict(zip(order, last.data.tolist(), strict=True))
         assert sent == {lim.name: lim.upper for lim in limits}, "clamped to the hard limits"
         body.halt()  # and back to where the robot is
         robot.wait(lambda r: r.q == neutral(), "back at neutral")
@@ -301,13 +321,13 @@ def test_ros2_body_faults_and_stops(hub: tuple[zenoh.Session, str],
                     start = robot.positions()
                     deadline = time.monotonic() + WAIT_S
                     while not robot.within(  # a client streaming every 50 ms ...
-                            lambda r, a=start: max(abs(r.q[j] - a[j]) for j in far) > 0.1, 0.05):
+                            partial(_moved_from, start, far, 0.1), 0.05):
                         assert time.monotonic() < deadline, "never under way to right-low"
                         operator.send((LIMB, ORIGIN, "right-low", 3.0), ttl_ms=150)
                     if "estop" in how:  # ... then an e-stop, or silence past the TTL
                         operator.send(estop=True)
                     status = "estop" if "estop" in how else "holding"
-                    watch.wait(lambda st, x=status: st.status == x, status)  # type: ignore[misc]
+                    watch.wait(partial(_in_status, status), status)
                     stopped = time.monotonic()
                     assert robot.wait_rest() - stopped < 1.0 and not at(robot, far), how
                     operator.send(release=True)

@@ -13,10 +13,16 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import ClassVar, Generic, Protocol, TypeVar
 
 import zenoh
 from rosbags.typesys import Stores, get_typestore
+from rosbags.typesys.stores.ros2_jazzy import (
+    std_msgs__msg__Float64MultiArray as Float64MultiArray,
+)
+from rosbags.typesys.stores.ros2_jazzy import (
+    trajectory_msgs__msg__JointTrajectory as JointTrajectory,
+)
 from zenoh.ext import Int64, z_deserialize, z_serialize
 
 from kinesphere import zconfig
@@ -87,26 +93,39 @@ class GraphWatch:
         zconfig.undeclare(self._sub)
 
 
+class RosMessage(Protocol):
+    """A ROS message class of rosbags' type store (a dataclass naming its ROS type)."""
+
+    __msgtype__: ClassVar[str]
+
+
+M = TypeVar("M", bound=RosMessage)
+
+
 @dataclass
-class Received:
-    msg: Any
+class Tapped(Generic[M]):
+    """One message a :class:`RosTap` heard, with its attachment and its arrival time."""
+
+    msg: M
     seq: int
     stamp_ns: int
     gid: bytes
     at: float
 
 
-class RosTap(Heard[Received]):
+class RosTap(Heard[Tapped[M]]):
     """Every message on one ROS topic, decoded with rosbags, attachment checked."""
 
-    def __init__(self, session: zenoh.Session, domain: int, topic: str, ros_type: str,
+    def __init__(self, session: zenoh.Session, domain: int, topic: str, msg_type: type[M],
                  history: bool = False) -> None:
         super().__init__()
-        self.ros_type = ros_type
-        self.key = key(domain, topic, ros_type)
+        self.msg_type = msg_type
+        self.ros_type = msg_type.__msgtype__
+        self.key = key(domain, topic, self.ros_type)
         self.got = self.heard
+        self._sub: zconfig.Undeclarable
         if history:  # what rmw_zenoh does for a transient-local subscription
-            self._sub: Any = zenoh.ext.declare_advanced_subscriber(
+            self._sub = zenoh.ext.declare_advanced_subscriber(
                 session, self.key, self._on,
                 history=zenoh.ext.HistoryConfig(detect_late_publishers=True, max_samples=1),
                 subscriber_detection=True,
@@ -117,13 +136,17 @@ class RosTap(Heard[Received]):
     def _on(self, sample: zenoh.Sample) -> None:
         seq, ts, gid = read_attachment(sample)
         msg = JAZZY.deserialize_cdr(sample.payload.to_bytes(), self.ros_type)
-        self.add(Received(msg, seq, ts, gid, time.monotonic()))
+        assert isinstance(msg, self.msg_type), f"{self.ros_type} decoded as {type(msg)}"
+        self.add(Tapped(msg, seq, ts, gid, time.monotonic()))
 
     def explain(self) -> str:
         return f"on {self.key} ({len(self.got)} other messages)"
 
-    def wait(self, pred: Callable[[Any], bool] = lambda m: True, what: str = "a message",
-             timeout: float = WAIT_S, *, start: int = 0) -> Received:
+    # A tap's predicates read the message itself, not the envelope Heard keeps it in.
+    def wait(  # type: ignore[override]
+        self, pred: Callable[[M], bool] = lambda m: True, what: str = "a message",
+        timeout: float = WAIT_S, *, start: int = 0,
+    ) -> Tapped[M]:
         """The first message (from the start) whose ``msg`` satisfies ``pred``."""
         return super().wait(lambda r: pred(r.msg), what, timeout, start=start)
 
@@ -147,7 +170,7 @@ class RosPublisher:
         self.gid = bytes(range(16))
         self.seq = 0
 
-    def put(self, msg: Any) -> None:
+    def put(self, msg: object) -> None:
         self.seq += 1
         payload = bytes(JAZZY.serialize_cdr(msg, self.ros_type, little_endian=True))
         self.pub.put(payload, attachment=attachment(self.seq, self.gid))
@@ -175,7 +198,7 @@ class StandInRobot:
         self.order = order or self.names
         self.rate = rate
         self.interface = interface
-        self.received: list[tuple[float, Any]] = []
+        self.received: list[tuple[float, JointTrajectory | Float64MultiArray]] = []
         self.ticks = 0
         self.moved = (0, time.monotonic())
         """(tick, time) of the last tick in which any joint moved."""
@@ -207,13 +230,15 @@ class StandInRobot:
         msg = JAZZY.deserialize_cdr(sample.payload.to_bytes(), self.command_type)
         now = time.monotonic()
         with self._cond:
-            self.received.append((now, msg))
-            if self.interface == "trajectory":
+            if isinstance(msg, JointTrajectory):
+                self.received.append((now, msg))
                 point = msg.points[-1]
                 t = point.time_from_start.sec + point.time_from_start.nanosec * 1e-9
                 goal = dict(zip(msg.joint_names, point.positions.tolist(), strict=True))
                 self._plan = (now, dict(self.q), goal, max(t, 1e-3))
             else:
+                assert isinstance(msg, Float64MultiArray), f"{self.command_type}: {type(msg)}"
+                self.received.append((now, msg))
                 self.q.update(zip(self.order, msg.data.tolist(), strict=True))
             self._cond.notify_all()
 

@@ -133,7 +133,8 @@ class SdkPeer(Heard[dict[str, Any]]):
         """The first message on subscription ``name`` that satisfies ``pred``."""
         e = self.wait(lambda e: e["event"] == "msg" and e["name"] == name and pred(e["msg"]),
                       what or f"a message on {name}", timeout)
-        return e["msg"]  # type: ignore[no-any-return]
+        msg: dict[str, Any] = e["msg"]
+        return msg
 
     def sample(self, name: str, timeout: float = WAIT_S) -> dict[str, Any]:
         return self.wait(lambda e: e["event"] == "sample" and e["name"] == name,

@@ -23,6 +23,7 @@ import xml.etree.ElementTree as ET
 from collections.abc import Iterator
 from contextlib import ExitStack
 from dataclasses import dataclass
+from functools import partial
 from importlib.metadata import version
 from typing import Any
 
@@ -31,6 +32,7 @@ import pytest
 import xxhash
 import yourdfpy
 import zenoh
+from rosbags.typesys.stores.ros2_jazzy import tf2_msgs__msg__TFMessage as TFMessage
 
 from kinesphere import zconfig
 from kinesphere.platforms.platform import load_platform
@@ -44,7 +46,7 @@ from support.wait import WAIT_S, stop_process
 
 JS = "sensor_msgs/msg/JointState"
 STRING = "std_msgs/msg/String"
-TF = "tf2_msgs/msg/TFMessage"
+TF = TFMessage.__msgtype__
 ODOM = "nav_msgs/msg/Odometry"
 JOY = "sensor_msgs/msg/Joy"
 ROBOTS = {"baxter-1": "baxter", "packbot": "packbot"}
@@ -137,7 +139,7 @@ def site() -> Iterator[Site]:
                                    "the bridge describing both robots"))
         graph.close()
         node = next(t for t in tokens if t.endswith("/NN/%/%/kinesphere_bridge"))
-        static = RosTap(watcher, 0, "/tf_static", TF, history=True)
+        static = RosTap(watcher, 0, "/tf_static", TFMessage, history=True)
         static.wait(lambda m: {t.child_frame_id.split("/")[0] for t in m.transforms}
                     == {"baxter_1", "packbot"}, "/tf_static of both robots")
         static.close()
@@ -155,6 +157,16 @@ def _matrix(t: dict[str, Any]) -> np.ndarray:
     p = t["translation"]
     m[:3, 3] = [p["x"], p["y"], p["z"]]
     return m
+
+
+def _tf_of(ros_id: str, msg: dict[str, Any]) -> bool:
+    """A /tf message (the peer's JSON) about robot ``ros_id``'s frames."""
+    return str(msg["transforms"][0]["child_frame_id"]).startswith(f"{ros_id}/")
+
+
+def _robot_up(name: str, event: dict[str, Any]) -> bool:
+    """The peer's event that its stand-in robot ``name`` runs."""
+    return bool(event["event"] == "robot" and event["name"] == name)
 
 
 def _stamp(header: dict[str, Any]) -> int:
@@ -178,8 +190,8 @@ def _check_frames(site: Site, rid: str, tf: dict[str, Any], static: list[dict[st
     root = urdf.base_link
     x, y, yaw = state.base_pose
     base = np.eye(4)
-    base[:3, :3] = [[math.cos(yaw), -math.sin(yaw), 0], [math.sin(yaw), math.cos(yaw), 0],
-                    [0, 0, 1]]
+    base[:3, :3] = [[math.cos(yaw), -math.sin(yaw), 0.0], [math.sin(yaw), math.cos(yaw), 0.0],
+                    [0.0, 0.0, 1.0]]
     base[:3, 3] = [x, y, 0.0]
     for link in urdf.link_map:
         frame, chained = f"{ros_id}/{link}", np.eye(4)
@@ -242,8 +254,7 @@ def test_ros2_peer_receives_every_robot_from_the_bridge(site: Site,
             "baxter_1", "packbot"}
         for rid in ROBOTS:
             r = rid.replace("-", "_")
-            tf = peer.message("tf", lambda m, r=r: m["transforms"][0]["child_frame_id"]
-                              .startswith(f"{r}/"), f"/tf of {r}")
+            tf = peer.message("tf", partial(_tf_of, r), f"/tf of {r}")
             assert _check_frames(site, rid, tf, static, urdfs[r]) > 5
 
         # odometry of the base that turned: the robot's own base pose
@@ -275,7 +286,7 @@ def test_ros2_peer_drives_the_gamepad_and_is_driven_by_the_ros2_body(site: Site)
             p = load_platform(platform)
             peer.send(op="robot", name=name, namespace=ns, every=0.02, base=mobile,
                       joints=dict(zip(p.joint_names, p.neutral_vector().tolist(), strict=True)))
-            peer.wait(lambda e, n=name: e["event"] == "robot" and e["name"] == n, f"robot {name}")
+            peer.wait(partial(_robot_up, name), f"robot {name}")
         _, watch = stack.enter_context(running_agent(
             site.endpoint, "baxter", arm, speed=1.0, rate=200.0, body="ros2",
             ros2=Ros2BodyOptions(namespace=arm_ns)))
