@@ -19,6 +19,7 @@ from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TypedDict, Unpack
 
 import numpy as np
 import zenoh
@@ -39,6 +40,7 @@ from kinesphere.protocol import (
 )
 from kinesphere.robots.agent.controller import Controller
 from kinesphere.robots.agent.fleet import FleetHost, RobotSpec
+from kinesphere.robots.agent.options import Ros2BodyOptions
 from kinesphere.robots.agent.runtime import Agent, AgentOptions
 from support.network import KEYS
 from support.paths import ROOT
@@ -148,10 +150,20 @@ class StateWatch(Watch[RobotState]):
         return self.wait(lambda s: s.last_command_seq >= seq and pred(s), what, timeout)
 
 
+class AgentOverrides(TypedDict, total=False):
+    """The :class:`AgentOptions` a test sets besides ``speed``."""
+
+    rate: float
+    body: str
+    ros2: Ros2BodyOptions
+    groups: tuple[str, ...]
+    max_translation_m: float
+
+
 @contextmanager
 def running_agent(
     endpoint: str, platform: str, robot_id: str | None = None, speed: float = 0.0,
-    trace: Trace | None = None, **options: object,
+    trace: Trace | None = None, **options: Unpack[AgentOverrides],
 ) -> Iterator[tuple[Agent, StateWatch]]:
     """An agent in this process with its own session joined to the hub, and its state."""
     robot_id = robot_id or Path(platform).name

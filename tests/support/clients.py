@@ -18,10 +18,12 @@ import time
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
+from typing import Self
 
 os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
 os.environ.setdefault("SDL_AUDIODRIVER", "dummy")
 
+import msgspec  # noqa: E402
 import pygame  # noqa: E402
 import zenoh  # noqa: E402
 
@@ -81,24 +83,25 @@ def pygames_sdl() -> ctypes.CDLL:
 
 
 class Hands:
-    """A pad's two sticks and its deadman, however its axes and buttons reach SDL."""
+    """A pad's two sticks and its deadman, however its axes and buttons reach SDL. Each action
+    returns the pad, so one step can do several: ``p.deadman().right(0.0, -1.0)``."""
 
-    def axis(self, axis: int, value: float) -> None:
+    def axis(self, axis: int, value: float) -> Self:
         raise NotImplementedError
 
-    def button(self, b: int, down: bool = True) -> None:
+    def button(self, b: int, down: bool = True) -> Self:
         raise NotImplementedError
 
-    def right(self, x: float, y: float) -> None:
+    def right(self, x: float, y: float) -> Self:
         self.axis(pygame.CONTROLLER_AXIS_RIGHTX, x)
-        self.axis(pygame.CONTROLLER_AXIS_RIGHTY, y)
+        return self.axis(pygame.CONTROLLER_AXIS_RIGHTY, y)
 
-    def left(self, x: float, y: float) -> None:
+    def left(self, x: float, y: float) -> Self:
         self.axis(pygame.CONTROLLER_AXIS_LEFTX, x)
-        self.axis(pygame.CONTROLLER_AXIS_LEFTY, y)
+        return self.axis(pygame.CONTROLLER_AXIS_LEFTY, y)
 
-    def deadman(self, down: bool = True) -> None:
-        self.button(pygame.CONTROLLER_BUTTON_LEFTSHOULDER, down)
+    def deadman(self, down: bool = True) -> Self:
+        return self.button(pygame.CONTROLLER_BUTTON_LEFTSHOULDER, down)
 
 
 class VirtualPad(Hands):
@@ -122,16 +125,18 @@ class VirtualPad(Hands):
         self.joystick = self.sdl.SDL_JoystickOpen(self.index)
         assert self.joystick, self.sdl.SDL_GetError().decode()
 
-    def axis(self, axis: int, value: float) -> None:
+    def axis(self, axis: int, value: float) -> Self:
         """A stick axis in -1..1 (SDL: x right +, y down +) or a trigger in 0..1."""
         if axis in (pygame.CONTROLLER_AXIS_TRIGGERLEFT, pygame.CONTROLLER_AXIS_TRIGGERRIGHT):
             raw = round(-32768 + value * 65535)  # the joystick's full range is the trigger's
         else:
             raw = max(-32768, min(32767, round(value * 32767)))
         assert self.sdl.SDL_JoystickSetVirtualAxis(self.joystick, axis, raw) == 0
+        return self
 
-    def button(self, b: int, down: bool = True) -> None:
+    def button(self, b: int, down: bool = True) -> Self:
         assert self.sdl.SDL_JoystickSetVirtualButton(self.joystick, b, int(down)) == 0
+        return self
 
     def unplug(self) -> None:
         """Detach the device (SDL then reports it removed, like a pulled cable)."""
@@ -274,7 +279,7 @@ def client_link(endpoint: str, watch: bool = True, sender: str | None = None
 
 
 def post(kind: int, **attrs: object) -> None:
-    pygame.event.post(pygame.event.Event(kind, **attrs))
+    pygame.event.post(pygame.event.Event(kind, attrs))
 
 
 class Pad(Hands):
@@ -283,28 +288,32 @@ class Pad(Hands):
     def __init__(self, iid: int = 3) -> None:
         self.iid = iid
 
-    def plug(self) -> None:
+    def plug(self) -> Self:
         post(pygame.CONTROLLERDEVICEADDED, device_index=90 + self.iid, instance_id=self.iid)
+        return self
 
-    def unplug(self) -> None:
+    def unplug(self) -> Self:
         post(pygame.CONTROLLERDEVICEREMOVED, instance_id=self.iid)
+        return self
 
-    def axis(self, a: int, value: float) -> None:
+    def axis(self, a: int, value: float) -> Self:
         post(pygame.CONTROLLERAXISMOTION, instance_id=self.iid, axis=a, value=int(value * MAX))
+        return self
 
-    def button(self, b: int, down: bool = True) -> None:
+    def button(self, b: int, down: bool = True) -> Self:
         kind = pygame.CONTROLLERBUTTONDOWN if down else pygame.CONTROLLERBUTTONUP
         post(kind, instance_id=self.iid, button=b)
+        return self
 
-    def tap(self, b: int) -> None:
+    def tap(self, b: int) -> Self:
         self.button(b)
-        self.button(b, down=False)
+        return self.button(b, down=False)
 
 
 class Script:
     """A Source that posts scheduled events before each tick, then reads the real queue."""
 
-    def __init__(self, inp: pad.PygameInput, steps: dict[int, Callable[[], None]]) -> None:
+    def __init__(self, inp: pad.PygameInput, steps: dict[int, Callable[[], object]]) -> None:
         self.inp = inp
         self.steps = steps
         self.tick = 0
@@ -344,9 +353,8 @@ class FakeRobot:
             robot_id=self.robot_id, platform=self.platform, seq=self.seq,
             stamp_ns=time.time_ns(), joint_names=[], q=[], qd=[], base_pose=[0.0, 0.0, 0.0],
             status=status, last_command_seq=-1, groups=self.groups,
-            **fields,  # type: ignore[arg-type]
         )
-        self.pub.put(encode(st))
+        self.pub.put(encode(msgspec.structs.replace(st, **fields)))
 
 
 @contextmanager

@@ -156,7 +156,7 @@ class Tokens:
             return self._cond.wait_for(lambda: (name in self.alive) == present, timeout)
 
     def close(self) -> None:
-        self._sub.undeclare()  # type: ignore[no-untyped-call]
+        zconfig.undeclare(self._sub)
 
 
 def cli(*args: str) -> list[str]:

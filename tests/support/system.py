@@ -9,7 +9,7 @@ import os
 import shutil
 import socket
 import subprocess
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -105,7 +105,8 @@ def query_pose(s: zenoh.Session, platform: str, limb: str, origin: str, directio
     for reply in s.get(KEYS.pose(platform, limb, origin, direction, size), timeout=10.0):
         if reply.ok is not None:
             return decode(reply.ok.payload.to_bytes(), Pose)
-        raise error_from_reply(reply.err.payload.to_bytes())
+        if reply.err is not None:
+            raise error_from_reply(reply.err.payload.to_bytes())
     raise AssertionError(f"no databank answered for {platform}")
 
 
@@ -119,8 +120,9 @@ def at_pose(state: RobotState | None, joints: dict[str, float], tol: float = 0.0
 class Observer:
     """A session that watches liveliness and every robot's state."""
 
-    def __init__(self, config: zenoh.Config | None = None, **kw: object) -> None:
-        self.session = open_session(config=config, **kw)  # type: ignore[arg-type]
+    def __init__(self, config: zenoh.Config | None = None, mode: str | None = None,
+                 connect: Sequence[str] | None = None) -> None:
+        self.session = open_session(mode, connect=connect, config=config)
         self.states = StateRecorder(KEYS, history=False).start(self.session)
         self.alive: Alive
         self.alive, self._subs = watch_alive(self.session, KEYS)
@@ -134,6 +136,13 @@ class Observer:
         until(up, timeout, f"liveliness of {sorted(robots)} and databank={databank}")
         until(lambda: robots <= set(self.states.snapshot()), timeout, "first robot states")
 
+    def state(self, robot_id: str) -> RobotState:
+        """The robot's last state; fails the test if none was heard yet."""
+        state = self.states.last(robot_id)
+        if state is None:
+            pytest.fail(f"no state of {robot_id} heard yet")
+        return state
+
     def describe(self) -> str:
         """The robots' last states, for failure messages."""
         return "\n".join(
@@ -142,7 +151,7 @@ class Observer:
             for rid, st in sorted(self.states.snapshot().items()))
 
     def close(self) -> None:
-        undeclare(*self._subs)  # type: ignore[arg-type]
+        undeclare(*self._subs)
         self.states.close()
         close_session(self.session)
 
@@ -153,7 +162,7 @@ def router_hub(sup: Supervisor) -> str:
     port = free_port()
     endpoint = f"tcp/127.0.0.1:{port}"
     sup.spawn("router", ["router", "--listen", endpoint])
-    until(lambda: sup.check() or port_open(port), WAIT_S, "the router to listen")
+    until(lambda: port_open(port), WAIT_S, "the router to listen", guard=sup.check)
     return endpoint
 
 
@@ -231,7 +240,7 @@ def secured_system(tmp: Path) -> Iterator[Secured]:
     for sup in supervisor(tmp / "logs"):
         router = sup.spawn("router", ["router", "--config", str(configs["router"]),
                                       "--robots", str(DEPLOY / "robots.toml")])
-        until(lambda s=sup: s.check() or port_open(port), WAIT_S, "the TLS router to listen")
+        until(lambda: port_open(port), WAIT_S, "the TLS router to listen", guard=sup.check)
         sup.spawn("databank", ["databank", "serve", "--db", db, "--allow-writes", "--replica",
                                "db-1", "--zenoh-config", str(configs["databank"])])
         sup.spawn("agent", ["agent", "youbot", "--id", SECURED_ROBOT, "--rate", "250",

@@ -61,4 +61,5 @@ def pixels(png: bytes) -> npt.NDArray[np.int16]:
 
 def coloured(image: npt.NDArray[np.int16], threshold: int = 60) -> npt.NDArray[np.bool_]:
     """Saturated pixels: the robots' painted links (background, grid and text are grey)."""
-    return (image.max(axis=2) - image.min(axis=2)) > threshold
+    spread: npt.NDArray[np.int16] = image.max(axis=2) - image.min(axis=2)
+    return spread > threshold

@@ -21,10 +21,17 @@ WAIT_S = 60.0
 
 
 def until(cond: Callable[[], bool], timeout: float, what: str, every: float = 0.05,
-          explain: Callable[[], object] | None = None) -> None:
-    """Poll ``cond`` until it holds; fail naming ``what`` (and ``explain()``) after ``timeout``."""
+          explain: Callable[[], object] | None = None,
+          guard: Callable[[], None] | None = None) -> None:
+    """Poll ``cond`` until it holds; fail naming ``what`` (and ``explain()``) after ``timeout``.
+    ``guard`` runs before each poll and raises to end the wait early (``Supervisor.check``: a
+    child that died will not make ``cond`` hold)."""
     deadline = time.monotonic() + timeout
-    while not cond():
+    while True:
+        if guard is not None:
+            guard()
+        if cond():
+            return
         if time.monotonic() > deadline:
             extra = f"\n{explain()}" if explain is not None else ""
             pytest.fail(f"timed out after {timeout:g} s waiting for {what}{extra}")
