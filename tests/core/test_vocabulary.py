@@ -10,7 +10,6 @@ from typing import Any
 
 import msgspec
 import pytest
-import zenoh
 
 from kinesphere import protocol as pr
 from kinesphere.cli import main
@@ -23,7 +22,7 @@ from kinesphere.services.ecl.ecl import Ecl
 from kinesphere.vocabulary import WORDS, vocabulary
 from support.agents import DatabankProcess, running_fleet_host
 from support.byor import robot_data
-from support.network import KEYS
+from support.network import KEYS, Hub
 from support.paths import TOY
 from support.wait import WAIT_S
 
@@ -181,7 +180,7 @@ def test_body_words_are_bounded_and_version_1_peers_keep_working() -> None:
 
 
 def test_send_right_arm_from_the_right_shoulder_to_every_articulated_body(
-    hub: tuple[zenoh.Session, str], databank: DatabankProcess, capsys: pytest.CaptureFixture[str],
+    hub: Hub, databank: DatabankProcess, capsys: pytest.CaptureFixture[str],
 ) -> None:
     """``right_arm right_shoulder left-high 3`` (and ``left_arm``) answered by Baxter, NAO,
     youBot and PackBot, the one-armed bodies saying which arm; ``left_leg`` refused by
