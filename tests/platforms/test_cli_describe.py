@@ -20,18 +20,18 @@ def run(*args: str) -> subprocess.CompletedProcess[str]:
     )
 
 
-def test_describe_json_gives_the_sets(capsys: object) -> None:
+def test_describe_json_gives_the_sets(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["describe", str(TOY_EURDF), "--json"]) == 0
-    info = json.loads(capsys.readouterr().out)  # type: ignore[attr-defined]
+    info = json.loads(capsys.readouterr().out)
     assert info["dof"] == 4
     assert [lb["label"] for lb in info["L"]] == ["limb_11", "limb_12", "limb_21"]
     assert info["L"][1]["links"] == ["lower", "hand", "tip"]
     assert info["P"][3]["lower"] is None  # continuous joint
 
 
-def test_describe_text_lists_limbs_with_links(capsys: object) -> None:
+def test_describe_text_lists_limbs_with_links(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["describe", str(TOY_EURDF)]) == 0
-    out = capsys.readouterr().out  # type: ignore[attr-defined]
+    out = capsys.readouterr().out
     assert "L = {limb_11, limb_12, limb_21}" in out
     assert "links:  lower, hand, tip" in out
 
