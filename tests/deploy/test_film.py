@@ -9,6 +9,7 @@ import imageio_ffmpeg
 import numpy as np
 import pytest
 from PIL import Image
+from PIL.GifImagePlugin import GifImageFile
 
 from kinesphere.clients.orders.phrases import load_phrase
 from kinesphere.deploy.film import CAPTION_H, PLATFORMS, render
@@ -31,7 +32,7 @@ def test_left_high_film(tmp_path: Path) -> None:
              for f in reader]
     assert len(video) == expected
     with Image.open(gif) as g:
-        assert g.n_frames == expected
+        assert isinstance(g, GifImageFile) and g.n_frames == expected
     first, middle = video[0].astype(int), video[len(video) // 2].astype(int)
     for j, name in enumerate(PLATFORMS):  # every robot's pixels change: each body moved
         tile = np.s_[CAPTION_H + 16 : H + CAPTION_H - 20, j * W : (j + 1) * W]

@@ -29,7 +29,8 @@ def deny(f: dn.DenialFilter, zid: str, cn: str | None, key: str) -> None:
 
 def test_a_flood_of_distinct_keys_is_bounded_per_identity() -> None:
     """Before: 3,000 distinct keys -> 3,000 lines, and per-key records never pruned."""
-    clock, lines = ManualClock(), []
+    clock = ManualClock()
+    lines: list[str] = []
     f = dn.DenialFilter(report=lines.append, passthrough=lambda _: None, clock=clock)
     for i in range(3000):
         deny(f, "abc1", "nao-1", f"kinesphere/robot/x{i}/state")
@@ -44,7 +45,8 @@ def test_a_flood_of_distinct_keys_is_bounded_per_identity() -> None:
 
 
 def test_sessions_without_certificates_share_one_total_budget() -> None:
-    clock, lines = ManualClock(), []
+    clock = ManualClock()
+    lines: list[str] = []
     f = dn.DenialFilter(report=lines.append, passthrough=lambda _: None, clock=clock)
     for i in range(3000):
         deny(f, f"{i:x}ff", None, f"k/{i}")
