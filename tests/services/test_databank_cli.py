@@ -12,6 +12,7 @@ import threading
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import IO
 
 import pytest
 import zenoh
@@ -65,8 +66,8 @@ class StartLine:
         self._thread = threading.Thread(target=self._read, args=(stream,), daemon=True)
         self._thread.start()
 
-    def _read(self, stream: object) -> None:
-        for line in stream:  # type: ignore[attr-defined]
+    def _read(self, stream: IO[str]) -> None:
+        for line in stream:
             self.text.append(line)
             self.lines.put(line)
 
@@ -147,7 +148,10 @@ def test_replicas_one_answer_and_failover_on_sigkill(
             assert len(replies) == 1 and replies[0].ok is not None
             answers.append(replies[0])
         expected = pose_of(raw_get(querier, key))
-        serving = {str(r.replier_id.zid) for r in answers}  # type: ignore[union-attr]
+        serving = set()
+        for r in answers:
+            assert r.replier_id is not None, "a reply names the session that sent it"
+            serving.add(str(r.replier_id.zid))
         assert len(serving) == 1 and serving <= procs.keys()
         victim = procs[serving.pop()]
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 import shutil
 import threading
 from collections.abc import Iterator
+from functools import partial
 from pathlib import Path
 
 import pytest
@@ -26,6 +27,11 @@ CELL = ("limb_11", "distal_11", "left-high")
 def record_request(size: int = 2, **joints: float) -> bytes:
     return pr.encode(pr.RecordRequest(limb="arm", origin="shoulder", direction="Left High",
                                       size=size, joints=joints or {"yaw": 0.75}))
+
+
+def _serves(svc: DatabankService, size: int, pose: pr.Pose) -> bool:
+    """``svc`` answers the test's cell at ``size`` with ``pose``."""
+    return svc.ecl("toyarm").query(*CELL, size) == pose
 
 
 class Net:
@@ -80,8 +86,11 @@ def test_record_serves_new_values_at_once_and_announces_them(net: Net, tmp_path:
     svc = net.replica("rw", db, writes=True)
     heard: list[zenoh.Sample] = []
     got = threading.Event()
-    sub = net.client.declare_subscriber(changed_key(OWN_KEYS, "toyarm"),
-                                        lambda s: (heard.append(s), got.set()))
+    def on_change(sample: zenoh.Sample) -> None:
+        heard.append(sample)
+        got.set()
+
+    sub = net.client.declare_subscriber(changed_key(OWN_KEYS, "toyarm"), on_change)
     key = OWN_KEYS.pose("toyarm", *CELL, 2)
     old = pose_of(raw_get(net.client, key))  # now cached; the subscriber is known by now
     version = svc.ecl("toyarm").version
@@ -105,7 +114,7 @@ def test_record_serves_new_values_at_once_and_announces_them(net: Net, tmp_path:
         assert stored.joints["wrist"] == -0.5
         assert Ecl.open(str(TOY), db).query(*CELL, 3).joints["wrist"] == -0.5  # on disk
     finally:
-        sub.undeclare()  # type: ignore[no-untyped-call]
+        zconfig.undeclare(sub)
 
 
 @pytest.mark.parametrize(
@@ -150,8 +159,7 @@ def test_replicas_follow_each_others_records(net: Net, tmp_path: Path) -> None:
     if replies[0][0]:
         recorded = pose_of(replies)
         for svc in (a, b, c):
-            until(lambda s=svc: s.ecl("toyarm").query(*CELL, 1) == recorded, 10.0,
-                  f"replica {svc.replica_id} to follow")
+            until(partial(_serves, svc, 1, recorded), 10.0, f"replica {svc.replica_id} to follow")
     else:  # it reached the read-only replica
         assert error_code(replies) == "forbidden"
     # a record sent to every replica (as the docs say) is stored by each writer
@@ -160,6 +168,5 @@ def test_replicas_follow_each_others_records(net: Net, tmp_path: Path) -> None:
     assert sorted(ok for ok, _ in replies) == [False, True, True]
     recorded = pr.decode(next(data for ok, data in replies if ok), pr.Pose)
     for svc in (a, b, c):
-        until(lambda s=svc: s.ecl("toyarm").query(*CELL, 3) == recorded, 10.0,
-              f"replica {svc.replica_id} to follow")
+        until(partial(_serves, svc, 3, recorded), 10.0, f"replica {svc.replica_id} to follow")
     assert Ecl.open(str(TOY), other).query(*CELL, 3) == recorded

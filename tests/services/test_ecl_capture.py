@@ -6,18 +6,18 @@ import shutil
 from pathlib import Path
 
 import pytest
-import zenoh
 
 from kinesphere.cli import main
 from kinesphere.services.ecl.ecl import Ecl
 from kinesphere.services.ecl.store import default_db_path
-from support.agents import CommandSender, running_agent  # noqa: F401
+from support.agents import CommandSender, DatabankProcess, running_agent  # noqa: F401
+from support.network import Hub
 
 LIMB = ("limb_11", "distal_11", "forward-middle", 2)
 
 
 def test_record_captures_the_running_robots_limb(
-    hub: tuple[zenoh.Session, str], databank: object, tmp_path: Path,  # noqa: F811
+    hub: Hub, databank: DatabankProcess, tmp_path: Path,  # noqa: F811
 ) -> None:
     session, endpoint = hub
     db = tmp_path / "youbot.sqlite"
@@ -41,7 +41,7 @@ def test_record_captures_the_running_robots_limb(
 
 
 def test_record_from_a_silent_robot_is_a_clear_error(
-    hub: tuple[zenoh.Session, str], tmp_path: Path, capsys: pytest.CaptureFixture[str],  # noqa: F811
+    hub: Hub, tmp_path: Path, capsys: pytest.CaptureFixture[str],  # noqa: F811
 ) -> None:
     db = tmp_path / "youbot.sqlite"
     shutil.copy(default_db_path("youbot"), db)

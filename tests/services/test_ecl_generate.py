@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import statistics
 from pathlib import Path
+from typing import Any
 
 import mujoco
 import numpy as np
@@ -25,7 +26,7 @@ SHIPPED = ("baxter", "nao", "youbot", "packbot", "khepera")
 CHEAP = ("youbot", "limb_13", "distal_13")  # two joints: the fastest real entry to regenerate
 
 
-def generated_rows(name: str) -> list[dict]:
+def generated_rows(name: str) -> list[dict[str, Any]]:
     return [r for r in shipped(name).rows() if r["joints"] and r["direction"] != "place-middle"]
 
 

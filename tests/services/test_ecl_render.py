@@ -27,7 +27,8 @@ def test_contact_sheet_shows_each_stored_direction_and_greys_the_rest() -> None:
     assert image.size == (9 * CELL, 3 * (CELL + LABEL) + TITLE)
     sheet = np.asarray(image)
     have = {d.slug for d in ecl.directions("limb_13", "distal_13")}
-    shown, missing = [], []
+    shown: list[tuple[str, np.ndarray]] = []
+    missing: list[tuple[str, np.ndarray]] = []
     for r, level in enumerate(render.LEVELS):
         for c, h in enumerate(render.COLUMNS):
             d = Direction((h.value, level.value))

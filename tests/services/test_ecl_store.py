@@ -80,6 +80,7 @@ def test_nulls_exactly_where_the_limb_does_not_reach(tmp_path: Path) -> None:
     rows = _sql(db, "SELECT v.limb, p.* FROM pose p JOIN vsam v USING (k_id)")
     seen = set()
     for limb, _p, _k, *values in rows:
+        assert isinstance(limb, str)
         set_joints = {j for j, v in zip(joints, values, strict=True) if v is not None}
         expected = set() if limb == "c_1" else set(plat.eurdf.limb_joints(limb))
         assert set_joints == expected, limb
@@ -110,7 +111,7 @@ def test_meta_records_platform_hash_vsam_generator_time_and_joints(tmp_path: Pat
     db = tmp_path / "toy.sqlite"
     plat = load_platform(str(TOY))
     write_databank(db, plat, load_vsam(plat), toy_rows(), "gen-7", {"note": "hand made"})
-    meta = dict(_sql(db, "SELECT key, value FROM meta"))
+    meta = {str(key): str(value) for key, value in _sql(db, "SELECT key, value FROM meta")}
     assert meta["platform"] == "toyarm"
     assert meta["eurdf_sha256"] == plat.eurdf.sha256
     assert json.loads(meta["vsam"]) == load_vsam(plat).to_dict()
@@ -335,5 +336,6 @@ def test_real_platforms_store_nulls_exactly_outside_each_limb(tmp_path: Path, na
             assert err.value.code == "cannot_translate"
     if plat.base.mobile:
         step = load_vsam(plat).translation_step
+        assert step is not None
         assert ecl.query("c_1", "c_1", "forward", 2).translation == pytest.approx(
             [2 * step, 0.0, 0.0])
