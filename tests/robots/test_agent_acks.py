@@ -8,11 +8,9 @@ from __future__ import annotations
 
 import math
 
-import zenoh
-
 from kinesphere.errors import KinesphereError
 from kinesphere.laban import Direction
-from kinesphere.protocol import SpatialCommand
+from kinesphere.protocol import Pose, SpatialCommand
 from support.agents import (
     AckWatch,
     CommandSender,
@@ -21,10 +19,11 @@ from support.agents import (
     joints_close,
     running_agent,
 )
+from support.network import Hub
 
 
 def test_a_command_is_accepted_moves_and_is_reached_or_superseded(
-    hub: tuple[zenoh.Session, str], databank: DatabankProcess
+    hub: Hub, databank: DatabankProcess
 ) -> None:
     session, endpoint = hub
     cat = databank.catalogue("baxter")
@@ -56,7 +55,7 @@ def test_a_command_is_accepted_moves_and_is_reached_or_superseded(
 
 
 def test_commands_that_move_nothing_get_one_ack_and_the_state_names_who(
-    hub: tuple[zenoh.Session, str], databank: DatabankProcess
+    hub: Hub, databank: DatabankProcess
 ) -> None:
     session, endpoint = hub
     cat = databank.catalogue("youbot")
@@ -104,7 +103,7 @@ def test_commands_that_move_nothing_get_one_ack_and_the_state_names_who(
 
 
 def test_substitutions_and_databank_errors_are_relayed_as_the_databank_said(
-    hub: tuple[zenoh.Session, str], databank: DatabankProcess
+    hub: Hub, databank: DatabankProcess
 ) -> None:
     """A direction a limb lacks: whatever the databank answers (the nearest direction it has,
     or ``direction_unavailable``), the robot's ack and state say the same."""
@@ -114,7 +113,7 @@ def test_substitutions_and_databank_errors_are_relayed_as_the_databank_said(
     missing = next(d.slug for d in Direction.pulls() if d.slug not in entry.directions)
     part = (entry.limb, entry.origin, missing, 2.0)
     try:
-        answer: object = databank.query("baxter", SpatialCommand(*part))
+        answer: Pose | KinesphereError = databank.query("baxter", SpatialCommand(*part))
     except KinesphereError as exc:
         answer = exc
     acks = AckWatch(session, "bx-subs")
@@ -134,7 +133,7 @@ def test_substitutions_and_databank_errors_are_relayed_as_the_databank_said(
 
 
 def test_a_translation_beyond_the_robots_maximum_is_refused_and_nothing_moves(
-    hub: tuple[zenoh.Session, str], databank: DatabankProcess
+    hub: Hub, databank: DatabankProcess
 ) -> None:
     """Whoever refuses a huge size (the databank past its ``max_size``, or the robot past its
     maximum translation per command), the base does not move and state keeps flowing."""

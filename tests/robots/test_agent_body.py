@@ -14,7 +14,6 @@ from collections.abc import Sequence
 
 import numpy as np
 import pytest
-import zenoh
 
 from kinesphere import zconfig
 from kinesphere.errors import KinesphereError
@@ -27,6 +26,7 @@ from kinesphere.robots.agent.body import Body, Reading
 from kinesphere.robots.agent.options import BODY_KINDS
 from kinesphere.robots.agent.runtime import Agent, AgentOptions
 from support.agents import CommandSender, DatabankProcess, StateWatch, joints_close
+from support.network import Hub
 
 
 class KinematicBody(Body):
@@ -95,7 +95,7 @@ class StallingBody(KinematicBody):
 
 
 def test_the_watchdog_runs_on_the_wall_clock_through_a_stalled_step(
-    hub: tuple[zenoh.Session, str],
+    hub: Hub,
 ) -> None:
     """A drive with a 300 ms TTL, then the body stalls 1 s in one step: the first step after
     the stall holds (robot time alone would have driven on for most of the TTL)."""
@@ -123,7 +123,7 @@ def test_the_watchdog_runs_on_the_wall_clock_through_a_stalled_step(
 
 
 def test_an_agent_drives_a_kinematic_body_over_the_wire(
-    hub: tuple[zenoh.Session, str], databank: DatabankProcess
+    hub: Hub, databank: DatabankProcess
 ) -> None:
     session, endpoint = hub
     cat = databank.catalogue("youbot")
@@ -161,7 +161,7 @@ def test_an_agent_drives_a_kinematic_body_over_the_wire(
         "the body was sent Ruckig's jerk-limited positions"
 
 
-def test_a_body_that_fails_never_stops_the_state_stream(hub: tuple[zenoh.Session, str]) -> None:
+def test_a_body_that_fails_never_stops_the_state_stream(hub: Hub) -> None:
     _, endpoint = hub
     body = DriverLostBody("baxter", 1.0 / 500.0, after=50)
     with zconfig.session(config=zconfig.loopback_config(endpoint)) as s:
@@ -179,7 +179,7 @@ def test_a_body_that_fails_never_stops_the_state_stream(hub: tuple[zenoh.Session
 
 
 def test_the_agent_reports_an_unplannable_target_and_keeps_publishing(
-    hub: tuple[zenoh.Session, str],
+    hub: Hub,
 ) -> None:
     _, endpoint = hub
     with zconfig.session(config=zconfig.loopback_config(endpoint)) as s:

@@ -11,7 +11,6 @@ from typing import Any
 import mujoco
 import numpy as np
 import pytest
-import zenoh
 
 from kinesphere.platforms.clearance import PATH_STEP, Clearance, Touch
 from kinesphere.platforms.mjcf import platform_model, robot_contacts
@@ -21,6 +20,7 @@ from kinesphere.robots.agent.guard import CHECK_GAP_S, Guard, make_guard
 from kinesphere.robots.agent.mujoco_body import MujocoBody
 from kinesphere.services.ecl.ecl import Ecl
 from support.agents import AckWatch, CommandSender, DatabankProcess, running_agent
+from support.network import Hub
 from support.wait import WAIT_S
 
 DT = 0.002
@@ -337,7 +337,7 @@ class HoldOut:
 
 
 def test_a_halted_target_sent_again_is_blocked_again_and_nothing_moves(
-    hub: tuple[zenoh.Session, str], databank: DatabankProcess
+    hub: Hub, databank: DatabankProcess
 ) -> None:
     """Over the wire: the contact halt ends the command ``blocked`` with the pair; the same
     target streamed again is ``accepted`` then ``blocked`` with the same reason, never

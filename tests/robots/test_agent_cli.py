@@ -12,7 +12,7 @@ import zenoh
 
 from kinesphere import zconfig
 from support.agents import CommandSender, DatabankProcess, StateWatch
-from support.network import KEYS
+from support.network import KEYS, Hub
 from support.paths import ROOT
 from support.wait import WAIT_S
 
@@ -20,7 +20,7 @@ pytestmark = pytest.mark.processes
 
 
 def test_agent_process_obeys_its_group_and_stops_on_sigterm(
-    hub: tuple[zenoh.Session, str], databank: DatabankProcess
+    hub: Hub, databank: DatabankProcess
 ) -> None:
     session, endpoint = hub
     alive, gone = threading.Event(), threading.Event()

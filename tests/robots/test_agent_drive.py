@@ -11,7 +11,6 @@ import math
 from collections.abc import Callable
 
 import numpy as np
-import zenoh
 
 from kinesphere.laban import Direction
 from kinesphere.protocol import Drive, RobotState, SpatialCommand
@@ -26,6 +25,7 @@ from support.agents import (
     overlap,
     running_agent,
 )
+from support.network import Hub
 
 TTL_MS = 2000
 
@@ -45,7 +45,7 @@ def stream(op: CommandSender, watch: StateWatch, until: Callable[[RobotState], b
 
 
 def test_youbot_turns_in_place_then_drives_diagonally_while_its_arm_moves(
-    hub: tuple[zenoh.Session, str], databank: DatabankProcess
+    hub: Hub, databank: DatabankProcess
 ) -> None:
     session, endpoint = hub
     entry = databank.catalogue("youbot").limbs[0]
@@ -72,7 +72,8 @@ def test_youbot_turns_in_place_then_drives_diagonally_while_its_arm_moves(
         op.send(stop=True, ttl_ms=TTL_MS)
         op.close()
     end = diagonal[-1]
-    dx, dy = rotate(*(np.array(end.base_pose[:2]) - start), -heading)
+    moved_x, moved_y = np.array(end.base_pose[:2]) - start
+    dx, dy = rotate(float(moved_x), float(moved_y), -heading)
     assert abs(math.atan2(dy, dx) - math.pi / 4) < 0.02, "diagonal in the body frame"
     assert abs(end.base_pose[2] - heading) < 2e-3, "no turning while driving straight"
     begin, finish = overlap(trace)
@@ -84,7 +85,7 @@ def test_youbot_turns_in_place_then_drives_diagonally_while_its_arm_moves(
 
 
 def test_packbot_arcs_on_forward_and_yaw_and_never_slides(
-    hub: tuple[zenoh.Session, str],
+    hub: Hub,
 ) -> None:
     session, endpoint = hub
     trace = Trace()

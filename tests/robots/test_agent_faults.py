@@ -12,15 +12,15 @@ import os
 import signal
 import threading
 import time
+from functools import partial
 
 import msgspec
 import numpy as np
 import psutil
 import pytest
-import zenoh
 
 from kinesphere import zconfig
-from kinesphere.protocol import MAX_INT, Command, SpatialCommand, encode
+from kinesphere.protocol import MAX_INT, Ack, Command, SpatialCommand, encode
 from kinesphere.robots.agent import acks as ack_rules
 from kinesphere.robots.agent.inbox import MAX_PENDING, PER_SENDER
 from kinesphere.robots.agent.ordering import MAX_SENDERS
@@ -34,14 +34,18 @@ from support.agents import (
     joints_close,
     running_agent,
 )
-from support.network import KEYS
+from support.network import KEYS, Hub
 from support.wait import WAIT_S
 
 pytestmark = pytest.mark.processes
 
 
+def _verdict_on(seq: int, ack: Ack) -> bool:
+    return ack.seq == seq and ack.stage in ("rejected", "superseded", "accepted")
+
+
 def test_commands_queued_while_the_agent_was_frozen_never_run(
-    hub: tuple[zenoh.Session, str], databank: DatabankProcess
+    hub: Hub, databank: DatabankProcess
 ) -> None:
     """SIGSTOP a real agent while an operator streams at 30 Hz (ttl 300 ms), switch to another
     target while it is frozen, stop streaming, SIGCONT: nothing moves, the commands are
@@ -68,13 +72,15 @@ def test_commands_queued_while_the_agent_was_frozen_never_run(
             gap = np.abs(before[index] - np.array(list(goal.values()))).max()
             assert gap > 0.3, "the second target is a real motion away"
             proc.send_signal(signal.SIGSTOP)
-            frozen = [op.send(there, ttl_ms=300) for _ in range(30) if not time.sleep(1 / 30)]
+            frozen = []
+            for _ in range(30):  # a client streaming at 30 Hz
+                time.sleep(1 / 30)
+                frozen.append(op.send(there, ttl_ms=300))
             time.sleep(1.0)  # the operator stopped: a freeze that outlasts the ttl
             seen = len(watch.states)
             proc.send_signal(signal.SIGCONT)
             for seq in frozen[-3:]:
-                ack = acks.wait(lambda a, seq=seq: a.seq == seq and a.stage in (
-                    "rejected", "superseded", "accepted"), "a verdict on a frozen command")
+                ack = acks.wait(partial(_verdict_on, seq), "a verdict on a frozen command")
                 assert ack.stage != "accepted", ack
             assert any(a.code == "expired" for a in acks.acks if a.seq in frozen)
             after = watch.wait(lambda s: len(watch.states) > seen + 75, "1.5 s of states after")
@@ -89,7 +95,7 @@ def test_commands_queued_while_the_agent_was_frozen_never_run(
 
 
 def test_a_flood_cannot_delay_an_estop_and_every_table_stays_bounded(
-    hub: tuple[zenoh.Session, str], databank: DatabankProcess
+    hub: Hub, databank: DatabankProcess
 ) -> None:
     session, endpoint = hub
     cat = databank.catalogue("youbot")
@@ -143,7 +149,7 @@ def test_a_flood_cannot_delay_an_estop_and_every_table_stays_bounded(
 
 
 def test_garbage_is_malformed_in_one_log_line_and_a_forged_clock_silences_nobody(
-    hub: tuple[zenoh.Session, str], databank: DatabankProcess, caplog: pytest.LogCaptureFixture,
+    hub: Hub, databank: DatabankProcess, caplog: pytest.LogCaptureFixture,
     capfd: pytest.CaptureFixture[str],
 ) -> None:
     session, endpoint = hub

@@ -11,6 +11,7 @@ import signal
 import subprocess
 import sys
 import threading
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -22,7 +23,7 @@ from kinesphere.cli import main
 from kinesphere.errors import KinesphereError
 from kinesphere.laban import Direction
 from kinesphere.platforms.mjcf import platform_model
-from kinesphere.protocol import Catalogue, SpatialCommand
+from kinesphere.protocol import Ack, Catalogue, RobotState, SpatialCommand
 from kinesphere.robots.agent.fleet import (
     FleetHost,
     RobotSpec,
@@ -40,12 +41,20 @@ from support.agents import (
     joints_close,
     running_fleet_host,
 )
-from support.network import KEYS
+from support.network import KEYS, Hub
 from support.paths import ROOT
 from support.wait import WAIT_S
 
 ROBOTS = [RobotSpec("baxter", "f-baxter"), RobotSpec("nao", "f-nao"),
           RobotSpec("youbot", "f-youbot", ("bases",))]
+
+
+def _newer_than(seq: int, state: RobotState) -> bool:
+    return state.seq > seq
+
+
+def _ack_at(robot_id: str, stage: str, ack: Ack) -> bool:
+    return (ack.robot_id, ack.stage) == (robot_id, stage)
 
 
 def far(cat: Catalogue, k: int) -> tuple[str, str, str, float]:
@@ -55,7 +64,7 @@ def far(cat: Catalogue, k: int) -> tuple[str, str, str, float]:
 
 
 def test_robots_of_several_platforms_obey_their_own_commands(
-    hub: tuple[zenoh.Session, str], databank: DatabankProcess
+    hub: Hub, databank: DatabankProcess
 ) -> None:
     session, endpoint = hub
     poses = {r.robot_id: far(databank.catalogue(r.platform), i % 2)
@@ -73,13 +82,12 @@ def test_robots_of_several_platforms_obey_their_own_commands(
         watches[first].after(seq, lambda st: joints_close(st, targets[first], 0.02),
                              f"{first} at its pose")
         for rid in watches.keys() - {first}:
-            now = watches[rid].wait(lambda st, rid=rid: st.seq > start[rid].seq + 5,
-                                    f"{rid} states")
+            now = watches[rid].wait(partial(_newer_than, start[rid].seq + 5), f"{rid} states")
             assert (now.last_command_seq, now.status) == (-1, "idle"), (rid, now)
         # each robot reaches its own pose for its own command
         for rid, op in ops.items():
             seq = op.send(poses[rid])
-            watches[rid].after(seq, lambda st, rid=rid: joints_close(st, targets[rid], 0.02),
+            watches[rid].after(seq, partial(joints_close, joints=targets[rid], tol=0.02),
                                f"{rid} at its pose")
         # a group command reaches its member only
         group = CommandSender(session, key=KEYS.group_command("bases"), sender="grp")
@@ -91,7 +99,7 @@ def test_robots_of_several_platforms_obey_their_own_commands(
 
 
 def test_one_robots_estop_does_not_stop_the_others(
-    hub: tuple[zenoh.Session, str], databank: DatabankProcess
+    hub: Hub, databank: DatabankProcess
 ) -> None:
     session, endpoint = hub
     robots = ROBOTS[:2]
@@ -135,7 +143,7 @@ class CrashingMujocoBody(MujocoBody):
         super().simulate()
 
 
-def test_a_failing_body_holds_its_robot_alone(hub: tuple[zenoh.Session, str]) -> None:
+def test_a_failing_body_holds_its_robot_alone(hub: Hub) -> None:
     _session, endpoint = hub
     robots = [RobotSpec("youbot", "f-fail"), RobotSpec("khepera", "f-fine")]
     with zconfig.session(config=zconfig.loopback_config(endpoint)) as s:
@@ -193,7 +201,7 @@ def test_fleet_file_and_robot_arguments(tmp_path: Path) -> None:
 
 @pytest.mark.processes
 def test_fleet_command_runs_every_robot_and_stops_on_sigterm(
-    tmp_path: Path, hub: tuple[zenoh.Session, str]
+    tmp_path: Path, hub: Hub
 ) -> None:
     session, endpoint = hub
     fleet = tmp_path / "fleet.toml"
@@ -218,13 +226,13 @@ def test_fleet_command_runs_every_robot_and_stops_on_sigterm(
                 cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
             try:
                 with changed:
-                    assert changed.wait_for(lambda ids=ids: ids <= alive, WAIT_S), alive
+                    assert changed.wait_for(partial(ids.issubset, alive), WAIT_S), alive
             finally:
                 proc.send_signal(signal.SIGTERM)
                 _, err = proc.communicate(timeout=WAIT_S)
             assert proc.returncode == 0, err.decode(errors="replace")[-2000:]
             with changed:
-                assert changed.wait_for(lambda ids=ids: not ids & alive, WAIT_S), alive
+                assert changed.wait_for(partial(ids.isdisjoint, alive), WAIT_S), alive
     finally:
         zconfig.undeclare(sub)
 
@@ -247,7 +255,7 @@ def test_fleet_command_line_errors(tmp_path: Path) -> None:
 
 
 def test_send_all_moves_every_body_exact_or_substituted(
-    hub: tuple[zenoh.Session, str], databank: DatabankProcess, capsys: pytest.CaptureFixture[str]
+    hub: Hub, databank: DatabankProcess, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """A fleet command in a direction only some bodies keep: every robot moves, the others by
     the nearest direction they have, each robot reporting what it was served and how far from
@@ -270,15 +278,13 @@ def test_send_all_moves_every_body_exact_or_substituted(
         for r in robots:
             rid, watch = r.robot_id, watches[r.robot_id]
             want = answers[rid].substitutions
-            accepted = acks.wait(lambda a, rid=rid: (a.robot_id, a.stage) == (rid, "accepted"),
-                                 f"{rid} accepting the command")
+            accepted = acks.wait(partial(_ack_at, rid, "accepted"), f"{rid} accepting the command")
             assert accepted.substitutions == want, rid
             angle = accepted.measured_angle
             assert angle is not None and angle == answers[rid].measured_angle, rid
-            watch.wait(lambda st, rid=rid: joints_close(st, answers[rid].joints, 0.02),
+            watch.wait(partial(joints_close, joints=answers[rid].joints, tol=0.02),
                        f"{rid} at its {answers[rid].direction} pose")
-            acks.wait(lambda a, rid=rid: (a.robot_id, a.stage) == (rid, "reached"),
-                      f"{rid} reaching its pose")
+            acks.wait(partial(_ack_at, rid, "reached"), f"{rid} reaching its pose")
             moving = [st.substitutions for st in watch.states if st.status == "moving"]
             assert moving and all(subs == want for subs in moving), rid
             st = watch.states[-1]

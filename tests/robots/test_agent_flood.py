@@ -21,7 +21,7 @@ from kinesphere import protocol as pr
 from kinesphere.errors import KinesphereError
 from kinesphere.keyexpr import KEYS
 from kinesphere.procs import Supervisor
-from kinesphere.zconfig import loopback_config, loopback_hub
+from kinesphere.zconfig import loopback_config, loopback_hub, undeclare
 from support.soak import MIB, SCALE, FloodTally, mib, rss
 from support.system import Observer
 from support.wait import WAIT_S, until
@@ -106,7 +106,7 @@ class Marks:
             assert time.monotonic() < deadline, f"the agent acked no mark up to {self.seq}"
 
     def close(self) -> None:
-        self._sub.undeclare()  # type: ignore[no-untyped-call]
+        undeclare(self._sub)
 
 
 class Stream:
@@ -122,7 +122,7 @@ class Stream:
         return max((b - a for a, b in zip(t, t[1:], strict=False)), default=float("inf"))
 
     def close(self) -> None:
-        self._sub.undeclare()  # type: ignore[no-untyped-call]
+        undeclare(self._sub)
 
 
 
@@ -197,6 +197,6 @@ def test_a_flood_of_malformed_commands_moves_nothing(sup: Supervisor) -> None:
                   WAIT_S, "the robot to drive again after the flood")
             marks.close()
         finally:
-            pub.undeclare()  # type: ignore[no-untyped-call]
+            undeclare(pub)
             stream.close()
             obs.close()

@@ -7,15 +7,24 @@ Real time (``speed=1``): the lease timeout against silent clients is the point.
 from __future__ import annotations
 
 import time
+from functools import partial
 
 import numpy as np
-import zenoh
 
-from kinesphere.protocol import Drive
+from kinesphere.protocol import Ack, Drive, RobotState
 from kinesphere.robots.agent.lease import LEASE_TIMEOUT_S
 from support.agents import AckWatch, CommandSender, DatabankProcess, StateWatch, running_agent
+from support.network import Hub
 
 TTL_MS = 500
+
+
+def _verdict_on(sender: str, seq: int, ack: Ack) -> bool:
+    return ack.sender == sender and ack.seq == seq and ack.stage in ("accepted", "rejected")
+
+
+def _newer_than(seq: int, state: RobotState) -> bool:
+    return state.seq > seq
 
 
 def streams(ann: CommandSender, bob: CommandSender, watch: StateWatch, n: int
@@ -31,7 +40,7 @@ def streams(ann: CommandSender, bob: CommandSender, watch: StateWatch, n: int
 
 
 def test_two_operators_only_the_holder_moves_the_robot(
-    hub: tuple[zenoh.Session, str], databank: DatabankProcess
+    hub: Hub, databank: DatabankProcess
 ) -> None:
     session, endpoint = hub
     acks = AckWatch(session, "yb-lease")
@@ -78,12 +87,11 @@ def test_two_operators_only_the_holder_moves_the_robot(
         quiet = time.monotonic()
         while True:
             seq = ann.send(drive=Drive(forward=0.6), ttl_ms=TTL_MS)
-            a = acks.wait(lambda x, seq=seq: x.sender == "ann" and x.seq == seq
-                          and x.stage in ("accepted", "rejected"), "Ann's verdict")
+            a = acks.wait(partial(_verdict_on, "ann", seq), "Ann's verdict")
             if a.stage == "accepted":
                 break
             now = watch.states[-1].seq
-            watch.wait(lambda s, now=now: s.seq > now, "the next state")
+            watch.wait(partial(_newer_than, now), "the next state")
         waited = time.monotonic() - quiet
         assert LEASE_TIMEOUT_S - 0.1 <= waited <= LEASE_TIMEOUT_S + 2.0, waited
         assert a.lease_holder == "ann"

@@ -14,7 +14,6 @@ import math
 
 import numpy as np
 import pytest
-import zenoh
 
 from kinesphere import zconfig
 from kinesphere.errors import KinesphereError
@@ -23,6 +22,7 @@ from kinesphere.robots.agent.bodies import make_body
 from kinesphere.robots.agent.controller import Controller
 from kinesphere.robots.agent.resolver import Resolver, parts_key
 from support.agents import DatabankProcess
+from support.network import Hub
 from support.wait import WAIT_S
 
 PLATFORMS = ["baxter", "nao", "youbot", "packbot", "khepera"]
@@ -36,7 +36,7 @@ PAIR_HOLD_S = 0.4
 
 @pytest.mark.parametrize("platform", PLATFORMS)
 def test_limits_hold_for_every_ecl_pose(
-    hub: tuple[zenoh.Session, str], databank: DatabankProcess, platform: str
+    hub: Hub, databank: DatabankProcess, platform: str
 ) -> None:
     _, endpoint = hub
     with zconfig.session(config=zconfig.loopback_config(endpoint)) as s:
@@ -84,7 +84,7 @@ def test_limits_hold_for_every_ecl_pose(
 
 
 def test_two_arms_pressed_together_never_pass_a_hard_limit(
-    hub: tuple[zenoh.Session, str], databank: DatabankProcess
+    hub: Hub, databank: DatabankProcess
 ) -> None:
     """Every far pose of Baxter's right arm with every far pose of its left arm, retargeted
     one after another mid-motion: where the arms meet, contact pushes joints against their

@@ -6,7 +6,10 @@ These pin down the properties the end-to-end tests rely on, quickly and determin
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from functools import partial
 
+import msgspec
 import numpy as np
 import pytest
 
@@ -15,7 +18,13 @@ from kinesphere.errors import KinesphereError
 from kinesphere.eurdf import JointLimit
 from kinesphere.platforms.platform import BaseSpec
 from kinesphere.protocol import Command, Drive
-from kinesphere.robots.agent.base import DiffBase, OmniBase, make_base, wrap_angle
+from kinesphere.robots.agent.base import (
+    BaseController,
+    DiffBase,
+    OmniBase,
+    make_base,
+    wrap_angle,
+)
 from kinesphere.robots.agent.bodies import make_body
 from kinesphere.robots.agent.controller import Controller
 from kinesphere.robots.agent.otg import Otg
@@ -121,7 +130,7 @@ OMNI = BaseSpec("omni", 0.1, max_speed=0.8, max_yaw_rate=1.0, max_acceleration=1
 DIFF = BaseSpec("diff", 0.1, max_speed=0.5, max_yaw_rate=2.0, max_acceleration=1.0, max_jerk=5.0)
 
 
-def drive_base(base: OmniBase | DiffBase, steps: int) -> np.ndarray:
+def drive_base(base: BaseController, steps: int) -> np.ndarray:
     twists = []
     for _ in range(steps):
         base.step()
@@ -200,9 +209,7 @@ def test_ruckig_failures_become_a_braked_hold_with_a_reason() -> None:
 
 
 def cmd(**kw: object) -> Command:
-    fields: dict[str, object] = {"seq": 1, "sent_ns": 0, "deadman": True, "ttl_ms": 0}
-    fields.update(kw)
-    return Command(**fields)  # type: ignore[arg-type]
+    return msgspec.structs.replace(Command(seq=1, sent_ns=0, deadman=True, ttl_ms=0), **kw)
 
 
 def test_safety_estop_latches_until_an_explicit_release() -> None:
@@ -267,9 +274,11 @@ def test_a_body_caught_on_itself_is_reported_not_called_at_target() -> None:
     assert "during motion; halted" in detail
 
 
-@pytest.mark.parametrize("bad", [{"rate": 0.0}, {"state_rate": 1000.0}, {"speed": -1.0},
-                                 {"rate": math.inf}])
-def test_bad_options_are_user_errors(bad: dict[str, float]) -> None:
+@pytest.mark.parametrize("bad", [partial(AgentOptions, rate=0.0),
+                                 partial(AgentOptions, state_rate=1000.0),
+                                 partial(AgentOptions, speed=-1.0),
+                                 partial(AgentOptions, rate=math.inf)])
+def test_bad_options_are_user_errors(bad: Callable[[], AgentOptions]) -> None:
     with pytest.raises(KinesphereError) as err:
-        AgentOptions(**bad)
+        bad()
     assert err.value.code == "malformed"

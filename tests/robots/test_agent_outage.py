@@ -11,27 +11,26 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-import zenoh
 
 from kinesphere import zconfig
 from kinesphere.protocol import RecordRequest, SpatialCommand, encode
 from kinesphere.services.ecl.store import DATA_DIR
 from support.agents import CommandSender, DatabankProcess, joints_close, running_agent
-from support.network import KEYS
+from support.network import KEYS, Hub
 from support.wait import WAIT_S, until
 
 pytestmark = pytest.mark.processes
 
 
 @pytest.fixture
-def own_hub() -> Iterator[tuple[zenoh.Session, str]]:
+def own_hub() -> Iterator[Hub]:
     """Not the shared hub: the shared databank must not answer while this one is down."""
     with zconfig.loopback_hub() as pair:
-        yield pair
+        yield Hub(*pair)
 
 
 @pytest.fixture
-def own_databank(own_hub: tuple[zenoh.Session, str]) -> Iterator[DatabankProcess]:
+def own_databank(own_hub: Hub) -> Iterator[DatabankProcess]:
     session, endpoint = own_hub
     bank = DatabankProcess(endpoint, session)
     bank.start()
@@ -42,7 +41,7 @@ def own_databank(own_hub: tuple[zenoh.Session, str]) -> Iterator[DatabankProcess
 
 
 def test_outage_keeps_last_pose_and_recovers_without_restart(
-    own_hub: tuple[zenoh.Session, str], own_databank: DatabankProcess
+    own_hub: Hub, own_databank: DatabankProcess
 ) -> None:
     session, endpoint = own_hub
     entry = own_databank.catalogue("baxter").limbs[0]
@@ -79,7 +78,7 @@ def test_outage_keeps_last_pose_and_recovers_without_restart(
 
 
 def test_cache_is_per_databank_version(
-    own_hub: tuple[zenoh.Session, str], tmp_path: Path
+    own_hub: Hub, tmp_path: Path
 ) -> None:
     """A repeated command needs no round trip; a recorded pose reaches the robot at once."""
     session, endpoint = own_hub

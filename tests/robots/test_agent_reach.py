@@ -9,7 +9,6 @@ from contextlib import ExitStack
 
 import numpy as np
 import pytest
-import zenoh
 
 from kinesphere.protocol import Catalogue, Pose, RobotState, SpatialCommand
 from kinesphere.robots.agent.runtime import Agent
@@ -21,6 +20,7 @@ from support.agents import (
     joints_close,
     running_agent,
 )
+from support.network import Hub
 
 PLATFORMS = ["baxter", "nao", "youbot", "packbot", "khepera"]
 TOL = 5e-3
@@ -63,7 +63,7 @@ def check_limits(trace: Trace, agent: Agent) -> None:
 
 @pytest.mark.parametrize("platform", PLATFORMS)
 def test_one_command_reaches_the_ecl_pose(
-    hub: tuple[zenoh.Session, str], databank: DatabankProcess, platform: str
+    hub: Hub, databank: DatabankProcess, platform: str
 ) -> None:
     session, endpoint = hub
     cat = databank.catalogue(platform)
@@ -87,7 +87,7 @@ def test_one_command_reaches_the_ecl_pose(
 
 
 def test_retarget_mid_motion_stays_continuous(
-    hub: tuple[zenoh.Session, str], databank: DatabankProcess
+    hub: Hub, databank: DatabankProcess
 ) -> None:
     session, endpoint = hub
     cat = databank.catalogue("baxter")
@@ -110,7 +110,7 @@ def test_retarget_mid_motion_stays_continuous(
 
 
 def test_wildcard_command_moves_every_robot_to_its_own_pose(
-    hub: tuple[zenoh.Session, str], databank: DatabankProcess
+    hub: Hub, databank: DatabankProcess
 ) -> None:
     session, endpoint = hub
     robots = ["baxter", "nao", "youbot"]

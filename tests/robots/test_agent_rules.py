@@ -4,11 +4,15 @@ the ack rate limit. Fast and deterministic; the wire tests show the same rules e
 from __future__ import annotations
 
 import itertools
+from functools import partial
 
+import msgspec
+
+from kinesphere.errors import KinesphereError
 from kinesphere.protocol import Command, Drive, LeaseAction, SpatialCommand
 from kinesphere.robots.agent import acks
 from kinesphere.robots.agent.acks import AckLimiter
-from kinesphere.robots.agent.inbox import MAX_PENDING, PER_SENDER, Inbox
+from kinesphere.robots.agent.inbox import MAX_PENDING, PER_SENDER, Inbox, Resolved
 from kinesphere.robots.agent.lease import LEASE_TIMEOUT_S, Lease
 from kinesphere.robots.agent.ordering import MAX_CLOCK_AHEAD_S, Ordering, Received
 
@@ -18,16 +22,19 @@ PART = SpatialCommand("limb_11", "distal_11", "left-high", 2.0)
 
 def cmd(seq: int, sender: str = "op", session: str = "s1", sent_ms: int = 1000,
         **kw: object) -> Command:
-    fields: dict[str, object] = {"seq": seq, "sent_ns": sent_ms * MS, "deadman": True,
-                                 "ttl_ms": 300, "sender": sender, "session": session,
-                                 "parts": [PART]}
-    fields.update(kw)
-    return Command(**fields)  # type: ignore[arg-type]
+    return msgspec.structs.replace(Command(seq=seq, sent_ns=sent_ms * MS, deadman=True, ttl_ms=300,
+                                           sender=sender, session=session, parts=[PART]), **kw)
 
 
 def at(c: Command, recv_ms: int, offset_ms: int = 0) -> Received:
     """``c`` received at ``recv_ms`` on the robot's clocks (wall = mono + offset)."""
     return Received(c, recv_ms * MS, (recv_ms + offset_ms) * MS)
+
+
+def commands(items: list[Received | KinesphereError | Resolved]) -> list[Received]:
+    """Drained items, each a command received (the tests put nothing else)."""
+    assert all(isinstance(r, Received) for r in items), items
+    return [r for r in items if isinstance(r, Received)]
 
 
 def codes(o: Ordering, items: list[Received], now_ms: int | None = None) -> list[str]:
@@ -51,8 +58,8 @@ def test_ordering_is_per_sender_and_session_and_a_fresh_session_resets_it() -> N
 
 def test_version_one_senders_without_a_session_may_restart() -> None:
     o = Ordering()
-    old = dict(session="", sent_ms=1000)
-    assert codes(o, [at(cmd(9, **old), 1000), at(cmd(8, **old), 1001)]) == ["ok", "stale"]
+    old = partial(cmd, session="", sent_ms=1000)
+    assert codes(o, [at(old(9), 1000), at(old(8), 1001)]) == ["ok", "stale"]
     assert codes(o, [at(cmd(1, session="", sent_ms=2000), 2000)]) == ["ok"], "restarted"
 
 
@@ -96,24 +103,24 @@ def test_the_sender_table_is_bounded() -> None:
 
 def test_lease_rules() -> None:
     lease = Lease()
-    a = dict(sender="a", session="1")
-    b = dict(sender="b", session="2")
-    assert lease.check(cmd(1, deadman=False, **a), 0.0).allowed and lease.holder == "", \
+    a = partial(cmd, sender="a", session="1")
+    b = partial(cmd, sender="b", session="2")
+    assert lease.check(a(1, deadman=False), 0.0).allowed and lease.holder == "", \
         "letting go neither needs nor takes a free lease"
-    assert lease.check(cmd(2, **a), 0.1).holder == "a"
-    v = lease.check(cmd(1, **b), 0.2)
+    assert lease.check(a(2), 0.1).holder == "a"
+    v = lease.check(b(1), 0.2)
     assert not v.allowed and v.holder == "a"
-    assert not lease.check(cmd(2, deadman=False, **b), 0.25).allowed, "b cannot make a hold"
-    assert not lease.check(cmd(3, lease=LeaseAction.ACQUIRE, parts=[], **b), 0.3).allowed
-    for kw in ({"estop": True}, {"stop": True}, {"release": True}):
-        assert lease.check(cmd(4, **kw, **b), 0.4).allowed, kw
-    v = lease.check(cmd(5, lease=LeaseAction.TAKE, **b), 0.5)
+    assert not lease.check(b(2, deadman=False), 0.25).allowed, "b cannot make a hold"
+    assert not lease.check(b(3, lease=LeaseAction.ACQUIRE, parts=[]), 0.3).allowed
+    for c in (b(4, estop=True), b(4, stop=True), b(4, release=True)):
+        assert lease.check(c, 0.4).allowed, c
+    v = lease.check(b(5, lease=LeaseAction.TAKE), 0.5)
     assert v.allowed and v.holder == "b" and v.taken_from == "a"
-    assert not lease.check(cmd(3, **a), 0.6).allowed
-    assert lease.check(cmd(6, lease=LeaseAction.RELEASE, parts=[], **b), 0.7).holder == ""
-    assert lease.check(cmd(4, **a), 0.8).holder == "a"
+    assert not lease.check(a(3), 0.6).allowed
+    assert lease.check(b(6, lease=LeaseAction.RELEASE, parts=[]), 0.7).holder == ""
+    assert lease.check(a(4), 0.8).holder == "a"
     assert lease.expire(0.8 + LEASE_TIMEOUT_S + 0.01) == "a" and lease.holder == ""
-    assert lease.check(cmd(7, **b), 5.0).holder == "b"
+    assert lease.check(b(7), 5.0).holder == "b"
     assert lease.check(cmd(9, sender="", session=""), 5.1).holder == "b", "anonymous waits"
     assert lease.expire(5.0 + LEASE_TIMEOUT_S + 0.01) == "b"
     old_client = lease.check(cmd(10, sender="v1", session=""), 9.0)
@@ -132,7 +139,8 @@ def test_inbox_puts_estops_first_coalesces_motion_and_stays_bounded() -> None:
     box.put(at(cmd(next(seq), sender="flood"), 1))
     d = box.drain()
     assert [r.cmd.sender for r in d.estops] == ["other"]
-    assert [(r.cmd.seq, r.cmd.stop) for r in d.items] == [(100, False), (101, True), (103, False)]
+    assert [(r.cmd.seq, r.cmd.stop) for r in commands(d.items)] == [
+        (100, False), (101, True), (103, False)]
     assert len(d.superseded) == 99 and box.drain().items == []
     for i in range(10 * MAX_PENDING):
         for _ in range(2):
@@ -152,14 +160,14 @@ def test_a_flood_from_many_senders_cannot_push_out_a_stop_or_a_release() -> None
     for i in range(4 * MAX_PENDING):
         box.put(at(cmd(next(seq), sender=f"flood{i}"), 1))
     d = box.drain()
-    kept = [r.cmd.sender for r in d.items]
+    kept = [r.cmd.sender for r in commands(d.items)]
     assert kept[:2] == ["panic", "calm"] and len(kept) == MAX_PENDING
     assert len(d.superseded) == 4 * MAX_PENDING - (MAX_PENDING - 2)
     assert all(r.cmd.sender.startswith("flood") for r in d.superseded)
     for i in range(2 * MAX_PENDING):  # every pair holds a stop: the least recently heard goes
         box.put(at(cmd(next(seq), sender=f"stop{i}", stop=True), 1))
     d = box.drain()
-    assert [r.cmd.sender for r in d.items] == [f"stop{i}" for i in range(MAX_PENDING,
+    assert [r.cmd.sender for r in commands(d.items)] == [f"stop{i}" for i in range(MAX_PENDING,
                                                                          2 * MAX_PENDING)]
 
 

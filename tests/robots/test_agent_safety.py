@@ -9,12 +9,12 @@ from collections.abc import Callable
 from contextlib import ExitStack
 
 import numpy as np
-import zenoh
 
 from kinesphere.protocol import Command, RobotState, encode
 from kinesphere.robots.agent.runtime import Agent
 from kinesphere.robots.agent.safety import DRIVE_TTL_S
 from support.agents import CommandSender, DatabankProcess, Trace, running_agent
+from support.network import Hub
 
 
 def status(*names: str) -> Callable[[RobotState], bool]:
@@ -47,7 +47,7 @@ def check_braked(trace: Trace, max_acceleration: float, dt: float) -> None:
     assert np.abs(np.diff(twist[:, :2], axis=0)).max() <= max_acceleration * dt * (1 + 1e-6)
 
 
-def test_deadman_release_stops_the_base(hub: tuple[zenoh.Session, str]) -> None:
+def test_deadman_release_stops_the_base(hub: Hub) -> None:
     session, endpoint = hub
     trace = Trace()
     with running_agent(endpoint, "youbot", speed=1.0, trace=trace) as (agent, watch):
@@ -64,7 +64,7 @@ def test_deadman_release_stops_the_base(hub: tuple[zenoh.Session, str]) -> None:
 
 
 def test_ttl_expiry_stops_a_drive_when_the_client_goes_quiet(
-    hub: tuple[zenoh.Session, str],
+    hub: Hub,
 ) -> None:
     session, endpoint = hub
     trace = Trace()
@@ -80,7 +80,7 @@ def test_ttl_expiry_stops_a_drive_when_the_client_goes_quiet(
     check_braked(trace, spec.max_acceleration, agent.controller.dt)
 
 
-def test_drive_without_ttl_still_needs_fresh_commands(hub: tuple[zenoh.Session, str]) -> None:
+def test_drive_without_ttl_still_needs_fresh_commands(hub: Hub) -> None:
     session, endpoint = hub
     with running_agent(endpoint, "youbot", speed=4.0) as (agent, watch):
         op = CommandSender(session, agent.robot_id)
@@ -91,7 +91,7 @@ def test_drive_without_ttl_still_needs_fresh_commands(hub: tuple[zenoh.Session, 
 
 
 def test_estop_halts_every_robot_latches_and_releases(
-    hub: tuple[zenoh.Session, str], databank: DatabankProcess,
+    hub: Hub, databank: DatabankProcess,
 ) -> None:
     session, endpoint = hub
     cat = databank.catalogue("baxter")
@@ -138,7 +138,7 @@ def test_estop_halts_every_robot_latches_and_releases(
 
 
 def test_bad_commands_are_reported_and_the_loop_goes_on(
-    hub: tuple[zenoh.Session, str], databank: DatabankProcess
+    hub: Hub, databank: DatabankProcess
 ) -> None:
     session, endpoint = hub
     with running_agent(endpoint, "baxter", speed=4.0) as (agent, watch):

@@ -14,14 +14,16 @@ from __future__ import annotations
 
 import signal
 import time
+from functools import partial
 
+import msgspec
 import numpy as np
 import zenoh
 
 from kinesphere import zconfig
 from kinesphere.clients.link import RobotLink
 from kinesphere.keyexpr import Keys
-from kinesphere.protocol import MAX_INT, Command, Drive, LeaseAction, SpatialCommand, encode
+from kinesphere.protocol import MAX_INT, Ack, Command, Drive, LeaseAction, SpatialCommand, encode
 from kinesphere.robots.agent.ordering import REBASE_S, SEQ_WINDOW, Ordering, Received
 from kinesphere.robots.agent.safety import Safety, Verdict
 from support.agents import (
@@ -33,7 +35,7 @@ from support.agents import (
     joints_close,
     running_agent,
 )
-from support.network import KEYS
+from support.network import KEYS, Hub
 from support.wait import WAIT_S
 
 S = 1_000_000_000
@@ -46,10 +48,13 @@ DRIVE = Drive(direction="forward-middle", speed=0.5)
 
 def cmd(seq: int, sent_ns: int, session: str = "a", clock: str = "host-1", sender: str = "ann",
         ttl_ms: int = 300, **kw: object) -> Command:
-    fields: dict[str, object] = dict(seq=seq, sent_ns=sent_ns, deadman=True, ttl_ms=ttl_ms,
-                                     drive=DRIVE, sender=sender, session=session, clock=clock)
-    fields.update(kw)
-    return Command(**fields)  # type: ignore[arg-type]
+    return msgspec.structs.replace(Command(seq=seq, sent_ns=sent_ns, deadman=True, ttl_ms=ttl_ms,
+                                           drive=DRIVE, sender=sender, session=session,
+                                           clock=clock), **kw)
+
+
+def _first_from(sender: str, ack: Ack) -> bool:
+    return ack.sender == sender and ack.seq == 0
 
 
 def at(o: Ordering, c: Command, mono_ns: int, delay_ns: int = 1_000_000) -> str:
@@ -113,8 +118,7 @@ def test_seq_cannot_be_pushed_to_the_end_of_the_numbers() -> None:
 def test_an_estop_is_released_only_by_whoever_latched_it() -> None:
     s = Safety()
 
-    def c(**kw: object) -> Command:
-        return cmd(0, T0, **kw)
+    c = partial(cmd, 0, T0)
 
     assert s.on_command(c(sender="alice", estop=True), 0.0) is Verdict.ESTOP
     assert s.on_command(c(sender="bob", release=True), 0.1) is Verdict.LATCHED
@@ -143,17 +147,16 @@ class Signed:
 
     def send(self, sender: str, **kw: object) -> int:
         self.seq += 1
-        fields: dict[str, object] = dict(seq=self.seq, sent_ns=time.time_ns(), deadman=True,
-                                         ttl_ms=0, sender=sender, session="s", clock="c")
-        fields.update(kw)
-        self.pub.put(encode(Command(**fields)))  # type: ignore[arg-type]
+        cmd = Command(seq=self.seq, sent_ns=time.time_ns(), deadman=True, ttl_ms=0,
+                      sender=sender, session="s", clock="c")
+        self.pub.put(encode(msgspec.structs.replace(cmd, **kw)))
         return self.seq
 
     def close(self) -> None:
         zconfig.undeclare(self.pub)
 
 
-def test_the_robot_takes_the_sender_from_the_key(hub: tuple[zenoh.Session, str]) -> None:
+def test_the_robot_takes_the_sender_from_the_key(hub: Hub) -> None:
     session, endpoint = hub
     acks = AckWatch(session, "signed")
     with running_agent(endpoint, "khepera", robot_id="signed", speed=1.0) as (_, watch):
@@ -179,7 +182,7 @@ def test_the_robot_takes_the_sender_from_the_key(hub: tuple[zenoh.Session, str])
     acks.close()
 
 
-def test_a_client_told_stale_starts_a_fresh_session(hub: tuple[zenoh.Session, str]) -> None:
+def test_a_client_told_stale_starts_a_fresh_session(hub: Hub) -> None:
     session, endpoint = hub
     with running_agent(endpoint, "khepera", robot_id="victim", speed=1.0), \
             zconfig.session(config=zconfig.loopback_config(endpoint)) as mine:
@@ -224,7 +227,7 @@ def test_a_client_told_stale_starts_a_fresh_session(hub: tuple[zenoh.Session, st
 
 
 def test_a_new_sessions_command_queued_while_the_robot_was_frozen_never_runs(
-    hub: tuple[zenoh.Session, str], databank: DatabankProcess
+    hub: Hub, databank: DatabankProcess
 ) -> None:
     """The operator was heard before (one session); the robot is frozen; a new session (the
     next `send`) and a sender never heard each put a command; 1.5 s later the robot thaws:
@@ -264,8 +267,7 @@ def test_a_new_sessions_command_queued_while_the_robot_was_frozen_never_runs(
             seen = len(watch.states)
             proc.send_signal(signal.SIGCONT)
             for who in ("ann", "zed"):
-                ack = acks.wait(lambda a, w=who: a.sender == w and a.seq == 0,
-                                f"the verdict on {who}'s frozen command")
+                ack = acks.wait(partial(_first_from, who), f"the verdict on {who}'s frozen command")
                 assert ack.stage == "rejected" and ack.code == "expired", ack
             after = watch.wait(lambda s: len(watch.states) > seen + 75, "1.5 s of states after")
             moved = max(float(np.abs(np.array(s.q) - before).max()) for s in watch.states[seen:])

@@ -5,8 +5,6 @@ from __future__ import annotations
 
 import math
 
-import zenoh
-
 from kinesphere.laban import Direction
 from kinesphere.protocol import SpatialCommand
 from support.agents import (
@@ -17,10 +15,11 @@ from support.agents import (
     overlap,
     running_agent,
 )
+from support.network import Hub
 
 
 def test_translation_and_articulation_overlap_in_time(
-    hub: tuple[zenoh.Session, str], databank: DatabankProcess
+    hub: Hub, databank: DatabankProcess
 ) -> None:
     session, endpoint = hub
     cat = databank.catalogue("youbot")
@@ -30,7 +29,8 @@ def test_translation_and_articulation_overlap_in_time(
                   if Direction.parse(d).horizontal.name != "PLACE"]
     part = SpatialCommand(entry.limb, entry.origin, horizontal[0], max(entry.sizes) + 2.0)
     pose = databank.query("youbot", part)
-    assert pose.translation is not None and pose.joints
+    goal = pose.translation
+    assert goal is not None and pose.joints
     trace = Trace()
     with running_agent(endpoint, "youbot", speed=4.0, trace=trace) as (agent, watch):
         target, _ = agent.controller.joints.clamp(pose.joints)
@@ -39,7 +39,7 @@ def test_translation_and_articulation_overlap_in_time(
         done = watch.after(
             seq,
             lambda s: s.status == "idle" and joints_close(s, target, 5e-3)
-            and math.dist(s.base_pose[:2], pose.translation[:2]) < 5e-3,  # type: ignore[index]
+            and math.dist(s.base_pose[:2], goal[:2]) < 5e-3,
             "arm at the pose and base translated",
         )
         op.close()
@@ -48,8 +48,7 @@ def test_translation_and_articulation_overlap_in_time(
     assert end - start > 0.2, f"joints and base should move together, overlap {start}..{end}"
 
 
-def test_drive_while_the_arm_sweeps(hub: tuple[zenoh.Session, str],
-                                    databank: DatabankProcess) -> None:
+def test_drive_while_the_arm_sweeps(hub: Hub, databank: DatabankProcess) -> None:
     """The PackBot sweep: drive forward while the arm goes low left, then low right."""
     session, endpoint = hub
     sweeps = [(e, pair) for pair in (("left-low", "right-low"),
@@ -79,20 +78,21 @@ def test_drive_while_the_arm_sweeps(hub: tuple[zenoh.Session, str],
 
 
 def test_limbless_robot_follows_a_core_command(
-    hub: tuple[zenoh.Session, str], databank: DatabankProcess
+    hub: Hub, databank: DatabankProcess
 ) -> None:
     session, endpoint = hub
     cat = databank.catalogue("khepera")
     core = cat.core[0]
     part = SpatialCommand(core, core, "left-forward-middle", 3.0)
     pose = databank.query("khepera", part)
-    assert pose.translation is not None
+    goal = pose.translation
+    assert goal is not None
     with running_agent(endpoint, "khepera", speed=4.0) as (agent, watch):
         op = CommandSender(session, agent.robot_id)
         seq = op.send((part.limb, part.origin, part.direction, part.size))
         done = watch.after(
             seq, lambda s: s.status == "idle"
-            and math.dist(s.base_pose[:2], pose.translation[:2]) < 5e-3,  # type: ignore[index]
+            and math.dist(s.base_pose[:2], goal[:2]) < 5e-3,
             "khepera at the translated position")
         op.close()
     assert abs(done.base_pose[2] - math.pi / 4) < 5e-3, "a diff base turns towards the goal"

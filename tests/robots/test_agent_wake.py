@@ -13,13 +13,13 @@ import time
 from dataclasses import dataclass
 
 import pytest
-import zenoh
 
 from kinesphere import zconfig
 from kinesphere.protocol import Catalogue
 from kinesphere.robots.agent.pacing import LoopStats, Wake, run_paced
 from kinesphere.robots.agent.runtime import Agent, AgentOptions
 from support.agents import CommandSender, DatabankProcess
+from support.network import Hub
 from support.wait import WAIT_S
 
 RATE = 4.0  # Hz: a quarter of a second between scheduled steps makes the order unmistakable
@@ -68,7 +68,7 @@ class Recorder:
 
 @pytest.mark.parametrize("strict", [False, True], ids=["reacts", "strict-period"])
 def test_a_command_is_applied_before_the_next_scheduled_step(
-    hub: tuple[zenoh.Session, str], databank: DatabankProcess, strict: bool
+    hub: Hub, databank: DatabankProcess, strict: bool
 ) -> None:
     session, endpoint = hub
     cat = databank.catalogue("baxter")

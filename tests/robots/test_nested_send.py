@@ -17,14 +17,13 @@ from __future__ import annotations
 import statistics
 
 import pytest
-import zenoh
 
 from kinesphere.cli import main
 from kinesphere.laban import Direction
 from kinesphere.robots.agent.fleet import RobotSpec
 from support.agents import DatabankProcess, running_fleet_host
 from support.nested import MeasuredBody, SegmentEnds, degrees, reach, unit
-from support.network import KEYS
+from support.network import KEYS, Hub
 from support.wait import WAIT_S
 
 DIRECTIONS = [d for d in Direction if d.horizontal.value != "place"]
@@ -42,7 +41,7 @@ def test_pairs_cover_every_direction_once_per_segment() -> None:
 
 
 def test_send_points_the_upper_arm_and_the_forearm_each_where_told(
-    hub: tuple[zenoh.Session, str], databank: DatabankProcess, capsys: pytest.CaptureFixture[str],
+    hub: Hub, databank: DatabankProcess, capsys: pytest.CaptureFixture[str],
 ) -> None:
     _, endpoint = hub
     bodies = {r.robot_id: MeasuredBody(r.platform) for r in ROBOTS}
