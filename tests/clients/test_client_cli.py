@@ -12,21 +12,20 @@ from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
-import zenoh
 
 from kinesphere.cli import main
 from kinesphere.clients.gamepad.inputs import ticks
 from kinesphere.clients.gamepad.state import Action, ControllerState
 from kinesphere.protocol import AckStage, Command, Substitution
 from support.clients import CommandInbox, Reply, StandIn, usual
-from support.network import OWN_KEYS
+from support.network import OWN_KEYS, Hub
 
 ROBOTS = ("c1", "c2", "c3")
 GROUPS = {"c1": ("pair",), "c2": ("pair",), "c3": ()}
 
 
 @pytest.fixture
-def boxes(hub: tuple[zenoh.Session, str]) -> Iterator[dict[str, StandIn]]:
+def boxes(hub: Hub) -> Iterator[dict[str, StandIn]]:
     """Three robots that answer as agents do; c1 and c2 are in group ``pair``."""
     b = {r: StandIn(hub[0], r, GROUPS[r]) for r in ROBOTS}
     yield b
@@ -35,7 +34,7 @@ def boxes(hub: tuple[zenoh.Session, str]) -> Iterator[dict[str, StandIn]]:
 
 
 @contextmanager
-def robot(hub: tuple[zenoh.Session, str], robot_id: str,
+def robot(hub: Hub, robot_id: str,
           answer: Callable[[Command], list[Reply]] | None) -> Iterator[StandIn]:
     r = StandIn(hub[0], robot_id, answer=answer)
     try:
@@ -63,7 +62,7 @@ def test_help_lists_the_operator_commands(capsys: pytest.CaptureFixture[str]) ->
 
 
 def test_send_one_command(
-    hub: tuple[zenoh.Session, str], boxes: dict[str, StandIn], capsys: pytest.CaptureFixture[str]
+    hub: Hub, boxes: dict[str, StandIn], capsys: pytest.CaptureFixture[str]
 ) -> None:
     code = cli(hub[1], "send", "c1", "limb_11", "distal_11", "Left-High", "3", "right_arm",
                "right_shoulder", "forward-low", "near", "--sender", "alice")
@@ -79,7 +78,7 @@ def test_send_one_command(
 
 
 def test_send_to_a_robot_that_rejects_exits_1_with_the_code(
-    hub: tuple[zenoh.Session, str], capsys: pytest.CaptureFixture[str]
+    hub: Hub, capsys: pytest.CaptureFixture[str]
 ) -> None:
     why = "(limb_11, distal_11) has no direction left-low"
     with robot(hub, "c4", refusing("direction_unavailable", why)):
@@ -89,7 +88,7 @@ def test_send_to_a_robot_that_rejects_exits_1_with_the_code(
 
 
 def test_send_that_nobody_acknowledges_exits_1(
-    hub: tuple[zenoh.Session, str], capsys: pytest.CaptureFixture[str]
+    hub: Hub, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """The robot's subscription is there (the put goes out) but no ack ever comes back."""
     with robot(hub, "mute", None) as mute:
@@ -103,7 +102,7 @@ def test_send_that_nobody_acknowledges_exits_1(
 
 
 def test_send_prints_substitutions(
-    hub: tuple[zenoh.Session, str], capsys: pytest.CaptureFixture[str]
+    hub: Hub, capsys: pytest.CaptureFixture[str]
 ) -> None:
     sub = Substitution("limb_11", "distal_11", "left-low", "left-forward-low", 35.26)
 
@@ -119,7 +118,7 @@ def test_send_prints_substitutions(
 
 
 def test_send_to_a_group_with_a_drive_held(
-    hub: tuple[zenoh.Session, str], boxes: dict[str, StandIn], capsys: pytest.CaptureFixture[str]
+    hub: Hub, boxes: dict[str, StandIn], capsys: pytest.CaptureFixture[str]
 ) -> None:
     """One put on the group's key; the members are learnt from the robots' states."""
     code = cli(hub[1], "send", "group:pair", "arm", "shoulder", "left-low", "far",
@@ -138,7 +137,7 @@ def test_send_to_a_group_with_a_drive_held(
 
 
 def test_a_group_named_like_a_robot_is_suggested(
-    hub: tuple[zenoh.Session, str], capsys: pytest.CaptureFixture[str]
+    hub: Hub, capsys: pytest.CaptureFixture[str]
 ) -> None:
     field = CommandInbox(hub[0], OWN_KEYS.group_command("field"))
     try:
@@ -149,7 +148,7 @@ def test_a_group_named_like_a_robot_is_suggested(
 
 
 def test_a_misspelt_robot_id_is_answered_with_the_nearest_live_one(
-    hub: tuple[zenoh.Session, str], boxes: dict[str, StandIn], capsys: pytest.CaptureFixture[str]
+    hub: Hub, boxes: dict[str, StandIn], capsys: pytest.CaptureFixture[str]
 ) -> None:
     assert cli(hub[1], "send", "c11", "a", "b", "left", "1", "--wait", "0.5") == 2
     err = capsys.readouterr().err
@@ -158,7 +157,7 @@ def test_a_misspelt_robot_id_is_answered_with_the_nearest_live_one(
 
 
 def test_estop_reaches_every_robot_and_each_acknowledges(
-    hub: tuple[zenoh.Session, str], boxes: dict[str, StandIn], capsys: pytest.CaptureFixture[str]
+    hub: Hub, boxes: dict[str, StandIn], capsys: pytest.CaptureFixture[str]
 ) -> None:
     assert cli(hub[1], "estop") == 0
     for r in ROBOTS:
@@ -174,14 +173,14 @@ def test_estop_reaches_every_robot_and_each_acknowledges(
 
 
 def test_estop_with_no_robot_is_a_loud_failure(
-    hub: tuple[zenoh.Session, str], capsys: pytest.CaptureFixture[str]
+    hub: Hub, capsys: pytest.CaptureFixture[str]
 ) -> None:
     assert cli(hub[1], "estop", "--timeout", "0.5") == 1
     assert "E-STOP REACHED NO ROBOT" in capsys.readouterr().err
 
 
 def test_estop_that_a_live_robot_does_not_acknowledge_exits_1(
-    hub: tuple[zenoh.Session, str], boxes: dict[str, StandIn], capsys: pytest.CaptureFixture[str]
+    hub: Hub, boxes: dict[str, StandIn], capsys: pytest.CaptureFixture[str]
 ) -> None:
     with robot(hub, "mute", None) as mute:
         assert cli(hub[1], "estop", "--timeout", "0.5") == 1
@@ -192,7 +191,7 @@ def test_estop_that_a_live_robot_does_not_acknowledge_exits_1(
 
 
 def test_play_a_phrase_file(
-    hub: tuple[zenoh.Session, str], boxes: dict[str, StandIn], tmp_path: Path
+    hub: Hub, boxes: dict[str, StandIn], tmp_path: Path
 ) -> None:
     f = tmp_path / "p.toml"
     f.write_text("[[step]]\nduration = 0.2\nparts = ['limb_11 distal_11 left-high 2']\n")
@@ -204,7 +203,7 @@ def test_play_a_phrase_file(
 
 
 def test_play_reports_a_refusal_once_per_robot_and_code(
-    hub: tuple[zenoh.Session, str], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+    hub: Hub, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     f = tmp_path / "p.toml"
     step = "[[step]]\nduration = 0.3\nparts = ['limb_11 distal_11 {} 2']\n"
@@ -222,7 +221,7 @@ def test_play_reports_a_refusal_once_per_robot_and_code(
 
 
 def test_lease_acquire_and_a_refusal_naming_the_holder(
-    hub: tuple[zenoh.Session, str], boxes: dict[str, StandIn], capsys: pytest.CaptureFixture[str]
+    hub: Hub, boxes: dict[str, StandIn], capsys: pytest.CaptureFixture[str]
 ) -> None:
     assert cli(hub[1], "lease", "acquire", "c1", "--sender", "alice") == 0
     cmd = boxes["c1"].wait(lambda g: True, "the lease command").cmd
@@ -235,7 +234,7 @@ def test_lease_acquire_and_a_refusal_naming_the_holder(
 
 
 def test_gamepad_replays_a_recording_headless(
-    hub: tuple[zenoh.Session, str], boxes: dict[str, StandIn], tmp_path: Path
+    hub: Hub, boxes: dict[str, StandIn], tmp_path: Path
 ) -> None:
     rec = tmp_path / "r.mcap"
     push = ControllerState(rx=1.0, held=frozenset({Action.DEADMAN}))
@@ -272,7 +271,7 @@ def test_gamepad_replays_a_recording_headless(
     ],
 )
 def test_user_mistakes_are_explained(
-    hub: tuple[zenoh.Session, str], capsys: pytest.CaptureFixture[str],
+    hub: Hub, capsys: pytest.CaptureFixture[str],
     args: list[str], message: str,
 ) -> None:
     assert cli(hub[1], *args) == 2
@@ -281,7 +280,7 @@ def test_user_mistakes_are_explained(
 
 
 def test_gamepad_with_its_hud_saves_a_screenshot(
-    hub: tuple[zenoh.Session, str], tmp_path: Path
+    hub: Hub, tmp_path: Path
 ) -> None:
     png = tmp_path / "hud.png"
     code = cli(hub[1], "gamepad", "--duration", "0.3", "--screenshot", str(png))
@@ -297,7 +296,7 @@ def _kinesphere(endpoint: str, *args: str, env: dict[str, str]) -> subprocess.Co
 
 
 @pytest.mark.processes
-def test_without_a_display_the_hud_says_use_headless(hub: tuple[zenoh.Session, str]) -> None:
+def test_without_a_display_the_hud_says_use_headless(hub: Hub) -> None:
     """SDL would fall back to its offscreen driver and run a HUD nobody sees."""
     env = {k: v for k, v in os.environ.items()
            if k not in ("DISPLAY", "WAYLAND_DISPLAY", "SDL_VIDEODRIVER")}
@@ -307,7 +306,7 @@ def test_without_a_display_the_hud_says_use_headless(hub: tuple[zenoh.Session, s
 
 
 @pytest.mark.processes
-def test_headless_without_a_controller_says_so(hub: tuple[zenoh.Session, str]) -> None:
+def test_headless_without_a_controller_says_so(hub: Hub) -> None:
     proc = _kinesphere(hub[1], "gamepad", "--headless", "--duration", "0.2", env=dict(os.environ))
     assert proc.returncode == 0
     assert "no game controller found" in proc.stderr

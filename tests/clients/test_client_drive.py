@@ -33,7 +33,7 @@ def test_holonomic_stick_is_the_body_velocity() -> None:
     d = drive(Steering.HOLONOMIC, -s, -s)  # up-left: diagonal, proportional
     assert d is not None and d.forward == pytest.approx(d.left) and d.forward > 0
     assert math.hypot(d.forward, d.left) == pytest.approx(T.drive_scale, abs=1e-3)
-    assert (d.direction, d.speed) == ("left-forward-middle", pytest.approx(T.drive_scale))
+    assert (d.direction, d.speed) == pytest.approx(("left-forward-middle", T.drive_scale))
 
 
 def test_arcade_stick_drives_forward_and_turns() -> None:

@@ -201,7 +201,7 @@ def test_deadman_release_stops_within_the_ttl(fleet: ClientFleet, pygame_up: Non
         p.deadman(False)
 
     with operator(fleet, tg.robot(PB)) as (op, inp):
-        script = Script(inp, {0: lambda: (p.deadman(), p.left(0.0, 1.0)),  # drive back
+        script = Script(inp, {0: lambda: p.deadman().left(0.0, 1.0),  # drive back
                               25: release, 26: lambda: None})
         run(op, script, finished=lambda: script.finished)
     moving = [h for h in fleet.track.since(PB, released[0] - 0.3) if h.at < released[0]]
@@ -215,7 +215,7 @@ def test_deadman_release_stops_within_the_ttl(fleet: ClientFleet, pygame_up: Non
     assert (rest.state.stamp_ns - halted.state.stamp_ns) / 1e9 < 3.0
 
 
-def gesture(fleet: ClientFleet, robot: str, press: Callable[[Pad], None], ticks: int
+def gesture(fleet: ClientFleet, robot: str, press: Callable[[Pad], object], ticks: int
             ) -> tuple[list[Heard], Heard]:
     """Hold the deadman and ``press`` for ``ticks`` at 30 Hz, let go; the robot's states from
     the first tick to rest, and the state at rest."""
@@ -259,7 +259,7 @@ def test_the_gamepad_turns_a_youbot_in_place_and_drives_it_diagonally_while_its_
     assert math.hypot(forward, left) < 0.05, "in place"
 
     s = math.sqrt(0.5)
-    hs, rest = gesture(fleet, YB, lambda p: (p.left(-s, -s), p.right(0.0, -1.0)), 45)
+    hs, rest = gesture(fleet, YB, lambda p: p.left(-s, -s).right(0.0, -1.0), 45)
     forward, left, turned = body_motion(hs, rest)
     assert forward > 0.2 and left > 0.2 and abs(forward - left) < 0.3 * forward, "diagonally"
     assert abs(turned) < 0.05
@@ -271,8 +271,8 @@ def test_the_gamepad_turns_a_youbot_in_place_and_drives_it_diagonally_while_its_
 def test_the_gamepad_arcs_a_packbot(fleet: ClientFleet, pygame_up: None) -> None:
     """Forward on the stick and a turn on the d-pad (or, once the catalogue says 'skid', the
     stick alone): forward and yaw together, an arc to the left."""
-    press = lambda p: (p.left(0.0, -1.0), p.button(pygame.CONTROLLER_BUTTON_DPAD_LEFT))  # noqa: E731
-    hs, rest = gesture(fleet, PB, press, 45)
+    hs, rest = gesture(fleet, PB,
+                       lambda p: p.left(0.0, -1.0).button(pygame.CONTROLLER_BUTTON_DPAD_LEFT), 45)
     forward, left, turned = body_motion(hs, rest)
     assert forward > 0.3 and turned > 0.3 and left > 0.05, "an arc to the left"
 

@@ -4,13 +4,16 @@ screenshot can be saved (``KINESPHERE_HUD_PNG=path`` keeps one to look at)."""
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import time
 from collections.abc import Iterator
 from pathlib import Path
+from typing import TypedDict, Unpack
 
 os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
 
+import msgspec  # noqa: E402
 import pygame  # noqa: E402
 import pytest  # noqa: E402
 
@@ -37,18 +40,37 @@ def window() -> Iterator[hud.Hud]:
 def state(robot_id: str, platform: str, status: str, **kw: object) -> Seen:
     st = RobotState(robot_id=robot_id, platform=platform, seq=1, stamp_ns=time.time_ns(),
                     joint_names=["a"], q=[0.0], qd=[0.0], base_pose=[0.0, 0.0, 0.0],
-                    status=status, last_command_seq=7, **kw)  # type: ignore[arg-type]
-    return Seen(st, time.monotonic())
+                    status=status, last_command_seq=7)
+    return Seen(msgspec.structs.replace(st, **kw), time.monotonic())
 
 
 def answer(robot_id: str, seq: int, stage: AckStage, **kw: object) -> AckAnswer:
     ack = Ack(robot_id=robot_id, sender="gamepad-me", seq=seq, stage=stage,
-              stamp_ns=time.time_ns(), **kw)  # type: ignore[arg-type]
-    return AckAnswer(ack, time.monotonic())
+              stamp_ns=time.time_ns())
+    return AckAnswer(msgspec.structs.replace(ack, **kw), time.monotonic())
 
 
-def view(**kw: object) -> Readout:
-    base = dict(
+class ReadoutChanges(TypedDict, total=False):
+    """Fields of :class:`Readout` a test sets on the busy example of :func:`view`."""
+
+    target: tg.Target
+    aliases: dict[str, str]
+    intent: Intent
+    engaged: bool
+    deadman_required: bool
+    remote_estop: list[str]
+    need_fresh_deadman: bool
+    connected: bool
+    robots: dict[str, Seen]
+    catalogue_errors: dict[str, str]
+    available: frozenset[Direction] | None
+    asked: Direction | None
+    limb_holds: bool
+
+
+def view(**kw: Unpack[ReadoutChanges]) -> Readout:
+    """A busy HUD: a group of two PackBots, every robot status and answer at once."""
+    base = Readout(
         target=tg.group("sweepers"), members=["packbot-1", "packbot-2"],
         limb="limb_11", origin="distal_11",
         aliases={"limb_11": "arm", "distal_11": "shoulder"},
@@ -77,8 +99,13 @@ def view(**kw: object) -> Readout:
         notice="packbot-2 refuses your commands: alice@laptop holds this robot's lease; "
                "press Back (take) to take over",
     )
-    base.update(kw)
-    return Readout(**base)  # type: ignore[arg-type]
+    return dataclasses.replace(base, **kw)
+
+
+def rgb(surf: pygame.Surface, at: tuple[int, int]) -> tuple[int, int, int]:
+    """The colour of one pixel, without its alpha."""
+    c = surf.get_at(at)
+    return c.r, c.g, c.b
 
 
 def cell_centre(d: Direction) -> tuple[int, int]:
@@ -88,7 +115,7 @@ def cell_centre(d: Direction) -> tuple[int, int]:
 
 
 def lit_cells(surf: pygame.Surface) -> list[Direction]:
-    return [d for d in Direction if surf.get_at(cell_centre(d))[:3] == hud.LIT]
+    return [d for d in Direction if rgb(surf, cell_centre(d)) == hud.LIT]
 
 
 def test_the_chart_is_laid_out_as_the_stick_points() -> None:
@@ -125,8 +152,8 @@ def test_missing_directions_are_crossed_out(window: hud.Hud) -> None:
     surf = window.screen
     for d in Direction:
         r = hud.cell_rect(d)
-        bg = surf.get_at((r.left + 3, r.bottom - 12))[:3]
-        diagonal = [surf.get_at((r.left + 4 + k, r.top + 4 + k))[:3] for k in range(4, 8)]
+        bg = rgb(surf, (r.left + 3, r.bottom - 12))
+        diagonal = [rgb(surf, (r.left + 4 + k, r.top + 4 + k)) for k in range(4, 8)]
         if d is Direction.LEFT_FORWARD_LOW:
             assert bg == hud.LIT
         elif d in have or d is Direction.PLACE_MIDDLE:
@@ -136,16 +163,16 @@ def test_missing_directions_are_crossed_out(window: hud.Hud) -> None:
             assert bg == hud.UNAVAILABLE_BG, d
             cross = hud.BAD if d is Direction.LEFT_LOW else hud.UNAVAILABLE
             assert cross in diagonal, d
-    assert surf.get_at(hud.cell_rect(Direction.LEFT_LOW).topleft)[:3] != hud.UNAVAILABLE_BG
+    assert rgb(surf, hud.cell_rect(Direction.LEFT_LOW).topleft) != hud.UNAVAILABLE_BG
 
 
 def test_the_commanded_cell_is_lit(window: hud.Hud, tmp_path: Path) -> None:
     hud.render(window.screen, view(), window.fonts)
-    lit = window.screen.get_at(cell_centre(Direction.LEFT_LOW))[:3]
-    other = window.screen.get_at(cell_centre(Direction.RIGHT_HIGH))[:3]
+    lit = rgb(window.screen, cell_centre(Direction.LEFT_LOW))
+    other = rgb(window.screen, cell_centre(Direction.RIGHT_HIGH))
     assert lit == hud.LIT and other == hud.CELL_BG
     hud.render(window.screen, view(engaged=False), window.fonts)
-    assert window.screen.get_at(cell_centre(Direction.LEFT_LOW))[:3] == hud.DIM
+    assert rgb(window.screen, cell_centre(Direction.LEFT_LOW)) == hud.DIM
     window.screenshot(tmp_path / "hud.png")
     assert (tmp_path / "hud.png").stat().st_size > 5000
     keep = os.environ.get("KINESPHERE_HUD_PNG")
@@ -172,7 +199,7 @@ def test_level_shading_follows_laban(window: hud.Hud) -> None:
         surf.fill(hud.BG)
         draw_symbol(surf, Direction((Horizontal.PLACE.value, lvl.value)),
                         pygame.Rect(10, 10, 40, 60), hud.INK)
-        inks[lvl] = sum(surf.get_at((x, y))[:3] == hud.INK for x in range(13, 48)
+        inks[lvl] = sum(rgb(surf, (x, y)) == hud.INK for x in range(13, 48)
                         for y in range(13, 68))
     assert inks[Level.LOW] > inks[Level.HIGH] > inks[Level.MIDDLE] > 0
 
@@ -189,13 +216,13 @@ def test_level_shading_follows_laban(window: hud.Hud) -> None:
         {"intent": Intent(direction=Direction.RIGHT_FORWARD_HIGH, size=4.5, beyond=True)},
         {"catalogue_errors": {"nao": "no databank answers"}},
         {
-            "available": frozenset({"left-forward-low", "back-high"}),
+            "available": frozenset({Direction.LEFT_FORWARD_LOW, Direction.BACK_HIGH}),
             "asked": Direction.LEFT_LOW,
             "intent": Intent(direction=Direction.LEFT_FORWARD_LOW, size=3.0, deadman=True),
         },
     ],
 )
-def test_every_state_renders(window: hud.Hud, kw: dict[str, object]) -> None:
+def test_every_state_renders(window: hud.Hud, kw: ReadoutChanges) -> None:
     window._last = 0.0
     window.draw(view(**kw))
 
@@ -211,6 +238,6 @@ def test_a_direction_with_no_pose_near_is_crossed_out_in_red_while_driving(
         hud.render(window.screen, view(available=have, limb_holds=holds, intent=intent),
                    window.fonts)
         r = hud.cell_rect(Direction.LEFT_MIDDLE)
-        diagonal = [window.screen.get_at((r.left + 4 + k, r.top + 4 + k))[:3]
+        diagonal = [rgb(window.screen, (r.left + 4 + k, r.top + 4 + k))
                     for k in range(4, 8)]
         assert (hud.BAD in diagonal) is holds, (holds, diagonal)

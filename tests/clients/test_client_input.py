@@ -18,7 +18,7 @@ from kinesphere.clients.gamepad.mapping import MapperState, map_controls  # noqa
 from kinesphere.clients.gamepad.state import Action, ControllerState  # noqa: E402
 from kinesphere.errors import KinesphereError  # noqa: E402
 from kinesphere.laban import Direction  # noqa: E402
-from support.clients import VirtualPad  # noqa: E402
+from support.clients import VirtualPad, post  # noqa: E402
 
 MAX = 32767
 CTRL = 7  # instance id of the posted "controller"
@@ -32,10 +32,6 @@ pytestmark = pytest.mark.usefixtures("pygame_up")
 def inp() -> pad.PygameInput:
     pygame.event.clear()
     return pad.PygameInput(mapfile.load())
-
-
-def post(kind: int, **attrs: object) -> None:
-    pygame.event.post(pygame.event.Event(kind, **attrs))
 
 
 def axis(a: int, value: int, iid: int = CTRL) -> None:
@@ -148,13 +144,13 @@ def test_keyboard_offers_the_same_actions(inp: pad.PygameInput) -> None:
     key(pygame.K_3)
     cs = inp.poll()
     assert cs.source == "keyboard" and cs.held == {Action.DEADMAN}
-    assert direction(cs) == (Direction.LEFT_FORWARD_MIDDLE, pytest.approx(3.0, abs=1e-3))
+    assert direction(cs) == pytest.approx((Direction.LEFT_FORWARD_MIDDLE, 3.0), abs=1e-3)
     key(pygame.K_1)
     key(pygame.K_q)
-    assert direction(inp.poll()) == (Direction.LEFT_FORWARD_LOW, pytest.approx(1.0, abs=1e-3))
+    assert direction(inp.poll()) == pytest.approx((Direction.LEFT_FORWARD_LOW, 1.0), abs=1e-3)
     for k in (pygame.K_UP, pygame.K_LEFT):
         key(k, down=False)
-    assert direction(inp.poll()) == (Direction.PLACE_LOW, pytest.approx(1.0, abs=1e-3))
+    assert direction(inp.poll()) == pytest.approx((Direction.PLACE_LOW, 1.0), abs=1e-3)
     key(pygame.K_w)
     tuning = mapfile.load().tuning
     i = map_controls(inp.poll(), MapperState(), 0.0, tuning)[0]

@@ -8,7 +8,6 @@ from collections.abc import Callable, Iterator
 
 import pygame
 import pytest
-import zenoh
 
 from kinesphere.clients import targets as tg
 from kinesphere.clients.gamepad import mapfile
@@ -19,19 +18,19 @@ from kinesphere.clients.link import RobotLink
 from kinesphere.clients.options import TeleopOptions
 from kinesphere.protocol import AckStage, Command
 from support.clients import Pad, Reply, StandIn, client_link, kind, sentinel, usual
-from support.network import OWN_KEYS
+from support.network import OWN_KEYS, Hub
 from support.wait import WAIT_S
 
 
 @pytest.fixture
-def robot(hub: tuple[zenoh.Session, str]) -> Iterator[StandIn]:
+def robot(hub: Hub) -> Iterator[StandIn]:
     r = StandIn(hub[0], "l1")
     yield r
     r.close()
 
 
 @pytest.fixture
-def link(hub: tuple[zenoh.Session, str], robot: StandIn) -> Iterator[RobotLink]:
+def link(hub: Hub, robot: StandIn) -> Iterator[RobotLink]:
     with client_link(hub[1], sender="carol") as lk:
         assert lk.wait_subscribers([OWN_KEYS.command("l1")], WAIT_S) == []
         assert lk.wait_for(lambda k: "l1" in k.states(), WAIT_S)
@@ -102,7 +101,7 @@ def leasing(robot: StandIn) -> Callable[[Command], list[Reply]]:
 
 
 def test_a_refusal_for_another_operators_lease_is_shown_and_the_take_button_takes_over(
-    hub: tuple[zenoh.Session, str], inp: pad.PygameInput
+    hub: Hub, inp: pad.PygameInput
 ) -> None:
     robot = StandIn(hub[0], "l2")
     robot.answer = leasing(robot)

@@ -17,11 +17,13 @@ from kinesphere.laban import Direction
 T = Tuning()
 
 
-def stick(angle_deg: float, mag: float = 1.0, **kw: object) -> ControllerState:
-    """Right stick pushed towards ``angle_deg`` (0 = up/forward, 90 = left), SDL axes."""
+def stick(angle_deg: float, mag: float = 1.0, held: frozenset[str] = frozenset(),
+          lt: float = 0.0, rt: float = 0.0) -> ControllerState:
+    """Right stick pushed towards ``angle_deg`` (0 = up/forward, 90 = left), SDL axes, with
+    the actions ``held`` and the triggers ``lt``, ``rt``."""
     a = math.radians(angle_deg)
     fwd, left = mag * math.cos(a), mag * math.sin(a)
-    return ControllerState(rx=-left, ry=-fwd, **kw)  # type: ignore[arg-type]
+    return ControllerState(rx=-left, ry=-fwd, lt=lt, rt=rt, held=held)
 
 
 def intent(cs: ControllerState, prev: MapperState | None = None, dt: float = 1 / 30) -> Intent:

@@ -8,14 +8,13 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-import zenoh
 
 from kinesphere.clients.link import Sequencer
 from kinesphere.clients.orders import phrases
 from kinesphere.errors import KinesphereError
 from kinesphere.laban import Direction
 from support.clients import CommandInbox, client_link, sentinel
-from support.network import OWN_KEYS
+from support.network import OWN_KEYS, Hub
 from support.wait import WAIT_S
 
 
@@ -76,7 +75,7 @@ def test_an_unknown_phrase_lists_the_shipped_ones() -> None:
 
 
 @pytest.fixture
-def boxes(hub: tuple[zenoh.Session, str]) -> Iterator[dict[str, CommandInbox]]:
+def boxes(hub: Hub) -> Iterator[dict[str, CommandInbox]]:
     b = {r: CommandInbox(hub[0], OWN_KEYS.command(r)) for r in ("p1", "p2")}
     yield b
     for x in b.values():
@@ -84,7 +83,7 @@ def boxes(hub: tuple[zenoh.Session, str]) -> Iterator[dict[str, CommandInbox]]:
 
 
 def test_play_streams_each_step_for_its_duration(
-    hub: tuple[zenoh.Session, str], boxes: dict[str, CommandInbox], tmp_path: Path
+    hub: Hub, boxes: dict[str, CommandInbox], tmp_path: Path
 ) -> None:
     f = tmp_path / "two.toml"
     f.write_text(

@@ -8,7 +8,6 @@ from pathlib import Path
 
 import pygame
 import pytest
-import zenoh
 
 from kinesphere import zconfig
 from kinesphere.clients import mcaplog
@@ -20,28 +19,29 @@ from kinesphere.clients.gamepad.teleop import Teleop, run
 from kinesphere.clients.options import TeleopOptions
 from kinesphere.clients.recording.traffic import replay
 from kinesphere.errors import KinesphereError
+from kinesphere.protocol import Command
 from support.clients import CommandInbox, Pad, Script, client_link, sentinel
-from support.network import OWN_KEYS
+from support.network import OWN_KEYS, Hub
 from support.wait import WAIT_S
 
 
 @pytest.fixture
-def box(hub: tuple[zenoh.Session, str]) -> Iterator[CommandInbox]:
+def box(hub: Hub) -> Iterator[CommandInbox]:
     inbox = CommandInbox(hub[0], OWN_KEYS.command("rec"))
     yield inbox
     inbox.close()
 
 
 def test_a_replay_sends_what_the_recorded_session_sent(
-    hub: tuple[zenoh.Session, str], box: CommandInbox, pygame_up: None, tmp_path: Path
+    hub: Hub, box: CommandInbox, pygame_up: None, tmp_path: Path
 ) -> None:
     pygame.event.clear()
     inp = pad.PygameInput(mapfile.load())
     p = Pad()
     script = Script(inp, {
-        0: lambda: (p.plug(), p.deadman(), p.right(-1.0, 0.0)),
+        0: lambda: p.plug().deadman().right(-1.0, 0.0),
         3: lambda: p.axis(pygame.CONTROLLER_AXIS_TRIGGERLEFT, 1.0),
-        5: lambda: (p.left(0.0, -0.7), p.tap(pygame.CONTROLLER_BUTTON_X)),
+        5: lambda: p.left(0.0, -0.7).tap(pygame.CONTROLLER_BUTTON_X),
         8: lambda: p.right(1.0, 0.0),
         11: lambda: p.deadman(False),
         13: lambda: None,
@@ -73,7 +73,7 @@ def test_a_replay_sends_what_the_recorded_session_sent(
         sentinel(link, [OWN_KEYS.command("rec")], [box])
     second = box.commands()[len(first) :]
 
-    def content(cmds: list) -> list:  # type: ignore[type-arg]
+    def content(cmds: list[Command]) -> list[tuple[object, ...]]:
         return [(c.parts, c.drive, c.deadman, c.stop, c.lease) for c in cmds]
 
     assert len(first) == 13 and not first[-2].deadman and first[-1].lease == "release"

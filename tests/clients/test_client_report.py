@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import time
 
+import msgspec
 import pytest
 
 from kinesphere.clients.report import STALE_S, robot_lines
@@ -13,21 +14,20 @@ ME = "gamepad-me"
 
 
 def state(**kw: object) -> RobotState:
-    base: dict[str, object] = dict(
+    base = RobotState(
         robot_id="pb-1", platform="packbot", seq=1, stamp_ns=time.time_ns(),
         joint_names=["turret"], q=[0.0], qd=[0.0], base_pose=[0.0, 0.0, 0.0], status="idle",
         last_command_seq=-1)
-    base.update(kw)
-    return RobotState(**base)  # type: ignore[arg-type]
+    return msgspec.structs.replace(base, **kw)
 
 
 def ack(stage: AckStage, **kw: object) -> Ack:
-    return Ack(robot_id="pb-1", sender=ME, seq=12, stage=stage, stamp_ns=time.time_ns(),
-               **kw)  # type: ignore[arg-type]
+    base = Ack(robot_id="pb-1", sender=ME, seq=12, stage=stage, stamp_ns=time.time_ns())
+    return msgspec.structs.replace(base, **kw)
 
 
-def texts(st: RobotState, age_s: float = 0.12, **kw: object) -> list[str]:
-    return [ln.text for ln in robot_lines(st, age_s, ME, **kw)]  # type: ignore[arg-type]
+def texts(st: RobotState, age_s: float = 0.12) -> list[str]:
+    return [ln.text for ln in robot_lines(st, age_s, ME)]
 
 
 def test_an_estop_says_who_latched_it_and_how_to_release_it() -> None:

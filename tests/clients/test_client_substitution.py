@@ -32,7 +32,8 @@ from kinesphere.substitution import MAX_ANGLE_DEG, angle_between, forward_sign
 
 ECLS = {p: Ecl.open(p) for p in platform_names()}
 CATALOGUES = {p: ecl.catalogue() for p, ecl in ECLS.items()}
-TRIGGERS = {Level.LOW: {"lt": 1.0}, Level.MIDDLE: {}, Level.HIGH: {"rt": 1.0}}
+TRIGGERS = {Level.LOW: (1.0, 0.0), Level.MIDDLE: (0.0, 0.0), Level.HIGH: (0.0, 1.0)}
+"""The (left, right) trigger that asks for each level."""
 
 
 def limbs() -> list[tuple[str, Catalogue, str, str]]:
@@ -51,7 +52,8 @@ def pushed(heading_deg: float, level: Level) -> Direction:
     """What the mapping makes of the right stick at the rim towards ``heading_deg`` (0 =
     forward, 90 = left) with the trigger of ``level``."""
     a = math.radians(heading_deg)
-    cs = ControllerState(rx=-math.sin(a), ry=-math.cos(a), **TRIGGERS[level])  # type: ignore[arg-type]
+    lt, rt = TRIGGERS[level]
+    cs = ControllerState(rx=-math.sin(a), ry=-math.cos(a), lt=lt, rt=rt)
     return map_controls(cs, MapperState(), 0.0, Tuning())[0].direction
 
 

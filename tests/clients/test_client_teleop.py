@@ -34,14 +34,14 @@ from support.clients import (
     kind,
     sentinel,
 )
-from support.network import OWN_KEYS
+from support.network import OWN_KEYS, Hub
 from support.wait import WAIT_S
 
 ROBOTS = ("r1", "r2", "r3")
 
 
 @pytest.fixture
-def inboxes(hub: tuple[zenoh.Session, str]) -> Iterator[dict[str, CommandInbox]]:
+def inboxes(hub: Hub) -> Iterator[dict[str, CommandInbox]]:
     session, _ = hub
     boxes = {r: CommandInbox(session, OWN_KEYS.command(r)) for r in ROBOTS}
     yield boxes
@@ -50,7 +50,7 @@ def inboxes(hub: tuple[zenoh.Session, str]) -> Iterator[dict[str, CommandInbox]]
 
 
 @pytest.fixture
-def link(hub: tuple[zenoh.Session, str], inboxes: dict[str, CommandInbox]) -> Iterator[RobotLink]:
+def link(hub: Hub, inboxes: dict[str, CommandInbox]) -> Iterator[RobotLink]:
     _, endpoint = hub
     with client_link(endpoint) as lk:
         assert lk.wait_subscribers([OWN_KEYS.command(r) for r in ROBOTS], WAIT_S) == []
@@ -63,8 +63,8 @@ def inp(pygame_up: None) -> pad.PygameInput:
     return pad.PygameInput(mapfile.load())
 
 
-def teleop(link: RobotLink, target: tg.Target, **options: object) -> Teleop:
-    return Teleop(link, mapfile.load(), target, TeleopOptions(**options))  # type: ignore[arg-type]
+def teleop(link: RobotLink, target: tg.Target, options: TeleopOptions | None = None) -> Teleop:
+    return Teleop(link, mapfile.load(), target, options or TeleopOptions())
 
 
 def settle(link: RobotLink, boxes: dict[str, CommandInbox]) -> None:
@@ -85,7 +85,7 @@ def test_stream_content_rate_ttl_and_final_stop(
         p.left(0.0, -1.0)  # drive forward
 
     script = Script(inp, {0: press, 30: lambda: p.deadman(False), 34: lambda: None})
-    op = teleop(link, tg.robot("r1"), rate_hz=30.0, ttl_ms=300)
+    op = teleop(link, tg.robot("r1"), TeleopOptions(rate_hz=30.0, ttl_ms=300))
     run(op, script, finished=lambda: script.finished)
     settle(link, inboxes)
     got = [g for g in inboxes["r1"].got if g.cmd.sender != "sentinel"]
@@ -126,7 +126,7 @@ def test_without_a_deadman_a_deflected_stick_streams(
     link: RobotLink, inboxes: dict[str, CommandInbox], inp: pad.PygameInput
 ) -> None:
     p = Pad()
-    op = teleop(link, tg.robot("r1"), deadman_required=False)
+    op = teleop(link, tg.robot("r1"), TeleopOptions(deadman_required=False))
     op.tick(inp.poll())  # centred: nothing
     p.right(0.0, 1.0)  # stick down: back
     op.tick(inp.poll())
@@ -152,7 +152,7 @@ def engage(op: Teleop, inp: pad.PygameInput, p: Pad, ticks: int = 2) -> None:
 
 
 def test_group_and_all_reach_every_intended_robot_and_no_other(
-    hub: tuple[zenoh.Session, str], link: RobotLink, inboxes: dict[str, CommandInbox],
+    hub: Hub, link: RobotLink, inboxes: dict[str, CommandInbox],
     inp: pad.PygameInput,
 ) -> None:
     session, _ = hub
@@ -187,7 +187,7 @@ def test_group_and_all_reach_every_intended_robot_and_no_other(
 
 
 def test_target_button_cycles_robots_then_the_groups_they_report_then_all(
-    hub: tuple[zenoh.Session, str], link: RobotLink, inp: pad.PygameInput
+    hub: Hub, link: RobotLink, inp: pad.PygameInput
 ) -> None:
     session, _ = hub
     for r in ROBOTS:
@@ -223,7 +223,7 @@ def test_switching_target_stops_the_old_one(
 
 
 def test_estop_goes_to_all_latches_and_start_releases_only_what_it_latched(
-    hub: tuple[zenoh.Session, str], link: RobotLink, inboxes: dict[str, CommandInbox],
+    hub: Hub, link: RobotLink, inboxes: dict[str, CommandInbox],
     inp: pad.PygameInput,
 ) -> None:
     session, _ = hub
@@ -288,8 +288,8 @@ def test_leaving_the_loop_sends_a_final_stop(
     link: RobotLink, inboxes: dict[str, CommandInbox], inp: pad.PygameInput
 ) -> None:
     p = Pad()
-    script = Script(inp, {0: lambda: (p.deadman(), p.right(0.0, -1.0)), 3: lambda: None})
-    op = teleop(link, tg.robot("r2"), rate_hz=100.0)
+    script = Script(inp, {0: lambda: p.deadman().right(0.0, -1.0), 3: lambda: None})
+    op = teleop(link, tg.robot("r2"), TeleopOptions(rate_hz=100.0))
     run(op, script, finished=lambda: script.finished)  # ends with the deadman still held
     settle(link, inboxes)
     cmds = inboxes["r2"].commands()
@@ -297,7 +297,7 @@ def test_leaving_the_loop_sends_a_final_stop(
 
 
 def test_an_estop_reported_by_a_robot_pauses_the_stream(
-    hub: tuple[zenoh.Session, str], link: RobotLink, inboxes: dict[str, CommandInbox],
+    hub: Hub, link: RobotLink, inboxes: dict[str, CommandInbox],
     inp: pad.PygameInput,
 ) -> None:
     """Robots release a latch on any deadman command: never stream into someone's e-stop."""
@@ -332,7 +332,7 @@ FAKEBOT = Catalogue(
 
 
 def test_shoulder_cycling_follows_the_robots_catalogue(
-    hub: tuple[zenoh.Session, str], link: RobotLink, inboxes: dict[str, CommandInbox],
+    hub: Hub, link: RobotLink, inboxes: dict[str, CommandInbox],
     inp: pad.PygameInput,
 ) -> None:
     session, _ = hub
@@ -393,7 +393,7 @@ def packbot_operator(session: zenoh.Session, link: RobotLink, inp: pad.PygameInp
 
 
 def test_the_sweep_goes_out_as_asked(
-    hub: tuple[zenoh.Session, str], link: RobotLink, inboxes: dict[str, CommandInbox],
+    hub: Hub, link: RobotLink, inboxes: dict[str, CommandInbox],
     inp: pad.PygameInput,
 ) -> None:
     """The PackBot arm (real databank) reaches low to either side: low + stick left sends
@@ -416,7 +416,7 @@ def test_the_sweep_goes_out_as_asked(
 
 
 def test_a_direction_no_body_has_near_sends_the_drive_alone(
-    hub: tuple[zenoh.Session, str], link: RobotLink, inboxes: dict[str, CommandInbox],
+    hub: Hub, link: RobotLink, inboxes: dict[str, CommandInbox],
     inp: pad.PygameInput,
 ) -> None:
     """PackBot's arm (shipped databank) has no pose pointing within 45 degrees of back-low
@@ -444,7 +444,7 @@ def test_a_direction_no_body_has_near_sends_the_drive_alone(
 
 
 def test_a_recorded_pose_makes_the_client_fetch_catalogues_again(
-    hub: tuple[zenoh.Session, str], link: RobotLink
+    hub: Hub, link: RobotLink
 ) -> None:
     session, _ = hub
     with fake_catalogue(session, FAKEBOT):

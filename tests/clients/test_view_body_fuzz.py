@@ -55,6 +55,7 @@ def _mutate(text: str, rng: random.Random) -> str:
     elif kind == 3:  # a chain lengthened
         links = root.findall("link")
         last = rng.choice(links).get("name")
+        assert last is not None, "the platform's links are named"
         for i in range(rng.choice((10, 70, 600))):
             ET.SubElement(root, "link", name=f"fz{i}")
             j = ET.SubElement(root, "joint", name=f"fzj{i}", type="fixed")

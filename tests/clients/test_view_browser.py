@@ -54,8 +54,8 @@ def test_view_draws_and_moves_robots(sup: Supervisor) -> None:
         obs.wait_alive(set(), databank=True, sup=sup)
         sup.spawn("view", ["view", "--connect", endpoint, "--port", str(web)])
         with browser_page() as page:
-            until(lambda: sup.check() or _loads(page, f"http://127.0.0.1:{web}/"), WAIT_S,
-                  "the view's page")
+            until(lambda: _loads(page, f"http://127.0.0.1:{web}/"), WAIT_S, "the view's page",
+                  guard=sup.check)
             page.get_by_text("0 robot(s)").wait_for(timeout=WAIT_S * 1000)
             for rid, platform in (("baxter-1", "baxter"), ("youbot-1", "youbot")):
                 sup.spawn(rid, ["agent", platform, "--id", rid, "--connect", endpoint,

@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import time
 
+import msgspec
+
 from kinesphere import protocol as pr
 from kinesphere import zconfig
 from kinesphere.clients.view.fleet import Fleet
@@ -28,7 +30,8 @@ def seq_of(fleet: Fleet, rid: str) -> int:
 
 
 def command(seq: int, **kw: object) -> pr.Command:
-    return pr.Command(seq=seq, sent_ns=time.time_ns(), ttl_ms=300, sender="t", **kw)  # type: ignore[arg-type]
+    return msgspec.structs.replace(
+        pr.Command(seq=seq, sent_ns=time.time_ns(), ttl_ms=300, sender="t", deadman=True), **kw)
 
 
 def test_commands_reach_the_robots_they_address() -> None:
@@ -65,8 +68,8 @@ def test_commands_reach_the_robots_they_address() -> None:
             until(lambda: all(r.command == stop and r.motion is None
                                    for r in fleet.snapshot().values()), 20.0, "the stop everywhere")
 
-            tokens.pop("r2").undeclare()
+            zconfig.undeclare(tokens.pop("r2"))
             until(lambda: set(fleet.snapshot()) == {"r1"}, 20.0, "r2 gone")
-            tokens.pop("r1").undeclare()
+            zconfig.undeclare(tokens.pop("r1"))
         finally:
             fleet.close()

@@ -12,19 +12,19 @@ import logging
 import socket
 import time
 from collections.abc import Iterator
-from typing import Any
 
 import msgspec
 import pytest
 import viser
 import websockets.exceptions
 from websockets.sync.client import connect
+from websockets.typing import Origin, Subprotocol
 
 from kinesphere import zconfig
 from kinesphere.clients.view.app import FleetView
 from support.network import OWN_KEYS, Hub
 
-PROTOCOL = f"viser-v{viser.__version__}"
+PROTOCOL = Subprotocol(f"viser-v{viser.__version__}")
 CONNECTIONS = 500
 
 
@@ -45,7 +45,7 @@ def _scene(port: int, origin: str | None, host: str | None = None) -> int:
     got = 0
     sock = socket.create_connection(("127.0.0.1", port), timeout=5)
     with connect(f"ws://{host or f'127.0.0.1:{port}'}", sock=sock,
-                 origin=origin,  # type: ignore[arg-type]
+                 origin=None if origin is None else Origin(origin),
                  subprotocols=[PROTOCOL], open_timeout=5) as ws:
         deadline = time.monotonic() + 1.0
         while time.monotonic() < deadline:
@@ -56,8 +56,8 @@ def _scene(port: int, origin: str | None, host: str | None = None) -> int:
     return got
 
 
-def _status(exc: pytest.ExceptionInfo[Any]) -> int:
-    return int(exc.value.response.status_code)
+def _status(exc: pytest.ExceptionInfo[websockets.exceptions.InvalidStatus]) -> int:
+    return exc.value.response.status_code
 
 
 def test_a_page_of_another_origin_gets_no_scene(view: FleetView) -> None:
@@ -114,7 +114,7 @@ def test_bare_connections_and_bad_frames_log_one_line_per_peer(
     ]
     for frame in frames:  # ten kinds of malformed frames, each on its own connection
         try:
-            with connect(f"ws://127.0.0.1:{port}", origin=f"http://127.0.0.1:{port}",
+            with connect(f"ws://127.0.0.1:{port}", origin=Origin(f"http://127.0.0.1:{port}"),
                          subprotocols=[PROTOCOL], open_timeout=5) as ws:
                 ws.send(frame)
                 ws.recv(timeout=1.0)

@@ -16,8 +16,10 @@ import shutil
 import sys
 import time
 from collections.abc import Callable, Iterator
+from functools import partial
 from pathlib import Path
-from typing import Any
+from types import FrameType
+from typing import TYPE_CHECKING
 
 import pytest
 import trimesh
@@ -38,6 +40,9 @@ from support.hostile import BROKEN_NUMBERS, arm, model, nested
 from support.network import OWN_KEYS, Hub
 from support.paths import TOY
 from support.wait import WAIT_S
+
+if TYPE_CHECKING:
+    from _typeshed import TraceFunction
 
 
 @pytest.mark.parametrize("flaw", list(BROKEN_NUMBERS))
@@ -60,11 +65,11 @@ def test_chains_past_the_depth_links_past_the_count_and_deep_xml_are_refused() -
     assert err.value.code == "invalid_eurdf"
 
 
-def _lines(build: Callable[[], Any]) -> int:
+def _lines(build: Callable[[], object]) -> int:
     """Python lines executed by ``build()``: the work done, independent of the machine."""
     count = 0
 
-    def tracer(frame: Any, event: str, arg: Any) -> Any:
+    def tracer(frame: FrameType, event: str, arg: object) -> TraceFunction:
         nonlocal count
         if event == "line":
             count += 1
@@ -78,11 +83,15 @@ def _lines(build: Callable[[], Any]) -> int:
     return count
 
 
+def _arm_geometry(links: int) -> BodyGeometry:
+    return BodyGeometry(model(arm(links)))
+
+
 def test_building_a_body_costs_work_linear_in_its_links() -> None:
     """Counted in executed lines, so load does not matter: doubling the chain at most a bit
     over doubles the work (the old scene-graph path multiplied whole chains per shape, and
     numpy's chain-order search is cubic Python: ~16x per doubling)."""
-    small, mid, large = (_lines(lambda n=n: BodyGeometry(model(arm(n)))) for n in (8, 16, 32))
+    small, mid, large = (_lines(partial(_arm_geometry, n)) for n in (8, 16, 32))
     assert mid / small < 2.5 and large / mid < 2.5, (small, mid, large)
 
 
@@ -115,7 +124,7 @@ class OpenedFiles:
         self.paths: list[str] = []
         sys.addaudithook(self._hook)
 
-    def _hook(self, event: str, args: tuple[Any, ...]) -> None:
+    def _hook(self, event: str, args: tuple[object, ...]) -> None:
         if self.on and event == "open" and isinstance(args[0], (str, bytes, os.PathLike)):
             self.paths.append(os.fsdecode(args[0]))
 
