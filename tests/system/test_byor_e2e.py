@@ -16,7 +16,6 @@ from pathlib import Path
 import mujoco
 import numpy as np
 import pytest
-import zenoh
 
 from kinesphere import zconfig
 from kinesphere.cli import main
@@ -26,6 +25,7 @@ from kinesphere.platforms.platform import load_platform
 from kinesphere.protocol import SpatialCommand
 from support.agents import DatabankProcess, StateWatch, joints_close
 from support.byor import PANDA, TALOS, TIAGO, UR5, robot_data
+from support.network import Hub
 from support.paths import ROOT
 
 pytestmark = pytest.mark.processes
@@ -58,15 +58,15 @@ def brought(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 @pytest.fixture(scope="module")
-def own_hub() -> Iterator[tuple[zenoh.Session, str]]:
+def own_hub() -> Iterator[Hub]:
     """Not the shared hub: this module's databank serves the brought robots under the default
     prefix, where the shared databank (complete on ``{p}/ecl/*/**``) would call them unknown."""
     with zconfig.loopback_hub() as pair:
-        yield pair
+        yield Hub(*pair)
 
 
 @pytest.fixture(scope="module")
-def bank(brought: Path, own_hub: tuple[zenoh.Session, str]) -> Iterator[DatabankProcess]:
+def bank(brought: Path, own_hub: Hub) -> Iterator[DatabankProcess]:
     """One databank process serving the four brought robots, found by name via --platforms."""
     session, endpoint = own_hub
     args = ["--platforms", str(brought)]
@@ -102,7 +102,7 @@ def test_platforms_are_found_on_the_search_path_only_when_given(brought: Path) -
 
 @pytest.mark.parametrize("name", list(ROBOTS))
 def test_send_up_left_far_moves_the_tip_up_left_of_the_shoulder(
-    name: str, brought: Path, bank: DatabankProcess, own_hub: tuple[zenoh.Session, str]
+    name: str, brought: Path, bank: DatabankProcess, own_hub: Hub
 ) -> None:
     session, endpoint = own_hub
     _, limb, origin, direction, _ = ROBOTS[name]

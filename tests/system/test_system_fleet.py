@@ -82,14 +82,14 @@ def test_fleet_through_router(tmp_path: Path, sup: Supervisor) -> None:
 
         # 3. a new command while it is down cannot be resolved: robots say so and hold
         _put(obs, POSE_B, seq=0)
-        until(lambda: all(obs.states.last(r).status == "databank_unreachable"  # type: ignore[union-attr]
+        until(lambda: all(obs.state(r).status == "databank_unreachable"
                           for r in ROBOTS), WAIT_S, "robots to report databank_unreachable")
         assert all(at_pose(obs.states.last(r), a[r]) for r in ROBOTS)
 
         # 4. a restarted databank serves again, without restarting anything else
         sup.spawn("databank", ["databank", "serve", *dbs, "--zenoh-config", str(cfg),
                                "--replica", "db-2"])
-        until(lambda: sup.check() or "db-2" in obs.alive.databanks, WAIT_S, "databank back")
+        until(lambda: "db-2" in obs.alive.databanks, WAIT_S, "databank back", guard=sup.check)
         _put(obs, POSE_B, seq=1)
         until(lambda: all(at_pose(obs.states.last(r), b[r]) for r in ROBOTS), WAIT_S,
               "every robot at pose B after the restart",
@@ -101,21 +101,21 @@ def test_fleet_through_router(tmp_path: Path, sup: Supervisor) -> None:
                           'parts = []\ndrive = "forward 0.5"\n')
         sup.spawn("play", ["play", str(phrase), "--target", "youbot-1", "--zenoh-config",
                            str(cfg), "--wait", "20"])
-        x0 = obs.states.last("youbot-1").base_pose[0]  # type: ignore[union-attr]
-        until(lambda: sup.check() or obs.states.last("youbot-1").base_pose[0] > x0 + 0.05,  # type: ignore[union-attr]
-              WAIT_S, "the youbot to drive")
+        x0 = obs.state("youbot-1").base_pose[0]
+        until(lambda: obs.state("youbot-1").base_pose[0] > x0 + 0.05, WAIT_S,
+              "the youbot to drive", guard=sup.check)
         sup.kill("play")
         killed = time.monotonic()
-        until(lambda: obs.states.last("youbot-1").status == "holding", 10.0,  # type: ignore[union-attr]
+        until(lambda: obs.state("youbot-1").status == "holding", 10.0,
               "the youbot to hold")
         to_hold = time.monotonic() - killed
         assert to_hold < TTL_MS / 1000 + 1.5, f"held {to_hold:.2f} s after the client died"
 
         # and its base comes to rest (it brakes jerk-limited from where the TTL caught it)
-        x = obs.states.last("youbot-1").base_pose[0]  # type: ignore[union-attr]
+        x = obs.state("youbot-1").base_pose[0]
         while True:
             assert obs.states.wait_fresh(["youbot-1"], time.time_ns() + 200_000_000, 5.0)
-            x, dx = obs.states.last("youbot-1").base_pose[0], x  # type: ignore[union-attr]
+            x, dx = obs.state("youbot-1").base_pose[0], x
             if abs(x - dx) < 0.002:
                 break
             assert time.monotonic() - killed < TTL_MS / 1000 + 5.0, "the base did not stop"

@@ -30,7 +30,7 @@ from kinesphere.deploy.up import Demo
 from kinesphere.keyexpr import KEYS
 from kinesphere.procs import Child, Supervisor
 from kinesphere.protocol import Ack, Command, SpatialCommand, decode, encode
-from kinesphere.zconfig import free_port, loopback_config
+from kinesphere.zconfig import free_port, loopback_config, undeclare
 from support.paths import ROOT
 from support.system import Observer, at_pose
 from support.wait import WAIT_S, until
@@ -75,7 +75,7 @@ class EstopAcks:
                 if stage == "estopped" and sender == ESTOP_SENDER}
 
     def close(self) -> None:
-        self._sub.undeclare()  # type: ignore[no-untyped-call]
+        undeclare(self._sub)
 
 
 def statuses(demo: Demo) -> dict[str, str]:
@@ -92,15 +92,15 @@ def status_lists(endpoint: str, mode: str, capsys: pytest.CaptureFixture[str]) -
 def test_kill_any_service_and_the_rest_keep_talking(
     demo: Demo, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    sup, ep = demo.sup, demo.endpoint
-    assert demo.alive is not None
+    sup, ep, tokens = demo.sup, demo.endpoint, demo.alive
+    assert tokens is not None
     runs = [status_lists(ep, "client", capsys) for _ in range(10)]
     assert all(r == set(ROBOTS) for r in runs), runs
 
     # the databank dies: robots keep running, the hub keeps routing
     held = demo.recorder.snapshot()["youbot-1"]
     sup.kill("databank")
-    until(lambda: not demo.alive.databanks, WAIT_S, "the databank's token to go")  # type: ignore[union-attr]
+    until(lambda: not tokens.databanks, WAIT_S, "the databank's token to go")
     assert demo.recorder.wait_fresh(ROBOTS, time.time_ns(), WAIT_S), "robots went quiet"
 
     # a command now cannot be resolved: each robot keeps its pose and says why
@@ -114,7 +114,7 @@ def test_kill_any_service_and_the_rest_keep_talking(
 
     # an agent dies too: the others are not affected
     sup.kill("agent-khepera-2")
-    until(lambda: "khepera-2" not in demo.alive.robots, WAIT_S, "khepera-2's token to go")  # type: ignore[union-attr]
+    until(lambda: "khepera-2" not in tokens.robots, WAIT_S, "khepera-2's token to go")
     alive = {r for r in ROBOTS if r != "khepera-2"}
 
     # a new operator process joins the hub and e-stops every robot still alive; each acks it

@@ -13,6 +13,7 @@ rules generated from the same fleet file.
 from __future__ import annotations
 
 import time
+from functools import partial
 from pathlib import Path
 
 import pytest
@@ -51,13 +52,13 @@ def _cli(s: Secured, name: str, operator: str, *args: str, sender: str = ""
     return s.sup.wait(name, WAIT_S), child.tail()
 
 
-def _put(config: zenoh.Config, key: str, **fields: object) -> None:
-    cmd: dict[str, object] = dict(seq=1, sent_ns=time.time_ns(), deadman=True, ttl_ms=0,
-                                  session=f"s{time.monotonic_ns()}")
-    cmd.update(fields)
+def _put(config: zenoh.Config, key: str, *, sender: str, seq: int = 1,
+         parts: list[SpatialCommand] | None = None, lease: LeaseAction = LeaseAction.NONE) -> None:
+    cmd = Command(seq=seq, sent_ns=time.time_ns(), deadman=True, ttl_ms=0,
+                  session=f"s{time.monotonic_ns()}", sender=sender, parts=parts or [], lease=lease)
     with session(config=config) as s:
         pub = s.declare_publisher(key)
-        pub.put(encode(Command(**cmd)))  # type: ignore[arg-type]
+        pub.put(encode(cmd))
         undeclare(pub)
 
 
@@ -77,7 +78,7 @@ def test_an_operator_speaks_only_under_its_own_name(secured: Secured) -> None:
          lease=LeaseAction.TAKE)
     _put(bob, KEYS.command(ROBOT), sender="alice", parts=move)  # the plain key: nobody may
     for key in (mine, KEYS.command(ROBOT)):
-        until(lambda key=key: s.denied(f"Put (ingress) on {key} by CN=bob"), WAIT_S,
+        until(partial(s.denied, f"Put (ingress) on {key} by CN=bob"), WAIT_S,
               f"the router to deny bob's put on {key}")
     _put(alice, mine, sender="alice", lease=LeaseAction.ACQUIRE, seq=2)  # traffic after his
     assert obs.states.wait_fresh([ROBOT], time.time_ns() + 300_000_000, WAIT_S)
@@ -101,7 +102,7 @@ def test_only_the_latching_operator_releases_its_estop(secured: Secured) -> None
                      "--timeout", "20")
     assert code == 1 and f"{ROBOT}: REJECTED: estopped" in out, out
     assert obs.states.wait_fresh([ROBOT], time.time_ns() + 300_000_000, WAIT_S)
-    assert obs.states.last(ROBOT).status == "estop"  # type: ignore[union-attr]
+    assert obs.state(ROBOT).status == "estop"
     code, out = _cli(s, "release-alice", "alice", "estop", "--release", "--target", ROBOT,
                      "--timeout", "20")
     assert code == 0 and f"{ROBOT}: released" in out, out
@@ -125,10 +126,10 @@ def test_a_restamped_replay_sends_as_the_replaying_operator(secured: Secured,
         rec.close()
     target = query_pose(obs.session, "youbot", *POSE).joints
     until(lambda: at_pose(obs.states.last(ROBOT), target), WAIT_S, "alice's pose")
-    until(lambda: not obs.states.last(ROBOT).lease_holder,  # type: ignore[union-attr]
+    until(lambda: not obs.state(ROBOT).lease_holder,
           WAIT_S * 2, "alice's lease to expire")
     code, out = _cli(s, "replay-bob", "bob", "replay", str(recording), "--restamp",
                      "--wait", "20")
     assert code == 0 and "replayed" in out, out
-    until(lambda: obs.states.last(ROBOT).lease_holder == "bob",  # type: ignore[union-attr]
+    until(lambda: obs.state(ROBOT).lease_holder == "bob",
           WAIT_S, "bob's replayed commands leasing the robot to bob")

@@ -70,7 +70,7 @@ def start_router(sup: Supervisor, ports: dict[str, int], name: str) -> None:
     if name != "hq":
         argv += ["--link", f"tcp/127.0.0.1:{ports['hq']}"]
     sup.spawn(f"router-{name}", argv)
-    until(lambda: sup.check() or port_open(ports[name]), WAIT_S, f"router {name} to listen")
+    until(lambda: port_open(ports[name]), WAIT_S, f"router {name} to listen", guard=sup.check)
 
 
 SENDER = "mesh-test"
@@ -151,7 +151,7 @@ def test_commands_states_queries_and_estop_cross_the_mesh(mesh: Mesh) -> None:
 
     # an e-stop from the operator site latches every robot at the robot site
     mesh.estop("estop")
-    until(lambda: all(ops.states.last(r).status == "estop" for r in ROBOTS),
+    until(lambda: all(ops.state(r).status == "estop" for r in ROBOTS),
           WAIT_S, "every robot to latch the e-stop", explain=ops.describe)
     latched = Command(seq=LATCHED_SEQ, sent_ns=time.time_ns(), parts=[SpatialCommand(*POSE_B)],
                       deadman=True, ttl_ms=0, sender=SENDER)
@@ -161,14 +161,14 @@ def test_commands_states_queries_and_estop_cross_the_mesh(mesh: Mesh) -> None:
                        and a.seq == LATCHED_SEQ and a.code == "estopped"} == set(ROBOTS),
               WAIT_S, "every robot to refuse the command while latched (acks)",
               explain=lambda: acks[-5:])
-    until(lambda: all(ops.states.last(r).last_command_seq == LATCHED_SEQ for r in ROBOTS),
+    until(lambda: all(ops.state(r).last_command_seq == LATCHED_SEQ for r in ROBOTS),
           WAIT_S, "every robot to report the refused command", explain=ops.describe)
-    assert all(at_pose(ops.states.last(r), a[r]) and ops.states.last(r).status == "estop"
+    assert all(at_pose(ops.states.last(r), a[r]) and ops.state(r).status == "estop"
                for r in ROBOTS), f"a latched robot moved:\n{ops.describe()}"
 
     # released from the operator site, the robots obey the next command
     mesh.estop("release", "--release", "--target", "all")
-    until(lambda: all(ops.states.last(r).status != "estop" for r in ROBOTS),
+    until(lambda: all(ops.state(r).status != "estop" for r in ROBOTS),
           WAIT_S, "every robot to release the e-stop", explain=ops.describe)
     mesh.send("send-b", *map(str, POSE_B))
     until(lambda: all(at_pose(ops.states.last(r), b[r]) for r in ROBOTS), WAIT_S,
@@ -186,15 +186,15 @@ def test_lost_middle_router_robot_holds_within_ttl(mesh: Mesh) -> None:
                        str(mesh.configs["ops"]), "--wait", "20"])
 
     def x() -> float:
-        return site.states.last(robot).base_pose[0]
+        return site.state(robot).base_pose[0]
 
     x0 = x()
-    until(lambda: sup.check() or x() > x0 + 0.05, WAIT_S, "the youbot to drive")
+    until(lambda: x() > x0 + 0.05, WAIT_S, "the youbot to drive", guard=sup.check)
 
     # the link between the sites goes: headquarters' router dies mid-stream
     sup.kill("router-hq")
     killed = time.monotonic()
-    until(lambda: site.states.last(robot).status == "holding", 10.0,
+    until(lambda: site.state(robot).status == "holding", 10.0,
           "the youbot to hold", explain=site.describe)
     to_hold = time.monotonic() - killed
     assert to_hold < TTL_MS / 1000 + 1.5, f"held {to_hold:.2f} s after the link went"
@@ -218,8 +218,9 @@ def test_lost_middle_router_robot_holds_within_ttl(mesh: Mesh) -> None:
     # headquarters comes back: the site routers re-link by themselves, the databank's and the
     # robots' sessions find it again, and a new command crosses the mesh
     start_router(sup, mesh.ports, "hq")
-    until(lambda: sup.check() or (set(ROBOTS) <= ops.alive.robots and bool(ops.alive.databanks)),
-          WAIT_S, "the mesh to re-form (robots and databank alive at the operator site)")
+    until(lambda: set(ROBOTS) <= ops.alive.robots and bool(ops.alive.databanks), WAIT_S,
+          "the mesh to re-form (robots and databank alive at the operator site)",
+          guard=sup.check)
     a = query_pose(ops.session, "youbot", *POSE_A).joints
     mesh.send("send-after", *map(str, POSE_A))
     until(lambda: at_pose(ops.states.last(robot), a), WAIT_S, "the youbot at pose A again",
@@ -239,8 +240,8 @@ def test_tls_mesh_each_router_judges_its_own_clients(tmp_path: Path, sup: Superv
               "hall": sup.spawn("router-hall", [
                   "router", "--config", str(configs["router"]), *fleet,
                   "--listen", f"tls/127.0.0.1:{hall}", "--link", f"tls/localhost:{hq}"])}
-    until(lambda: sup.check() or (port_open(hq) and port_open(hall)), WAIT_S,
-          "both TLS routers to listen")
+    until(lambda: port_open(hq) and port_open(hall), WAIT_S, "both TLS routers to listen",
+          guard=sup.check)
     key = Keys.signed(KEYS.command("hall-robot"), "alice")
     got: list[str] = []
     arrived = threading.Condition()

@@ -80,7 +80,7 @@ class AckLedger:
             return len(self.heard)
 
     def close(self) -> None:
-        self._sub.undeclare()  # type: ignore[no-untyped-call]
+        undeclare(self._sub)
 
 
 class SoakOperator:
@@ -94,11 +94,13 @@ class SoakOperator:
         self.sent: dict[int, tuple[str, ...]] = {}
         self.kind: dict[int, str] = {}
 
-    def put(self, robots: tuple[str, ...], kind: str, **fields: object) -> int:
+    def put(self, robots: tuple[str, ...], kind: str, *,
+            parts: list[pr.SpatialCommand] | None = None, drive: pr.Drive | None = None,
+            deadman: bool = True, stop: bool = False) -> int:
         self.seq += 1
         cmd = pr.Command(seq=self.seq, sent_ns=time.time_ns(), ttl_ms=TTL_MS,
-                         sender=self.sender, session=self.session_id,
-                         deadman=bool(fields.pop("deadman", True)), **fields)  # type: ignore[arg-type]
+                         sender=self.sender, session=self.session_id, deadman=deadman,
+                         parts=parts or [], drive=drive, stop=stop)
         keys = [KEYS.command("*")] if len(robots) == len(ROBOTS) else [KEYS.command(r)
                                                                           for r in robots]
         for key in keys:
@@ -183,9 +185,9 @@ def test_two_operators_four_robots_and_a_restarting_databank(
         for rid, platform in ROBOTS.items():
             sup.spawn(f"agent-{rid}", ["agent", platform, "--id", rid, "--rate", "250",
                                        *client_args(endpoint)])
-        until(lambda: sup.check() or (set(ROBOTS) <= alive.robots and bool(alive.databanks)
-                                      and set(ROBOTS) <= set(recorder.snapshot())),
-              WAIT_S * 2, "the databank and four robots")
+        until(lambda: set(ROBOTS) <= alive.robots and bool(alive.databanks)
+              and set(ROBOTS) <= set(recorder.snapshot()),
+              WAIT_S * 2, "the databank and four robots", guard=sup.check)
         poses = {r: arm_poses(z, ROBOTS[r]) for r in ("yb", "pb")}
         ops = {name: SoakOperator(name, z) for name in HOLDS}
         rng = random.Random(11)
