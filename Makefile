@@ -48,8 +48,10 @@ browser:
 lint: $(STAMP)
 	$(BIN)/ruff check $(SRC)
 
+# Strict mypy over every distribution's package, the tests and the benchmarks: the tests import
+# their shared code as `support.*` (pytest's pythonpath), so mypy_path names tests/ too.
 typecheck: $(STAMP)
-	$(BIN)/mypy kinesphere $(addsuffix /kinesphere,$(filter-out .,$(PARTS)))
+	$(BIN)/mypy kinesphere $(addsuffix /kinesphere,$(filter-out .,$(PARTS))) tests bench
 
 layers: $(STAMP)
 	$(BIN)/lint-imports
