@@ -133,7 +133,7 @@ def test_kill_any_service_and_the_rest_keep_talking(
 
 
 @dataclass
-class Step:
+class TourStep:
     """One command of the README's tour and the lines the README shows it print."""
 
     words: list[str]
@@ -147,18 +147,18 @@ NUMBER = re.compile(r"[-+]?\d+(?:\.\d+)?")
 ANSI = re.compile(r"\x1b\[[0-9;]*m")
 
 
-def tour() -> tuple[list[Step], str]:
+def tour() -> tuple[list[TourStep], str]:
     """The console blocks of the README's "A five-minute tour", and the sender it names."""
     text = (ROOT / "README.md").read_text(encoding="utf-8")
     start = text.index("\n## A five-minute tour\n")
     section = text[start : text.find("\n## ", start + 1)]
-    steps: list[Step] = []
+    steps: list[TourStep] = []
     for block in re.findall(r"```console\n(.*?)```", section, flags=re.S):
         for line in block.splitlines():
             if line.startswith("$ "):
                 words = shlex.split(line[2:], comments=True)
                 background = words[-1] == "&"
-                steps.append(Step(words[:-1] if background else words, background))
+                steps.append(TourStep(words[:-1] if background else words, background))
             else:
                 steps[-1].shown.append(line)
     sender = re.search(r"\(here `([^`]+)`\)", section)
