@@ -21,7 +21,7 @@ import pytest
 
 from kinesphere.procs import Supervisor
 from kinesphere.zconfig import free_port
-from support.system import Observer, at_pose, query_pose, router_hub
+from support.system import Observer, at_pose, log_folder, query_pose, router_hub
 from support.view import browser_page, coloured, pixels
 from support.wait import WAIT_S, until
 
@@ -72,7 +72,7 @@ def test_view_draws_and_moves_robots(sup: Supervisor) -> None:
 
             until(both_drawn, WAIT_S, "both robots drawn in the canvas", every=0.5)
             before = _steady(page)
-            page.screenshot(path=str(sup.log_dir / "view-before.png"))
+            page.screenshot(path=str(log_folder(sup) / "view-before.png"))
 
             target = query_pose(obs.session, "baxter", *POSE).joints
             sup.spawn("send", ["send", "baxter-1", *map(str, POSE), "--connect", endpoint,
@@ -84,7 +84,7 @@ def test_view_draws_and_moves_robots(sup: Supervisor) -> None:
                 timeout=WAIT_S * 1000)
             page.get_by_text("baxter-1 (baxter): idle").wait_for(timeout=WAIT_S * 1000)
             after = _steady(page)
-            page.screenshot(path=str(sup.log_dir / "view-after.png"))
+            page.screenshot(path=str(log_folder(sup) / "view-after.png"))
     finally:
         obs.close()
     changed = np.abs(after - before).max(axis=2) > 40

@@ -23,7 +23,7 @@ from kinesphere.keyexpr import KEYS
 from kinesphere.procs import Supervisor
 from kinesphere.zconfig import loopback_config, loopback_hub, undeclare
 from support.soak import MIB, SCALE, FloodTally, mib, rss
-from support.system import Observer
+from support.system import Observer, log_of
 from support.wait import WAIT_S, until
 
 pytestmark = pytest.mark.processes
@@ -179,7 +179,7 @@ def test_a_flood_of_malformed_commands_moves_nothing(sup: Supervisor) -> None:
             after, moved = rss(agent.pid), max(
                 abs(a - b) for a, b in zip(pose(obs), rest, strict=True))
             gap = stream.max_gap(start)
-            log_lines = len(agent.log_path.read_text(errors="replace").splitlines())
+            log_lines = len(log_of(agent).read_text(errors="replace").splitlines())
             tally.extra = {"motion after stop": f"{moved:.2e}", "longest state gap":
                            f"{gap * 1000:.0f} ms", "RSS before": mib(before),
                            "half-way": mib(mid), "after": mib(after),

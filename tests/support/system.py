@@ -18,7 +18,7 @@ import pytest
 import zenoh
 
 from kinesphere.deploy.watch import Alive, StateRecorder, watch_alive
-from kinesphere.procs import Supervisor
+from kinesphere.procs import Child, Supervisor
 from kinesphere.protocol import Pose, RobotState, decode, error_from_reply
 from kinesphere.services.ecl.store import DATA_DIR
 from kinesphere.zconfig import (
@@ -166,6 +166,18 @@ def router_hub(sup: Supervisor) -> str:
     return endpoint
 
 
+def log_of(child: Child) -> Path:
+    """The log file of ``child``: the tests' supervisors keep one per child."""
+    assert child.log_path is not None, f"{child.name} writes to the test's own output"
+    return child.log_path
+
+
+def log_folder(sup: Supervisor) -> Path:
+    """The folder of ``sup``'s logs (the tests' supervisors always keep one)."""
+    assert sup.log_dir is not None, "this supervisor keeps no logs"
+    return sup.log_dir
+
+
 def supervisor(log_dir: Path) -> Iterator[Supervisor]:
     """A Supervisor that stops everything and checks for leftovers at teardown."""
     sup = Supervisor(log_dir)
@@ -249,6 +261,6 @@ def secured_system(tmp: Path) -> Iterator[Secured]:
         obs = Observer(session_config(config_file=configs["operator"]))
         try:
             obs.wait_alive({SECURED_ROBOT}, databank=True, sup=sup)
-            yield Secured(sup, configs, certs, port, router.log_path, obs)
+            yield Secured(sup, configs, certs, port, log_of(router), obs)
         finally:
             obs.close()

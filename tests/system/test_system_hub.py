@@ -32,7 +32,7 @@ from kinesphere.procs import Child, Supervisor
 from kinesphere.protocol import Ack, Command, SpatialCommand, decode, encode
 from kinesphere.zconfig import free_port, loopback_config, undeclare
 from support.paths import ROOT
-from support.system import Observer, at_pose
+from support.system import Observer, at_pose, log_of
 from support.wait import WAIT_S, until
 
 pytestmark = pytest.mark.processes
@@ -186,7 +186,7 @@ def unprinted(shown: list[str], output: str) -> list[str]:
 
 def log(child: Child, since: int = 0) -> str:
     """What ``child`` printed (after the first ``since`` bytes of its log)."""
-    with child.log_path.open("rb") as f:
+    with log_of(child).open("rb") as f:
         f.seek(since)
         return f.read().decode("utf-8", errors="replace")
 
@@ -263,7 +263,7 @@ def test_the_readme_tour_runs_as_written(
             acks.close()
         # the databank again, as the tour started it, for the tour's last step
         bank = next(step for step in steps if step.words[1:2] == ["databank"])
-        before = sup.children["databank"].log_path.stat().st_size  # the log is appended to
+        before = log_of(sup.children["databank"]).stat().st_size  # the log is appended to
         wait_printed(sup, sup.spawn("databank", bank.words[1:] + ["--connect", ep]), bank.shown,
                      since=before)
         assert sup.stop("agent-k2") == 0

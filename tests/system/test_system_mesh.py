@@ -35,6 +35,7 @@ from support.system import (
     client_config,
     databank_args,
     localize,
+    log_of,
     make_certs,
     port_open,
     query_pose,
@@ -266,7 +267,7 @@ def test_tls_mesh_each_router_judges_its_own_clients(tmp_path: Path, sup: Superv
         assert wait_matching(pub, WAIT_S), "the command subscriber never reached hq"
         superuser.put(key, b"superuser")
         until(lambda: "access denied: Put (ingress) on " + key + " by CN=superuser"
-              in router["hq"].log_path.read_text(errors="replace"), WAIT_S,
+              in log_of(router["hq"]).read_text(errors="replace"), WAIT_S,
               "hq to deny and log the superuser's command")
         deadline = time.monotonic() + WAIT_S
         with arrived:  # put again until one arrives: a put on a link just made may be dropped
@@ -275,4 +276,4 @@ def test_tls_mesh_each_router_judges_its_own_clients(tmp_path: Path, sup: Superv
                 arrived.wait_for(lambda: "operator" in got, 1.0)
         undeclare(pub, sub)
     assert got and set(got) == {"operator"}, f"a denied command crossed the mesh: {got}"
-    assert "access denied" not in router["hall"].log_path.read_text(errors="replace")
+    assert "access denied" not in log_of(router["hall"]).read_text(errors="replace")
