@@ -13,7 +13,6 @@ import time
 
 import mujoco
 import numpy as np
-import zenoh
 from ruckig import Synchronization
 
 from kinesphere import zconfig
@@ -27,6 +26,7 @@ from kinesphere.robots.agent.pacing import STALL_NS
 from kinesphere.robots.agent.resolver import parts_key
 from kinesphere.robots.agent.runtime import Agent, AgentOptions
 from support.agents import DatabankProcess, far
+from support.network import Hub
 
 DT = 0.002
 
@@ -146,7 +146,7 @@ def payload(seq: int, parts: list[tuple[str, str, str, float]] | None = None,
 
 
 def test_a_fleet_robot_steps_exactly_like_a_lone_agent(
-    hub: tuple[zenoh.Session, str], databank: DatabankProcess
+    hub: Hub, databank: DatabankProcess
 ) -> None:
     """The same commands at the same steps to robots of a fleet host (lean steps, followers,
     batched stops) and to lone agents (their whole cycle every step) from the same state:
@@ -241,7 +241,7 @@ def test_a_fleet_robot_steps_exactly_like_a_lone_agent(
 
 
 def test_a_resting_fleet_robot_sees_no_stall_but_a_stalled_loop_ages_new_clocks(
-    hub: tuple[zenoh.Session, str]
+    hub: Hub
 ) -> None:
     """A robot at rest on a fleet host runs no cycle of its own for a long while: the loop
     still stepped, so a command from a clock never heard is fresh. When the loop itself did

@@ -14,6 +14,7 @@ import sys
 import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
+from functools import partial
 from pathlib import Path
 
 import psutil
@@ -27,7 +28,7 @@ from kinesphere.protocol import SpatialCommand
 from kinesphere.robots.agent.fleet import RobotSpec
 from kinesphere.robots.agent.workers import check_listen, deal, share, worker_flag
 from support.agents import AckWatch, CommandSender, DatabankProcess, StateWatch, far, joints_close
-from support.network import KEYS
+from support.network import KEYS, Hub
 from support.paths import ROOT
 from support.wait import WAIT_S
 
@@ -126,7 +127,7 @@ def workers(proc: subprocess.Popen[bytes]) -> dict[int, psutil.Process]:
 
 
 def test_workers_run_robots_of_their_own_and_one_killed_takes_only_its_robots(
-    tmp_path: Path, hub: tuple[zenoh.Session, str], databank: DatabankProcess
+    tmp_path: Path, hub: Hub, databank: DatabankProcess
 ) -> None:
     session, endpoint = hub
     specs = [RobotSpec(p, rid) for rid, p in ROBOTS.items()]
@@ -150,7 +151,7 @@ def test_workers_run_robots_of_their_own_and_one_killed_takes_only_its_robots(
             before = watches[idle].wait(lambda st: True, f"a state of {idle}")
             for rid in (one, two):
                 seq = ops[rid].send(poses[rid])
-                watches[rid].after(seq, lambda st, rid=rid: joints_close(st, targets[rid], 0.02),
+                watches[rid].after(seq, partial(joints_close, joints=targets[rid], tol=0.02),
                                    f"{rid} at its pose")
                 acks.of(f"op-{rid}", seq, "reached")
             now = watches[idle].wait(lambda st: st.seq > before.seq + 5, f"{idle} states")
