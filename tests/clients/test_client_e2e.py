@@ -113,7 +113,7 @@ class SdlRun:
     released: float  # the deadman let go
 
 
-def through_sdl(fleet: ClientFleet, robot: str, steps: dict[int, Callable[[VirtualPad], None]],
+def through_sdl(fleet: ClientFleet, robot: str, steps: dict[int, Callable[[VirtualPad], object]],
                 release_at: int) -> SdlRun:
     """Play ``steps`` (tick -> what to do on the pad) on an SDL virtual GameController
     driving a gamepad client aimed at ``robot``, let go of the deadman at ``release_at``."""
