@@ -33,9 +33,9 @@ from kinesphere.protocol import CompoundRequest, Pose, SpatialCommand, encode
 from kinesphere.query import get_one
 from kinesphere.robots.agent.fleet import RobotSpec
 from kinesphere.vocabulary import lookup, vocabulary
-from support.agents import Databank, running_fleet_host
-from support.nested import Body, Segment, degrees
-from support.network import KEYS
+from support.agents import DatabankProcess, running_fleet_host
+from support.nested import MeasuredBody, SegmentEnds, degrees
+from support.network import KEYS, Hub
 from support.paths import ROOT
 from support.wait import WAIT_S
 
@@ -84,13 +84,13 @@ def player_vector(direction: str, level: str) -> np.ndarray:
     return np.array([np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.cos(theta)])
 
 
-def segments(body: Body) -> dict[str, Segment]:
+def segments(body: MeasuredBody) -> dict[str, SegmentEnds]:
     """Score column -> the segment the body's vocabulary names for it."""
     words = lookup(vocabulary(body.eurdf))
     out = {}
     for column, (limb, origin) in PARTS.items():
         if words[limb].label and words[origin].label:
-            out[column] = Segment(words[origin].label, words[limb].end or words[limb].label)
+            out[column] = SegmentEnds(words[origin].label, words[limb].end or words[limb].label)
     return out
 
 
@@ -98,8 +98,9 @@ def side_of(column: str) -> str:
     return column.split()[0]
 
 
-def target_cells(session: zenoh.Session, platform: str, body: Body, parts: dict[str, Segment],
-                 editor: ModuleType, raw: dict[str, list[str]]) -> dict[str, tuple[str, str]]:
+def target_cells(session: zenoh.Session, platform: str, body: MeasuredBody,
+                 parts: dict[str, SegmentEnds], editor: ModuleType, raw: dict[str, list[str]]
+                 ) -> dict[str, tuple[str, str]]:
     """Each arm column's cell in the databank's own pose for the keyframe (asked as the robot
     asks it, every performed part at once), notated by LabanEditor on yourdfpy's kinematics;
     none when that pose has the arms touching something (MuJoCo's contacts): the evidence
@@ -121,7 +122,7 @@ def target_cells(session: zenoh.Session, platform: str, body: Body, parts: dict[
     return out
 
 
-def touches(platform: str, body: Body, joints: dict[str, float]) -> bool:
+def touches(platform: str, body: MeasuredBody, joints: dict[str, float]) -> bool:
     """Whether an arm touches anything in ``joints`` (MuJoCo's contact detection)."""
     pm = platform_model(platform)
     m, data = pm.model, mujoco.MjData(pm.model)
@@ -142,7 +143,7 @@ def performed_slug(direction: str, level: str) -> str:
 
 
 def test_play_scores_on_four_bodies_notated_back_by_labaneditor(
-    hub: tuple[zenoh.Session, str], databank: Databank, tmp_path: Path,
+    hub: Hub, databank: DatabankProcess, tmp_path: Path,
     capsys: pytest.CaptureFixture[str], editor: ModuleType,
 ) -> None:
     session, endpoint = hub
@@ -213,11 +214,11 @@ def measured(session: zenoh.Session, reports: list[dict[str, Any]],
     """Every robot's :class:`Tally` from ``--report`` files (the joint states it reported),
     by yourdfpy and LabanEditor, against the scores as ``json`` read them."""
     out: dict[str, Tally] = {}
-    bodies: dict[str, tuple[Body, dict[str, Segment]]] = {}
+    bodies: dict[str, tuple[MeasuredBody, dict[str, SegmentEnds]]] = {}
     for report in reports:
         for robot in report["robots"]:
             if robot["platform"] not in bodies:
-                body = Body(robot["platform"])
+                body = MeasuredBody(robot["platform"])
                 bodies[robot["platform"]] = (body, segments(body))
             body, parts = bodies[robot["platform"]]
             t = out.setdefault(robot["robot"], Tally())

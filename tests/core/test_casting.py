@@ -12,7 +12,7 @@ from kinesphere.eurdf import load_eurdf
 from kinesphere.platforms.platform import load_platform
 from kinesphere.pointing import Pointing
 from kinesphere.vocabulary import vocabulary
-from support.nested import Body, Segment
+from support.nested import MeasuredBody, SegmentEnds
 
 ARMS = ("right elbow", "right wrist", "left elbow", "left wrist")
 
@@ -42,7 +42,7 @@ def test_parts_point_as_yourdfpy_measures_them(platform: str) -> None:
     c = cast(platform, vocabulary(p.eurdf), p.base.kind)
     assert p.eurdf.path is not None
     pointing = Pointing(load_eurdf(p.eurdf.path.read_text(encoding="utf-8")))
-    body = Body(platform)
+    body = MeasuredBody(platform)
     rng = np.random.default_rng(3)
     names = list(p.eurdf.limits)
     for _ in range(20):
@@ -53,4 +53,4 @@ def test_parts_point_as_yourdfpy_measures_them(platform: str) -> None:
         body.pose(joints)
         for r, v in zip(c.roles, ours, strict=True):
             assert v is not None
-            np.testing.assert_allclose(v, body.direction(Segment(r.start, r.end)), atol=1e-6)
+            np.testing.assert_allclose(v, body.direction(SegmentEnds(r.start, r.end)), atol=1e-6)
