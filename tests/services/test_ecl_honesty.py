@@ -164,10 +164,9 @@ def test_sizes_grow_by_the_limbs_rule(name: str) -> None:
     rows = [r for r in shipped(name).rows() if r["joints"] and r["direction"] != "place-middle"]
     cells: dict[tuple[str, str, str], list[np.ndarray]] = {}
     for r in rows:
-        origin = origin_of(pm, neutral, r["origin"])
+        at = origin_of(pm, neutral, r["origin"])
         tip = tip_world(pm, configure(pm, full(r)), r["limb"])
-        cells.setdefault((r["limb"], r["origin"], r["direction"]), []).append(
-            rot.T @ (tip - origin))
+        cells.setdefault((r["limb"], r["origin"], r["direction"]), []).append(rot.T @ (tip - at))
     assert cells
     for (limb, origin, slug), tips in cells.items():
         pair = f"{limb}/{origin}"

@@ -65,8 +65,8 @@ def test_an_arm_that_bends_reaches_near_mid_and_far(name: str, limb: str, origin
     cells = tips(name, limb, origin)
     whole = [c for c in cells.values() if {1, 2, 3} <= set(c)]
     assert len(whole) >= 10, (name, limb, len(whole))
-    near = [np.linalg.norm(c[1]) / np.linalg.norm(c[3]) for c in whole]
-    mid = [np.linalg.norm(c[2]) / np.linalg.norm(c[3]) for c in whole]
+    near = [float(np.linalg.norm(c[1]) / np.linalg.norm(c[3])) for c in whole]
+    mid = [float(np.linalg.norm(c[2]) / np.linalg.norm(c[3])) for c in whole]
     assert statistics.median(near) <= 0.7, (name, limb, statistics.median(near))
     assert statistics.median(near) < statistics.median(mid) < 1.0
     for d, c in cells.items():

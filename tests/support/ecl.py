@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from functools import cache
 from pathlib import Path
+from typing import Any
 
 import mujoco
 import numpy as np
@@ -30,7 +31,7 @@ def tip_world(pm: PlatformModel, data: mujoco.MjData, limb: str) -> np.ndarray:
     return np.asarray(data.xpos[body] + data.xmat[body].reshape(3, 3) @ point)
 
 
-def full(row: dict) -> dict[str, float]:
+def full(row: dict[str, Any]) -> dict[str, float]:
     """A stored row's joints and its support (a stance leg)."""
     return {**row["joints"], **row.get("support", {})}
 
