@@ -12,7 +12,6 @@ kinesphere's reader.
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import sys
 from dataclasses import dataclass, field
@@ -36,10 +35,8 @@ from kinesphere.vocabulary import lookup, vocabulary
 from support.agents import DatabankProcess, running_fleet_host
 from support.nested import MeasuredBody, SegmentEnds, degrees
 from support.network import KEYS, Hub
-from support.paths import ROOT
 from support.wait import WAIT_S
 
-ORACLE = ROOT / "tests" / "data" / "labanotationsuite" / "labanProcessor.py"
 GESTURES = ("big2", "think_d_high_s")
 ROBOTS = [RobotSpec("baxter", "lab-baxter"), RobotSpec("nao", "lab-nao"),
           RobotSpec("youbot", "lab-youbot"), RobotSpec("packbot", "lab-packbot")]
@@ -55,15 +52,6 @@ LATE_MS = 100
 """A keyframe reached this late (a few control steps on a loaded machine) counts as reached."""
 MEASURED = 4
 """At least a keyframe's arm cells (on a loaded machine more keyframes are late: fewer)."""
-
-
-@pytest.fixture(scope="module")
-def editor() -> ModuleType:
-    spec = importlib.util.spec_from_file_location("labanProcessor", ORACLE)
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 def shipped_score(name: str) -> dict[str, dict[str, dict[str, list[str]]]]:
@@ -99,7 +87,7 @@ def side_of(column: str) -> str:
 
 
 def target_cells(session: zenoh.Session, platform: str, body: MeasuredBody,
-                 parts: dict[str, SegmentEnds], editor: ModuleType, raw: dict[str, list[str]]
+                 parts: dict[str, SegmentEnds], laban_editor: ModuleType, raw: dict[str, list[str]]
                  ) -> dict[str, tuple[str, str]]:
     """Each arm column's cell in the databank's own pose for the keyframe (asked as the robot
     asks it, every performed part at once), notated by LabanEditor on yourdfpy's kinematics;
@@ -117,8 +105,8 @@ def target_cells(session: zenoh.Session, platform: str, body: MeasuredBody,
     body.pose(pose.joints)
     out: dict[str, tuple[str, str]] = {}
     for c in columns:
-        _, theta, phi = editor.to_sphere(body.direction(parts[c]))
-        out[c] = tuple(editor.coordinate2laban(theta, phi))
+        _, theta, phi = laban_editor.to_sphere(body.direction(parts[c]))
+        out[c] = tuple(laban_editor.coordinate2laban(theta, phi))
     return out
 
 
@@ -144,7 +132,7 @@ def performed_slug(direction: str, level: str) -> str:
 
 def test_play_scores_on_four_bodies_notated_back_by_labaneditor(
     hub: Hub, databank: DatabankProcess, tmp_path: Path,
-    capsys: pytest.CaptureFixture[str], editor: ModuleType,
+    capsys: pytest.CaptureFixture[str], laban_editor: ModuleType,
 ) -> None:
     session, endpoint = hub
     zenoh_args = ["--connect", endpoint, "--prefix", KEYS.prefix, "--wait", str(WAIT_S),
@@ -177,7 +165,7 @@ def test_play_scores_on_four_bodies_notated_back_by_labaneditor(
     assert "rotation     not performed: a fixed base" in check.split("lab-nao")[0]
     written = {next(iter(shipped_score(name))): next(iter(shipped_score(name).values()))
                for name in GESTURES}
-    tally = measured(session, [reports[name] for name in GESTURES], written, editor)
+    tally = measured(session, [reports[name] for name in GESTURES], written, laban_editor)
     for spec in ROBOTS:
         t = tally[spec.robot_id]
         print(t.line(spec.platform))
@@ -209,7 +197,7 @@ class Tally:
 
 
 def measured(session: zenoh.Session, reports: list[dict[str, Any]],
-             written: dict[str, dict[str, dict[str, list[str]]]], editor: ModuleType
+             written: dict[str, dict[str, dict[str, list[str]]]], laban_editor: ModuleType
              ) -> dict[str, Tally]:
     """Every robot's :class:`Tally` from ``--report`` files (the joint states it reported),
     by yourdfpy and LabanEditor, against the scores as ``json`` read them."""
@@ -226,15 +214,15 @@ def measured(session: zenoh.Session, reports: list[dict[str, Any]],
             for kf in robot["keyframes"]:
                 raw = written[kf["gesture"]][kf["keyframe"]]
                 assert kf["q"], (robot["robot"], kf["keyframe"], kf["said"])
-                has = target_cells(session, robot["platform"], body, parts, editor, raw)
+                has = target_cells(session, robot["platform"], body, parts, laban_editor, raw)
                 body.pose(dict(zip(kf["joint_names"], kf["q"], strict=True)))
                 for column in t.performs:
                     cell = tuple(raw[column])
                     if cell == ("Place", "Normal"):
                         continue  # no direction: LabanEditor never writes it
                     v = body.direction(parts[column])
-                    _, theta, phi = editor.to_sphere(v)
-                    as_written = tuple(editor.coordinate2laban(theta, phi)) == cell
+                    _, theta, phi = laban_editor.to_sphere(v)
+                    as_written = tuple(laban_editor.coordinate2laban(theta, phi)) == cell
                     t.cells += 1
                     t.same += as_written
                     if has.get(column) != cell or kf["said"] or kf["late_ms"] > LATE_MS:
