@@ -368,15 +368,20 @@ class LimbSolver:
         self.config.update(q)
         return np.asarray(q[self.qadr].copy())
 
-    def _clean_step(self, q: np.ndarray, dq: np.ndarray) -> np.ndarray | None:
-        """``q`` advanced by ``dq`` (limb joints, hinge/slide only), or by a fraction of it,
-        clamped to the limits and free of contacts; None if no fraction is clean."""
+    def clean(self, values: np.ndarray, step: np.ndarray) -> np.ndarray | None:
+        """The limb's joint ``values`` advanced by ``step`` (hinge/slide only), or by a
+        fraction of it (:data:`RETRIES`), clamped to the limits and free of contacts; None if
+        no fraction is clean. The configuration is left at the answer."""
         for fraction in (1.0, *RETRIES):
-            values = np.clip(q[self.qadr] + fraction * dq, self.lower, self.upper)
-            nxt = self.full_q(values)
-            if self.collides(nxt) is None:
-                return nxt  # collides() left the configuration at nxt
+            nxt: np.ndarray = np.clip(values + fraction * step, self.lower, self.upper)
+            if self.collides(self.full_q(nxt)) is None:
+                return nxt
         return None
+
+    def _clean_step(self, q: np.ndarray, dq: np.ndarray) -> np.ndarray | None:
+        """:meth:`clean` of the limb's joints in the whole configuration ``q``."""
+        values = self.clean(q[self.qadr], dq)
+        return None if values is None else self.full_q(values)
 
 
 def _stance(pm: PlatformModel, links: set[str]) -> tuple[tuple[int, ...], frozenset[int]]:

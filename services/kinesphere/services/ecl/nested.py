@@ -445,7 +445,7 @@ class ChainSolver:
                 break
             step = np.zeros(len(ls.joints))
             step[ls.moving] = v[self._dofs]
-            nxt = self._clean(values, step)
+            nxt = ls.clean(values, step)
             if nxt is None:
                 break
             values = nxt
@@ -456,16 +456,6 @@ class ChainSolver:
             if turned < SETTLED_DEG:
                 break
         return values
-
-    def _clean(self, values: np.ndarray, step: np.ndarray) -> np.ndarray | None:
-        """``values`` advanced by ``step`` (or half, or a quarter of it), inside the limits
-        and touching nothing; None when every fraction touches."""
-        ls = self.limb
-        for fraction in (1.0, 0.5, 0.25):
-            nxt = np.clip(values + fraction * step, ls.lower, ls.upper)
-            if ls.collides(ls.full_q(nxt)) is None:
-                return np.asarray(nxt)
-        return None
 
 
 class Nested:
