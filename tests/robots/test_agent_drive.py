@@ -13,9 +13,10 @@ from collections.abc import Callable
 import numpy as np
 
 from kinesphere.laban import Direction
-from kinesphere.protocol import Drive, RobotState, SpatialCommand
+from kinesphere.protocol import AckStage, Drive, RobotState, SpatialCommand, Status
 from kinesphere.robots.agent.base import rotate
 from support.agents import (
+    AckWatch,
     CommandSender,
     DatabankProcess,
     StateWatch,
@@ -92,17 +93,21 @@ def test_packbot_arcs_on_forward_and_yaw_and_never_slides(
     with running_agent(endpoint, "packbot", speed=2.0, trace=trace) as (agent, watch):
         spec = agent.controller.platform.base
         op = CommandSender(session, agent.robot_id)
+        acks = AckWatch(session, agent.robot_id)
         arc = Drive(forward=0.4, yaw=0.4)
         states = stream(op, watch, lambda s: s.base_pose[2] > 2.0, "turned 2 rad on the arc",
                         drive=arc)
         seq = op.send(drive=Drive(left=1.0), ttl_ms=TTL_MS)
-        told = watch.after(seq, lambda s: True, "the push to the left acted on")
+        told = acks.of(op.sender, seq, AckStage.ACCEPTED, "the push to the left accepted")
         rest = watch.after(seq, lambda s: not agent.controller.moving,
                            "a push to the left brakes a tracked base")
         op.close()
     x, y, yaw = states[-1].base_pose
     assert x > 0.5 and y > 0.5 and yaw > 2.0, "forward and round to the left"
-    assert "left ignored" in told.detail and rest.status == "idle"
+    assert "left ignored" in told.detail
+    # no databank runs here: once the catalogue query times out (a loaded machine), the
+    # databank's reachability outranks motion in the status, so either says "at rest"
+    assert rest.status in (Status.IDLE, Status.DATABANK_UNREACHABLE), rest.status
     poses = np.array([s.base_pose for s in states])
     moved = [0]
     for i in range(1, len(poses)):  # every 2 cm of path: the motion points where the base does

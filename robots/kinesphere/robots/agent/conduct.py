@@ -359,8 +359,10 @@ class Conduct:
             if cmd.drive is not None:
                 raise KinesphereError("malformed", "a command turns the base to a heading or "
                                       "drives it, not both")
+        driving = ""
         if cmd.drive is not None:
-            self.set(Status.MOVING, drive_base(base, cmd.drive, self.platform))
+            driving = drive_base(base, cmd.drive, self.platform)
+            self.set(Status.MOVING, driving)
         elif base is not None and base.driving:
             base.stop()
             if self.acks.motion is not None and self.acks.motion.target == _DRIVE:
@@ -372,7 +374,7 @@ class Conduct:
                 self._overtake()
                 base.turn_to(cmd.heading, self._duration(due))
                 self.acks.follow(cmd, ("heading", cmd.heading), due=due)
-            self.acks.send(cmd, AckStage.ACCEPTED)
+            self.acks.send(cmd, AckStage.ACCEPTED, driving)
             return
         key = parts_key(cmd.parts)
         hit = self.resolver.cached(key)
