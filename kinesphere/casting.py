@@ -63,6 +63,14 @@ class Casting:
     turns: bool = False
     far: float = FAR
 
+    def chains(self) -> list[list[Role]]:
+        """The roles grouped as a databank answers them together: the head, each arm's parts
+        (an upper arm with its forearm)."""
+        groups: dict[str, list[Role]] = {}
+        for r in self.roles:
+            groups.setdefault(r.column.split()[0], []).append(r)
+        return list(groups.values())
+
     def role(self, column: str) -> Role | None:
         return next((r for r in self.roles if r.column == column), None)
 

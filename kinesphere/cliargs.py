@@ -180,6 +180,15 @@ def add_wait(parser: argparse.ArgumentParser, default: float, what: str) -> None
     _add_seconds(parser, "--wait", default, what)
 
 
+def add_score_options(parser: argparse.ArgumentParser, every: str) -> None:
+    """``--gesture NAME`` and ``--speed X``: which gesture of a Labanotation score, how fast
+    (``every``: what the command does without ``--gesture``)."""
+    parser.add_argument("--gesture", metavar="NAME",
+                        help=f"a score: only this gesture (default: {every})")
+    parser.add_argument("--speed", type=float, metavar="X",
+                        help="a score: X times as fast as its own times (default: 1)")
+
+
 def platform_list(text: str) -> list[str]:
     """``baxter, nao`` -> ``["baxter", "nao"]`` (empty items dropped)."""
     return [name for name in (n.strip() for n in text.split(",")) if name]

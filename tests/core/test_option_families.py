@@ -45,6 +45,7 @@ FAMILIES: dict[str, tuple[str, ...]] = {
     "--duration": ("quit after S seconds", "stop after S seconds"),
     "--exact": ("this direction only: no substitution",),
     "--db": ("databank file to use instead of", "serve this databank file"),
+    "--gesture": ("a score: only this gesture",),
 }
 
 

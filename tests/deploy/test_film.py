@@ -11,8 +11,10 @@ import pytest
 from PIL import Image
 from PIL.GifImagePlugin import GifImageFile
 
+from kinesphere.clients.orders import score_play
 from kinesphere.clients.orders.phrases import load_phrase
-from kinesphere.deploy.film import CAPTION_H, PLATFORMS, render
+from kinesphere.deploy.film import CAPTION_H, HOLD_S, PLATFORMS, UPBEAT_S, render
+from kinesphere.errors import KinesphereError
 from support.paths import ROOT
 
 PHRASE = ROOT / "clients" / "phrases" / "left_high.toml"
@@ -38,3 +40,26 @@ def test_left_high_film(tmp_path: Path) -> None:
         tile = np.s_[CAPTION_H + 16 : H + CAPTION_H - 20, j * W : (j + 1) * W]
         changed = (np.abs(middle[tile] - first[tile]).max(axis=2) > 40).sum()
         assert changed > 30, f"{name} did not move between the first and middle frames"
+
+
+@pytest.mark.processes  # ffmpeg encodes the film
+def test_a_score_film_shows_every_body_performing_it(tmp_path: Path) -> None:
+    """``think_d_high_s``: both hands up to the chin, the body turned 60 degrees right, and
+    back; each body moves (the one-armed ones at least turn), the frames span the score."""
+    mp4 = tmp_path / "think.mp4"
+    n = render("think_d_high_s", mp4, None, PLATFORMS, W, H, FPS, speed=2.0)
+    score = score_play.load("think_d_high_s").gestures[0]
+    span = (score.keyframes[-1].time_ms - score.keyframes[0].time_ms) / 1e3 / 2.0
+    assert n == math.ceil((UPBEAT_S + span + HOLD_S) * FPS)
+    reader = imageio_ffmpeg.read_frames(str(mp4))
+    reader.__next__()
+    video = [np.frombuffer(f, np.uint8).reshape(H + CAPTION_H, W * len(PLATFORMS), 3)
+             for f in reader]
+    assert len(video) == n
+    first, turned = video[0].astype(int), video[round((UPBEAT_S + 0.6) * FPS)].astype(int)
+    for j, name in enumerate(PLATFORMS):
+        tile = np.s_[CAPTION_H + 16 : H + CAPTION_H - 20, j * W : (j + 1) * W]
+        changed = (np.abs(turned[tile] - first[tile]).max(axis=2) > 40).sum()
+        assert changed > 30, f"{name} did not move for the score"
+    with pytest.raises(KinesphereError, match="no gesture 'wave'"):
+        render("think_d_high_s", mp4, None, PLATFORMS, W, H, FPS, gesture="wave")

@@ -13,7 +13,12 @@ import argparse
 from collections.abc import Callable
 from typing import Any
 
-from kinesphere.cliargs import add_ros_distro, add_ros_domain, add_zenoh_arguments
+from kinesphere.cliargs import (
+    add_ros_distro,
+    add_ros_domain,
+    add_score_options,
+    add_zenoh_arguments,
+)
 from kinesphere.clients.options import (
     ANSWER,
     JOY_LAYOUTS,
@@ -213,9 +218,7 @@ def register(sub: Any) -> None:
                    help="phrase file (TOML), score file (JSON) or a shipped name")
     add_target(p)
     add_rate(p, "while the phrase or score plays")
-    p.add_argument("--gesture", metavar="NAME", help="a score: play only this gesture")
-    p.add_argument("--speed", type=float, metavar="X",
-                   help="a score: play X times as fast (default 1: the score's own times)")
+    add_score_options(p, "every gesture in turn")
     p.add_argument("--check", action="store_true",
                    help="a score: print what each body performs (and which cells its databank "
                    "cannot) and move nothing")

@@ -18,6 +18,7 @@ from kinesphere.cliargs import (
     add_output,
     add_platform_list,
     add_prefix,
+    add_score_options,
     add_timeout,
     add_zenoh_arguments,
 )
@@ -107,12 +108,18 @@ def register(sub: Any) -> None:
 
     fm = sub.add_parser(
         "film",
-        help="film a movement phrase performed by every body side by side (MP4 and GIF)",
+        help="film a movement phrase or a Labanotation score performed by every body side by "
+        "side (MP4 and GIF)",
         description="Render PHRASE (a phrase file or shipped name) on each platform's real "
         "agent controller with its real ECL, off-screen with MuJoCo, side by side with the "
-        "current command in words, as an MP4 and a GIF.",
+        "current command in words, as an MP4 and a GIF. Or a gesture of a Labanotation score "
+        "(a .json file or a shipped score's name, e.g. big2; see docs/labanotation.md): each "
+        "body performs the parts it has at the score's times, the caption is the keyframe's "
+        "notation.",
     )
-    fm.add_argument("phrase", metavar="PHRASE", help="phrase file (TOML) or shipped name")
+    fm.add_argument("phrase", metavar="PHRASE|SCORE",
+                    help="phrase file (TOML), score file (JSON) or a shipped name")
+    add_score_options(fm, "the score's first")
     add_output(fm, "the video file", default="PHRASE.mp4", metavar="MP4")
     fm.add_argument("--gif", metavar="GIF", help="GIF file (default: the video's name, .gif)")
     fm.add_argument("--no-gif", action="store_true", help="write only the MP4")
@@ -167,6 +174,7 @@ def _film(args: argparse.Namespace) -> int:
 
     out = Path(args.output or f"{Path(args.phrase).stem}.mp4")
     gif = None if args.no_gif else Path(args.gif or out.with_suffix(".gif"))
-    n = render(args.phrase, out, gif, args.platforms, args.width, args.height, args.fps)
+    n = render(args.phrase, out, gif, args.platforms, args.width, args.height, args.fps,
+               args.gesture, 1.0 if args.speed is None else args.speed)
     print(f"wrote {n} frames to {out}" + (f" and {gif}" if gif else ""), file=sys.stderr)
     return 0

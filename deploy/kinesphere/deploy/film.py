@@ -6,13 +6,18 @@ same base controllers) stepped in robot time, its targets answered by its real E
 process, exactly as the agent would get them from the databank. Frames are MuJoCo off-screen
 renders (``MUJOCO_GL=egl``) with the ECL's camera, composed side by side with a caption of
 the current command in words, and written as MP4 (ffmpeg from imageio-ffmpeg) and GIF.
+
+A Labanotation score (``film SCORE.json``) is filmed the same way: each body performs the parts
+it has (:mod:`kinesphere.casting`), each keyframe reached at the score's time where the body's
+limits allow (the agent's timed retarget), a mobile base turning to the score's facing; the
+caption is the keyframe's notation, the tile says what the body does not perform.
 """
 
 from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Final
@@ -40,6 +45,9 @@ class Performer:
     camera: Any
     names: dict[str, str]
     note: str = ""
+    casting: Any = None
+    """A score's casting on this body (None for a phrase)."""
+    start_yaw: float = 0.0
 
 
 def _font(size: int) -> ImageFont.FreeTypeFont | ImageFont.ImageFont:
@@ -49,8 +57,21 @@ def _font(size: int) -> ImageFont.FreeTypeFont | ImageFont.ImageFont:
         return ImageFont.load_default()
 
 
-def _performers(platforms: Sequence[str], phrase: Any, width: int, height: int
-                ) -> list[Performer]:
+@dataclass(frozen=True)
+class Cue:
+    """From ``at`` seconds on, every body goes to its next target (``start``); the caption
+    says ``heading``, each tile ``words(performer)``."""
+
+    at: float
+    heading: str
+    start: Callable[[Performer], None]
+    words: Callable[[Performer], str]
+
+
+def _performers(platforms: Sequence[str], targets_of: Callable[[str, Any], list[list[Any]]],
+                width: int, height: int) -> list[Performer]:
+    """A performer per platform, its camera framing the poses ``targets_of(platform, ecl)``
+    (lists of parts) it will take."""
     from kinesphere.platforms.mjcf import platform_model
     from kinesphere.robots.agent.bodies import make_body
     from kinesphere.robots.agent.controller import Controller
@@ -63,9 +84,9 @@ def _performers(platforms: Sequence[str], phrase: Any, width: int, height: int
         pm = platform_model(name)
         ecl = Ecl.open(name)
         targets = []
-        for step in phrase.steps:
+        for parts in targets_of(name, ecl):
             try:
-                targets.append(pose_qpos(pm, _resolve(ecl, step.parts)))
+                targets.append(pose_qpos(pm, _resolve(ecl, parts)))
             except KinesphereError:
                 pass
         body = make_body("mujoco", name, 1.0 / CONTROL_HZ)  # the agent's default body
@@ -123,7 +144,7 @@ def _tile(p: Performer, words: str, width: int, height: int) -> Image.Image:
     img: Image.Image = p.camera.shoot(p.controller.body.data.qpos)
     draw = ImageDraw.Draw(img)
     draw.text((5, 4), p.name, fill=(0, 0, 0), font=_font(14))
-    lines = [words]
+    lines = [words] if words else []
     if p.note:
         lines.append(p.note)
     draw.text((5, height - 16 * len(lines) - 2), _ascii("\n".join(lines)), fill=(40, 40, 40),
@@ -131,49 +152,154 @@ def _tile(p: Performer, words: str, width: int, height: int) -> Image.Image:
     return img
 
 
+def _phrase_cues(phrase: Any) -> tuple[list[Cue], float]:
+    """A phrase's steps as cues, and its duration."""
+    from kinesphere.words import drive_words, part_words
+
+    cues, at = [], 0.0
+    for i, step in enumerate(phrase.steps):
+        heading = f"{phrase.name} · step {i + 1}/{len(phrase.steps)}"
+        heading += f": {step.note}" if step.note else ""
+
+        def words(p: Performer, step: Any = step) -> str:
+            return " + ".join([*(part_words(x, p.names) for x in step.parts),
+                               *([drive_words(step.drive)] if step.drive else [])])
+
+        def start(p: Performer, step: Any = step) -> None:
+            _start(p, step)
+
+        cues.append(Cue(at, heading, start, words))
+        at += step.duration
+    return cues, at
+
+
+UPBEAT_S: Final = 1.5
+"""A score's first keyframe: the starting pose, reached before the score's clock starts."""
+HOLD_S: Final = 1.0
+"""The last keyframe held this long at the end of a score's film."""
+
+
+def _score_cues(gesture: Any, speed: float) -> tuple[list[Cue], float]:
+    """A gesture's keyframes as cues (each toward its keyframe's time), and the duration."""
+    first = gesture.keyframes[0]
+    due = [UPBEAT_S + (k.time_ms - first.time_ms) / 1e3 / speed for k in gesture.keyframes]
+    cues = []
+    for i, kf in enumerate(gesture.keyframes):
+        at = 0.0 if i == 0 else due[i - 1]
+        arrive = None if i == 0 else due[i] - at
+        heading = (f"{gesture.name} · {kf.name} ({i + 1}/{len(gesture.keyframes)}, at "
+                   f"{due[i] - UPBEAT_S:.1f} s)\n{kf.notation()}")
+        def start(p: Performer, kf: Any = kf, arrive: float | None = arrive) -> None:
+            _perform(p, kf, arrive)
+
+        cues.append(Cue(at, heading, start, _nothing))
+    return cues, due[-1] + HOLD_S
+
+
+def _nothing(p: Performer) -> str:
+    return ""  # the tile says what the body does not perform (its note)
+
+
+def _perform(p: Performer, kf: Any, arrive: float | None) -> None:
+    """One keyframe on one body as ``play`` sends it: its parts at once (the chains its ECL
+    refuses left out), arriving ``arrive`` seconds from now, a mobile base turning."""
+    casting = p.casting
+    assert casting is not None
+    ctrl, kept, lacking = p.controller, [], list[str]()
+    for chain in casting.chains():
+        try:
+            _resolve(p.ecl, casting.parts(kf, chain))
+            kept.extend(chain)
+        except KinesphereError:
+            lacking.extend(r.column for r in chain)
+    p.note = "; ".join(_short(casting.skipped, lacking))
+    if kept:
+        ctrl.joints.retarget(_resolve(p.ecl, casting.parts(kf, kept)).joints, duration=arrive)
+    if casting.turns and ctrl.base is not None:
+        ctrl.base.turn_to(p.start_yaw + math.radians(kf.turn_deg), arrive)
+    elif kf.turn_deg:
+        p.note += ("; " if p.note else "") + "no turn (fixed base)"
+
+
+def _short(skipped: dict[str, str], lacking: list[str]) -> list[str]:
+    """What a body does not perform, in a tile's few words."""
+    out = []
+    if "head" in skipped:
+        out.append("no head")
+    if any(why.startswith("one arm") for why in skipped.values()):
+        out.append("one arm")
+    sides = dict.fromkeys(c.split()[0] for c in lacking)
+    out += [f"cannot: {s if s == 'head' else s + ' arm'}" for s in sides]
+    return out
+
+
 def render(phrase_ref: str | Path, out: Path, gif: Path | None, platforms: Sequence[str],
-           width: int = 320, height: int = 240, fps: float = 15.0) -> int:
-    """Render the phrase; returns the number of frames written to each file."""
+           width: int = 320, height: int = 240, fps: float = 15.0, gesture: str | None = None,
+           speed: float = 1.0) -> int:
+    """Render the phrase, or one gesture of a score (``gesture``, default its first, its
+    times divided by ``speed``); returns the number of frames written to each file."""
     import imageio_ffmpeg
 
+    from kinesphere.casting import cast
+    from kinesphere.clients.orders import score_play
     from kinesphere.clients.orders.phrases import load_phrase
-    from kinesphere.words import drive_words, part_words
 
     if width % 2 or height % 2 or width < 64 or height < 64:
         raise KinesphereError("malformed", "--width and --height must be even and >= 64")
     if not 1 <= fps <= 60:
         raise KinesphereError("malformed", f"--fps must be 1..60, got {fps}")
-    phrase = load_phrase(phrase_ref)
-    performers = _performers(platforms, phrase, width, height)
+    if not 0.01 <= speed <= 100:
+        raise KinesphereError("malformed", f"--speed must be 0.01..100, got {speed:g}")
+    if score_play.is_score(str(phrase_ref)):
+        score = score_play.load(str(phrase_ref))
+        g = score.gesture(gesture) if gesture else score.gestures[0]
+        cues, duration = _score_cues(g, speed)
+
+        def targets_of(name: str, ecl: Any) -> list[list[Any]]:
+            c = cast(name, ecl.catalogue().vocabulary, ecl.platform.base.kind,
+                     ecl.catalogue().sizes)
+            return [c.parts(kf) for kf in g.keyframes]
+    else:
+        if gesture is not None:
+            raise KinesphereError("malformed", "--gesture applies to a score (SCORE.json)")
+        phrase = load_phrase(phrase_ref)
+        cues, duration = _phrase_cues(phrase)
+
+        def targets_of(name: str, ecl: Any) -> list[list[Any]]:
+            return [list(step.parts) for step in phrase.steps]
+    performers = _performers(platforms, targets_of, width, height)
+    if score_play.is_score(str(phrase_ref)):
+        for p in performers:
+            cat = p.ecl.catalogue()
+            p.casting = cast(p.name, cat.vocabulary, cat.base_kind, cat.sizes)
+            p.start_yaw = p.controller.base_pose()[2] if p.controller.base is not None else 0.0
     total_w = width * len(performers)
     size = (total_w, height + CAPTION_H)
-    frames = math.ceil(phrase.duration * fps)
-    starts = np.cumsum([0.0] + [s.duration for s in phrase.steps])
+    frames = math.ceil(duration * fps)
+    starts = [c.at for c in cues]
     writer = imageio_ffmpeg.write_frames(str(out), size, fps=fps, macro_block_size=1,
                                          quality=7)
     writer.send(None)
     gif_frames: list[Image.Image] = []
-    step_i = -1
+    cue_i = -1
     try:
         for k in range(frames):
             t = k / fps
             i = int(np.searchsorted(starts, t, side="right") - 1)
-            if i != step_i:
-                step_i = i
+            if i != cue_i:
+                cue_i = i
                 for p in performers:
-                    _start(p, phrase.steps[i])
+                    cues[i].start(p)
             for p in performers:
                 while p.controller.time < t - 1e-9:
                     p.controller.step()
-            step = phrase.steps[step_i]
-            heading = f"{phrase.name} · step {step_i + 1}/{len(phrase.steps)}"
-            heading += f": {step.note}" if step.note else ""
+            cue = cues[cue_i]
             canvas = Image.new("RGB", size, (255, 255, 255))
-            canvas.paste(_caption(f"{heading}\nt = {t:4.1f} s", total_w), (0, 0))
+            canvas.paste(_caption(f"{cue.heading}\nt = {t:4.1f} s"
+                                  if "\n" not in cue.heading else
+                                  f"{cue.heading}   t = {t:4.1f} s", total_w), (0, 0))
             for j, p in enumerate(performers):
-                words = " + ".join([*(part_words(x, p.names) for x in step.parts),
-                                    *([drive_words(step.drive)] if step.drive else [])])
-                canvas.paste(_tile(p, words, width, height), (j * width, CAPTION_H))
+                canvas.paste(_tile(p, cue.words(p), width, height), (j * width, CAPTION_H))
             writer.send(np.ascontiguousarray(np.asarray(canvas)))
             if gif is not None:
                 gif_frames.append(canvas.quantize(colors=128))

@@ -166,14 +166,6 @@ def casting_lines(performers: Iterable[Performer]) -> list[str]:
     return lines
 
 
-def _chains(casting: Casting) -> list[list[Role]]:
-    """The roles grouped as the databank answers them: the head, each arm's parts."""
-    groups: dict[str, list[Role]] = {}
-    for r in casting.roles:
-        groups.setdefault(r.column.split()[0], []).append(r)
-    return list(groups.values())
-
-
 def check(link: RobotLink, performers: Sequence[Performer], gestures: Sequence[Gesture],
           timeout: float = QUERY_TIMEOUT_S) -> None:
     """Ask the databank for every keyframe's chains on every platform once (module, step 1);
@@ -191,7 +183,7 @@ def check(link: RobotLink, performers: Sequence[Performer], gestures: Sequence[G
 
 def _refusals(link: RobotLink, p: Performer, kf: Keyframe, timeout: float) -> dict[str, str]:
     out: dict[str, str] = {}
-    for chain in _chains(p.casting):
+    for chain in p.casting.chains():
         request = CompoundRequest(parts=p.casting.parts(kf, chain))
         try:
             get_one(link.session, link.keys.compound(p.platform), Pose, encode(request),
