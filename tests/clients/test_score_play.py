@@ -87,13 +87,12 @@ def side_of(column: str) -> str:
 
 
 def target_cells(session: zenoh.Session, platform: str, body: MeasuredBody,
-                 parts: dict[str, SegmentEnds], laban_editor: ModuleType, raw: dict[str, list[str]]
-                 ) -> dict[str, tuple[str, str]]:
-    """Each arm column's cell in the databank's own pose for the keyframe (asked as the robot
-    asks it, every performed part at once), notated by LabanEditor on yourdfpy's kinematics;
+                 parts: dict[str, SegmentEnds], laban_editor: ModuleType, raw: dict[str, list[str]],
+                 columns: list[str]) -> dict[str, tuple[str, str]]:
+    """Each of ``columns``' cell in the databank's own pose for the keyframe (asked as the
+    robot asks it, every performed part at once), notated by LabanEditor on yourdfpy's kinematics;
     none when that pose has the arms touching something (MuJoCo's contacts): the evidence
     that the body has the cells, independently of the robot's motion."""
-    columns = list(parts)
     request = CompoundRequest(parts=[
         SpatialCommand(PARTS[c][0], PARTS[c][1], performed_slug(*raw[c]), 3) for c in columns])
     try:
@@ -214,7 +213,8 @@ def measured(session: zenoh.Session, reports: list[dict[str, Any]],
             for kf in robot["keyframes"]:
                 raw = written[kf["gesture"]][kf["keyframe"]]
                 assert kf["q"], (robot["robot"], kf["keyframe"], kf["said"])
-                has = target_cells(session, robot["platform"], body, parts, laban_editor, raw)
+                has = target_cells(session, robot["platform"], body, parts, laban_editor, raw,
+                                   t.performs)
                 body.pose(dict(zip(kf["joint_names"], kf["q"], strict=True)))
                 for column in t.performs:
                     cell = tuple(raw[column])
