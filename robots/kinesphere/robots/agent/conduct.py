@@ -83,7 +83,9 @@ class Conduct:
         self._ratelog = RateLog(log)
         self._moved_at = 0.0
         self._moved_wall = 0.0
-        """When the joints or base last moved, by the host's monotonic clock."""
+        """When the joints or base last moved, by :attr:`wall`."""
+        self.wall: Callable[[], float] = time.monotonic
+        """The host's clock the senders' seconds go by (a test sets its own)."""
         self._aims: Lru[int, tuple[Pose, Aim]] = Lru(AIMS_KEPT)
         self._started: tuple[Command, Pose, PartsKey, list[Clamp], Due | None] | None = None
         """The move started this step, its status and acks not yet said (:meth:`_settle`)."""
@@ -122,7 +124,7 @@ class Conduct:
         """A step along a followed trajectory went as planned: all :meth:`after_step` would
         have done (a fleet host's lean step, ``Agent.followed``)."""
         self._moved_at = self.controller.time
-        self._moved_wall = time.monotonic()
+        self._moved_wall = self.wall()
         self._track(True)
 
     def _track(self, under_way: bool) -> None:
@@ -134,7 +136,7 @@ class Conduct:
         guard = ctrl.guard
         if under_way or (guard is not None and (guard.legs or guard.pending)):
             left = max(ctrl.remaining, ctrl.dt)
-            motion.eta = Due(ctrl.time + left, time.monotonic() + left / self.time_scale)
+            motion.eta = Due(ctrl.time + left, self.wall() + left / self.time_scale)
 
     def commanded(self) -> None:
         """The step's setpoints went to the body: the first toward a new target is the moment
@@ -155,7 +157,7 @@ class Conduct:
         changed = False
         self._track(moving)
         if moving:
-            self._moved_wall = time.monotonic()
+            self._moved_wall = self.wall()
         fault = ctrl.fault()
         if fault != self._fault:
             self._fault, changed = fault, True
@@ -304,7 +306,7 @@ class Conduct:
         if cmd.arrive_ms <= 0:
             return None
         left = max(0.0, cmd.arrive_ms / 1e3 - age_ns / 1e9)
-        return Due(self.controller.time + left * self.time_scale, time.monotonic() + left)
+        return Due(self.controller.time + left * self.time_scale, self.wall() + left)
 
     def _late(self, motion: Motion, planned: bool) -> int:
         """Milliseconds (the sender's) by which ``motion`` arrives after its due time: as
@@ -315,11 +317,11 @@ class Conduct:
         due = motion.due
         if due is None:
             return 0
-        now = time.monotonic()
-        if planned:
-            left = ctrl.dt + ctrl.remaining
-            arrival = Due(ctrl.time + left, now + left / self.time_scale)
-        elif motion.eta.robot > ctrl.time:  # replaced under way
+        if planned:  # the plan, in the robot's time (the host's has not passed yet)
+            late = (ctrl.time + ctrl.remaining - due.robot) / self.time_scale
+            return round(max(0.0, late) * 1e3)
+        now = self.wall()
+        if motion.eta.robot > ctrl.time:  # replaced under way
             arrival = motion.eta
         elif ctrl.moving:
             arrival = Due(ctrl.time, now)
