@@ -29,16 +29,12 @@ from kinesphere.clients.options import TeleopOptions
 from kinesphere.protocol import RobotState, decode
 from support.network import KEYS
 from support.paths import ROOT
+from support.system import databank_args
 from support.wait import WAIT_S, stop_process
 
 TTL_MS = 300
 PB, YB = "pb-1", "yb-1"
 PLATFORMS = {PB: "packbot", YB: "youbot"}
-
-
-def databank_args() -> list[str]:
-    """The shipped databanks of the platforms under test."""
-    return [a for p in PLATFORMS.values() for a in ("--platform", p)]
 
 
 class FleetProcess:
@@ -150,13 +146,13 @@ class ClientFleet:
 
 def running_fleet(logs: Path) -> Iterator[ClientFleet]:
     """The databank and the two agents as processes on a hub of their own, until closed."""
-    args = databank_args()
+    args = databank_args(list(PLATFORMS.values()))
     with zconfig.loopback_hub() as (hub, endpoint):
         track = StateHistory(hub)
         children: list[FleetProcess] = []
         try:
             children.append(FleetProcess(hub, endpoint, ["databank", "serve", *args],
-                                  KEYS.alive_databank_all(), logs / "databank.log"))
+                                         KEYS.alive_databank_all(), logs / "databank.log"))
             for rid, platform in PLATFORMS.items():
                 groups = ["--group", "sweepers"] if rid == PB else []
                 children.append(FleetProcess(hub, endpoint,
