@@ -228,6 +228,8 @@ def play_score(args: argparse.Namespace) -> int:
                           file=sys.stderr)
                     score_play.play(link, performers, g, seq, tempo, lambda: stop.set,
                                     score_play.progress)
+                    for line in score_play.late_lines(performers, g):
+                        print(line, file=sys.stderr)
                     if stop.set:
                         break
             finally:

@@ -389,3 +389,14 @@ def progress(g: Gesture, kf: Keyframe, at: float) -> None:
     """One line on stderr per keyframe as it starts."""
     print(f"  keyframe {kf.index + 1}/{len(g.keyframes)} {kf.name} at {at:5.2f} s: "
           f"{kf.notation()}", file=sys.stderr)
+
+
+def late_lines(performers: Sequence[Performer], g: Gesture) -> list[str]:
+    """Per robot, the keyframes of ``g`` it said it reached late, and by how much."""
+    lines = []
+    for p in performers:
+        late = [f"{k.keyframe} +{k.late_ms} ms" for k in p.report.keyframes
+                if k.gesture == g.name and k.late_ms > 0]
+        if late:
+            lines.append(f"  {p.robot} late at {len(late)} keyframe(s): {', '.join(late)}")
+    return lines
