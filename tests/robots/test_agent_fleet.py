@@ -23,7 +23,7 @@ from kinesphere.cli import main
 from kinesphere.errors import KinesphereError
 from kinesphere.laban import Direction
 from kinesphere.platforms.mjcf import platform_model
-from kinesphere.protocol import Ack, Catalogue, RobotState, SpatialCommand
+from kinesphere.protocol import Ack, SpatialCommand
 from kinesphere.robots.agent.fleet import (
     FleetHost,
     RobotSpec,
@@ -38,7 +38,9 @@ from support.agents import (
     AckWatch,
     CommandSender,
     DatabankProcess,
+    far,
     joints_close,
+    newer_than,
     running_fleet_host,
 )
 from support.network import KEYS, Hub
@@ -49,18 +51,8 @@ ROBOTS = [RobotSpec("baxter", "f-baxter"), RobotSpec("nao", "f-nao"),
           RobotSpec("youbot", "f-youbot", ("bases",))]
 
 
-def _newer_than(seq: int, state: RobotState) -> bool:
-    return state.seq > seq
-
-
 def _ack_at(robot_id: str, stage: str, ack: Ack) -> bool:
     return (ack.robot_id, ack.stage) == (robot_id, stage)
-
-
-def far(cat: Catalogue, k: int) -> tuple[str, str, str, float]:
-    entry = cat.limbs[0]
-    pulls = [d for d in entry.directions if d != "place-middle"]
-    return (entry.limb, entry.origin, pulls[k], float(max(entry.sizes)))
 
 
 def test_robots_of_several_platforms_obey_their_own_commands(
@@ -82,7 +74,7 @@ def test_robots_of_several_platforms_obey_their_own_commands(
         watches[first].after(seq, lambda st: joints_close(st, targets[first], 0.02),
                              f"{first} at its pose")
         for rid in watches.keys() - {first}:
-            now = watches[rid].wait(partial(_newer_than, start[rid].seq + 5), f"{rid} states")
+            now = watches[rid].wait(partial(newer_than, start[rid].seq + 5), f"{rid} states")
             assert (now.last_command_seq, now.status) == (-1, "idle"), (rid, now)
         # each robot reaches its own pose for its own command
         for rid, op in ops.items():

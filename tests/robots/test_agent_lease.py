@@ -11,9 +11,16 @@ from functools import partial
 
 import numpy as np
 
-from kinesphere.protocol import Ack, Drive, RobotState
+from kinesphere.protocol import Ack, Drive
 from kinesphere.robots.agent.lease import LEASE_TIMEOUT_S
-from support.agents import AckWatch, CommandSender, DatabankProcess, StateWatch, running_agent
+from support.agents import (
+    AckWatch,
+    CommandSender,
+    DatabankProcess,
+    StateWatch,
+    newer_than,
+    running_agent,
+)
 from support.network import Hub
 
 TTL_MS = 500
@@ -21,10 +28,6 @@ TTL_MS = 500
 
 def _verdict_on(sender: str, seq: int, ack: Ack) -> bool:
     return ack.sender == sender and ack.seq == seq and ack.stage in ("accepted", "rejected")
-
-
-def _newer_than(seq: int, state: RobotState) -> bool:
-    return state.seq > seq
 
 
 def streams(ann: CommandSender, bob: CommandSender, watch: StateWatch, n: int
@@ -91,7 +94,7 @@ def test_two_operators_only_the_holder_moves_the_robot(
             if a.stage == "accepted":
                 break
             now = watch.states[-1].seq
-            watch.wait(partial(_newer_than, now), "the next state")
+            watch.wait(partial(newer_than, now), "the next state")
         waited = time.monotonic() - quiet
         assert LEASE_TIMEOUT_S - 0.1 <= waited <= LEASE_TIMEOUT_S + 2.0, waited
         assert a.lease_holder == "ann"

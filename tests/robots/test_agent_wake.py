@@ -15,20 +15,13 @@ from dataclasses import dataclass
 import pytest
 
 from kinesphere import zconfig
-from kinesphere.protocol import Catalogue
 from kinesphere.robots.agent.pacing import LoopStats, Wake, run_paced
 from kinesphere.robots.agent.runtime import Agent, AgentOptions
-from support.agents import CommandSender, DatabankProcess
+from support.agents import CommandSender, DatabankProcess, far
 from support.network import Hub
 from support.wait import WAIT_S
 
 RATE = 4.0  # Hz: a quarter of a second between scheduled steps makes the order unmistakable
-
-
-def far(cat: Catalogue, k: int) -> tuple[str, str, str, float]:
-    entry = cat.limbs[0]
-    pulls = [d for d in entry.directions if d != "place-middle"]
-    return (entry.limb, entry.origin, pulls[k], float(max(entry.sizes)))
 
 
 @dataclass(frozen=True)

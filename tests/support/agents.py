@@ -268,6 +268,12 @@ class AckWatch(Watch[Ack]):
             return [a.stage for a in self.acks if a.sender == sender and a.seq == seq]
 
 
+def newer_than(seq: int, state: RobotState) -> bool:
+    """``state`` comes after the robot's state number ``seq`` (for waits: ``partial(newer_than,
+    seq)``)."""
+    return state.seq > seq
+
+
 def far(cat: Catalogue, k: int = 0) -> tuple[str, str, str, float]:
     """The far reach of the first limb in its ``k``-th real pull (place-middle left out)."""
     entry = cat.limbs[0]
