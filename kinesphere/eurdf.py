@@ -147,9 +147,13 @@ class Eurdf:
         return self.origin(distal).joints[0]
 
     def limb_joints(self, limb: str) -> tuple[str, ...]:
-        """Actuated joints of a limb in P order: its distal's root joint and all below it."""
+        """Actuated joints of a limb in P order: its distal's root joint and all below it,
+        except those below its tip (a hand's fingers below an arm's palm: the arm's poses
+        never move them)."""
         part = self.limb(limb)
         links = set(part.links)
+        if part.tip:
+            links -= set(self.subtree_links(part.tip)[1:])
         return tuple(
             j.name for j in self.urdf.robot.joints if j.name in self.limits and j.child in links
         )

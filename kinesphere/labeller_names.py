@@ -29,12 +29,14 @@ _FINGER = {
     "finger", "fingers", "thumb", "index", "ring", "pinky", "mrl", "gripper", "hand", "palm",
     "claw", "jaw", "knuckle",
 }
-_DRIVE = {"wheel", "caster", "suspension", "rotor", "propeller", "prop", "track"}
+_DRIVE = {"wheel", "caster", "castor", "suspension", "rotor", "propeller", "prop", "track"}
+_STEER = {"steer", "steering", "swivel"}
 _CORE = {"torso", "waist", "trunk", "spine", "lumbar", "chest", "thorax"}
 _LEFT = {"left", "l", "larm", "lleg", "lf", "lh", "fl", "hl", "rl", "bl"}
 _RIGHT = {"right", "r", "rarm", "rleg", "rf", "rh", "fr", "hr", "rr", "br"}
-_FRONT = {"lf", "rf", "fl", "fr"}
-_HIND = {"lh", "rh", "hl", "hr", "rl", "rr", "bl", "br"}
+_FRONT = {"front", "fore", "lf", "rf", "fl", "fr"}
+_HIND = {"hind", "back", "rear", "lh", "rh", "hl", "hr", "rl", "rr", "bl", "br"}
+_WHOLE = {"left", "right", "front", "fore", "hind", "back", "rear"}  # outvote abbreviations
 _FIRST_LOCATION = {"arm": "shoulder", "leg": "hip", "head": "neck"}
 _DEEPER = {"elbow": "forearm", "knee": "shin", "ankle": "foot", "wrist": None}
 
@@ -54,6 +56,10 @@ def is_finger_name(name: str) -> bool:
 
 def is_drive_name(name: str) -> bool:
     return bool(_DRIVE & set(words(name)))
+
+
+def is_steer_name(name: str) -> bool:
+    return bool(_STEER & set(words(name)))
 
 
 def is_core_name(name: str) -> bool:
@@ -91,18 +97,29 @@ class Namer:
         return alias
 
     @staticmethod
-    def side_of(names: Iterable[str]) -> str | None:
+    def _vote(names: Iterable[str], a: tuple[str, set[str]], b: tuple[str, set[str]]
+              ) -> str | None:
+        """Which of two words the names say more often (a whole word counts twice an
+        abbreviation: ``motor_front_rightL`` is on the right)."""
         votes: Counter[str] = Counter()
         for n in names:
             ws = set(words(n))
-            votes["left"] += bool(ws & _LEFT)
-            votes["right"] += bool(ws & _RIGHT)
-        if votes["left"] != votes["right"]:
-            return "left" if votes["left"] > votes["right"] else "right"
+            for word, group in (a, b):
+                hit = ws & group
+                votes[word] += 2 if hit & _WHOLE else 1 if hit else 0
+        if votes[a[0]] != votes[b[0]]:
+            return a[0] if votes[a[0]] > votes[b[0]] else b[0]
         return None
 
-    def chain(self, names: list[str], y: float, locations: int, only: bool) -> Chain:
-        """Classify a chain from its joint and link names; an unnamed sole arm is an arm."""
+    @staticmethod
+    def side_of(names: Iterable[str]) -> str | None:
+        return Namer._vote(names, ("left", _LEFT), ("right", _RIGHT))
+
+    def chain(self, names: list[str], y: float | None, locations: int, only: bool,
+              fore_hint: str | None = None) -> Chain:
+        """Classify a chain from its joint and link names; an unnamed sole arm is an arm.
+        ``y``: where its first joint sits across the body (None: on the middle line), for a
+        side the names do not give; ``fore_hint``: front or hind from the geometry."""
         counts = Counter(
             kind for n in names for w in words(n) for kind, ws in _KINDS.items() if w in ws
         )
@@ -110,19 +127,21 @@ class Namer:
         if kind is None and only and locations >= 3:
             kind = "arm"
         side = self.side_of(names)
-        if side is None and not only and abs(y) > 0.02:
+        if side is None and not only and y is not None:
             side = "right" if y < 0 else "left"
-        first = set(words(names[0]))  # the chain's first joint: FR_hip_joint, base_LF_HAA
-        fore = None
-        if kind == "leg" and first & (_FRONT | _HIND):
-            fore = "front" if first & _FRONT else "hind"
-        return Chain(kind, side, fore)
+        fore = self._vote(names[:1], ("front", _FRONT), ("hind", _HIND))  # FR_hip, base_LF_HAA
+        if fore is None:  # whole words anywhere (abbreviations also name foot sensors: FsrFL)
+            fore = self._vote(names, ("front", _FRONT & _WHOLE), ("hind", _HIND & _WHOLE))
+        if kind == "leg" and fore is None:
+            fore = fore_hint
+        return Chain(kind, side, fore if kind == "leg" else None)
 
     def limb(self, chain: Chain, depth: int, joint_names: list[str]) -> str | None:
         if chain.kind is None:
             return None
-        if depth == 1:
-            return self._take(chain.prefix + chain.kind)
+        if depth == 1:  # a second chain of one leg (Minitaur's two motors) is leg_2
+            alias = chain.prefix + chain.kind
+            return self._take(alias) or self._take(f"{alias}_2")
         word = _location_word(joint_names)
         part = _DEEPER.get(word) if word else None
         return self._take(chain.prefix + part) if part else None

@@ -273,8 +273,9 @@ class Catalogue(Message, tag="catalogue", kw_only=True):
     ``sizes`` every stored size, ``aliases`` maps aliases (``right_arm``) to label names, and
     ``version`` identifies the ECL contents (changes when poses are recorded). ``max_size`` is
     the largest size the ECL answers (``size_out_of_range`` past it; None from older
-    databanks), ``base_kind`` the base (``fixed``, ``omni``, ``diff``, ``skid``; "" if unknown),
-    ``vocabulary`` how the body answers the words of the body vocabulary.
+    databanks), ``base_kind`` the base (``fixed``, ``omni``, ``diff``, ``skid``,
+    ``legged``; "" if unknown), ``vocabulary`` how the body answers the words of the body
+    vocabulary.
     """
 
     platform: str

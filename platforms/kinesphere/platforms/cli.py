@@ -22,17 +22,31 @@ def register(sub: Any) -> None:
         help="scaffold a platform folder from any URDF",
         description="Write DIR/NAME/: the eURDF (proposed labels, meshes copied beside it), "
         "platform.toml (base kind, height, neutral pose) and vsam.toml (Laban-27 for every "
-        "limb). Edit them, then 'kinesphere ecl build DIR/NAME' and run it with "
+        "limb). The folder is written whole or not at all. What MuJoCo would refuse is "
+        "mended where the mend is standard (inertias balanced, zero-size shapes dropped, a "
+        "spherical joint as three revolutes, a missing mesh as a box from its link's "
+        "inertia) and every mend is listed; what cannot be mended is one error naming the "
+        "element. Edit the files, then 'kinesphere ecl build DIR/NAME' and run it with "
         "'--platforms DIR' (or $KINESPHERE_PLATFORMS=DIR) like a shipped platform.",
     )
-    new.add_argument("name", help="platform name: a-z, 0-9, _ and -, starting with a letter")
+    new.add_argument("name", help="platform name: a-z and 0-9 words joined by single _ or -, "
+                     "starting with a letter")
     new.add_argument("--urdf", type=Path, required=True, help="the robot's URDF file")
     new.add_argument(
         "--dir", type=Path, default=None,
         help="folder to create NAME/ in (default: the first --platforms folder, else .)",
     )
     add_merge_distance(new)
-    new.add_argument("--force", action="store_true", help="replace an existing folder's files")
+    new.add_argument("--up", default="auto", choices=("auto", "z", "y", "x", "-z", "-y", "-x"),
+                     help="the file's up axis (default auto: from where its legs point; z "
+                     "for a robot without legs). A Y-up file (pybullet's) is turned so z is up")
+    new.add_argument("--neutral", default="auto", choices=("auto", "zero"),
+                     help="auto (default): where the zero pose leaves a limb few directions "
+                     "(a stretched, singular arm), propose a bent neutral and say why; zero: "
+                     "keep zero (kept 0.05 rad off every limit)")
+    new.add_argument("--force", action="store_true",
+                     help="replace an existing platform folder (as a whole, once the new one "
+                     "is complete)")
     new.set_defaults(func=_platform_new)
     p = sub.add_parser("platforms", help="list the known platforms (shipped and brought)")
     add_json(p, "the list")
@@ -58,18 +72,28 @@ def _platform_new(args: argparse.Namespace) -> int:
     from kinesphere.platforms.scaffold import new_platform
 
     parent = args.dir if args.dir is not None else (search_path() or [Path(".")])[0]
-    s = new_platform(args.name, args.urdf, parent, args.merge_distance, args.force)
+    s = new_platform(args.name, args.urdf, parent, args.merge_distance, args.force, args.up,
+                     args.neutral)
     e = s.eurdf
     print(f"wrote {s.folder}/: {e.name}.eurdf ({len(e.limits)} DOF, C={len(e.core)}, "
           f"{len(e.limbs)} limbs), platform.toml (base {s.base_kind}, height {s.height} m), "
           f"vsam.toml ({len(s.limbs)} entries)")
-    print(f"meshes: {s.meshes_copied} copied, {s.meshes_hulled} replaced by convex hulls"
-          + (f", {len(s.meshes_missing)} not found: {', '.join(s.meshes_missing[:3])}"
-             if s.meshes_missing else ""))
+    m = s.meshes
+    print(f"meshes: {m.copied} copied, {m.converted} converted to binary STL, {m.hulls} "
+          f"replaced by convex hulls, {len(m.missing)} not found")
+    for line in s.mends:
+        print(f"  mended: {line}")
+    if s.warnings:
+        print(f"  {s.warnings}")
+    if s.base_kind == "legged":
+        print(f"stands on {', '.join(s.standing_on)}: base legged (walking abstracted)")
+    for proposal in s.neutral:
+        if proposal.joints:
+            print(f"neutral: {proposal} (--neutral zero keeps zero)")
     for p in e.limbs:
         if p.index[1] == 1:
             print(f"  {p.name:<8} {p.alias or '':<18} from {p.distal}: "
-                  f"{len(e.limb_joints(p.name))} joints")
+                  f"{len(e.limb_joints(p.name))} joints" + (f", tip {p.tip}" if p.tip else ""))
     print("next: edit the three files, check with 'kinesphere describe "
           f"{s.folder}', then 'kinesphere ecl build {s.folder}'")
     return 0

@@ -1,35 +1,73 @@
-"""Mesh files of a brought robot: found wherever its URDF points, made readable by MuJoCo.
+"""Mesh files of a brought robot: found inside its package, checked, made readable by MuJoCo.
 
 URDFs name meshes as ``package://PKG/path``, ``file://`` URLs or paths relative to the URDF.
 A platform folder must stand on its own, so ``platform new`` copies every mesh into its
-``meshes/`` folder and points the eURDF there. MuJoCo reads STL and OBJ; anything else (COLLADA
-``.dae`` above all) becomes the convex hull of its vertices, which trimesh (a yourdfpy
-dependency) reads. Hulls are coarse but honest for collisions and good enough for pictures.
+``meshes/`` folder and points the eURDF there. A package may be hostile, so a mesh is read only
+where its name says it is: the real file (symlinks followed) must lie inside the package it was
+found in (the ``package://`` folder, else the URDF's package or folder), must be a regular file
+with a mesh suffix, and is bounded in bytes, faces and vertices; a copy is never more readable
+than its source. MuJoCo reads binary STL and OBJ; an ASCII STL and an OBJ (whose texture
+coordinates MuJoCo warns about, or whose normals it rejects) become binary STL, anything else
+(COLLADA ``.dae`` above all) the convex hull of its vertices, read by trimesh (a yourdfpy
+dependency). A mesh that cannot be found is replaced by a box with the link's inertia, so
+collision and floor checks still have something to check.
 """
 
 from __future__ import annotations
 
 import hashlib
 import os
-import shutil
+import re
+import struct
 import xml.etree.ElementTree as ET
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 from urllib.parse import unquote, urlparse
 
+import numpy as np
+
 from kinesphere.errors import KinesphereError
+from kinesphere.platforms import origins
 
 MUJOCO_READS = (".stl", ".obj")
+SUFFIXES = frozenset({".stl", ".obj", ".dae", ".ply", ".off", ".glb", ".gltf"})
+MAX_BYTES = 64 * 2**20  # one mesh file
+MAX_TOTAL = 512 * 2**20  # every mesh of one robot
+MAX_FACES = 200_000  # MuJoCo's limit for an STL file
+MIN_VERTICES = 4  # MuJoCo's least for a mesh
+STAND_IN = (0.01, 0.5)  # metres: the sides of a stand-in box, clamped
 
 
-def resolve(filename: str, urdf_dir: Path) -> Path | None:
-    """The file a URDF mesh name points to, or None when it cannot be found.
+def refused(message: str) -> KinesphereError:
+    return KinesphereError("invalid_eurdf", message)
+
+
+@dataclass
+class Imported:
+    """What became of a robot's meshes."""
+
+    copied: int = 0
+    converted: int = 0  # ASCII STL and OBJ written as binary STL
+    hulls: int = 0
+    missing: list[str] = field(default_factory=list)
+    stand_ins: list[str] = field(default_factory=list)  # one line per replaced geometry
+
+
+@dataclass(frozen=True)
+class Found:
+    path: Path  # as named (lexically), not resolved
+    package: Path  # the folder it must stay inside
+
+
+def locate(filename: str, urdf_dir: Path) -> Found | None:
+    """Where a URDF mesh name points, with the package it must stay in; None when absent.
 
     ``package://PKG/rest`` is looked up in every ancestor of the URDF's folder (a folder named
     PKG, or one holding PKG) and in ``ROS_PACKAGE_PATH``.
     """
     if filename.startswith("package://"):
-        pkg, _, rest = filename[len("package://") :].partition("/")
+        pkg, _, rest = filename[len("package://"):].lstrip("/").partition("/")
         roots: list[Path] = []
         for folder in (urdf_dir, *urdf_dir.parents):
             roots += [folder] if folder.name == pkg else [folder / pkg]
@@ -38,52 +76,187 @@ def resolve(filename: str, urdf_dir: Path) -> Path | None:
                 roots += [Path(entry) / pkg, Path(entry)]
         for root in roots:
             if (root / rest).is_file():
-                return root / rest
+                return Found(root / rest, root)
         return None
     if filename.startswith("file://"):
         path = Path(unquote(urlparse(filename).path))
     else:
         path = Path(filename)
-        if not path.is_absolute():
-            path = urdf_dir / path
-    return path if path.is_file() else None
+    if not path.is_absolute():
+        path = Path(os.path.normpath(urdf_dir / path))
+        package = Path(os.path.commonpath([_package(urdf_dir), path]))
+    else:
+        package = _package(path.parent)
+    return Found(path, package) if path.is_file() else None
 
 
-def import_meshes(robot: ET.Element, urdf_dir: Path, folder: Path) -> tuple[int, int, list[str]]:
+def _package(folder: Path) -> Path:
+    """The ROS package a folder is in (nearest ancestor with package.xml), else the folder."""
+    for f in (folder, *folder.parents):
+        if (f / "package.xml").is_file():
+            return f
+    return folder
+
+
+def check(found: Found, name: str) -> Path:
+    """The real file behind a found mesh, refused if it leaves its package, is no regular
+    mesh file or is too large."""
+    real = Path(os.path.realpath(found.path))
+    package = Path(os.path.realpath(found.package))
+    if real != package and package not in real.parents:
+        raise refused(f"mesh {name}: {found.path} leads to {real}, outside its package "
+                      f"{found.package}; a mesh is never read from outside it")
+    if found.path.suffix.lower() not in SUFFIXES or real.suffix.lower() not in SUFFIXES:
+        raise refused(f"mesh {name}: {real.name} is not a mesh file "
+                      f"({', '.join(sorted(SUFFIXES))})")
+    st = real.stat()
+    if not real.is_file():
+        raise refused(f"mesh {name}: {real} is not a regular file")
+    if st.st_size > MAX_BYTES:
+        raise refused(f"mesh {name}: {st.st_size} bytes; a mesh may have at most {MAX_BYTES}")
+    return real
+
+
+def import_meshes(robot: ET.Element, urdf_dir: Path, folder: Path) -> Imported:
     """Copy or convert every ``<mesh>`` of ``robot`` into ``folder/meshes`` and point the
-    elements there (relative names). Returns (copied, hulls, missing file names)."""
+    elements there (relative names); replace the ones not found by stand-ins."""
     out_dir = folder / "meshes"
     done: dict[Path, str] = {}
-    copied = hulls = 0
-    missing: list[str] = []
-    for mesh in robot.iter("mesh"):
-        name = mesh.get("filename") or ""
-        src = resolve(name, urdf_dir)
-        if src is None:
-            missing.append(name)
-            continue
-        if src not in done:
-            out_dir.mkdir(parents=True, exist_ok=True)
-            digest = hashlib.sha1(str(src).encode()).hexdigest()[:8]
-            if src.suffix.lower() in MUJOCO_READS:
-                target = out_dir / f"{src.stem}_{digest}{src.suffix.lower()}"
-                shutil.copyfile(src, target)
-                copied += 1
-            else:
-                target = out_dir / f"{src.stem}_{digest}_hull.stl"
-                _hull(src, target)
-                hulls += 1
-            done[src] = f"meshes/{target.name}"
-        mesh.set("filename", done[src])
-    return copied, hulls, missing
+    result = Imported()
+    total = 0
+    for link in robot.findall("link"):
+        for kind in ("collision", "visual"):
+            for k, item in enumerate(list(link.findall(kind))):
+                mesh = item.find("geometry/mesh")
+                if mesh is None:
+                    continue
+                name = mesh.get("filename") or ""
+                found = locate(name, urdf_dir)
+                if found is None:
+                    result.missing.append(name)
+                    result.stand_ins.append(_stand_in(link, item, kind, k, name))
+                    continue
+                real = check(found, name)
+                if real not in done:
+                    total += real.stat().st_size
+                    if total > MAX_TOTAL:
+                        raise refused(f"meshes of more than {MAX_TOTAL} bytes in all")
+                    out_dir.mkdir(exist_ok=True)
+                    done[real] = f"meshes/{_write(real, name, out_dir, result)}"
+                mesh.set("filename", done[real])
+    return result
 
 
-def _hull(src: Path, target: Path) -> None:
+def _write(real: Path, name: str, out_dir: Path, result: Imported) -> str:
+    """Write one mesh into ``out_dir`` as MuJoCo reads it; the file name written."""
+    stem = re.sub(r"[^A-Za-z0-9_.-]", "_", real.stem)[:40] or "mesh"
+    digest = hashlib.sha1(str(real).encode()).hexdigest()[:8]
+    mode = real.stat().st_mode & 0o644 | 0o600
+    suffix = real.suffix.lower()
+    if suffix == ".stl" and _binary_stl_faces(real, name) is not None:
+        target = out_dir / f"{stem}_{digest}.stl"
+        _copy(real, target, mode)
+        result.copied += 1
+    elif suffix in MUJOCO_READS:
+        target = out_dir / f"{stem}_{digest}.stl"
+        _save(_load(real, name), target, mode, name)
+        result.converted += 1
+    else:
+        target = out_dir / f"{stem}_{digest}_hull.stl"
+        _save(_load(real, name).convex_hull, target, mode, name)
+        result.hulls += 1
+    return target.name
+
+
+def _binary_stl_faces(path: Path, name: str) -> int | None:
+    """The face count of a binary STL (checked against MuJoCo's bounds), or None when the
+    file is ASCII STL."""
+    size = path.stat().st_size
+    with path.open("rb") as fh:
+        head = fh.read(84)
+    if len(head) < 84:
+        return None
+    faces = int(struct.unpack("<I", head[80:84])[0])
+    if size != 84 + 50 * faces:
+        return None
+    _bounded(name, faces, 3 * faces)
+    return faces
+
+
+def _bounded(name: str, faces: int, vertices: int) -> None:
+    if faces > MAX_FACES:
+        raise refused(f"mesh {name}: {faces} faces; MuJoCo reads at most {MAX_FACES} "
+                      "(simplify it, e.g. with a decimation filter)")
+    if vertices < MIN_VERTICES or faces < 1:
+        raise refused(f"mesh {name}: {vertices} vertices; a mesh needs at least {MIN_VERTICES}")
+
+
+def _load(src: Path, name: str) -> Any:
     import trimesh
 
     try:
-        loaded: Any = trimesh.load(src, force="mesh")
-        hull = loaded.convex_hull
+        loaded: Any = trimesh.load(src, force="mesh", skip_materials=True)
+        vertices, faces = len(loaded.vertices), len(loaded.faces)
     except Exception as exc:  # trimesh and its loaders raise assorted types
-        raise KinesphereError("invalid_eurdf", f"cannot read mesh {src}: {exc}") from None
-    hull.export(target)
+        raise refused(f"cannot read mesh {name}: {exc}") from None
+    _bounded(name, faces, vertices)
+    return loaded
+
+
+def _save(mesh: Any, target: Path, mode: int, name: str) -> None:
+    _bounded(name, len(mesh.faces), len(mesh.vertices))
+    data = mesh.export(file_type="stl")
+    fd = os.open(target, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW, mode)
+    with os.fdopen(fd, "wb") as fh:
+        fh.write(data)
+
+
+def _copy(src: Path, target: Path, mode: int) -> None:
+    fd = os.open(target, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW, mode)
+    with os.fdopen(fd, "wb") as out, src.open("rb") as inp:
+        while chunk := inp.read(1 << 20):
+            out.write(chunk)
+
+
+def _stand_in(link: ET.Element, item: ET.Element, kind: str, k: int, name: str) -> str:
+    """Replace a missing mesh with the box of the link's inertia (a solid box of its mass and
+    principal moments, on its principal axes), or drop it when the link has no inertia."""
+    lname = link.get("name")
+    box = inertia_box(link)
+    geometry = item.find("geometry")
+    assert geometry is not None
+    if box is None:
+        link.remove(item)
+        return f"link {lname}: {kind} {k} mesh {name} not found; dropped (no inertia to size it)"
+    sides, frame = box
+    for child in list(geometry):
+        geometry.remove(child)
+    ET.SubElement(geometry, "box", size=" ".join(f"{s:.4g}" for s in sides))
+    origins.write(item, frame)
+    return (f"link {lname}: {kind} {k} mesh {name} not found; stand-in box "
+            f"{' x '.join(f'{s:.3g}' for s in sides)} m from its inertia")
+
+
+def inertia_box(link: ET.Element) -> tuple[list[float], np.ndarray] | None:
+    """The solid box with a link's mass and principal moments of inertia (sides clamped to
+    STAND_IN), and its frame in the link's frame; None without a usable inertia."""
+    inertial = link.find("inertial")
+    mass_el = inertial.find("mass") if inertial is not None else None
+    tensor_el = inertial.find("inertia") if inertial is not None else None
+    if inertial is None or mass_el is None or tensor_el is None:
+        return None
+    mass = float(mass_el.get("value") or 0.0)
+    if mass <= 0:
+        return None
+    i = {k: float(tensor_el.get(k) or 0.0) for k in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")}
+    tensor = np.array([[i["ixx"], i["ixy"], i["ixz"]], [i["ixy"], i["iyy"], i["iyz"]],
+                       [i["ixz"], i["iyz"], i["izz"]]])
+    moments, axes = np.linalg.eigh(tensor)
+    if np.linalg.det(axes) < 0:
+        axes[:, 0] *= -1
+    m1, m2, m3 = moments
+    squares = 6.0 / mass * np.array([m2 + m3 - m1, m1 + m3 - m2, m1 + m2 - m3])
+    sides = [float(np.clip(np.sqrt(max(s, 0.0)), *STAND_IN)) for s in squares]
+    frame = origins.read(inertial)
+    frame[:3, :3] = frame[:3, :3] @ axes
+    return sides, frame

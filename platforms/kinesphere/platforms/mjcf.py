@@ -93,6 +93,9 @@ def _add_geoms(
                 continue  # 'platform new' lists meshes it could not find
             mesh = spec.add_mesh(name=f"{link.name}_{'vis' if visual else 'col'}{k}",
                                  file=str(path))
+            # bodies carry the URDF's inertia, so a mesh's own volume is never used: a flat
+            # one (a plane, a cloth) is as good as a closed one
+            mesh.inertia = mujoco.mjtMeshInertia.mjMESH_INERTIA_SHELL
             if g.mesh.scale is not None:
                 mesh.scale = np.broadcast_to(np.asarray(g.mesh.scale, dtype=float), 3)
             kw.update(type=mujoco.mjtGeom.mjGEOM_MESH, meshname=mesh.name)
@@ -112,6 +115,22 @@ def _add_geoms(
             geom.rgba = [0.5, 0.5, 0.5, 0.0 if link.visuals else 1.0]
 
 
+def _principal(link: yourdfpy.Link) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """A link's inertia as MuJoCo takes it: position, orientation of the principal axes and
+    the principal moments (at least 1e-6); None without a tensor worth the name."""
+    inertial = link.inertial
+    mass = float(inertial.mass) if inertial is not None and inertial.mass else 0.0
+    if inertial is None or inertial.inertia is None or mass <= 1e-3:
+        return None
+    tensor = np.asarray(inertial.inertia, dtype=float)
+    origin = inertial.origin if inertial.origin is not None else np.eye(4)
+    rot = origin[:3, :3]
+    evals, evecs = np.linalg.eigh(rot @ tensor @ rot.T)
+    if np.linalg.det(evecs) < 0:
+        evecs[:, 0] *= -1
+    return origin[:3, 3], _quat(evecs), np.maximum(evals, 1e-6)
+
+
 def _add_inertial(body: mujoco.MjsBody, link: yourdfpy.Link, has_joint: bool) -> None:
     inertial = link.inertial
     mass = float(inertial.mass) if inertial is not None and inertial.mass else 0.0
@@ -121,18 +140,23 @@ def _add_inertial(body: mujoco.MjsBody, link: yourdfpy.Link, has_joint: bool) ->
         mass = 1e-3
     body.explicitinertial = True
     body.mass = mass
-    if inertial is not None and inertial.inertia is not None and mass > 1e-3:
-        tensor = np.asarray(inertial.inertia, dtype=float)
-        origin = inertial.origin if inertial.origin is not None else np.eye(4)
-        rot = origin[:3, :3]
-        evals, evecs = np.linalg.eigh(rot @ tensor @ rot.T)
-        if np.linalg.det(evecs) < 0:
-            evecs[:, 0] *= -1
-        body.ipos = origin[:3, 3]
-        body.iquat = _quat(evecs)
-        body.inertia = np.maximum(evals, 1e-6)
+    principal = _principal(link)
+    if principal is not None:
+        body.ipos, body.iquat, body.inertia = principal
     else:
         body.inertia = [1e-6, 1e-6, 1e-6]
+
+
+def unbalanced(urdf: yourdfpy.URDF) -> list[str]:
+    """Links whose principal moments break A + B >= C: MuJoCo's balanceinertia evens them."""
+    out = []
+    for link in urdf.robot.links:
+        principal = _principal(link)
+        if principal is not None:
+            a, b, c = sorted(principal[2])
+            if a + b < c:
+                out.append(str(link.name))
+    return out
 
 
 def build_spec(platform: Platform) -> mujoco.MjSpec:
@@ -141,6 +165,9 @@ def build_spec(platform: Platform) -> mujoco.MjSpec:
     spec = mujoco.MjSpec()
     spec.modelname = platform.name
     spec.compiler.degree = False
+    # Third-party inertias often break the triangle inequality (A + B >= C) by rounding:
+    # MuJoCo's own mend sets such a body's moments to their mean ('platform new' lists them).
+    spec.compiler.balanceinertia = True
     spec.option.timestep = TIMESTEP
     spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
     world = spec.worldbody

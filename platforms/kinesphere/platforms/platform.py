@@ -29,7 +29,7 @@ from kinesphere.errors import KinesphereError, did_you_mean
 from kinesphere.eurdf import Eurdf, load_eurdf
 
 PLATFORMS_DIR = Path(__file__).resolve().parent / "shipped"
-BaseKind = Literal["fixed", "omni", "diff", "skid"]
+BaseKind = Literal["fixed", "omni", "diff", "skid", "legged"]
 BASE_KINDS: tuple[str, ...] = get_args(BaseKind)
 
 
@@ -48,7 +48,8 @@ JointJerk = Annotated[
 
 
 class BaseSpec(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
-    """How the core moves: not at all, omnidirectionally, or differentially (diff/skid).
+    """How the core moves: not at all, omnidirectionally, differentially (diff/skid), or by
+    walking (legged: abstracted as a holonomic planar base, the legs free to gesture).
     Also the ``[base]`` table of platform.toml, decoded as is."""
 
     kind: BaseKind = "fixed"
@@ -64,7 +65,7 @@ class BaseSpec(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
 
     @property
     def holonomic(self) -> bool:
-        return self.kind == "omni"
+        return self.kind in ("omni", "legged")
 
 
 class _PlatformTable(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
@@ -130,7 +131,7 @@ def platform_folders() -> dict[str, Path]:
             found.setdefault(root.resolve().name, root.resolve())
         elif root.is_dir():
             for p in sorted(root.iterdir()):
-                if (p / "platform.toml").is_file():
+                if not p.name.startswith(".") and (p / "platform.toml").is_file():
                     found.setdefault(p.name, p.resolve())
     return found
 

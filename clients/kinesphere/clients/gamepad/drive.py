@@ -7,8 +7,9 @@ same on a 0.1 m/s NAO and a 2.5 m/s PackBot.
 
 How the stick steers depends on the base (``Catalogue.base_kind``):
 
-* ``omni`` (youBot's mecanum wheels, NAO's walk): holonomic. The stick is the body-frame
-  velocity (up = forward, left = sideways left, diagonals diagonal); the turn buttons turn.
+* ``omni`` (youBot's mecanum wheels, NAO's walk) and ``legged`` (a brought walker):
+  holonomic. The stick is the body-frame velocity (up = forward, left = sideways left,
+  diagonals diagonal); the turn buttons turn.
 * ``diff`` / ``skid`` (two wheels, tracks): arcade. Up/down is forward/back, left/right turns
   (a tracked robot cannot slide sideways; pushing left turns it left, in place when the stick
   is only left); the turn buttons turn too.
