@@ -4,16 +4,17 @@ The MuJoCo base is three kinematic joints (world x, y, yaw) tracked by position 
 anything is possible in simulation; the controller restricts itself to what the real base
 can do:
 
-* ``omni`` and ``legged`` (holonomic; walking abstracted): Ruckig (``otg.py``) over world ``(x, y,
-  yaw)``. A translation moves in a straight line by a displacement given in the body frame at
-  command time; a Drive is Ruckig's velocity interface towards ``speed * max_speed`` along the
-  direction. Per-axis limits are scaled by the direction's components, so speed, acceleration and
-  jerk are bounded as vectors (a diagonal is not sqrt(2) faster). * ``diff`` / ``skid`` (non-
-  holonomic): Ruckig over ``(s, yaw)``, path length and heading, integrated as a unicycle. A
-  translation turns towards the displacement (or away from it, driving backwards, when that is the
-  shorter turn), then drives; a Drive maps the forward component to linear speed and the lateral
-  one to a yaw rate (left turns left), which is what a tank or a two-wheeled robot does with a
-  stick.
+* ``omni`` and ``legged`` (holonomic; a walk is abstracted so): Ruckig (``otg.py``) over
+  world ``(x, y, yaw)``. A translation moves in
+  a straight line by a displacement given in the body frame at command time; a Drive is Ruckig's
+  velocity interface towards ``speed * max_speed`` along the direction. Per-axis limits are
+  scaled by the direction's components, so speed, acceleration and jerk are bounded as
+  vectors (a diagonal is not sqrt(2) faster).
+* ``diff`` / ``skid`` (non-holonomic): Ruckig over ``(s, yaw)``, path length and heading,
+  integrated as a unicycle. A translation turns towards the displacement (or away from it,
+  driving backwards, when that is the shorter turn), then drives; a Drive maps the forward
+  component to linear speed and the lateral one to a yaw rate (left turns left), which is
+  what a tank or a two-wheeled robot does with a stick.
 
 A continuous drive (``follow``: forward, left, yaw as fractions of the limits) is a body-frame
 velocity and a turn rate: ``omni`` follows all three (its world-frame target velocity turns
