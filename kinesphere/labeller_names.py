@@ -31,6 +31,7 @@ _FINGER = {
 }
 _DRIVE = {"wheel", "caster", "castor", "suspension", "rotor", "propeller", "prop", "track"}
 _STEER = {"steer", "steering", "swivel"}
+_WHEEL = {"wheel", "caster", "castor", "track"}
 _CORE = {"torso", "waist", "trunk", "spine", "lumbar", "chest", "thorax"}
 _LEFT = {"left", "l", "larm", "lleg", "lf", "lh", "fl", "hl", "rl", "bl"}
 _RIGHT = {"right", "r", "rarm", "rleg", "rf", "rh", "fr", "hr", "rr", "br"}
@@ -56,6 +57,12 @@ def is_finger_name(name: str) -> bool:
 
 def is_drive_name(name: str) -> bool:
     return bool(_DRIVE & set(words(name)))
+
+
+def is_wheel_name(name: str) -> bool:
+    """A wheel, caster or track: what rolls a base on the floor (rotors and propellers do
+    not)."""
+    return bool(_WHEEL & set(words(name)))
 
 
 def is_steer_name(name: str) -> bool:

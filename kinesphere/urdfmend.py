@@ -12,6 +12,8 @@ other readers do, and every mend is said in one line (:class:`Mends`):
 * a revolute whose lower limit is not below its upper one is unlimited (Bullet's rule), one
   without limits continuous;
 * a mesh ``scale`` with more than three numbers keeps the first three (as pybullet reads it);
+* a pybullet ``capsule`` becomes a cylinder and a sphere at each end (the same shape);
+* xacro's ``$(optenv NAME DEFAULT)`` left in an attribute reads as its default;
 * geometry of zero or negative size, which MuJoCo refuses, is dropped (it covers nothing);
 * a root link without geometry holding its robot by one floating or planar joint, or a
   ``world`` link welding it, is ROS's way of freeing or fixing a base: it goes (its child is
@@ -24,7 +26,9 @@ with one line naming the element.
 
 from __future__ import annotations
 
+import copy
 import math
+import re
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -164,6 +168,8 @@ def _check_tree(root: ET.Element) -> None:
 
 def mend(root: ET.Element, mends: Mends) -> None:
     """Mend what other readers accept and MuJoCo or the eURDF loader would not (see module)."""
+    _optenv(root, mends)
+    _capsules(root, mends)
     _spherical(root, mends)
     for el in root.findall("joint"):
         kind = el.get("type")
@@ -179,6 +185,12 @@ def mend(root: ET.Element, mends: Mends) -> None:
                               "three numbers, not all zero")
         if kind == "revolute" and el.find("mimic") is None:
             _revolute_limits(el, mends)
+        lim = el.find("limit")
+        if kind == "prismatic" and lim is not None and el.find("mimic") is None:
+            lower, upper = _float(lim.get("lower")), _float(lim.get("upper"))
+            if lower is not None and upper is not None and lower > upper:
+                raise refused(f"<joint name={name!r}> (prismatic) has lower limit {lower:g} "
+                              f"above upper {upper:g}; a URDF slider cannot be unlimited")
     for el in root.iter("mesh"):
         scale = (el.get("scale") or "").split()
         if len(scale) > 3:
@@ -192,6 +204,60 @@ def mend(root: ET.Element, mends: Mends) -> None:
             raise refused(f"<joint name={el.get('name')!r}> is {el.get('type')} inside the tree: "
                           "only a robot's root may float (make it fixed, or the root's joint)")
     check(root)  # the mends added links and joints: still within bounds
+
+
+_OPTENV = re.compile(r"^\$\(optenv\s+\S+\s*(.*)\)$")
+
+
+def _optenv(root: ET.Element, mends: Mends) -> None:
+    for el in root.iter():
+        for attr, value in el.attrib.items():
+            m = _OPTENV.match(value.strip())
+            if m:
+                el.set(attr, m.group(1).strip())
+                mends.add(f"<{el.tag} {attr}={value!r}>: xacro's optenv read as its default "
+                          f"{m.group(1).strip()!r}")
+
+
+def _capsules(root: ET.Element, mends: Mends) -> None:
+    """A capsule (radius r, length l along z) as a cylinder plus a sphere at each end."""
+    for link in root.findall("link"):
+        for kind in ("visual", "collision"):
+            for item in list(link.findall(kind)):
+                capsule = item.find("geometry/capsule")
+                if capsule is None:
+                    continue
+                radius, length = capsule.get("radius", "0"), capsule.get("length", "0")
+                geometry = item.find("geometry")
+                assert geometry is not None
+                geometry.remove(capsule)
+                ET.SubElement(geometry, "cylinder", radius=radius, length=length)
+                at = list(link).index(item)
+                for end in (0.5, -0.5):
+                    cap = copy.deepcopy(item)
+                    cap_geometry = cap.find("geometry")
+                    assert cap_geometry is not None
+                    for child in list(cap_geometry):
+                        cap_geometry.remove(child)
+                    ET.SubElement(cap_geometry, "sphere", radius=radius)
+                    _shift_z(cap, end * (_float(length) or 0.0))
+                    at += 1
+                    link.insert(at, cap)
+                mends.add(f"link {link.get('name')}: {kind} capsule read as a cylinder with a "
+                          "sphere at each end")
+
+
+def _shift_z(item: ET.Element, dz: float) -> None:
+    """Move an element's origin by ``dz`` along its own z axis."""
+    origin = item.find("origin")
+    if origin is None:
+        origin = ET.SubElement(item, "origin", xyz="0 0 0", rpy="0 0 0")
+    xyz = [float(x) for x in (origin.get("xyz") or "0 0 0").split()]
+    r, p, y = [float(x) for x in (origin.get("rpy") or "0 0 0").split()]
+    cr, sr, cp, sp, cy, sy = (math.cos(r), math.sin(r), math.cos(p), math.sin(p), math.cos(y),
+                              math.sin(y))
+    z_axis = (cy * sp * cr + sy * sr, sy * sp * cr - cy * sr, cp * cr)  # Rz Ry Rx, column z
+    origin.set("xyz", " ".join(f"{a + dz * b:.9g}" for a, b in zip(xyz, z_axis, strict=True)))
 
 
 def _revolute_limits(el: ET.Element, mends: Mends) -> None:
@@ -285,8 +351,9 @@ def _zero_sizes(root: ET.Element, mends: Mends) -> None:
                     continue
                 sizes = [_float(x) for a in GEOMETRY_SIZES.get(shape.tag, ())
                          for x in (shape.get(a) or "1").split()]
-                if shape.tag == "mesh":
-                    sizes = [_float(x) for x in (shape.get("scale") or "1").split()]
+                if shape.tag == "mesh":  # a negative scale mirrors (Talos's left and right)
+                    sizes = [abs(x) if x is not None else None
+                             for x in map(_float, (shape.get("scale") or "1").split())]
                 if any(s is not None and s <= 0 for s in sizes):
                     link.remove(item)
                     mends.add(f"link {link.get('name')}: {kind} {k} ({shape.tag} of size 0) "

@@ -8,9 +8,10 @@ found in (the ``package://`` folder, else the URDF's package or folder), must be
 with a mesh suffix, and is bounded in bytes, faces and vertices; a copy is never more readable
 than its source. MuJoCo reads binary STL and OBJ; an ASCII STL and an OBJ (whose texture
 coordinates MuJoCo warns about, or whose normals it rejects) become binary STL, anything else
-(COLLADA ``.dae`` above all) the convex hull of its vertices, read by trimesh (a yourdfpy
-dependency). A mesh that cannot be found is replaced by a box with the link's inertia, so
-collision and floor checks still have something to check.
+(COLLADA ``.dae`` above all, and an OBJ past MuJoCo's face limit) the convex hull of its
+vertices, read by trimesh (a yourdfpy dependency). A mesh that cannot be found, or in which
+trimesh finds no triangle, is replaced by a box with the link's inertia, so collision and
+floor checks still have something to check.
 """
 
 from __future__ import annotations
@@ -134,7 +135,7 @@ def import_meshes(robot: ET.Element, urdf_dir: Path, folder: Path) -> Imported:
                 found = locate(name, urdf_dir)
                 if found is None:
                     result.missing.append(name)
-                    result.stand_ins.append(_stand_in(link, item, kind, k, name))
+                    result.stand_ins.append(_stand_in(link, item, kind, k, name, "not found"))
                     continue
                 real = check(found, name)
                 if real not in done:
@@ -142,13 +143,17 @@ def import_meshes(robot: ET.Element, urdf_dir: Path, folder: Path) -> Imported:
                     if total > MAX_TOTAL:
                         raise refused(f"meshes of more than {MAX_TOTAL} bytes in all")
                     out_dir.mkdir(exist_ok=True)
-                    done[real] = f"meshes/{_write(real, name, out_dir, result)}"
-                mesh.set("filename", done[real])
+                    done[real] = _write(real, name, out_dir, result)
+                if done[real]:
+                    mesh.set("filename", f"meshes/{done[real]}")
+                else:
+                    result.stand_ins.append(_stand_in(link, item, kind, k, name, "unreadable"))
     return result
 
 
 def _write(real: Path, name: str, out_dir: Path, result: Imported) -> str:
-    """Write one mesh into ``out_dir`` as MuJoCo reads it; the file name written."""
+    """Write one mesh into ``out_dir`` as MuJoCo reads it; the file name written, or "" for a
+    format trimesh reads no triangle of (a COLLADA file of an unsupported kind)."""
     stem = re.sub(r"[^A-Za-z0-9_.-]", "_", real.stem)[:40] or "mesh"
     digest = hashlib.sha1(str(real).encode()).hexdigest()[:8]
     mode = real.stat().st_mode & 0o644 | 0o600
@@ -157,13 +162,16 @@ def _write(real: Path, name: str, out_dir: Path, result: Imported) -> str:
         target = out_dir / f"{stem}_{digest}.stl"
         _copy(real, target, mode)
         result.copied += 1
-    elif suffix in MUJOCO_READS:
+    elif suffix in MUJOCO_READS and _fits(mesh := _load(real, name), name, suffix):
         target = out_dir / f"{stem}_{digest}.stl"
-        _save(_load(real, name), target, mode, name)
+        _save(mesh, target, mode, name)
         result.converted += 1
     else:
+        loaded = _load(real, name, strict=suffix in MUJOCO_READS)
+        if len(loaded.vertices) < MIN_VERTICES:
+            return ""
         target = out_dir / f"{stem}_{digest}_hull.stl"
-        _save(_load(real, name).convex_hull, target, mode, name)
+        _save(loaded.convex_hull, target, mode, name)
         result.hulls += 1
     return target.name
 
@@ -183,6 +191,13 @@ def _binary_stl_faces(path: Path, name: str) -> int | None:
     return faces
 
 
+def _fits(mesh: Any, name: str, suffix: str) -> bool:
+    """An ASCII STL past MuJoCo's face limit is refused like a binary one; an OBJ is hulled."""
+    if suffix == ".stl":
+        _bounded(name, len(mesh.faces), len(mesh.vertices))
+    return len(mesh.faces) <= MAX_FACES
+
+
 def _bounded(name: str, faces: int, vertices: int) -> None:
     if faces > MAX_FACES:
         raise refused(f"mesh {name}: {faces} faces; MuJoCo reads at most {MAX_FACES} "
@@ -191,15 +206,18 @@ def _bounded(name: str, faces: int, vertices: int) -> None:
         raise refused(f"mesh {name}: {vertices} vertices; a mesh needs at least {MIN_VERTICES}")
 
 
-def _load(src: Path, name: str) -> Any:
+def _load(src: Path, name: str, strict: bool = True) -> Any:
+    """A mesh file read by trimesh; a STL or OBJ (``strict``) with fewer than MIN_VERTICES is
+    refused, other formats are hulled if they hold enough."""
     import trimesh
 
     try:
         loaded: Any = trimesh.load(src, force="mesh", skip_materials=True)
-        vertices, faces = len(loaded.vertices), len(loaded.faces)
+        vertices = len(loaded.vertices)
     except Exception as exc:  # trimesh and its loaders raise assorted types
         raise refused(f"cannot read mesh {name}: {exc}") from None
-    _bounded(name, faces, vertices)
+    if strict:
+        _bounded(name, 1, vertices)
     return loaded
 
 
@@ -218,7 +236,8 @@ def _copy(src: Path, target: Path, mode: int) -> None:
             out.write(chunk)
 
 
-def _stand_in(link: ET.Element, item: ET.Element, kind: str, k: int, name: str) -> str:
+def _stand_in(link: ET.Element, item: ET.Element, kind: str, k: int, name: str,
+              why: str) -> str:
     """Replace a missing mesh with the box of the link's inertia (a solid box of its mass and
     principal moments, on its principal axes), or drop it when the link has no inertia."""
     lname = link.get("name")
@@ -227,13 +246,13 @@ def _stand_in(link: ET.Element, item: ET.Element, kind: str, k: int, name: str) 
     assert geometry is not None
     if box is None:
         link.remove(item)
-        return f"link {lname}: {kind} {k} mesh {name} not found; dropped (no inertia to size it)"
+        return f"link {lname}: {kind} {k} mesh {name} {why}; dropped (no inertia to size it)"
     sides, frame = box
     for child in list(geometry):
         geometry.remove(child)
     ET.SubElement(geometry, "box", size=" ".join(f"{s:.4g}" for s in sides))
     origins.write(item, frame)
-    return (f"link {lname}: {kind} {k} mesh {name} not found; stand-in box "
+    return (f"link {lname}: {kind} {k} mesh {name} {why}; stand-in box "
             f"{' x '.join(f'{s:.3g}' for s in sides)} m from its inertia")
 
 

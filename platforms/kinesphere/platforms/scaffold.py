@@ -38,9 +38,9 @@ import yourdfpy
 
 from kinesphere.cliargs import MERGE_DISTANCE_M
 from kinesphere.errors import KinesphereError
-from kinesphere.eurdf import Eurdf, load_eurdf
+from kinesphere.eurdf import ACTUATED_TYPES, Eurdf, load_eurdf
 from kinesphere.labeller import Proposal, link_frames, propose, read_urdf, xml_comment
-from kinesphere.labeller_names import is_drive_name
+from kinesphere.labeller_names import is_wheel_name
 from kinesphere.platforms import neutral as neutral_search
 from kinesphere.platforms import stance
 from kinesphere.platforms.meshes import Imported, import_meshes
@@ -115,6 +115,9 @@ def new_platform(
     clock = _Clock(time_limit)
     mends = Mends()
     robot_el, model = read_urdf(urdf, mends)  # nothing is created before this succeeds
+    if not any(j.type in ACTUATED_TYPES and j.mimic is None for j in model.robot.joints):
+        raise KinesphereError("invalid_eurdf", f"{urdf}: nothing to steer: no revolute, "
+                              "continuous or prismatic joint (an object, not a robot)")
     folder = parent / name
     if folder.exists() and not force:
         if (folder / "platform.toml").exists():
@@ -163,34 +166,25 @@ def _build(name: str, urdf: Path, robot_el: ET.Element, model: yourdfpy.URDF, me
     clock.check("meshes")
     for plugin in robot.findall("gazebo") + robot.findall("transmission"):
         robot.remove(plugin)  # simulator and controller plumbing: not part of the body
-    from kinesphere.platforms.mjcf import build_spec, unbalanced
+    from kinesphere.platforms.mjcf import unbalanced
 
     balanced = unbalanced(model)
     if balanced:
         mends.add(f"inertia of {', '.join(balanced[:6])}{' ...' if len(balanced) > 6 else ''} "
                   "breaks A + B >= C: evened by MuJoCo's balanceinertia")
-    for k, line in enumerate(mends.lines):
-        robot.insert(k, xml_comment(f"mended by 'kinesphere platform new': {line}"))
-    ET.indent(robot)
-    eurdf_path = work / f"{name}.eurdf"
-    _write(eurdf_path, "<?xml version=\"1.0\"?>\n"
-           + ET.tostring(xml_comment(f"proposed by 'kinesphere platform new' from {urdf.name}: "
-                                     "edit the body_part labels freely, then check with "
-                                     "'kinesphere describe'"), encoding="unicode") + "\n"
-           + ET.tostring(robot, encoding="unicode") + "\n", mode)
-    eurdf = load_eurdf(eurdf_path)
-    zero = _neutral(eurdf)
-    plat = Platform(name, name, work, eurdf, BaseSpec("fixed", 0.0), 4.0, 40.0, zero)
-    try:
-        compiled = build_spec(plat).compile()
-    except ValueError as exc:  # MuJoCo's compiler: one line naming the element
-        raise KinesphereError("invalid_eurdf", f"MuJoCo refuses the model: {_one_line(exc)}"
-                              ) from None
+    eurdf, compiled = _body(robot, mends, work, name, urdf, mode)
     clock.check("compiling")
+    zero = _neutral(eurdf)
     qpos = _qpos(compiled, eurdf, zero)
     standing = stance.stance(compiled, qpos)
     legs, core = standing.on(eurdf)
-    kind = _base_kind(eurdf, legs, core, mends)
+    kind = _base_kind(eurdf, proposal, legs, core, mends)
+    if kind != "fixed" and standing.drawn:  # the balance check needs what it stands on
+        stance.collide_visuals(robot, standing.drawn)
+        mends.add(f"{', '.join(standing.drawn)}: stand on the floor with visual shapes only; "
+                  "those shapes collide too")
+        eurdf, compiled = _body(robot, mends, work, name, urdf, mode)
+        standing = stance.stance(compiled, qpos)
     bearing = set(legs) if kind == "legged" else set()
     proposals: list[neutral_search.Proposal] = []
     chosen = dict(zero)
@@ -207,6 +201,10 @@ def _build(name: str, urdf: Path, robot_el: ET.Element, model: yourdfpy.URDF, me
     elif neutral != "zero":
         raise KinesphereError("malformed", f"--neutral {neutral!r}: use auto or zero")
     height = round(standing.depth + CLEARANCE, 4)
+    if height < 0:  # the root frame sits below every shape: the robot floats, as in the file
+        mends.add(f"the root frame sits {-height:.3f} m below the lowest shape: height 0, the "
+                  "robot hangs above the floor as its file places it")
+        height = 0.0
     _write(work / "platform.toml",
            _platform_toml(name, urdf, kind, height, chosen, zero, proposals, legs), mode)
     limbs_kept = [p.name for p in eurdf.limbs if p.name not in proposal.hands]
@@ -215,6 +213,31 @@ def _build(name: str, urdf: Path, robot_el: ET.Element, model: yourdfpy.URDF, me
     load_platform(str(work))  # the folder loads as a platform, neutral pose checked against P
     return Scaffold(work, eurdf, kind, height, imported, limbs_kept, proposal.hands,
                     mends.lines, proposals, legs, axis)
+
+
+def _body(robot: ET.Element, mends: Mends, work: Path, name: str, urdf: Path, mode: int
+          ) -> tuple[Eurdf, mujoco.MjModel]:
+    """Write the eURDF (its mends in comments), load it and compile it with a fixed base."""
+    from kinesphere.platforms.mjcf import build_spec
+
+    text = copy.deepcopy(robot)
+    for k, line in enumerate(mends.lines):
+        text.insert(k, xml_comment(f"mended by 'kinesphere platform new': {line}"))
+    ET.indent(text)
+    path = work / f"{name}.eurdf"
+    path.unlink(missing_ok=True)
+    _write(path, "<?xml version=\"1.0\"?>\n"
+           + ET.tostring(xml_comment(f"proposed by 'kinesphere platform new' from {urdf.name}: "
+                                     "edit the body_part labels freely, then check with "
+                                     "'kinesphere describe'"), encoding="unicode") + "\n"
+           + ET.tostring(text, encoding="unicode") + "\n", mode)
+    eurdf = load_eurdf(path)
+    plat = Platform(name, name, work, eurdf, BaseSpec("fixed", 0.0), 4.0, 40.0, {})
+    try:
+        return eurdf, build_spec(plat).compile()
+    except ValueError as exc:  # MuJoCo's compiler: one line naming the element
+        raise KinesphereError("invalid_eurdf", f"MuJoCo refuses the model: {_one_line(exc)}"
+                              ) from None
 
 
 def qpos_root(model: mujoco.MjModel, qpos: np.ndarray) -> float:
@@ -250,17 +273,21 @@ def _leg_tips(model: yourdfpy.URDF, proposal: Proposal) -> list[np.ndarray]:
     return tips
 
 
-def _base_kind(eurdf: Eurdf, legs: list[str], core: bool, mends: Mends) -> str:
-    """legged when two or more limbs (and not the core) stand on the floor; omni for a
-    floating or planar root; diff for drive wheels in the core; else fixed."""
-    if len(legs) >= 2 and not core:
+def _base_kind(eurdf: Eurdf, proposal: Proposal, legs: list[str], core: bool,
+               mends: Mends) -> str:
+    """legged when two or more limbs that are no arms, heads or hands (each of two or more
+    joints) and not the core stand on the floor; omni for a floating or planar root; diff for
+    wheels or tracks in the core; else fixed (an arm hanging below a torso on a stand)."""
+    walking = [x for x in legs if proposal.kinds.get(x) in (None, "leg")
+               and x not in proposal.hands and len(eurdf.limb_joints(x)) >= 2]
+    if len(walking) >= 2 and len(walking) == len(legs) and not core:
         return "legged"
     if mends.mobile_root is not None:
         return "omni"
     core_links = {ln for p in eurdf.core for ln in p.links}
     wheels = [
         j for j in eurdf.urdf.robot.joints
-        if j.name in eurdf.limits and j.child in core_links and is_drive_name(j.name)
+        if j.name in eurdf.limits and j.child in core_links and is_wheel_name(j.name)
     ]
     return "diff" if wheels else "fixed"
 

@@ -2,7 +2,7 @@
 and what base that makes.
 
 Everything is read from collision geometry (visual meshes are often larger or looser than
-what the robot stands on; a robot without any collision geometry stands on its visuals), with
+what the robot stands on; a link without any collision geometry stands on its visuals), with
 the exact lowest point of each shape, so the base height puts the feet, wheels or pedestal on
 the floor and the balance check of the ECL generator finds them there. A robot standing on
 two or more of its limbs is **legged**: walking is abstracted as a holonomic planar base, as
@@ -12,6 +12,7 @@ humanoid) is turned so z is up, by re-expressing the root link's frame.
 
 from __future__ import annotations
 
+import copy
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 
@@ -47,16 +48,15 @@ def upright(up: str) -> np.ndarray:
 
 
 def detect_up(legs: list[np.ndarray]) -> str:
-    """The up axis a robot's legs say (their tips' mean offset from the root points down);
-    z when fewer than two legs speak."""
+    """y or -y when every leg's tip hangs from the root along -y or +y (pybullet's Y-up
+    files), else z: legs folded forward or back at zero (a Ghost quadruped) say nothing."""
     if len(legs) < 2:
         return "z"
-    down = np.mean(legs, axis=0)
-    k = int(np.argmax(np.abs(down)))
-    if np.linalg.norm(down) < 1e-6:
-        return "z"
-    name = "xyz"[k]
-    return name if down[k] < 0 else f"-{name}"
+    tips = np.array(legs)
+    along = np.abs(tips[:, 1]) > 2 * np.linalg.norm(tips[:, [0, 2]], axis=1)
+    if along.all() and len(set(np.sign(tips[:, 1]))) == 1:
+        return "y" if tips[0, 1] < 0 else "-y"
+    return "z"
 
 
 def turn_root(robot: ET.Element, rotation: np.ndarray) -> None:
@@ -74,10 +74,12 @@ def turn_root(robot: ET.Element, rotation: np.ndarray) -> None:
 
 
 def bearing_geoms(model: mujoco.MjModel) -> list[int]:
-    """The robot's collision geoms; its visual ones when it has no collision geometry."""
+    """Each link's collision geoms; its visual ones when it has no collision geometry (PR2's
+    wheels are drawn, not collided)."""
     robot = [g for g in range(model.ngeom) if model.geom_bodyid[g] != 0]
-    colliding = [g for g in robot if model.geom_contype[g]]
-    return colliding or robot
+    colliding = {int(model.geom_bodyid[g]) for g in robot if model.geom_contype[g]}
+    return [g for g in robot
+            if model.geom_contype[g] or int(model.geom_bodyid[g]) not in colliding]
 
 
 def lowest(model: mujoco.MjModel, data: mujoco.MjData, g: int) -> float:
@@ -111,6 +113,7 @@ class Stance:
 
     depth: float  # the root's height above its lowest point
     feet: tuple[str, ...]  # links with geometry within TOUCH of the lowest point
+    drawn: tuple[str, ...] = ()  # feet that touch with visual geometry only
 
     def on(self, eurdf: Eurdf) -> tuple[list[str], bool]:
         """The first-level limbs standing on the floor, and whether the core does too."""
@@ -120,16 +123,31 @@ class Stance:
         return limbs, core
 
 
+def collide_visuals(robot: ET.Element, links: tuple[str, ...]) -> None:
+    """Give links that stand on the floor with visual geometry only that geometry as collision
+    geometry too, so the balance check sees what the robot stands on."""
+    for link in robot.findall("link"):
+        if link.get("name") in links and link.find("collision") is None:
+            for visual in link.findall("visual"):
+                collision = ET.Element("collision")
+                for child in visual:
+                    if child.tag in ("origin", "geometry"):
+                        collision.append(copy.deepcopy(child))
+                link.insert(list(link).index(visual) + 1, collision)
+
+
 def stance(model: mujoco.MjModel, qpos: np.ndarray) -> Stance:
     data = mujoco.MjData(model)
     data.qpos[:] = qpos
     mujoco.mj_kinematics(model, data)
     geoms = bearing_geoms(model)
     if not geoms:
-        return Stance(0.0, ())
+        return Stance(0.0, (), ())
     heights = {g: lowest(model, data, g) for g in geoms}
     low = min(heights.values())
     feet = sorted({model.body(int(model.geom_bodyid[g])).name
                    for g, h in heights.items() if h - low < TOUCH})
+    drawn = sorted({model.body(int(model.geom_bodyid[g])).name for g, h in heights.items()
+                    if h - low < TOUCH and not model.geom_contype[g]})
     root = float(data.xpos[1, 2])
-    return Stance(root - low, tuple(feet))
+    return Stance(root - low, tuple(feet), tuple(drawn))
