@@ -58,6 +58,14 @@ SIZE_ITERATIONS = 80
 ROUND_DIGITS = 6
 
 
+def short_of(value: float, bound: float) -> str:
+    """``value < bound`` with enough digits to show it (0.8497 is not "0.85 < 0.85")."""
+    digits = 2
+    while round(value, digits) >= bound and digits < 8:
+        digits += 1
+    return f"{value:.{digits}f} < {bound}"
+
+
 @dataclass(frozen=True)
 class Chain:
     """An honest pull: its poses near..far and the size rule they follow."""
@@ -309,7 +317,7 @@ class Sizes:
                             f"{gap:.3f} m beyond the size below ({below.distance:.3f} m)")
             for size, pose in zip(self.sizes, chain, strict=True):
                 if pose.cosine < COS_FAR:
-                    return f"size {size}: cosine {pose.cosine:.2f} < {COS_FAR}"
+                    return f"size {size}: cosine {short_of(pose.cosine, COS_FAR)}"
         else:
             neutral = self.neutral(d)
             for size, pose, below in zip(self.sizes, chain, [neutral, *chain], strict=False):

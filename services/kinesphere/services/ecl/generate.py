@@ -51,6 +51,7 @@ from kinesphere.services.ecl.chains import (
     Sizes,
     measure,
     rounded,
+    short_of,
     size_rule,
 )
 from kinesphere.services.ecl.ik import LimbSolver
@@ -262,7 +263,7 @@ def _direction(solver: LimbSolver, sizes: Sizes, balance: Balance, direction: Di
     held = _Kept([neutral] * len(sizes.sizes), neutral, rule=sizes.rule)
     far = _far(solver, sizes, d)
     if far.cosine < COS_FAR:
-        return held if at_rest else _Drop(f"far cosine {far.cosine:.2f} < {COS_FAR}")
+        return held if at_rest else _Drop(f"far cosine {short_of(far.cosine, COS_FAR)}")
     hit = solver.collides(solver.full_q(far.values))
     if hit is not None:  # the solver keeps poses clean, so this is a safety net
         return held if at_rest else _Drop(f"far pose collides ({hit})")
