@@ -25,3 +25,44 @@ PANDA = "panda_description/urdf/panda.urdf"
 UR5 = "ur_description/urdf/ur5_robot.urdf"
 TIAGO = "tiago_description/robots/tiago.urdf"
 TALOS = "talos_data/robots/talos_reduced.urdf"
+
+
+def _package_dir(dist: str, module: str, install: str) -> Path:
+    try:
+        distribution(dist)
+    except PackageNotFoundError:
+        raise AssertionError(f"{dist} is not installed: {install}") from None
+    import importlib
+
+    found = importlib.import_module(module).__file__
+    assert found is not None
+    return Path(found).parent
+
+
+def pybullet_data() -> Path:
+    """pybullet's own collection of URDFs (robots, objects, 1000 random objects)."""
+    return _package_dir("pybullet", "pybullet_data", "pip install -c constraints.txt pybullet")
+
+
+def rtb_data() -> Path:
+    """The Robotics Toolbox's collection (industrial arms among its xacro sources)."""
+    return _package_dir("rtb-data", "rtbdata", "pip install -c constraints.txt rtb-data")
+
+
+def collections() -> dict[str, Path]:
+    """The three public URDF collections the bring-your-own-robot sweep covers."""
+    return {"erd": robot_data(), "pyb": pybullet_data(), "rtb": rtb_data()}
+
+
+XARM6 = "xarm/xarm6_robot.urdf"  # pybullet_data
+IIWA = "kuka_iiwa/model.urdf"
+LAIKAGO_TOES = "laikago/laikago_toes.urdf"
+LAIKAGO = "laikago/laikago.urdf"
+MINI_CHEETAH = "mini_cheetah/mini_cheetah.urdf"
+PENDULUM5 = "pendulum5.urdf"
+RACECAR = "racecar/racecar.urdf"
+MINITAUR = "quadruped/minitaur.urdf"
+R2D2 = "r2d2.urdf"
+HUMANOID = "humanoid/humanoid.urdf"
+A1 = "a1/a1.urdf"
+HUSKY = "husky/husky.urdf"

@@ -205,6 +205,7 @@ def _build(name: str, urdf: Path, robot_el: ET.Element, model: yourdfpy.URDF, me
         mends.add(f"the root frame sits {-height:.3f} m below the lowest shape: height 0, the "
                   "robot hangs above the floor as its file places it")
         height = 0.0
+        eurdf = load_eurdf(_write_eurdf(robot, mends, work, name, urdf, mode))
     _write(work / "platform.toml",
            _platform_toml(name, urdf, kind, height, chosen, zero, proposals, legs), mode)
     limbs_kept = [p.name for p in eurdf.limbs if p.name not in proposal.hands]
@@ -220,6 +221,19 @@ def _body(robot: ET.Element, mends: Mends, work: Path, name: str, urdf: Path, mo
     """Write the eURDF (its mends in comments), load it and compile it with a fixed base."""
     from kinesphere.platforms.mjcf import build_spec
 
+    path = _write_eurdf(robot, mends, work, name, urdf, mode)
+    eurdf = load_eurdf(path)
+    plat = Platform(name, name, work, eurdf, BaseSpec("fixed", 0.0), 4.0, 40.0, {})
+    try:
+        return eurdf, build_spec(plat).compile()
+    except ValueError as exc:  # MuJoCo's compiler: one line naming the element
+        raise KinesphereError("invalid_eurdf", f"MuJoCo refuses the model: {_one_line(exc)}"
+                              ) from None
+
+
+def _write_eurdf(robot: ET.Element, mends: Mends, work: Path, name: str, urdf: Path,
+                 mode: int) -> Path:
+    """The eURDF file, each mend in a comment at the top of ``<robot>``."""
     text = copy.deepcopy(robot)
     for k, line in enumerate(mends.lines):
         text.insert(k, xml_comment(f"mended by 'kinesphere platform new': {line}"))
@@ -231,13 +245,7 @@ def _body(robot: ET.Element, mends: Mends, work: Path, name: str, urdf: Path, mo
                                      "edit the body_part labels freely, then check with "
                                      "'kinesphere describe'"), encoding="unicode") + "\n"
            + ET.tostring(text, encoding="unicode") + "\n", mode)
-    eurdf = load_eurdf(path)
-    plat = Platform(name, name, work, eurdf, BaseSpec("fixed", 0.0), 4.0, 40.0, {})
-    try:
-        return eurdf, build_spec(plat).compile()
-    except ValueError as exc:  # MuJoCo's compiler: one line naming the element
-        raise KinesphereError("invalid_eurdf", f"MuJoCo refuses the model: {_one_line(exc)}"
-                              ) from None
+    return path
 
 
 def qpos_root(model: mujoco.MjModel, qpos: np.ndarray) -> float:
@@ -261,15 +269,23 @@ def _reload(robot: ET.Element) -> yourdfpy.URDF:
 
 
 def _leg_tips(model: yourdfpy.URDF, proposal: Proposal) -> list[np.ndarray]:
-    """Where each leg's deepest link sits relative to the root at zero."""
+    """Which way each leg hangs at zero: from its first joint to the farthest of its links
+    and shapes (a link's frame may sit at its joint, its shape at the foot)."""
     children = {j.child for j in model.robot.joints}
     root = next(str(ln.name) for ln in model.robot.links if ln.name not in children)
     frames, _ = link_frames(model, root)
     tips = []
     for limb in proposal.limbs:
-        if proposal.kinds.get(limb.label) == "leg":
-            tips.append(max((frames[ln][:3, 3] for ln in limb.links),
-                            key=lambda p: float(np.linalg.norm(p))))
+        if proposal.kinds.get(limb.label) != "leg":
+            continue
+        start = frames[limb.location.joints[0].child][:3, 3]
+        points = [frames[ln][:3, 3] for ln in limb.links]
+        for ln in limb.links:
+            link = model.link_map[ln]
+            for item in (*link.visuals, *link.collisions):
+                if item.origin is not None:
+                    points.append((frames[ln] @ item.origin)[:3, 3])
+        tips.append(max((p - start for p in points), key=lambda p: float(np.linalg.norm(p))))
     return tips
 
 

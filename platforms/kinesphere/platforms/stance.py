@@ -53,7 +53,7 @@ def detect_up(legs: list[np.ndarray]) -> str:
     if len(legs) < 2:
         return "z"
     tips = np.array(legs)
-    along = np.abs(tips[:, 1]) > 2 * np.linalg.norm(tips[:, [0, 2]], axis=1)
+    along = np.abs(tips[:, 1]) > 1.25 * np.abs(tips[:, [0, 2]]).max(axis=1)
     if along.all() and len(set(np.sign(tips[:, 1]))) == 1:
         return "y" if tips[0, 1] < 0 else "-y"
     return "z"

@@ -1,0 +1,262 @@
+"""Bring your own robot over every URDF of three public collections installed from PyPI
+(example-robot-data, pybullet's pybullet_data, the Robotics Toolbox's rtb-data), as a user
+does it: ``platform new`` -> ``describe`` -> ``ecl build`` (one or two limbs each, two robots
+at a time). Nobody tuned anything on these files.
+
+Asserted for every one: no traceback and nothing half-written (a refusal is one error line
+naming the problem); every mend ``platform new`` made is printed and written into the eURDF;
+no finger joint in an arm limb; a legged robot stands with its feet on the floor and each leg
+built keeps at least 8 of the 26 directions; a mobile manipulator's arm keeps its directions;
+an arm whose zero pose is stretched out gets a proposed neutral that keeps at least 18.
+
+This is the slowest module of the suite (a few minutes on two cores); the table it prints
+(``-s``) is the README's.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import multiprocessing
+import re
+import time
+import traceback
+from collections.abc import Iterator
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+from typing import Any
+
+import mujoco
+import numpy as np
+import pytest
+from test_byor_support import IIWA, LAIKAGO, collections
+
+from kinesphere.cli import main
+from kinesphere.labeller_names import is_finger_name
+from kinesphere.robots.mjcf import build_spec
+from kinesphere.robots.platform import load_platform
+from kinesphere.robots.stance import bearing_geoms, lowest
+
+pytestmark = pytest.mark.slow
+WORKERS = 2
+MIN_PER_LEG = 8
+MIN_ARM = 12  # of 26: a mobile manipulator's arm keeps at least this many
+MIN_PROPOSED = 18  # of 26: a stretched 6-7 joint arm's proposed neutral keeps at least this
+MENDED = re.compile(r"^  mended: (.*)$", re.M)
+
+
+def urdfs() -> list[tuple[str, str, Path]]:
+    """(collection, relative path, file) for every URDF but pybullet's 1000 random objects."""
+    out = []
+    for col, root in collections().items():
+        for path in sorted(root.rglob("*.urdf")):
+            rel = str(path.relative_to(root))
+            if not rel.startswith("random_urdfs"):
+                out.append((col, rel, path))
+    assert len(out) > 150, "fewer URDFs than the three collections hold"
+    return out
+
+
+def _run(args: list[str]) -> tuple[int, str, str, str | None]:
+    """A CLI command in this process: exit code, stdout, stderr, and a traceback if any."""
+    out, err = io.StringIO(), io.StringIO()
+    try:
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            code = main(args)
+    except BaseException:  # a traceback is what this sweep exists to catch
+        return -1, out.getvalue(), err.getvalue(), traceback.format_exc()
+    return code, out.getvalue(), err.getvalue(), None
+
+
+def _limbs_to_build(folder: Path) -> list[str]:
+    """One leg of a legged robot (and its first arm), else its first arm, else its first
+    limb; none for a robot of wheels only."""
+    plat = load_platform(str(folder))
+    e = plat.eurdf
+    vsam = (folder / "vsam.toml").read_text()
+    firsts = [p for p in e.limbs if p.index[1] == 1 and f'limb = "{p.name}"' in vsam
+              and not vsam.split(f'limb = "{p.name}"')[0].rstrip().endswith("#")]
+    arms = [p.name for p in firsts if "arm" in (p.alias or "")]
+    if plat.base.kind == "legged":
+        legs = [p.name for p in firsts if "leg" in (p.alias or "")] or [firsts[0].name]
+        return [legs[0], *arms[:1]]
+    return arms[:1] or [p.name for p in firsts[:1]]
+
+
+def sweep_one(k: int, col: str, rel: str, urdf: Path, parent: Path) -> dict[str, Any]:
+    """platform new -> describe -> ecl build of one URDF; what happened, as plain data."""
+    name = f"{col}{k:04d}"
+    row: dict[str, Any] = {"col": col, "rel": rel, "name": name}
+    start = time.perf_counter()
+    code, out, err, tb = _run(["platform", "new", name, "--urdf", str(urdf), "--dir",
+                               str(parent)])
+    row.update(code=code, out=out, err=err, traceback=tb, new_s=time.perf_counter() - start)
+    if code != 0:
+        return row
+    folder = parent / name
+    code, out, _, tb = _run(["describe", str(folder)])
+    row.update(describe=code, describe_tb=tb)
+    row["limbs"] = _limbs_to_build(folder)
+    kept: dict[str, int] = {}
+    start = time.perf_counter()
+    for limb in row["limbs"]:
+        code, out, err, tb = _run(["ecl", "build", str(folder), "--limb", limb, "--jobs", "1"])
+        row.update(build=code, build_tb=tb, build_err=err[-400:])
+        found = re.search(r"(\d+) directions kept", out)
+        kept[limb] = int(found.group(1)) if found else -1
+    row.update(kept=kept, build_s=time.perf_counter() - start)
+    return row
+
+
+@pytest.fixture(scope="module")
+def swept(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Path, list[dict[str, Any]]]]:
+    parent = tmp_path_factory.mktemp("brought")
+    todo = urdfs()
+    context = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(max_workers=WORKERS, mp_context=context) as pool:
+        rows = list(pool.map(sweep_one, *zip(*[(k, c, r, u, parent)
+                                                for k, (c, r, u) in enumerate(todo)],
+                                              strict=True)))
+    yield parent, rows
+
+
+def made(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    return [r for r in rows if r["code"] == 0]
+
+
+def test_no_traceback_and_nothing_half_written(swept: tuple[Path, list[dict[str, Any]]]
+                                               ) -> None:
+    parent, rows = swept
+    for r in rows:
+        assert r["traceback"] is None, (r["rel"], r["traceback"])
+        if r["code"] != 0:
+            errors = [ln for ln in r["err"].splitlines() if ln.startswith("error:")]
+            assert r["code"] == 2 and len(errors) == 1, (r["rel"], r["err"])
+            assert not (parent / r["name"]).exists(), r["rel"]
+        else:
+            assert r["describe"] == 0 and r["describe_tb"] is None, r["rel"]
+            assert r["build"] == 0 and r["build_tb"] is None, (r["rel"], r["build_err"])
+    assert not [p for p in parent.iterdir() if p.name.startswith(".")]
+    assert len(made(rows)) >= 100
+
+
+def test_every_mend_is_printed_and_written_into_the_eurdf(
+    swept: tuple[Path, list[dict[str, Any]]]
+) -> None:
+    parent, rows = swept
+    mended = 0
+    for r in made(rows):
+        printed = MENDED.findall(r["out"])
+        text = (parent / r["name"] / f"{r['name']}.eurdf").read_text()
+        written = re.findall(r"<!-- mended by 'kinesphere platform new': (.*?) -->", text)
+        assert len(printed) == len(written), r["rel"]
+        for a, b in zip(printed, written, strict=True):
+            assert a.replace("--", "- -").rstrip("-") == b, (r["rel"], a, b)
+        mended += bool(printed)
+    by_rel = {r["rel"]: r for r in rows}
+    for rel, words in (("xarm/xarm6_robot.urdf", "balanceinertia"),
+                       ("laikago/laikago_toes.urdf", "of size 0) dropped"),
+                       ("pendulum5.urdf", "renamed 'world_link'"),
+                       ("humanoid/humanoid.urdf", "spherical, read as three revolutes"),
+                       ("double_pendulum_description/urdf/double_pendulum.urdf",
+                        "read as unlimited")):
+        assert words in by_rel[rel]["out"], (rel, by_rel[rel]["out"])
+    assert mended >= 20
+
+
+def test_no_finger_moves_with_an_arm(swept: tuple[Path, list[dict[str, Any]]]) -> None:
+    parent, rows = swept
+    arms = 0
+    for r in made(rows):
+        e = load_platform(str(parent / r["name"])).eurdf
+        for limb in e.limbs:
+            if "arm" in (limb.alias or ""):
+                arms += 1
+                fingers = [j for j in e.limb_joints(limb.name) if is_finger_name(j)]
+                assert not fingers, (r["rel"], limb.alias, fingers)
+    assert arms >= 60
+
+
+def _feet_height(folder: Path) -> float:
+    """The lowest point of the robot's standing geometry at neutral, above the floor."""
+    plat = load_platform(str(folder))
+    model = build_spec(plat).compile()
+    data = mujoco.MjData(model)
+    for joint, value in plat.eurdf.with_mimics(plat.neutral).items():
+        data.qpos[model.jnt_qposadr[model.joint(joint).id]] = value
+    mujoco.mj_kinematics(model, data)
+    return min(lowest(model, data, g) for g in bearing_geoms(model))
+
+
+def test_legged_robots_stand_on_their_feet_and_keep_their_leg_directions(
+    swept: tuple[Path, list[dict[str, Any]]]
+) -> None:
+    parent, rows = swept
+    legged = [r for r in made(rows) if "base legged" in r["out"]]
+    assert len(legged) >= 30
+    for r in legged:
+        folder = parent / r["name"]
+        assert 0.0 <= _feet_height(folder) < 0.002, r["rel"]
+        leg = r["limbs"][0]
+        assert r["kept"][leg] >= MIN_PER_LEG, (r["rel"], leg, r["kept"])
+    by_rel = {r["rel"]: r for r in rows}
+    assert "turned so z is up: the file's up axis is y" in by_rel[LAIKAGO]["out"]
+
+
+def test_mobile_manipulators_keep_their_arm_directions(
+    swept: tuple[Path, list[dict[str, Any]]]
+) -> None:
+    parent, rows = swept
+    mobile = [r for r in made(rows) if re.search(r"base (diff|omni|skid|legged)", r["out"])
+              and any("arm" in (load_platform(str(parent / r["name"])).eurdf.limb(x).alias
+                                or "") for x in r["limbs"])]
+    assert len(mobile) >= 10
+    for r in mobile:
+        arm = r["limbs"][-1]
+        assert r["kept"][arm] >= MIN_ARM, (r["rel"], arm, r["kept"])
+
+
+def test_a_stretched_arm_gets_a_neutral_that_keeps_its_directions(
+    swept: tuple[Path, list[dict[str, Any]]]
+) -> None:
+    parent, rows = swept
+    by_rel = {r["rel"]: r for r in rows}
+    iiwa = by_rel[IIWA]
+    assert "zero is stretched out, singular" in iiwa["out"]
+    proposed = [r for r in made(rows) if "zero is stretched out" in r["out"]
+                and "base fixed" in r["out"]]
+    for r in proposed:
+        plat = load_platform(str(parent / r["name"]))
+        arm = r["limbs"][0]
+        if 6 <= len(plat.eurdf.limb_joints(arm)) <= 7:
+            assert r["kept"][arm] >= MIN_PROPOSED, (r["rel"], r["kept"])
+    assert iiwa["kept"][iiwa["limbs"][0]] >= MIN_PROPOSED
+
+
+def test_every_random_object_is_refused_as_nothing_to_steer(tmp_path: Path) -> None:
+    objects = sorted((collections()["pyb"] / "random_urdfs").rglob("*.urdf"))
+    assert len(objects) == 1000
+    for k, path in enumerate(objects):
+        code, _, err, tb = _run(["platform", "new", f"thing{k}", "--urdf", str(path), "--dir",
+                                 str(tmp_path)])
+        assert tb is None and code == 2 and "nothing to steer" in err, (path, err)
+    assert not list(tmp_path.iterdir())
+
+
+def test_the_table(swept: tuple[Path, list[dict[str, Any]]]) -> None:
+    """The table of the README: robot, limbs found, directions kept, times (``-s``)."""
+    parent, rows = swept
+    print("\n| collection | URDF | result | base | limbs (aliases) | directions kept "
+          "| new s | build s |\n|---|---|---|---|---|---|---|---|")
+    for r in rows:
+        if r["code"] != 0:
+            why = r["err"].strip().splitlines()[-1].split(": ", 2)[-1][:70]
+            print(f"| {r['col']} | {r['rel']} | refused: {why} | | | | {r['new_s']:.1f} | |")
+            continue
+        e = load_platform(str(parent / r["name"])).eurdf
+        base = re.search(r"base (\w+)", r["out"])
+        limbs = ", ".join(p.alias or p.name for p in e.limbs if p.index[1] == 1)
+        kept = ", ".join(f"{e.limb(x).alias or x} {n}/26" for x, n in r["kept"].items())
+        print(f"| {r['col']} | {r['rel']} | ok | {base.group(1) if base else ''} | {limbs} "
+              f"| {kept} | {r['new_s']:.1f} | {r.get('build_s', 0.0):.1f} |")
+    assert np.isfinite([r["new_s"] for r in rows]).all()
