@@ -33,7 +33,7 @@ pytestmark = pytest.mark.processes
 # name: (URDF, limb, origin, direction, what the user edits in platform.toml's [neutral])
 ROBOTS = {
     "panda": (PANDA, "arm", "shoulder", "left-high", ""),
-    # the UR5's zero pose is a stretched, singular arm: bend it, as docs/byor.md says
+    # the UR5's zero pose is a stretched, singular arm: bend it by hand, as docs/byor.md says
     "ur5": (UR5, "arm", "shoulder", "left-high",
             "shoulder_lift_joint = -1.2\nelbow_joint = 1.5\nwrist_1_joint = -1.5\n"),
     "tiago": (TIAGO, "right_arm", "right_shoulder", "left-high", ""),
@@ -48,8 +48,9 @@ def brought(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """One folder of platforms, each made and built once for every test of this module."""
     root = tmp_path_factory.mktemp("platforms")
     for name, (urdf, limb, _, _, neutral) in ROBOTS.items():
+        keep = ["--neutral", "zero"] if neutral else []  # the hand-made one replaces it
         assert main(["platform", "new", name, "--urdf", str(robot_data() / urdf),
-                     "--dir", str(root)]) == 0
+                     "--dir", str(root), *keep]) == 0
         if neutral:
             with open(root / name / "platform.toml", "a") as fh:
                 fh.write(neutral)

@@ -87,6 +87,9 @@ def _platform_new(args: argparse.Namespace) -> int:
         print(f"  {s.warnings}")
     if s.base_kind == "legged":
         print(f"stands on {', '.join(s.standing_on)}: base legged (walking abstracted)")
+    if s.knees:
+        print("neutral: straight standing legs, knees bent so a foot can lift: "
+              + ", ".join(f"{j} = {v:g}" for j, v in s.knees.items()))
     for proposal in s.neutral:
         if proposal.joints:
             print(f"neutral: {proposal} (--neutral zero keeps zero)")

@@ -37,6 +37,8 @@ WANTED = 22  # of 26 directions open at zero: fewer (or a stretched limb) and on
 GAIN = 3  # the search's pose is proposed when it opens at least this many more
 BENDS = (0.5, 1.0, 1.5)  # rad, both signs
 MARGIN = 0.05  # rad kept from every joint limit
+KNEE = 0.3  # rad a straight standing leg's knee is bent by (half as much at hip and ankle)
+STRAIGHT = 0.97  # a leg whose foot is this share of its length from its hip is straight
 
 
 @dataclass(frozen=True)
@@ -182,4 +184,48 @@ def _candidates(limb: _Limb, zero: np.ndarray) -> list[tuple[np.ndarray, Score]]
             score = limb.open(limb.pose(q))
             if score is not None:
                 out.append((q, score))
+    return out
+
+
+def stance(model: mujoco.MjModel, eurdf: Eurdf, qpos: np.ndarray, legs: list[str]
+           ) -> dict[str, float]:
+    """Knees bent by KNEE where a standing leg is straight at zero (a humanoid's, Bolt's): a
+    straight leg cannot start lifting its foot. The leg's pitch joints (about the body's y
+    axis) bend hip, knee and ankle by -a, 2a, -a about y, so the foot stays flat and under the
+    hip, the knee bent the way its limits allow; legs that are already bent keep zero."""
+    data = mujoco.MjData(model)
+    data.qpos[:] = qpos
+    mujoco.mj_kinematics(model, data)
+    out: dict[str, float] = {}
+    for leg in legs:
+        joints = eurdf.limb_joints(leg)
+        ids = [model.joint(j).id for j in joints]
+        anchors = [data.xanchor[i].copy() for i in ids]
+        tip = data.xpos[model.body(eurdf.tip_link(leg)).id]
+        points = [*anchors, tip]
+        length = sum(float(np.linalg.norm(b - a)) for a, b in itertools.pairwise(points))
+        if length <= 0 or float(np.linalg.norm(tip - anchors[0])) < STRAIGHT * length:
+            continue
+        pitch = [(j, float(data.xaxis[i][1])) for j, i in zip(joints, ids, strict=True)
+                 if abs(float(data.xaxis[i][1])) > 0.9]
+        if len(pitch) < 2:
+            continue
+        knee, along = pitch[1]
+        lim = eurdf.limits[knee]
+        sign = 1.0 if lim.upper >= -lim.lower else -1.0  # the way the knee's limits open
+        bend = sign * KNEE  # about the knee's own axis; about y it is bend * along
+        about_y = {knee: 2 * bend * along}
+        for j, _ in (pitch[0], *pitch[2:3]):
+            about_y[j] = -bend * along
+        for j, y in about_y.items():
+            axis = dict(pitch)[j]
+            value = y / axis
+            limit = eurdf.limits[j]
+            if not limit.lower <= value <= limit.upper:
+                break
+            out[j] = round(value, 4)
+        else:
+            continue
+        for j in about_y:
+            out.pop(j, None)
     return out

@@ -76,6 +76,7 @@ class Scaffold:
     standing_on: list[str] = field(default_factory=list)
     up: str = "z"
     warnings: str | None = None  # third-party warnings, one line
+    knees: dict[str, float] = field(default_factory=dict)  # straight standing legs, bent
 
 
 class _Clock:
@@ -186,6 +187,15 @@ def _build(name: str, urdf: Path, robot_el: ET.Element, model: yourdfpy.URDF, me
         eurdf, compiled = _body(robot, mends, work, name, urdf, mode)
         standing = stance.stance(compiled, qpos)
     bearing = set(legs) if kind == "legged" else set()
+    knees: dict[str, float] = {}
+    if bearing:  # a leg that stands stands at zero, even at a limit: feet flat on the floor
+        at_limit = {j for p in bearing for j in eurdf.limb_joints(p)
+                    if j in zero and eurdf.limits[j].lower <= 0.0 <= eurdf.limits[j].upper}
+        zero = {j: v for j, v in zero.items() if j not in at_limit}
+        knees = neutral_search.stance(compiled, eurdf, _qpos(compiled, eurdf, zero), legs)
+        zero.update(knees)
+        qpos = _qpos(compiled, eurdf, zero)
+        standing = stance.stance(compiled, qpos)
     proposals: list[neutral_search.Proposal] = []
     chosen = dict(zero)
     if neutral == "auto":
@@ -207,13 +217,14 @@ def _build(name: str, urdf: Path, robot_el: ET.Element, model: yourdfpy.URDF, me
         height = 0.0
         eurdf = load_eurdf(_write_eurdf(robot, mends, work, name, urdf, mode))
     _write(work / "platform.toml",
-           _platform_toml(name, urdf, kind, height, chosen, zero, proposals, legs), mode)
+           _platform_toml(name, urdf, kind, height, chosen, zero, proposals, legs, knees), mode)
     limbs_kept = [p.name for p in eurdf.limbs if p.name not in proposal.hands]
+    knees = knees if bearing else {}
     _write(work / "vsam.toml", _vsam_toml(eurdf, limbs_kept, proposal.hands, kind != "fixed"),
            mode)
     load_platform(str(work))  # the folder loads as a platform, neutral pose checked against P
     return Scaffold(work, eurdf, kind, height, imported, limbs_kept, proposal.hands,
-                    mends.lines, proposals, legs, axis)
+                    mends.lines, proposals, legs, axis, None, knees)
 
 
 def _body(robot: ET.Element, mends: Mends, work: Path, name: str, urdf: Path, mode: int
@@ -396,6 +407,7 @@ def _comment(text: str) -> str:
 def _platform_toml(
     name: str, urdf: Path, kind: str, height: float, neutral: dict[str, float],
     zero: dict[str, float], proposals: list[neutral_search.Proposal], legs: list[str],
+    knees: dict[str, float],
 ) -> str:
     speeds = {"fixed": dict.fromkeys(MOBILE_DEFAULTS, 0.0), "legged": LEGGED_DEFAULTS
               }.get(kind, MOBILE_DEFAULTS)
@@ -421,6 +433,9 @@ def _platform_toml(
         "max_jerk = 30.0           # rad/s^3",
         "",
     ]
+    if knees:
+        lines.append("# neutral: the standing legs were straight (a foot could not start to lift);"
+                     " knees bent: " + ", ".join(f"{j} = {v:g}" for j, v in knees.items()))
     bent = [p for p in proposals if p.joints]
     for p in bent:
         lines.append(f"# neutral of {_comment(str(p))}; 'platform new --neutral zero' keeps zero")

@@ -6,7 +6,11 @@ convex hull of every robot point within TOUCH of the floor: both soles, the stan
 foot is lifted, a track, a pedestal) at least MARGIN inside its edge. The check is the same
 for every mobile platform; on wheels or tracks it rarely bites, on one foot it decides. A fixed
 base (``[base] kind = "fixed"``: Baxter's pedestal, an arm bolted to a table) is anchored and
-cannot topple, so it is never checked: a Panda reaching forward is no fall.
+cannot topple, so it is never checked: a Panda reaching forward is no fall. A legged base
+(``kind = "legged"``, a brought walker) abstracts walking: the gait that moves the base also
+shifts the body over the feet still down when one leg gestures, so its support is what touches
+the floor in the pose together with its stance at neutral (a quadruped giving a paw, not a
+quadruped toppling because one foot is up); reaching past that stance still topples.
 """
 
 from __future__ import annotations

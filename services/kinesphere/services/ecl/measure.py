@@ -12,7 +12,12 @@ generator's mistake.
   the cosine.
 * A pose is **statically stable** by the margin from the whole-body centre of mass (ground
   projection) to the edge of the support polygon: the convex hull of every robot point within
-  TOUCH of the floor (sample points of the collision geoms, :func:`samples`).
+  TOUCH of the floor (sample points of the collision geoms, :func:`samples`). A legged base
+  (``kind = "legged"``, a brought walker) abstracts walking: the gait that moves the base
+  also shifts the body over the feet still down when one leg gestures, so its support is what
+  touches the floor in the pose together with its stance at neutral (a quadruped giving a
+  paw, not a quadruped toppling because one foot is up); reaching past that stance still
+  topples.
 """
 
 from __future__ import annotations
@@ -79,9 +84,34 @@ def samples(model: mujoco.MjModel, g: int) -> list[tuple[np.ndarray, float]]:
             (pos + rot @ np.array([size[0] * np.cos(a), size[0] * np.sin(a), s * size[1]]), 0.0)
             for s in (-1.0, 1.0) for a in angles
         ]
+    if kind == mujoco.mjtGeom.mjGEOM_MESH:  # its outermost vertices (see _DIRECTIONS)
+        mesh = model.geom_dataid[g]
+        verts = model.mesh_vert[model.mesh_vertadr[mesh]:][: model.mesh_vertnum[mesh]]
+        outer = sorted({int(i) for i in np.argmax(verts @ _DIRECTIONS.T, axis=0)})
+        return [(pos + rot @ verts[i], 0.0) for i in outer]
     half = size if kind == mujoco.mjtGeom.mjGEOM_BOX else np.full(3, float(np.max(size)))
     signs = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], float)
     return [(pos + rot @ (s * half), 0.0) for s in signs]
+
+
+def _directions() -> np.ndarray:
+    """Laban's 26, and 8 directions 20 degrees off each axis: a mesh's vertices farthest along
+    them outline its shape, and the rim of each flat face (a sole's on the floor) closely."""
+    out = [np.array((x, y, z), dtype=float) for x in (-1, 0, 1) for y in (-1, 0, 1)
+           for z in (-1, 0, 1) if (x, y, z) != (0, 0, 0)]
+    tilt = np.radians(20.0)
+    for axis in range(3):
+        for sign in (-1.0, 1.0):
+            for a in np.linspace(0.0, 2 * np.pi, 8, endpoint=False):
+                d = np.zeros(3)
+                d[axis] = sign * np.cos(tilt)
+                d[(axis + 1) % 3] = np.sin(tilt) * np.cos(a)
+                d[(axis + 2) % 3] = np.sin(tilt) * np.sin(a)
+                out.append(d)
+    return np.array(out, dtype=float)
+
+
+_DIRECTIONS = _directions()
 
 
 def sample_points(model: mujoco.MjModel, geoms: list[int]
@@ -145,6 +175,10 @@ class Fk:
         self._bodies, self._points, self._radii = sample_points(
             m, [g for g in range(m.ngeom) if m.geom_contype[g] and g != floor])
         self._neutral_offsets: dict[tuple[str, str], np.ndarray] = {}
+        self._stance = np.zeros((0, 2))
+        if pm.platform.base.kind == "legged":  # walking abstracted: the gait keeps its stance
+            world, down = self._touching(pm.neutral_qpos())
+            self._stance = world[down, :2]
 
     def _kinematics(self, qpos: np.ndarray) -> mujoco.MjData:
         data = self._data
@@ -198,15 +232,19 @@ class Fk:
     def margin(self, qpos: np.ndarray) -> tuple[float, tuple[str, ...]]:
         """Metres from the centre of mass to the support polygon's edge (negative: outside),
         and the bodies bearing weight."""
-        m = self.model
+        world, down = self._touching(qpos)
+        names = tuple(sorted({self.model.body(int(b)).name for b in self._bodies[down]}))
+        com = self._data.subtree_com[0, :2]
+        return inside(hull(np.vstack([world[down, :2], self._stance])), com), names
+
+    def _touching(self, qpos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Every sample point in the world at ``qpos`` (centre of mass computed), and which of
+        them bear weight."""
         data = self._kinematics(qpos)
-        mujoco.mj_comPos(m, data)
+        mujoco.mj_comPos(self.model, data)
         rot = data.xmat[self._bodies].reshape(-1, 3, 3)
         world = data.xpos[self._bodies] + np.einsum("nij,nj->ni", rot, self._points)
-        down = world[:, 2] - self._radii < TOUCH
-        names = tuple(sorted({m.body(int(b)).name for b in self._bodies[down]}))
-        com = data.subtree_com[0, :2]
-        return inside(hull(world[down, :2]), com), names
+        return world, world[:, 2] - self._radii < TOUCH
 
     def com_margin(self, joints: Mapping[str, float]) -> float | None:
         """The stability margin of joint values (neutral elsewhere); None on a fixed base,
