@@ -7,7 +7,6 @@ from __future__ import annotations
 import warnings
 from pathlib import Path
 
-import mujoco
 import numpy as np
 import pytest
 from test_byor_support import (
@@ -22,6 +21,7 @@ from test_byor_support import (
     RACECAR,
     pybullet_data,
     robot_data,
+    standing,
 )
 
 from kinesphere.eurdf import load_eurdf
@@ -29,7 +29,6 @@ from kinesphere.labeller import propose_eurdf
 from kinesphere.robots.mjcf import build_spec
 from kinesphere.robots.platform import load_platform
 from kinesphere.robots.scaffold import new_platform
-from kinesphere.robots.stance import bearing_geoms, lowest
 from kinesphere.services.ecl.chains import short_of
 
 
@@ -71,25 +70,10 @@ def test_front_and_back_legs_and_a_central_head_are_named_right() -> None:
     assert "head_swivel" in r2d2.limb_joints("head")
 
 
-def _lowest(folder: Path) -> tuple[float, list[str]]:
-    """The lowest standing point at neutral (the floor is z = 0) and the links near it."""
-    plat = load_platform(str(folder))
-    model = build_spec(plat).compile()
-    data = mujoco.MjData(model)
-    for joint, value in plat.eurdf.with_mimics(plat.neutral).items():
-        data.qpos[model.jnt_qposadr[model.joint(joint).id]] = value
-    mujoco.mj_kinematics(model, data)
-    heights = {g: lowest(model, data, g) for g in bearing_geoms(model)}
-    low = min(heights.values())
-    feet = sorted({model.body(int(model.geom_bodyid[g])).name
-                   for g, h in heights.items() if h < low + 0.003})
-    return low, feet
-
-
 def test_a_quadruped_stands_on_its_feet_with_a_legged_base(tmp_path: Path) -> None:
     made = new_platform("a1", pybullet_data() / A1, tmp_path)
     assert made.base_kind == "legged" and load_platform(str(made.folder)).base.holonomic
-    low, feet = _lowest(made.folder)
+    low, feet = standing(made.folder)
     assert 0.0 <= low < 0.001
     assert feet == ["FL_toe", "FR_toe", "RL_toe", "RR_toe"]
     assert "translation_step" in (made.folder / "vsam.toml").read_text()
@@ -99,7 +83,7 @@ def test_a_y_up_file_is_turned_upright(tmp_path: Path) -> None:
     made = new_platform("laikago", pybullet_data() / LAIKAGO, tmp_path)
     assert made.up == "y" and any("up axis is y" in m for m in made.mends)
     assert made.base_kind == "legged"
-    low, feet = _lowest(made.folder)
+    low, feet = standing(made.folder)
     assert 0.0 <= low < 0.001 and len(feet) == 4
     assert len(made.standing_on) == 4
     named = new_platform("upright", pybullet_data() / LAIKAGO, tmp_path, up="z")

@@ -182,25 +182,18 @@ def test_nan_in_an_inertia_or_a_shape_is_refused(tmp_path: Path,
     nothing_in(tmp_path / "out")
 
 
-def test_an_stl_past_mujocos_face_limit_is_a_clear_error(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+@pytest.mark.parametrize(("faces", "triangle", "words"), [
+    (200_001, None, "200001 faces"),  # past MuJoCo's limit for an STL
+    (1, (0, 0, 0, 1, 0, 0, 0, 1, 0), "at least 4"),  # three vertices: no volume
+])
+def test_an_stl_mujoco_cannot_read_is_a_clear_error(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], faces: int,
+    triangle: tuple[float, ...] | None, words: str
 ) -> None:
-    urdf = package(tmp_path, arm(geometry=mesh("meshes/huge.stl")))
-    binary_stl(urdf.parent / "meshes" / "huge.stl", 200_001)
+    urdf = package(tmp_path, arm(geometry=mesh("meshes/part.stl")))
+    binary_stl(urdf.parent / "meshes" / "part.stl", faces, triangle)
     out = tmp_path / "out"
-    refused(capsys, ["platform", "new", "huge", "--urdf", str(urdf), "--dir", str(out)],
-            "200001 faces")
-    nothing_in(out)
-
-
-def test_a_mesh_of_fewer_than_four_vertices_is_a_clear_error(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
-) -> None:
-    urdf = package(tmp_path, arm(geometry=mesh("meshes/flat.stl")))
-    binary_stl(urdf.parent / "meshes" / "flat.stl", 1, (0, 0, 0, 1, 0, 0, 0, 1, 0))
-    out = tmp_path / "out"
-    refused(capsys, ["platform", "new", "flat", "--urdf", str(urdf), "--dir", str(out)],
-            "at least 4")
+    refused(capsys, ["platform", "new", "part", "--urdf", str(urdf), "--dir", str(out)], words)
     nothing_in(out)
 
 

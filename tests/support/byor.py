@@ -3,6 +3,8 @@
 from importlib.metadata import PackageNotFoundError, distribution
 from pathlib import Path
 
+import mujoco
+
 INSTALL = "pip install -c constraints.txt 'example-robot-data'  (or: make install)"
 
 
@@ -66,3 +68,23 @@ R2D2 = "r2d2.urdf"
 HUMANOID = "humanoid/humanoid.urdf"
 A1 = "a1/a1.urdf"
 HUSKY = "husky/husky.urdf"
+
+
+def standing(folder: Path) -> tuple[float, list[str]]:
+    """A brought platform at its neutral pose and base height: the height of its lowest
+    standing point above the floor, and the links within 3 mm of that point."""
+    from kinesphere.robots.mjcf import build_spec
+    from kinesphere.robots.platform import load_platform
+    from kinesphere.robots.stance import bearing_geoms, lowest
+
+    plat = load_platform(str(folder))
+    model = build_spec(plat).compile()
+    data = mujoco.MjData(model)
+    for joint, value in plat.eurdf.with_mimics(plat.neutral).items():
+        data.qpos[model.jnt_qposadr[model.joint(joint).id]] = value
+    mujoco.mj_kinematics(model, data)
+    heights = {g: lowest(model, data, g) for g in bearing_geoms(model)}
+    low = min(heights.values())
+    feet = sorted({model.body(int(model.geom_bodyid[g])).name
+                   for g, h in heights.items() if h < low + 0.003})
+    return low, feet

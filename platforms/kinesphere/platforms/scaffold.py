@@ -188,10 +188,7 @@ def _build(name: str, urdf: Path, robot_el: ET.Element, model: yourdfpy.URDF, me
         standing = stance.stance(compiled, qpos)
     bearing = set(legs) if kind == "legged" else set()
     knees: dict[str, float] = {}
-    if bearing:  # a leg that stands stands at zero, even at a limit: feet flat on the floor
-        at_limit = {j for p in bearing for j in eurdf.limb_joints(p)
-                    if j in zero and eurdf.limits[j].lower <= 0.0 <= eurdf.limits[j].upper}
-        zero = {j: v for j, v in zero.items() if j not in at_limit}
+    if bearing:  # straight standing legs bend their knees, feet kept flat
         knees = neutral_search.stance(compiled, eurdf, _qpos(compiled, eurdf, zero), legs)
         zero.update(knees)
         qpos = _qpos(compiled, eurdf, zero)
