@@ -98,7 +98,8 @@ def _platform_copy(tmp_path: Path, edit: tuple[str, str]) -> Path:
 @pytest.mark.parametrize(
     ("edit", "named"),
     [
-        (('kind = "omni"', 'kind = "hover"'), "base.kind: 'hover'; valid: diff, fixed, omni, skid"),
+        (('kind = "omni"', 'kind = "hover"'),
+         "base.kind: 'hover'; valid: diff, fixed, legged, omni, skid"),
         (("max_speed = ", "max_sped = "), "base: unknown max_sped; valid: height, kind"),
         (("[motion]", "[motions]"), "unknown motions; valid: base, motion, neutral, platform"),
         (("max_jerk = 5.0 ", "max_jerk = -1 "), "base.max_jerk must be 0..10000 m/s^3, got -1"),
