@@ -73,9 +73,9 @@ HUSKY = "husky/husky.urdf"
 def standing(folder: Path) -> tuple[float, list[str]]:
     """A brought platform at its neutral pose and base height: the height of its lowest
     standing point above the floor, and the links within 3 mm of that point."""
-    from kinesphere.robots.mjcf import build_spec
-    from kinesphere.robots.platform import load_platform
-    from kinesphere.robots.stance import bearing_geoms, lowest
+    from kinesphere.platforms.mjcf import build_spec
+    from kinesphere.platforms.platform import load_platform
+    from kinesphere.platforms.stance import bearing_geoms, lowest
 
     plat = load_platform(str(folder))
     model = build_spec(plat).compile()

@@ -9,7 +9,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_byor_support import (
+
+from kinesphere.eurdf import load_eurdf
+from kinesphere.labeller import propose_eurdf
+from kinesphere.platforms.mjcf import build_spec
+from kinesphere.platforms.platform import load_platform
+from kinesphere.platforms.scaffold import new_platform
+from kinesphere.services.ecl.chains import short_of
+from support.byor import (
     A1,
     HUMANOID,
     IIWA,
@@ -23,13 +30,6 @@ from test_byor_support import (
     robot_data,
     standing,
 )
-
-from kinesphere.eurdf import load_eurdf
-from kinesphere.labeller import propose_eurdf
-from kinesphere.robots.mjcf import build_spec
-from kinesphere.robots.platform import load_platform
-from kinesphere.robots.scaffold import new_platform
-from kinesphere.services.ecl.chains import short_of
 
 
 def test_a_word_in_a_joint_name_never_turns_a_leg_joint_into_core() -> None:

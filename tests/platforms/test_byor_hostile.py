@@ -16,8 +16,8 @@ import pytest
 
 from kinesphere.cli import main
 from kinesphere.eurdf import load_eurdf
-from kinesphere.robots.platform import load_platform
-from kinesphere.robots.scaffold import new_platform
+from kinesphere.platforms.platform import load_platform
+from kinesphere.platforms.scaffold import new_platform
 
 LINK = """<link name="{name}"><inertial><mass value="1"/>
 <inertia ixx="0.01" iyy="0.01" izz="0.01" ixy="0" ixz="0" iyz="0"/></inertial>{geometry}</link>"""

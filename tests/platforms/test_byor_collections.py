@@ -31,11 +31,11 @@ from typing import Any
 
 import numpy as np
 import pytest
-from test_byor_support import IIWA, LAIKAGO, collections, standing
 
 from kinesphere.cli import main
 from kinesphere.labeller_names import is_finger_name
-from kinesphere.robots.platform import load_platform
+from kinesphere.platforms.platform import load_platform
+from support.byor import IIWA, LAIKAGO, collections, standing
 
 pytestmark = pytest.mark.slow
 WORKERS = 2
@@ -231,7 +231,7 @@ def test_no_finger_moves_with_an_arm(swept: tuple[Path, list[dict[str, Any]]]) -
 
 def _stands_still(folder: Path) -> bool:
     """The centre of mass at neutral lies inside the stance (a polygon with an inside)."""
-    from kinesphere.robots.mjcf import platform_model
+    from kinesphere.platforms.mjcf import platform_model
     from kinesphere.services.ecl.balance import MARGIN, Balance
 
     pm = platform_model(str(folder))
