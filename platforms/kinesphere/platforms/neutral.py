@@ -27,6 +27,7 @@ import numpy as np
 from kinesphere.eurdf import Eurdf
 from kinesphere.laban import Direction
 from kinesphere.platforms.frames import pivot
+from kinesphere.platforms.mjcf import ROBOT_CONTYPE
 from kinesphere.platforms.stance import bearing_geoms, lowest
 
 OPEN = 0.25  # of the span per radian: the tip can start along a direction this fast ...
@@ -93,6 +94,8 @@ class _Limb:
         self.directions = np.array([np.asarray(d.vector) / np.linalg.norm(d.vector)
                                     for d in Direction.pulls()])
         self._jac = np.zeros((3, model.nv))
+        self._masks = _moving_pairs(model, [int(model.jnt_bodyid[model.joint(j).id])
+                                            for j in self.joints])
         self.touching_at_zero = self._contacts(base)
         self.span = self._span()
 
@@ -108,7 +111,13 @@ class _Limb:
 
     def _contacts(self, q: np.ndarray) -> set[tuple[int, int]]:
         self._forward(q)
-        mujoco.mj_collision(self.model, self.data)
+        m = self.model
+        saved = m.geom_contype.copy(), m.geom_conaffinity.copy()
+        m.geom_contype[:], m.geom_conaffinity[:] = self._masks
+        try:
+            mujoco.mj_collision(m, self.data)
+        finally:
+            m.geom_contype[:], m.geom_conaffinity[:] = saved
         bodies = self.model.geom_bodyid[self.data.contact.geom[: self.data.ncon]]
         return {(min(a, b), max(a, b)) for a, b in bodies.tolist()}
 
@@ -120,13 +129,20 @@ class _Limb:
         return max(sum(float(np.linalg.norm(b - a)) for a, b in itertools.pairwise(points)),
                    1e-3)
 
+    def _dips(self) -> bool:
+        """Whether a shape dips below the robot's lowest point: only shapes whose bounding
+        sphere reaches that low are measured exactly."""
+        geoms = np.asarray(self.geoms, dtype=int)
+        low = self.data.geom_xpos[geoms, 2] - self.model.geom_rbound[geoms]
+        near = geoms[low < self.floor - 1e-3]
+        return any(lowest(self.model, self.data, int(g)) < self.floor - 1e-3 for g in near)
+
     def open(self, q: np.ndarray) -> Score | None:
         """How open the limb is at ``q``; None if the pose touches something zero does not
         or dips below the robot's lowest point."""
         if self._contacts(q) - self.touching_at_zero:
             return None
-        if self.geoms and min(lowest(self.model, self.data, g) for g in self.geoms) < \
-                self.floor - 1e-3:
+        if self._dips():
             return None
         tip = self.data.xpos[self.tip]
         offset = tip - pivot(self.model, self.data, self.distal)
@@ -139,6 +155,22 @@ class _Limb:
         quality = np.minimum(speed / OPEN, 1.0) * np.minimum(room / ROOM, 1.0)
         return Score(int(((speed >= OPEN) & (room >= ROOM)).sum()), float(quality.sum()),
                      float(np.linalg.norm(offset)))
+
+
+def _moving_pairs(model: mujoco.MjModel, bodies: list[int]) -> tuple[np.ndarray, np.ndarray]:
+    """Collision masks under which only pairs with a shape that the limb's joints move are
+    checked: every other pair stands still while the limb moves, so it touches at every
+    candidate as at zero, and skipping it changes no answer (a humanoid's legs and torso are
+    most of its shapes)."""
+    moving = np.zeros(model.nbody, dtype=bool)
+    for b in range(model.nbody):  # parents come before their children
+        moving[b] = b in bodies or (b > 0 and moving[model.body_parentid[b]])
+    robot = (model.geom_contype & ROBOT_CONTYPE) != 0  # the floor never meets the robot
+    in_limb = moving[model.geom_bodyid]
+    contype = np.where(robot, np.where(in_limb, 12, 4), 0).astype(model.geom_contype.dtype)
+    conaffinity = np.where(robot, np.where(in_limb, 12, 8), 0).astype(
+        model.geom_conaffinity.dtype)
+    return contype, conaffinity  # still / still: 4 & 8 = 0, moving / any: 12 & 8 != 0
 
 
 def propose(model: mujoco.MjModel, eurdf: Eurdf, qpos: np.ndarray, limbs: list[str],
