@@ -14,7 +14,7 @@ export SDL_VIDEODRIVER ?= dummy
 export SDL_AUDIODRIVER ?= dummy
 export PYTHONDONTWRITEBYTECODE := 1
 
-.PHONY: install demo test lint typecheck layers browser bench soak lock clean
+.PHONY: install demo test lint typecheck layers browser bench soak sweep lock clean
 
 $(STAMP): $(addsuffix /pyproject.toml,$(PARTS)) constraints.txt
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -65,6 +65,13 @@ SOAK_SCALE ?= 20
 SOAK_TESTS := $(wildcard tests/*/test_*_fuzz.py tests/*/test_*_flood.py tests/system/test_system_soak.py)
 soak: $(STAMP)
 	KINESPHERE_SOAK_SCALE=$(SOAK_SCALE) $(BIN)/python -m pytest -q -s $(SOAK_TESTS)
+
+# Bring every URDF of the three public collections the tests install (example-robot-data,
+# pybullet_data, rtb-data): platform new, describe, and ecl build of the first limb of each
+# chain, once per robot; prints the coverage table of docs/byor.md (tens of minutes on two
+# cores; make test imports every file and builds a sample of four). SWEEP_ARGS="--only talos".
+sweep: $(STAMP)
+	PYTHONPATH=tests $(BIN)/python -m support.sweep $(SWEEP_ARGS)
 
 # Re-pin what CI tests with: resolve the newest allowed versions in a scratch venv, freeze them.
 lock:

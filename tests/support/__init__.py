@@ -7,5 +7,6 @@ waits on predicates), ``network`` (key prefixes, the hub's shape, peer sessions)
 module per role or part under test: ``agents``, ``clients``, ``client_fleet``, ``databank``,
 ``ecl``, ``nested`` (segments measured by another kinematics), ``protocol``, ``ros2``,
 ``ros2_peer`` (zenoh-ros2-sdk's peer, ``sdk_peer.py``, as a process), ``system``, ``view``,
-``hostile`` (bodies a forged answer could carry), ``soak``, ``byor``.
+``hostile`` (bodies a forged answer could carry), ``soak``, ``byor`` (third-party robots)
+and ``sweep`` (every URDF of three public collections brought; ``make sweep`` runs it).
 """
