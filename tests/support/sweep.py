@@ -156,6 +156,15 @@ def every_chain(row: Row) -> list[str]:
     return list(row["chains"])
 
 
+def one_chain(row: Row) -> list[str]:
+    """One chain per robot: its first arm, else its first leg, else its first chain."""
+    for word in ("arm", "leg", ""):
+        found = [n for n, a in row["chains"].items() if word in a]
+        if found:
+            return found[:1]
+    return []
+
+
 def made(rows: Iterable[Row]) -> list[Row]:
     return [r for r in rows if r["code"] == 0]
 
@@ -232,15 +241,17 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         prog="make sweep", description="Bring every URDF of example-robot-data, pybullet_data "
         "and rtb-data: platform new, describe, and ecl build of the first limb of each chain "
-        "(once per robot); print the coverage table and the counts.")
+        "(once per robot; --one: of one chain); print the coverage table and the counts.")
     parser.add_argument("--workers", type=int, default=2, help="processes (default 2)")
     parser.add_argument("--out", type=Path, help="also write the table and counts here")
     parser.add_argument("--only", default="", help="only URDFs whose path contains this")
+    parser.add_argument("--one", action="store_true",
+                        help="build one chain per robot (its first arm, else leg), not all")
     args = parser.parse_args(argv)
     items = [i for i in urdfs() if args.only in f"{i[0]}/{i[1]}"]
     start = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="kinesphere-sweep-") as tmp:
-        rows = sweep(items, Path(tmp), every_chain, args.workers)
+        rows = sweep(items, Path(tmp), one_chain if args.one else every_chain, args.workers)
     text = (table(rows) + "\n" + summary(rows)
             + f"wall time {time.perf_counter() - start:.0f} s with {args.workers} workers\n")
     print(text, end="")
