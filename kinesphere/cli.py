@@ -86,13 +86,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _platforms_everywhere(parser: argparse.ArgumentParser) -> None:
-    """Every sub-command also takes --platforms DIR after its name (unless it already has a
-    --platforms option of its own, like ``ecl compare``'s list of names)."""
+    """Every sub-command also takes --platforms DIR after its name."""
     for action in parser._actions:
         if isinstance(action, argparse._SubParsersAction):
             for child in dict.fromkeys(action.choices.values()):
-                if "--platforms" not in child._option_string_actions:
-                    add_platforms_argument(child)
+                add_platforms_argument(child)
                 _platforms_everywhere(child)
 
 

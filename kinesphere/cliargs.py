@@ -1,8 +1,8 @@
 """Command-line options every role's sub-commands share: the ``zenoh`` option group, and one
 function per option family more than one role's commands take (output file, JSON, waiting for
-answers, platform lists, the key prefix, ROS 2 domain and distribution, joint merging). A
-family's default comes from its caller's options dataclass (or a constant here), never
-repeated in a parser; its help is written once.
+answers, the bodies shown side by side, the platform search path, the key prefix, ROS 2 domain
+and distribution, joint merging). A family's default comes from its caller's options
+dataclass (or a constant here), never repeated in a parser; its help is written once.
 
 One rule for every command (after zenoh-python's ``examples/common/common.py``): the session
 starts from ``--zenoh-config FILE`` (or Zenoh's defaults), ``--mode``, ``--connect`` and
@@ -194,15 +194,15 @@ def platform_list(text: str) -> list[str]:
     return [name for name in (n.strip() for n in text.split(",")) if name]
 
 
-def add_platform_list(parser: argparse.ArgumentParser, default: Sequence[str] | None = None
-                      ) -> None:
-    """``--platforms A,B``: the bodies a command shows side by side, a list in
-    ``args.platforms``; without it ``default``, or None for every shipped platform."""
+def add_bodies(parser: argparse.ArgumentParser, default: Sequence[str] | None = None) -> None:
+    """``--bodies A,B``: the platforms whose bodies a command shows side by side, a list in
+    ``args.bodies``; without it ``default``, or None for every platform found. (``--platforms``
+    is the folder search path, taken by every command.)"""
     parser.add_argument(
-        "--platforms", type=platform_list, metavar="LIST",
+        "--bodies", type=platform_list, metavar="A,B",
         default=None if default is None else list(default),
-        help="comma-separated platforms (default: "
-        + ("all shipped" if default is None else ",".join(default)) + ")",
+        help="the platforms' bodies shown side by side, comma-separated (default: "
+        + ("every platform found" if default is None else ",".join(default)) + ")",
     )
 
 
@@ -283,7 +283,7 @@ __all__ = [
     "add_timeout",
     "add_wait",
     "platform_list",
-    "add_platform_list",
+    "add_bodies",
     "MERGE_DISTANCE_M",
     "add_merge_distance",
     "add_ros_distro",

@@ -46,6 +46,8 @@ FAMILIES: dict[str, tuple[str, ...]] = {
     "--exact": ("this direction only: no substitution",),
     "--db": ("databank file to use instead of", "serve this databank file"),
     "--gesture": ("a score: only this gesture",),
+    "--bodies": ("the platforms' bodies shown side by side",),
+    "--platforms": ("a folder of platform folders",),
 }
 
 
@@ -133,14 +135,23 @@ def test_an_output_with_a_default_may_be_left_out() -> None:
     assert _parse("label", "robot.urdf", "-o", "x.urdf").output == Path("x.urdf")
 
 
-def test_a_list_of_platforms_is_a_list_wherever_it_is_taken() -> None:
-    assert _parse("film", "left_high").platforms == list(DEFAULT_ROBOTS)
-    assert _parse("film", "left_high", "--platforms", "nao, ,youbot").platforms == ["nao",
-                                                                                    "youbot"]
-    assert _parse("ecl", "coverage", "--platforms", "baxter,nao").platforms == ["baxter", "nao"]
-    assert _parse("ecl", "coverage").platforms is None  # every shipped one
-    # elsewhere --platforms is still where platform folders are found
+def test_a_list_of_bodies_is_a_list_wherever_it_is_taken() -> None:
+    assert _parse("film", "left_high").bodies == list(DEFAULT_ROBOTS)
+    assert _parse("film", "left_high", "--bodies", "nao, ,youbot").bodies == ["nao", "youbot"]
+    assert _parse("ecl", "coverage", "--bodies", "baxter,nao").bodies == ["baxter", "nao"]
+    assert _parse("ecl", "coverage").bodies is None  # every platform found
+
+
+def test_every_command_finds_platform_folders_with_platforms() -> None:
+    """--platforms is one thing: the folders platforms are found in, on every command (the
+    commands showing bodies side by side name them with --bodies)."""
+    for name, parser in COMMANDS:
+        action = parser._option_string_actions.get("--platforms")
+        assert action is not None and action.dest == "platform_dirs", name
     assert _parse("describe", "nao", "--platforms", "/tmp/p").platform_dirs == ["/tmp/p"]
+    both = _parse("ecl", "compare", "limb_11", "distal_11", "left-high", "3", "-o", "x.png",
+                  "--platforms", "/tmp/p", "--bodies", "mybot,baxter")
+    assert (both.platform_dirs, both.bodies) == (["/tmp/p"], ["mybot", "baxter"])
 
 
 def test_a_ros_domain_is_one_option_and_the_bridge_keeps_its_old_spelling() -> None:

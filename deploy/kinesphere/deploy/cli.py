@@ -14,9 +14,9 @@ from typing import Any
 from kinesphere.cliargs import (
     DEFAULT_ENDPOINT,
     WATCHER,
+    add_bodies,
     add_json,
     add_output,
-    add_platform_list,
     add_prefix,
     add_score_options,
     add_timeout,
@@ -123,7 +123,7 @@ def register(sub: Any) -> None:
     add_output(fm, "the video file", default="PHRASE.mp4", metavar="MP4")
     fm.add_argument("--gif", metavar="GIF", help="GIF file (default: the video's name, .gif)")
     fm.add_argument("--no-gif", action="store_true", help="write only the MP4")
-    add_platform_list(fm, DEFAULT_ROBOTS)
+    add_bodies(fm, DEFAULT_ROBOTS)
     fm.add_argument("--width", type=int, default=320, help="tile width in pixels (default 320)")
     fm.add_argument("--height", type=int, default=240, help="tile height (default 240)")
     fm.add_argument("--fps", type=float, default=15.0, help="frames per second (default 15)")
@@ -174,7 +174,7 @@ def _film(args: argparse.Namespace) -> int:
 
     out = Path(args.output or f"{Path(args.phrase).stem}.mp4")
     gif = None if args.no_gif else Path(args.gif or out.with_suffix(".gif"))
-    n = render(args.phrase, out, gif, args.platforms, args.width, args.height, args.fps,
+    n = render(args.phrase, out, gif, args.bodies, args.width, args.height, args.fps,
                args.gesture, 1.0 if args.speed is None else args.speed)
     print(f"wrote {n} frames to {out}" + (f" and {gif}" if gif else ""), file=sys.stderr)
     return 0

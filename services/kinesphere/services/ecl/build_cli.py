@@ -21,7 +21,7 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from kinesphere.cliargs import add_json, add_output, add_platform_list
+from kinesphere.cliargs import add_bodies, add_json, add_output
 from kinesphere.errors import KinesphereError
 from kinesphere.services.options import (
     SHEET_SIZE,
@@ -99,7 +99,7 @@ def register_build(ecl_sub: Any, top_sub: Any) -> None:
         "origin) pair keeps, and list the directions every platform with limb_11, limb_12, "
         "limb_13 keeps: a fleet command in one of those is exact on every robot.",
     )
-    add_platform_list(v)
+    add_bodies(v)
     v.set_defaults(func=_coverage)
 
     s = ecl_sub.add_parser(
@@ -122,7 +122,7 @@ def register_build(ecl_sub: Any, top_sub: Any) -> None:
     )
     add_spatial_words(c)
     add_output(c, "the PNG file")
-    add_platform_list(c)
+    add_bodies(c)
     c.set_defaults(func=_compare)
 
     p = top_sub.add_parser(
@@ -346,7 +346,7 @@ def _coverage(args: argparse.Namespace) -> int:
     from kinesphere.platforms.platform import platform_names
     from kinesphere.services.ecl.coverage import markdown
 
-    sys.stdout.write(markdown(args.platforms or platform_names()))
+    sys.stdout.write(markdown(args.bodies or platform_names()))
     return 0
 
 
@@ -367,7 +367,7 @@ def _compare(args: argparse.Namespace) -> int:
     from kinesphere.services.ecl.render import compare_sheet
 
     image = compare_sheet(args.limb, args.origin, args.direction, args.size,
-                          args.platforms or platform_names())
+                          args.bodies or platform_names())
     return _save(image, args.output)
 
 
