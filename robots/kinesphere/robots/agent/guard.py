@@ -3,9 +3,13 @@
 A new target starts at once along the straight joint-space way (so command latency stays at the
 floor) while a worker thread checks that way against the robot's collision geometry; its
 finding comes a few milliseconds later, long before the limb is anywhere near the touch it
-predicts. A clear way goes on. A touching one is braked and replaced by the planner's
-waypoints, each leg followed from rest with phase-synchronised Ruckig, so the joints travel
-the straight lines that were checked, still jerk-limited. No route at all brakes, and the
+predicts. On a loaded machine it may come later: the joints never run more than
+:data:`UNCHECKED_S` of robot time on an unchecked way, they brake and wait for the finding
+there (and go on once it is clear). A clear way goes on. A touching one is braked; where the
+joints come to rest the planner's waypoints start (planned from there, not from where the move
+began: the brake took them some way along), each leg followed from rest with
+phase-synchronised Ruckig, so the joints travel the straight lines that were checked, still
+jerk-limited. No route at all brakes, and the
 fault names the links that would touch. During motion, a contact between two links that the
 motion did not start with (a push from outside, a body straying from its plan) halts every
 joint and is reported with the pair.
@@ -47,6 +51,10 @@ CHECKING = threading.Lock()
 """One way check at a time per process: a fleet host's control loop then competes for the
 interpreter with one checker, not with one per robot after a command to all (48 at once held
 ticks up to 100 ms); waiting checkers block on the lock, not on the interpreter."""
+UNCHECKED_S = 0.1
+"""s of robot time: how long the joints may move along a straight way still being checked
+before they brake for its finding (the check takes milliseconds on an idle machine; how late
+it comes under load must not decide how far the limb goes unchecked)."""
 ON_WAY_TOL = 1e-6
 """rad (m): how far from a way found clear a new start or goal may lie and still be on it."""
 
@@ -58,9 +66,21 @@ class Blocked:
     touch: Touch
 
 
+@dataclass(frozen=True)
+class Ask:
+    """A way for the worker: check the straight way from ``start`` to ``goal`` (then the
+    control thread brakes if it touches), or plan the ``route`` from where the joints rest."""
+
+    generation: int
+    start: np.ndarray
+    goal: np.ndarray
+    route: bool = False
+
+
 Finding = Touch | list[np.ndarray] | Blocked
-"""On one move: the straight way touches (brake now), then the route (waypoints ending at the
-goal; ``[goal]`` for a clear straight way) or Blocked."""
+"""On one move: the straight way touches (brake now; once at rest, the route from there is
+asked), or the route (waypoints ending at the goal; ``[goal]`` for a clear straight way) or
+Blocked."""
 
 
 class Guard:
@@ -80,13 +100,17 @@ class Guard:
         self._goal: np.ndarray | None = None
         """The target of the move under way (every joint), until a halt or stop cancels it."""
         self._generation = 0
-        self._asked: tuple[int, np.ndarray, np.ndarray] | None = None
+        self._asked: Ask | None = None
         self._findings: list[tuple[int, Finding]] = []
         self._clear: tuple[np.ndarray, np.ndarray] | None = None
         """The last straight way found clear (worker thread only)."""
         self._start_contacts: frozenset[tuple[str, str]] = frozenset()
         self._braked = self._halted = False
-        self._ask: tuple[int, np.ndarray, np.ndarray] | None = None
+        self._unchecked = 0
+        """Steps the joints may still take along the straight way before its finding."""
+        self._replan = False
+        """Braked on a touching way: a route is asked from where the joints come to rest."""
+        self._ask: Ask | None = None
         """A move asked this step, handed to the worker after the step (:meth:`after_step`)."""
         self.notify: Callable[[], None] | None = None
         """Called (on the worker thread) after a finding is posted: a fleet host wakes the
@@ -102,6 +126,7 @@ class Guard:
         """A move's way is still being checked (or its finding not yet applied)."""
         with self._wake:
             return (self._ask is not None or self._asked is not None or self._busy
+                    or self._replan
                     or any(g == self._generation for g, _ in self._findings))
 
     @property
@@ -109,7 +134,7 @@ class Guard:
         """Nothing for the control thread to do before or after a step but watch for
         contacts: no move to hand over, no finding to apply, no leg to start (lock-free: a
         finding posted while this reads is applied at the next step)."""
-        return not (self._ask is not None or self._findings or self.legs)
+        return not (self._ask is not None or self._findings or self.legs or self._replan)
 
     def settle(self, timeout: float) -> bool:
         """Wait until the way to the newest target is checked (and a route planned when it
@@ -135,13 +160,14 @@ class Guard:
         self._goal = joints.target.copy()
         self.legs = []
         self.fault = ""
-        self._braked = self._halted = False
+        self._braked = self._halted = self._replan = False
+        self._unchecked = max(1, round(UNCHECKED_S / joints.dt))
         self._start_contacts = (_pairs(self.body.contacts()) if self.body.touching()
                                 else frozenset())
         # Only this thread writes the generation; the worker reads it under the lock and a
         # finding on an older one is dropped either way (_post, _take).
         self._generation += 1
-        self._ask = (self._generation, start, self._goal)  # handed over after the step
+        self._ask = Ask(self._generation, start, self._goal)  # handed over after the step
         return clamps
 
     def cancel(self) -> None:
@@ -153,14 +179,19 @@ class Guard:
             self._asked = None
         self.legs = []
         self._goal = None
+        self._unchecked = 0
+        self._replan = False
 
     def before_step(self, joints: JointTrajectory) -> None:
         """Apply a finding that arrived; start the next leg once the last one is at rest."""
         finding = self._take()
-        if isinstance(finding, Touch):  # the straight way touches: brake at once
+        if finding is not None:
+            self._unchecked = 0  # checked
+        if isinstance(finding, Touch):  # the straight way touches: brake at once, plan at rest
             if not self._braked:
                 joints.stop()
                 self._braked = True
+            self._replan = True
         elif finding is not None:  # the route: clear, or waypoints, or none at all
             if isinstance(finding, Blocked):
                 self.fault = (f"blocked: no collision-free way to the target ({finding.touch}); "
@@ -169,6 +200,9 @@ class Guard:
             elif len(finding) > 1 or self._braked:
                 self.legs = list(finding)
                 log.info("way blocked; going via %d waypoint(s)", len(finding) - 1)
+        if self._replan and not joints.moving and self._goal is not None:
+            self._replan = False  # the route from here: the brake went some way along
+            self._ask = Ask(self._generation, joints.position.copy(), self._goal, route=True)
         if self.legs and not joints.moving:
             joints.go_to(self.legs.pop(0))
 
@@ -178,6 +212,12 @@ class Guard:
         halt on a contact the motion did not start with, naming the links (once)."""
         if self._ask is not None:
             self._hand_over()
+        if self._unchecked > 0 and joints.moving:
+            self._unchecked -= 1
+            if self._unchecked == 0 and not self._braked:  # the finding is late: wait for it
+                joints.stop()
+                self._braked = True
+                log.info("way still being checked after %g s; braked until it is", UNCHECKED_S)
         if self._halted or not (joints.moving or self.legs) or not self.body.touching():
             return
         new = _pairs(self.body.contacts()) - self._start_contacts
@@ -234,16 +274,22 @@ class Guard:
             began = time.monotonic()
             try:
                 with CHECKING:
-                    self._check(*asked)
+                    self._check(asked)
             except Exception:  # a planner bug must not stop the checks for good
-                log.exception("planning the way to %s failed", asked[2])
+                log.exception("planning the way to %s failed", asked.goal)
             finally:
                 with self._wake:
                     self._busy = False
                     self._wake.notify_all()
 
-    def _check(self, generation: int, start: np.ndarray, goal: np.ndarray) -> None:
-        """First the straight way alone (milliseconds), then a route if it touches."""
+    def _check(self, asked: Ask) -> None:
+        """The straight way alone (milliseconds); the route, asked once the joints braked to
+        rest on a way that touches, from there."""
+        generation, start, goal = asked.generation, asked.start, asked.goal
+        if asked.route:
+            route = self.clearance.route(start, goal)
+            self._post(generation, Blocked(route) if isinstance(route, Touch) else route)
+            return
         clear = self._clear
         if clear is not None and _on_way(start, *clear) and _on_way(goal, *clear):
             self.skipped += 1
@@ -256,8 +302,6 @@ class Guard:
             self._post(generation, [goal])
             return
         self._post(generation, touch)
-        route = self.clearance.route(start, goal)
-        self._post(generation, Blocked(route) if isinstance(route, Touch) else route)
 
     def _post(self, generation: int, finding: Finding) -> None:
         with self._wake:
