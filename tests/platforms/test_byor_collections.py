@@ -22,6 +22,8 @@ import pytest
 
 from kinesphere.eurdf import load_eurdf
 from kinesphere.labeller_names import is_finger_name
+from kinesphere.platforms.platform import load_platform
+from kinesphere.services.ecl.ik import LIMIT_MARGIN
 from support.byor import A1, IIWA, LAIKAGO, TIAGO, standing
 from support.sweep import OBJECTS, WRITTEN, Row, made, reason, sweep, urdfs
 
@@ -118,6 +120,22 @@ def test_every_legged_robot_stands_on_its_feet(swept: tuple[Path, list[Row]]) ->
         low, feet = standing(parent / r["name"])
         assert 0.0 <= low < 0.002 and feet, (r["rel"], low, feet)
     assert "turned so z is up: the file's up axis is y" in by_rel(rows)[("pyb", LAIKAGO)]["out"]
+
+
+def test_every_neutral_leaves_the_generator_room_from_every_limit(
+    swept: tuple[Path, list[Row]]
+) -> None:
+    """The generator's IK keeps LIMIT_MARGIN from every joint's limits, frozen or not: a
+    neutral closer than that (Baxter's fingers, 5 mm into a 21 mm range) leaves it no step."""
+    parent, rows = swept
+    for r in made(rows):
+        plat = load_platform(str(parent / r["name"]))
+        neutral = plat.eurdf.with_mimics(plat.neutral)
+        for joint, lim in plat.eurdf.limits.items():
+            value = neutral.get(joint, 0.0)
+            room = min(value - lim.lower, lim.upper - value)
+            assert room >= min(LIMIT_MARGIN, (lim.upper - lim.lower) / 2 - 1e-6), (
+                r["rel"], joint, value, lim)
 
 
 def _kept(row: Row) -> int:

@@ -128,7 +128,8 @@ def _build(item: tuple[Path, list[str]]) -> Row:
 
 
 def sweep(items: list[tuple[str, str, Path]], parent: Path,
-          limbs: Callable[[Row], list[str]], workers: int = 2) -> list[Row]:
+          limbs: Callable[[Row], list[str]], workers: int = 2,
+          progress: Callable[[str], None] = lambda line: None) -> list[Row]:
     """Import every item, then build what ``limbs`` picks for each robot made (a file that is
     a variant of a robot built earlier shares its build), ``workers`` processes at a time."""
     context = multiprocessing.get_context("spawn")
@@ -145,9 +146,12 @@ def sweep(items: list[tuple[str, str, Path]], parent: Path,
             else:
                 first[row["family"]] = row
                 built.append(row)
+        progress(f"{len(rows)} URDFs: {len(made(rows))} made, {len(built)} robots to build")
         for row, result in zip(built, pool.map(_build, [(parent / r["name"], r["limbs"])
                                                          for r in built]), strict=True):
             row.update(result)
+            progress(f"built {row['col']}/{row['rel']}: {row['kept']} in "
+                     f"{row['build_s']:.0f} s")
     return rows
 
 
@@ -251,7 +255,8 @@ def main(argv: list[str] | None = None) -> int:
     items = [i for i in urdfs() if args.only in f"{i[0]}/{i[1]}"]
     start = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="kinesphere-sweep-") as tmp:
-        rows = sweep(items, Path(tmp), one_chain if args.one else every_chain, args.workers)
+        rows = sweep(items, Path(tmp), one_chain if args.one else every_chain, args.workers,
+                     lambda line: print(line, file=sys.stderr, flush=True))
     text = (table(rows) + "\n" + summary(rows)
             + f"wall time {time.perf_counter() - start:.0f} s with {args.workers} workers\n")
     print(text, end="")

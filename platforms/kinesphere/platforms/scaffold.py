@@ -317,13 +317,15 @@ def _base_kind(eurdf: Eurdf, proposal: Proposal, legs: list[str], core: bool,
 
 
 def _neutral(eurdf: Eurdf) -> dict[str, float]:
-    """Zero, kept NEUTRAL_MARGIN inside each joint's limits: a pose at a limit leaves the
-    ECL's IK (which keeps its own margin) no feasible first step, and a robot no room."""
+    """Zero, kept NEUTRAL_MARGIN inside each joint's limits, or in the middle of a range
+    narrower than twice that (a gripper's 2 cm): a pose near a limit leaves the ECL's IK
+    (which keeps its own margin from every limit, its limb's or not) no feasible step, and a
+    robot no room. Baxter's fingers a quarter into their range froze both of its arms."""
     out: dict[str, float] = {}
     for name, lim in eurdf.limits.items():
         if not (np.isfinite(lim.lower) and np.isfinite(lim.upper)):
             continue
-        value = lim.clamp(0.0, min(NEUTRAL_MARGIN, (lim.upper - lim.lower) / 4))
+        value = lim.clamp(0.0, min(NEUTRAL_MARGIN, (lim.upper - lim.lower) / 2))
         if value != 0.0:
             out[name] = round(value, 6)
     return out
