@@ -204,13 +204,13 @@ def _clean(name: str, limb: str, values: Mapping[str, np.ndarray]) -> np.ndarray
     """Which sampled configurations keep the limb clear of the rest of the robot."""
     pm = platform_model(name)
     m, data = pm.model, mujoco.MjData(pm.model)
-    bodies = np.array([m.body(link).id for link in pm.platform.eurdf.limb(limb).links])
+    of_limb = np.zeros(m.nbody, dtype=bool)  # body id -> part of the limb (a lookup, not isin)
+    of_limb[[m.body(link).id for link in pm.platform.eurdf.limb(limb).links]] = True
     n = len(next(iter(values.values())))
     out = np.zeros(n, dtype=bool)
     for i in range(n):
         data.qpos[:] = pm.qpos({j: float(v[i]) for j, v in values.items()})
         mujoco.mj_kinematics(m, data)
         mujoco.mj_collision(m, data)
-        touched = m.geom_bodyid[data.contact.geom[: data.ncon]]
-        out[i] = not np.isin(touched, bodies).any()
+        out[i] = not of_limb[m.geom_bodyid[data.contact.geom[: data.ncon]]].any()
     return out
