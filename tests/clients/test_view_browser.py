@@ -59,7 +59,7 @@ def test_view_draws_and_moves_robots(sup: Supervisor) -> None:
             page.get_by_text("0 robot(s)").wait_for(timeout=WAIT_S * 1000)
             for rid, platform in (("baxter-1", "baxter"), ("youbot-1", "youbot")):
                 sup.spawn(rid, ["agent", platform, "--id", rid, "--connect", endpoint,
-                                "--rate", AGENT_HZ])
+                                "--control-rate", AGENT_HZ])
                 page.get_by_text(f"{rid} ({platform}): idle").wait_for(timeout=WAIT_S * 1000)
             obs.wait_alive({"baxter-1", "youbot-1"}, databank=True, sup=sup)
             for note in page.locator(".mantine-Notification-root button").all():

@@ -12,6 +12,7 @@ import pytest
 from kinesphere.cli import build_parser
 from kinesphere.clients.options import ANSWER, SEND, TeleopOptions, TrafficOptions, ViewOptions
 from kinesphere.deploy.plan import DEFAULT_ROBOTS
+from kinesphere.robots.agent.options import AgentOptions
 from kinesphere.services.options import QueryOptions
 
 PARSER = build_parser()
@@ -48,6 +49,8 @@ FAMILIES: dict[str, tuple[str, ...]] = {
     "--gesture": ("a score: only this gesture",),
     "--bodies": ("the platforms' bodies shown side by side",),
     "--platforms": ("a folder of platform folders",),
+    "--rate": ("commands per second ",),
+    "--control-rate": ("control and physics loop rate in Hz",),
 }
 
 
@@ -152,6 +155,18 @@ def test_every_command_finds_platform_folders_with_platforms() -> None:
     both = _parse("ecl", "compare", "limb_11", "distal_11", "left-high", "3", "-o", "x.png",
                   "--platforms", "/tmp/p", "--bodies", "mybot,baxter")
     assert (both.platform_dirs, both.bodies) == (["/tmp/p"], ["mybot", "baxter"])
+
+
+def test_a_rate_is_commands_per_second_and_the_agents_loop_is_its_control_rate() -> None:
+    """--rate is one thing (a client's commands per second); the agent's and the fleet host's
+    control and physics loop is --control-rate, beside --state-rate."""
+    loops = {name for name, p in COMMANDS if "--control-rate" in p._option_string_actions}
+    assert loops == {"agent", "fleet"}
+    streams = {name for name, p in COMMANDS if "--rate" in p._option_string_actions}
+    assert streams >= {"send", "play", "gamepad"} and not streams & loops
+    agent = _parse("agent", "nao", "--control-rate", "250", "--state-rate", "25")
+    assert (agent.control_rate, agent.state_rate) == (250.0, 25.0)
+    assert _parse("fleet", "f.toml").control_rate == AgentOptions.control_rate
 
 
 def test_a_ros_domain_is_one_option_and_the_bridge_keeps_its_old_spelling() -> None:

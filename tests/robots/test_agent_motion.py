@@ -274,10 +274,10 @@ def test_a_body_caught_on_itself_is_reported_not_called_at_target() -> None:
     assert "during motion; halted" in detail
 
 
-@pytest.mark.parametrize("bad", [partial(AgentOptions, rate=0.0),
+@pytest.mark.parametrize("bad", [partial(AgentOptions, control_rate=0.0),
                                  partial(AgentOptions, state_rate=1000.0),
                                  partial(AgentOptions, speed=-1.0),
-                                 partial(AgentOptions, rate=math.inf)])
+                                 partial(AgentOptions, control_rate=math.inf)])
 def test_bad_options_are_user_errors(bad: Callable[[], AgentOptions]) -> None:
     with pytest.raises(KinesphereError) as err:
         bad()

@@ -68,7 +68,8 @@ def test_a_command_is_applied_before_the_next_scheduled_step(
     poses = [far(cat, 0), far(cat, -1)]
     with zconfig.session(config=zconfig.loopback_config(endpoint)) as s:
         agent = Agent("baxter", f"wake-{int(strict)}", s,
-                      AgentOptions(rate=RATE, state_rate=RATE, speed=1.0, strict_period=strict))
+                      AgentOptions(control_rate=RATE, state_rate=RATE, speed=1.0,
+                                   strict_period=strict))
         rec = Recorder(agent)
         stop = threading.Event()
         agent.declare()

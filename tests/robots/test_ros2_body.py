@@ -118,7 +118,7 @@ def test_gamepad_moves_the_ros2_robot_to_an_ecl_pose_and_release_stops_it(
     rid, ns = "baxter-ros", "/baxter_ros"
     options = Ros2BodyOptions(namespace=ns)
     with ros_robot(endpoint, ns) as (ros, robot), \
-            running_agent(endpoint, PLATFORM, rid, speed=1.0, rate=200.0, body="ros2",
+            running_agent(endpoint, PLATFORM, rid, speed=1.0, control_rate=200.0, body="ros2",
                           ros2=options) as (agent, watch):
         assert watch.states[-1].q == pytest.approx(list(neutral().values()))
         js, jt = "sensor_msgs/msg/JointState", "trajectory_msgs/msg/JointTrajectory"
@@ -212,7 +212,7 @@ def test_joy_stream_drives_the_ros2_robot(hub: Hub,
     buttons = {"lb": 0}
     axes = [0.0] * 6
     with ros_robot(endpoint, ns) as (ros, robot), \
-            running_agent(endpoint, PLATFORM, rid, speed=1.0, rate=200.0, body="ros2",
+            running_agent(endpoint, PLATFORM, rid, speed=1.0, control_rate=200.0, body="ros2",
                           ros2=Ros2BodyOptions(namespace=ns)) as (_, watch):
         joy = RosPublisher(ros, 0, "/joy", "sensor_msgs/msg/Joy", node="game_controller_node")
         stop = threading.Event()
@@ -308,7 +308,7 @@ def test_ros2_body_faults_and_stops(hub: Hub, databank: DatabankProcess) -> None
         robot.wait(lambda r: r.q == neutral(), "back at neutral")
         body.close()
 
-        with running_agent(endpoint, PLATFORM, "baxter-f", speed=1.0, rate=200.0,
+        with running_agent(endpoint, PLATFORM, "baxter-f", speed=1.0, control_rate=200.0,
                            body="ros2", ros2=options) as (_, watch):
             part = SpatialCommand(LIMB, ORIGIN, "forward-high", 2.0)
             goal = databank.query(PLATFORM, part).joints

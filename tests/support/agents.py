@@ -153,7 +153,7 @@ class StateWatch(Watch[RobotState]):
 class AgentOverrides(TypedDict, total=False):
     """The :class:`AgentOptions` a test sets besides ``speed``."""
 
-    rate: float
+    control_rate: float
     body: str
     ros2: Ros2BodyOptions
     groups: tuple[str, ...]

@@ -255,7 +255,7 @@ def secured_system(tmp: Path) -> Iterator[Secured]:
         until(lambda: port_open(port), WAIT_S, "the TLS router to listen", guard=sup.check)
         sup.spawn("databank", ["databank", "serve", "--db", db, "--allow-writes", "--replica",
                                "db-1", "--zenoh-config", str(configs["databank"])])
-        sup.spawn("agent", ["agent", "youbot", "--id", SECURED_ROBOT, "--rate", "250",
+        sup.spawn("agent", ["agent", "youbot", "--id", SECURED_ROBOT, "--control-rate", "250",
                             "--zenoh-config", str(configs["agent"]),
                             *robot_cert(certs, SECURED_ROBOT)])
         obs = Observer(session_config(config_file=configs["operator"]))

@@ -288,10 +288,10 @@ def test_ros2_peer_drives_the_gamepad_and_is_driven_by_the_ros2_body(site: Site)
                       joints=dict(zip(p.joint_names, p.neutral_vector().tolist(), strict=True)))
             peer.wait(partial(_robot_up, name), f"robot {name}")
         _, watch = stack.enter_context(running_agent(
-            site.endpoint, "baxter", arm, speed=1.0, rate=200.0, body="ros2",
+            site.endpoint, "baxter", arm, speed=1.0, control_rate=200.0, body="ros2",
             ros2=Ros2BodyOptions(namespace=arm_ns)))
         _, base_watch = stack.enter_context(running_agent(
-            site.endpoint, "packbot", base, speed=1.0, rate=200.0, body="ros2",
+            site.endpoint, "packbot", base, speed=1.0, control_rate=200.0, body="ros2",
             ros2=Ros2BodyOptions(namespace=base_ns)))
 
         # a ROS joystick: the SDK's sensor_msgs/Joy at joy's 20 Hz autorepeat

@@ -62,7 +62,7 @@ def test_fleet_through_router(tmp_path: Path, sup: Supervisor) -> None:
                                "--replica", "db-1"])
         for rid, platform in ROBOTS.items():
             sup.spawn(f"agent-{rid}", ["agent", platform, "--id", rid, "--zenoh-config", str(cfg),
-                                       "--rate", AGENT_HZ])
+                                       "--control-rate", AGENT_HZ])
         obs.wait_alive(set(ROBOTS), databank=True, sup=sup)
         a = {rid: query_pose(obs.session, p, *POSE_A).joints for rid, p in ROBOTS.items()}
         b = {rid: query_pose(obs.session, p, *POSE_B).joints for rid, p in ROBOTS.items()}

@@ -45,7 +45,7 @@ ARM = ("limb_11", "distal_11", "left-high", 2)  # youBot's arm
 def demo(tmp_path: Path) -> Iterator[Demo]:
     opts = UpOptions(robots=[PlannedRobot(p, r) for r, p in ROBOTS.items()], phrases=[],
                      out=tmp_path / "out", headless=True, start_timeout=WAIT_S * 2,
-                     extra_agent_args=["--rate", "250"])
+                     extra_agent_args=["--control-rate", "250"])
     d = Demo(opts, console=Console(file=open(tmp_path / "up.log", "w"), width=120))
     try:
         d.start()

@@ -122,7 +122,8 @@ def mesh(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Mesh]:
             sup.spawn("databank", ["databank", "serve", *dbs, "--zenoh-config",
                                    str(configs["hq"]), "--replica", "hq-1"])
             for rid, platform in ROBOTS.items():
-                sup.spawn(f"agent-{rid}", ["agent", platform, "--id", rid, "--rate", AGENT_HZ,
+                sup.spawn(f"agent-{rid}", ["agent", platform, "--id", rid,
+                                           "--control-rate", AGENT_HZ,
                                            "--zenoh-config", str(configs["robots"])])
             ops = Observer(mode="client", connect=[f"tcp/127.0.0.1:{ports['ops']}"])
             site = Observer(mode="client", connect=[f"tcp/127.0.0.1:{ports['robots']}"])

@@ -183,7 +183,7 @@ def test_two_operators_four_robots_and_a_restarting_databank(
 
         start_databank()
         for rid, platform in ROBOTS.items():
-            sup.spawn(f"agent-{rid}", ["agent", platform, "--id", rid, "--rate", "250",
+            sup.spawn(f"agent-{rid}", ["agent", platform, "--id", rid, "--control-rate", "250",
                                        *client_args(endpoint)])
         until(lambda: set(ROBOTS) <= alive.robots and bool(alive.databanks)
               and set(ROBOTS) <= set(recorder.snapshot()),

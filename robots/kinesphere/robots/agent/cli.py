@@ -100,9 +100,9 @@ def register(sub: Any) -> None:
 def _loop_options(p: argparse.ArgumentParser) -> None:
     """How the control loop runs (one robot or a fleet)."""
     d = DEFAULTS
-    p.add_argument("--rate", type=float, default=d.rate,
-                   help=f"control rate in Hz (default {d.rate:g})")
-    p.add_argument("--state-rate", type=float, default=d.state_rate,
+    p.add_argument("--control-rate", type=float, default=d.control_rate, metavar="HZ",
+                   help=f"control and physics loop rate in Hz (default {d.control_rate:g})")
+    p.add_argument("--state-rate", type=float, default=d.state_rate, metavar="HZ",
                    help=f"RobotState rate in Hz (default {d.state_rate:g})")
     p.add_argument("--speed", type=float, default=d.speed,
                    help=f"robot seconds per wall second; 0 = as fast as possible "
@@ -178,9 +178,9 @@ def _agent(args: argparse.Namespace) -> int:
         cmd_vel=args.ros2_cmd_vel, cmd_vel_stamped=args.ros2_cmd_vel_stamped,
         odom=args.ros2_odom, distro=args.ros_distro,
     )
-    options = AgentOptions(rate=args.rate, state_rate=args.state_rate, speed=args.speed,
-                           prefix=args.prefix, groups=tuple(args.group), body=args.body,
-                           ros2=ros2, max_translation_m=args.max_translation,
+    options = AgentOptions(control_rate=args.control_rate, state_rate=args.state_rate,
+                           speed=args.speed, prefix=args.prefix, groups=tuple(args.group),
+                           body=args.body, ros2=ros2, max_translation_m=args.max_translation,
                            strict_period=args.strict_period)
     with _until_signal() as stop:
         session = session_from_args(args, ros2=args.body == "ros2")
@@ -193,7 +193,7 @@ def _agent(args: argparse.Namespace) -> int:
             if args.viewer:
                 viewer = _viewer(agent.controller.body)
             if viewer is not None:
-                every = max(1, round(args.rate / VIEWER_HZ))
+                every = max(1, round(args.control_rate / VIEWER_HZ))
                 v = viewer
                 a = agent
 
@@ -252,8 +252,8 @@ def _run_fleet(args: argparse.Namespace, robots: Sequence[Any], body: str) -> in
     check_fleet(robots)
     if args.workers is not None and args.workers < 1:
         raise KinesphereError("malformed", f"--workers {args.workers}: give at least 1")
-    options = AgentOptions(rate=args.rate, state_rate=args.state_rate, speed=args.speed,
-                           prefix=args.prefix, body=body,
+    options = AgentOptions(control_rate=args.control_rate, state_rate=args.state_rate,
+                           speed=args.speed, prefix=args.prefix, body=body,
                            max_translation_m=args.max_translation,
                            strict_period=args.strict_period)
     if args.worker is not None:

@@ -155,7 +155,7 @@ class FleetHost:
         """False: every robot's whole cycle every step, Ruckig stepped per robot (the way
         before the batching, kept to measure it against: ``bench_fleet.py``)."""
         self.followers = Followers([g for a in self.agents for g in a.controller.generators]
-                                   if batched else [], 1.0 / self.options.rate)
+                                   if batched else [], 1.0 / self.options.control_rate)
         self._bodies: list[Body] = []
         self._stops = HardStops([])
         every = self.agents[0].publish_every
@@ -189,7 +189,7 @@ class FleetHost:
     def run(self, stop: threading.Event | None = None) -> None:
         """Tick paced by ``options.speed`` until :meth:`close` (or ``stop`` is set)."""
         o = self.options
-        period = 1.0 / o.rate / o.speed if o.speed > 0 else 0.0
+        period = 1.0 / o.control_rate / o.speed if o.speed > 0 else 0.0
 
         def stopped() -> bool:
             return self._stop.is_set() or (stop is not None and stop.is_set())

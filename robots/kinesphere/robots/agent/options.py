@@ -65,15 +65,15 @@ pose, so the robot and its databank agree (``docs/protocol.md``, "Bounds")."""
 class AgentOptions:
     """How an agent runs; the single source of its defaults (``kinesphere agent`` reads them).
 
-    Control ``rate`` and ``state_rate`` in Hz, ``speed`` (robot seconds per wall second, 0 =
-    unpaced), key ``prefix``, ``groups`` it obeys, databank query timeout, joint-limit clamp
-    ``margin``, the ``body`` it drives (one of :data:`BODY_KINDS`, each made by
-    ``bodies.BODIES``; ``ros2`` reads ``ros2``), and
-    the largest base translation one command may ask for (``max_translation_m``; a pose asking
-    for more is refused with ``size_out_of_range`` and nothing moves), and ``strict_period``.
+    ``control_rate`` (the control and physics loop) and ``state_rate`` in Hz, ``speed`` (robot
+    seconds per wall second, 0 = unpaced), key ``prefix``, ``groups`` it obeys, databank query
+    timeout, joint-limit clamp ``margin``, the ``body`` it drives (one of :data:`BODY_KINDS`,
+    each made by ``bodies.BODIES``; ``ros2`` reads ``ros2``), and the largest base translation
+    one command may ask for (``max_translation_m``; a pose asking for more is refused with
+    ``size_out_of_range`` and nothing moves), and ``strict_period``.
     """
 
-    rate: float = 500.0
+    control_rate: float = 500.0
     state_rate: float = 50.0
     speed: float = 1.0
     prefix: str = DEFAULT_PREFIX
@@ -89,9 +89,10 @@ class AgentOptions:
 
     def __post_init__(self) -> None:
         checks = (
-            (math.isfinite(self.rate) and self.rate > 0, f"rate must be > 0 Hz, got {self.rate}"),
-            (0 < self.state_rate <= self.rate,
-             f"state rate must be in (0, rate], got {self.state_rate}"),
+            (math.isfinite(self.control_rate) and self.control_rate > 0,
+             f"control rate must be > 0 Hz, got {self.control_rate}"),
+            (0 < self.state_rate <= self.control_rate,
+             f"state rate must be in (0, control rate], got {self.state_rate}"),
             (math.isfinite(self.speed) and self.speed >= 0,
              f"speed must be >= 0 (0 = unpaced), got {self.speed}"),
             (self.query_timeout_s > 0, f"query timeout must be > 0, got {self.query_timeout_s}"),

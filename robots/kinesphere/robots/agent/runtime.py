@@ -82,7 +82,7 @@ class Agent:
         self.robot_id = robot_id
         self.session = session
         if body is None:
-            body = make_body(self.options.body, platform, 1.0 / self.options.rate,
+            body = make_body(self.options.body, platform, 1.0 / self.options.control_rate,
                              session=session, options=self.options, robot_id=robot_id)
         self.controller = Controller(body, self.options.margin, make_guard(body, platform))
         self.platform = self.controller.platform.name
@@ -100,7 +100,7 @@ class Agent:
         self._joint_names = list(self.controller.joint_names)
         self._groups = list(self.options.groups)
         """Lists every state carries as they are (never changed: made once)."""
-        self.publish_every = max(1, round(self.options.rate / self.options.state_rate))
+        self.publish_every = max(1, round(self.options.control_rate / self.options.state_rate))
         """Steps between two published states."""
         self.phase = phase
         """Offsets the steps that publish state: a fleet host spreads its robots' states
