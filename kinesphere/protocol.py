@@ -60,6 +60,8 @@ SignedFraction = Annotated[float, msgspec.Meta(ge=-1.0, le=1.0)]
 NonNegInt = Annotated[int, msgspec.Meta(ge=0, le=MAX_INT)]
 Int = Annotated[int, msgspec.Meta(ge=-MAX_INT, le=MAX_INT)]
 Name = Annotated[str, msgspec.Meta(max_length=MAX_NAME)]
+ANONYMOUS: Final = "anonymous"
+"""Who a command without ``sender`` is, in ``RobotState.estop_by`` and ``lease_holder``."""
 MAX_TEXT: Final = 1024
 """Longest free text (``detail``) in characters; producers cut theirs to it."""
 Text = Annotated[str, msgspec.Meta(max_length=MAX_TEXT)]

@@ -139,10 +139,68 @@ def open_session(
         config = session_config(
             mode, listen, connect, config_file, scouting, gossip=gossip, lease_ms=lease_ms
         )
+    mode = json.loads(config.get_json("mode"))
+    connect = json.loads(config.get_json("connect/endpoints"))
+    connect = connect.get(mode, []) if isinstance(connect, dict) else connect
     try:
-        return zenoh.open(config)
+        s = zenoh.open(config)
     except zenoh.ZError as exc:
-        raise KinesphereError("unavailable", f"cannot open zenoh session: {_zmsg(exc)}") from None
+        why = nobody_at(connect) if "nable to connect" in str(exc) else _zmsg(exc)
+        raise KinesphereError("unavailable", f"cannot open zenoh session: {why}") from None
+    with _OPENED_LOCK:
+        _OPENED[str(s.zid())] = (str(mode), tuple(str(e) for e in connect))
+        while len(_OPENED) > MAX_SESSIONS:
+            del _OPENED[next(iter(_OPENED))]
+    return s
+
+
+MAX_SESSIONS = 256
+"""Sessions whose mode and connect endpoints are remembered (a process opens a few)."""
+_OPENED: dict[str, tuple[str, tuple[str, ...]]] = {}
+_OPENED_LOCK = threading.Lock()
+QUIET_S = 0.3
+"""Discovery has settled when nobody new turned up for this long."""
+PEER_DISCOVERY_S = 1.0
+"""A peer session knows the others no sooner: its links to them form through gossip."""
+
+
+def _opened(s: zenoh.Session) -> tuple[str, tuple[str, ...]]:
+    with _OPENED_LOCK:
+        return _OPENED.get(str(s.zid()), ("peer", ()))
+
+
+def discovery_time(s: zenoh.Session) -> float:
+    """How long a session must listen before it may say who exists: :data:`PEER_DISCOVERY_S`
+    for a peer (its gossip links take a moment, about half a second on loopback), nothing for
+    a client, which hears everyone through its router at once."""
+    return 0.0 if _opened(s)[0] == "client" else PEER_DISCOVERY_S
+
+
+def nobody_at(endpoints: Sequence[str]) -> str:
+    """What to say when nothing answers at ``endpoints`` (a session's connect endpoints): that
+    nobody listens there, and, for an endpoint a plain router can serve, the command that
+    starts one (:func:`kinesphere.hints.router`)."""
+    from kinesphere import hints
+
+    if not endpoints:
+        return ("this session connects nowhere (no --connect endpoint) and no peer found it: "
+                "give --connect with the router's endpoint")
+    where = ", ".join(endpoints)
+    startable = [e for e in endpoints if hints.can_start_router(e)]
+    how = (f": start one with '{hints.router(startable[0])}'" if startable
+           else ": is the router running there, and reachable?")
+    return f"no Zenoh router answers at {where}{how} (or --connect to where it runs)"
+
+
+def alone(s: zenoh.Session) -> str:
+    """"" while ``s`` has a link to a router or a peer; else why nobody can hear it
+    (:func:`nobody_at` its connect endpoints). A peer session opens even when nothing answers
+    at its endpoints (it keeps retrying), so a command that heard nobody asks this before
+    blaming the robots."""
+    info = s.info
+    if info.routers_zid() or info.peers_zid():
+        return ""
+    return nobody_at(_opened(s)[1])
 
 
 P = ParamSpec("P")

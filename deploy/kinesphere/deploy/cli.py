@@ -145,13 +145,12 @@ def _up(args: argparse.Namespace) -> int:
 
 
 def _status(args: argparse.Namespace) -> int:
-    from kinesphere.deploy.status import collect, discovery_time, print_status
+    from kinesphere.deploy.status import collect, print_status
     from kinesphere.keyexpr import Keys
-    from kinesphere.zconfig import configs_from_args, session_from_args
+    from kinesphere.zconfig import session_from_args
 
-    discovery = discovery_time(configs_from_args(args)[-1])
     with session_from_args(args) as session:
-        info = collect(session, Keys(args.prefix), args.timeout, discovery)
+        info = collect(session, Keys(args.prefix), args.timeout)
     return print_status(info, args.json)
 
 

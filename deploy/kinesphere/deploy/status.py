@@ -3,9 +3,9 @@
 Liveliness says which processes exist, a robot's state stream what it is doing. Both are
 subscribed to from the start, liveliness with history, and status answers once discovery has
 settled: every robot whose token arrived has also reported, and nothing new turned up for
-QUIET_S. A client of the router (the default) hears everything through it at once. A peer
-first has to link to the others its gossip names, which takes a moment (about half a second
-on loopback), so in peer mode status waits at least PEER_DISCOVERY_S. One liveliness query
+``zconfig.QUIET_S``. A client of the router (the default) hears everything through it at
+once; a peer first has to link to the others its gossip names, so in peer mode status waits
+at least ``zconfig.discovery_time``. One liveliness query
 answered at once, as before, missed robots a peer had not linked to yet (5 of 10 runs).
 """
 
@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import json
 import time
-from typing import Any, Final
+from typing import Any
 
 import zenoh
 from rich.console import Console
@@ -21,27 +21,15 @@ from rich.console import Console
 from kinesphere.deploy.table import robot_table, state_dict, wide_console
 from kinesphere.deploy.watch import StateRecorder, watch_alive
 from kinesphere.keyexpr import Keys
-from kinesphere.zconfig import undeclare
-
-QUIET_S: Final = 0.3
-"""Discovery has settled when no new databank or robot turned up for this long."""
-PEER_DISCOVERY_S: Final = 1.0
-"""A peer session answers no sooner: its links to the other peers form through gossip."""
+from kinesphere.zconfig import QUIET_S, discovery_time, undeclare
 
 
-def discovery_time(config: zenoh.Config) -> float:
-    """How long a session of ``config`` waits for discovery at least (PEER_DISCOVERY_S for a
-    peer, nothing for a client)."""
-    return PEER_DISCOVERY_S if json.loads(config.get_json("mode")) == "peer" else 0.0
-
-
-def collect(session: zenoh.Session, keys: Keys, timeout: float, discovery: float = 0.0
-            ) -> dict[str, Any]:
+def collect(session: zenoh.Session, keys: Keys, timeout: float) -> dict[str, Any]:
     """Liveliness plus each robot's last state, as a JSON-ready dict, once discovery settled
-    (not before ``discovery`` s) or at ``timeout``."""
+    (not before :func:`~kinesphere.zconfig.discovery_time`) or at ``timeout``."""
     start = time.monotonic()
     deadline = start + timeout
-    earliest = start + discovery
+    earliest = start + discovery_time(session)
     recorder = StateRecorder(keys, history=False).start(session)
     alive, subs = watch_alive(session, keys)
     seen: set[str] = set()

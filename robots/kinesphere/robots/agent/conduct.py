@@ -19,9 +19,10 @@ import time
 from collections import deque
 from collections.abc import Callable, Hashable
 
+from kinesphere import hints
 from kinesphere.errors import KinesphereError
 from kinesphere.lru import Lru
-from kinesphere.protocol import AckStage, Command, LeaseAction, Pose, Status
+from kinesphere.protocol import ANONYMOUS, AckStage, Command, LeaseAction, Pose, Status
 from kinesphere.ratelog import RateLog
 from kinesphere.robots.agent.acks import Acks, Due, Meaning, Motion
 from kinesphere.robots.agent.base import drive_base
@@ -274,9 +275,11 @@ class Conduct:
             self.ordering.acted(cmd.seq)  # acted on now; poses count once resolved
         if verdict is Verdict.ESTOP:
             self.estop_lag.append(self.ticks - item.tick)
-            self.halt(Status.ESTOP, f"e-stop from {self.safety.holders()}; release with a "
-                       "command with release=true (kinesphere estop --release)",
-                       AckStage.SUPERSEDED)
+            by = cmd.sender or ANONYMOUS
+            release = hints.release_estop(self.robot_id, "" if by == ANONYMOUS else by)
+            each = " (each holder releases their own)" if len(self.safety.latches) > 1 else ""
+            self.halt(Status.ESTOP, f"e-stop from {self.safety.holders()}; release with "
+                      f"'{release}'{each}", AckStage.SUPERSEDED)
             log.warning("agent %s: e-stop by %s (seq %d)", self.robot_id, self.safety.estop_by,
                         cmd.seq)
             self.acks.send(cmd, AckStage.ESTOPPED)

@@ -23,8 +23,7 @@ import logging
 import math
 from dataclasses import dataclass
 
-from kinesphere.protocol import Command, LeaseAction
-from kinesphere.robots.agent.safety import ANONYMOUS
+from kinesphere.protocol import ANONYMOUS, Command, LeaseAction
 
 log = logging.getLogger(__name__)
 

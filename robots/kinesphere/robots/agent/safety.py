@@ -34,10 +34,7 @@ from __future__ import annotations
 import enum
 from dataclasses import dataclass, field
 
-from kinesphere.protocol import Command
-
-ANONYMOUS = "anonymous"
-"""Who a command without ``sender`` is, in ``estop_by`` and ``lease_holder``."""
+from kinesphere.protocol import ANONYMOUS, Command
 
 DRIVE_TTL_S = 0.5
 """Watchdog for a Drive sent with ``ttl_ms=0``: a base never drives on a single message."""
