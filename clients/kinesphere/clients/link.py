@@ -456,22 +456,62 @@ def link_for(args: argparse.Namespace, *, ros2: bool = False) -> Iterator[RobotL
 
 
 def reachable(link: RobotLink, target: tg.Target, wait: float) -> list[str]:
-    """The target's command keys, once a robot listens on each; else unavailable, with a hint
-    when a robot id was given for what is a group, or is near a live robot's id."""
+    """The target's command keys, once a robot listens on each; else unavailable, saying why:
+    this session reached nobody (no router: the command that starts one), or which robots
+    are alive (a robot id that is a group's name, a platform's, or near a live robot's id is
+    answered with what was meant). A robot id nobody has but that names a live robot's
+    platform fails at once: the user gave the platform, not the id."""
     keys = target.keys(link.keys)
+    if target.kind == "robot":
+        alive = link.alive_robots()
+        if target.name not in alive:
+            meant = _platform_named(link, target.name, alive)
+            if meant:
+                raise KinesphereError("unavailable", f"no robot has the id {target.name!r}: "
+                                      f"{target.name} is the platform of {meant}; give "
+                                      "the robot's id")
     missing = link.wait_subscribers(keys, wait)
-    if missing:
-        hint = ""
-        if target.kind == "robot":
-            as_group = tg.group(target.name)
-            if not link.wait_subscribers(as_group.keys(link.keys), 0.5):
-                hint = f"; did you mean --target {as_group.spelling}?"
-            else:
-                hint = did_you_mean(target.name, link.alive_robots())
-        raise KinesphereError(
-            "unavailable", f"no robot listens on {', '.join(missing)} (waited {wait:g} s){hint}"
-        )
-    return keys
+    if not missing:
+        return keys
+    nobody = zconfig.alone(link.session)
+    if nobody:
+        raise KinesphereError("unavailable", f"no robot listens on {', '.join(missing)}: "
+                              f"{nobody}")
+    hint = ""
+    if target.kind == "robot":
+        as_group = tg.group(target.name)
+        if not link.wait_subscribers(as_group.keys(link.keys), 0.5):
+            hint = f"; did you mean {as_group.spelling!r} (a group)?"
+        else:
+            hint = did_you_mean(target.name, link.alive_robots())
+    raise KinesphereError(
+        "unavailable", f"no robot listens on {', '.join(missing)} (waited {wait:g} s); "
+        f"{live_robots(link)}{hint}")
+
+
+def live_robots(link: RobotLink) -> str:
+    """``live robots: baxter-1 (baxter), yb-1 (youbot)``, or that none is alive."""
+    alive = link.alive_robots()
+    if not alive:
+        return f"no robot is alive under {link.keys.prefix!r}"
+    states = link.states()
+    return "live robots: " + ", ".join(
+        f"{rid} ({states[rid].state.platform})" if rid in states else rid for rid in alive)
+
+
+def _platform_named(link: RobotLink, name: str, alive: list[str]) -> str:
+    """The live robots whose platform is ``name`` (``yb-1 (a youbot)``), once their states
+    came in (up to :data:`PLATFORM_WAIT_S`); "" when none is."""
+    wanted = set(alive)
+    link.wait_for(lambda lk: wanted <= set(lk.states()), PLATFORM_WAIT_S)
+    states = link.states()
+    of = sorted(rid for rid in alive if rid in states
+                and states[rid].state.platform.casefold() == name.casefold())
+    return " and ".join(f"{rid} (a {name})" for rid in of)
+
+
+PLATFORM_WAIT_S = 1.0
+"""How long a wrong robot id waits for the live robots' states (their platforms)."""
 
 
 @contextmanager

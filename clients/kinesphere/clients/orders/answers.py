@@ -18,6 +18,7 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from typing import TextIO
 
+from kinesphere import zconfig
 from kinesphere.clients import targets as tg
 from kinesphere.clients.link import AckAnswer, RobotLink
 from kinesphere.protocol import Ack, AckStage, BodyWord, Substitution
@@ -48,6 +49,39 @@ def addressed(link: RobotLink, target: tg.Target, timeout: float = DISCOVERY_S) 
 
     link.wait_for(known, timeout)
     return tg.members(target, link.robot_groups())
+
+
+class Discovery:
+    """Who is alive, and whether that has settled: every robot heard of so far (liveliness,
+    or a state heard since this process started), and whether nobody new turned up for
+    :data:`~kinesphere.zconfig.QUIET_S` after the session's
+    :func:`~kinesphere.zconfig.discovery_time`. Read it under the link's lock (in a
+    :meth:`RobotLink.wait_for` predicate)."""
+
+    def __init__(self, link: RobotLink) -> None:
+        now = time.monotonic()
+        self.earliest = now + zconfig.discovery_time(link.session)
+        self.robots: set[str] = set()
+        self._changed = now
+
+    def update(self, link: RobotLink) -> set[str]:
+        """Every robot known now (never forgets one: a robot that went away meanwhile still
+        has to be accounted for)."""
+        found = set(link.robots())
+        if not found <= self.robots:
+            self.robots |= found
+            self._changed = time.monotonic()
+        return self.robots
+
+    @property
+    def settled(self) -> bool:
+        now = time.monotonic()
+        return now >= self.earliest and now - self._changed >= zconfig.QUIET_S
+
+    def wake_in(self) -> float:
+        """Seconds until :attr:`settled` may turn true without news."""
+        now = time.monotonic()
+        return max(0.0, self.earliest - now, self._changed + zconfig.QUIET_S - now)
 
 
 def substitution_text(subs: Iterable[Substitution]) -> str:

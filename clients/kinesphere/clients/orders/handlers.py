@@ -17,6 +17,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
+from kinesphere import zconfig
 from kinesphere.clients import targets
 from kinesphere.clients.link import RobotLink, Sequencer, link_for, reachable, signals
 from kinesphere.clients.options import TeleopOptions
@@ -137,28 +138,70 @@ def estop(args: argparse.Namespace) -> int:
                                  lambda o: o.answered(first))
         return _finish(found, args.timeout, "the release")
     with link_for(args) as link:
-        seq = link.sequencer(0)
-        first = seq.seq
-        link.estop_all(seq)  # at once: an e-stop never waits for discovery
-        left = answers.deadline(args.timeout)
-        # the liveliness query ends when the network has answered (at once when it is quick),
-        # so it may take the whole budget on a slow one rather than miss a robot
-        alive = set(link.alive_robots(max(0.1, left())))
+        return _estop_all(link, args.timeout, args.prefix)
 
-        def everyone(lk: RobotLink) -> bool:
-            alive.update(lk.robots())  # a robot heard of meanwhile must ack too
-            now = answers.outcomes(lk.answers(first), alive)
-            return bool(now) and all(
-                any(a.stage == AckStage.ESTOPPED for a in o.acks) for o in now.values())
 
-        while not link.wait_for(everyone, min(ESTOP_RESEND_S, left())) and left() > 0:
+def _estop_all(link: RobotLink, timeout: float, prefix: str) -> int:
+    """E-stop every robot, and say so only once every robot alive has latched (module text).
+
+    The e-stop goes out at once and again every :data:`ESTOP_RESEND_S` while a robot known
+    alive has not acknowledged it. Success needs two things: discovery has settled (every
+    robot with a liveliness token or a state heard is known, and nobody new turned up for a
+    moment: :class:`~kinesphere.clients.orders.answers.Discovery`) and every robot known has
+    acknowledged ``estopped``. A robot heard of later, even after the others all answered, must
+    answer too; one that never does is named, and the exit status is 1.
+    """
+    seq = link.sequencer(0)
+    first = seq.seq
+    link.estop_all(seq)  # at once: an e-stop never waits for discovery
+    left = answers.deadline(timeout)
+    discovery = answers.Discovery(link)
+    link.alive_robots(max(0.1, left()))  # the liveliness tokens there are now, complete
+
+    def latched(lk: RobotLink) -> set[str]:
+        return {rid for rid, got in lk.answers(first).items()
+                if any(a.ack.stage == AckStage.ESTOPPED for a in got)}
+
+    def confirmed(lk: RobotLink) -> bool:
+        robots = discovery.update(lk)
+        return discovery.settled and robots <= latched(lk)
+
+    while not link.wait_for(confirmed, min(ESTOP_RESEND_S, left(), discovery.wake_in() or
+                                           ESTOP_RESEND_S)) and left() > 0:
+        with link.changed:
+            missing = discovery.update(link) - latched(link)
+        if missing:
             link.estop_all(seq)  # robots discovered a moment later get a copy
-        found = answers.outcomes(link.answers(first), alive)
+    with link.changed:
+        robots = discovery.update(link)
+        settled = discovery.settled
+    found = answers.outcomes(link.answers(first), robots)
     if not found:
-        print(f"E-STOP REACHED NO ROBOT: nobody acknowledged it within {args.timeout:g} s and "
-              f"no robot is alive under {args.prefix!r}", file=sys.stderr)
+        nobody = zconfig.alone(link.session)
+        print(f"E-STOP REACHED NO ROBOT: nobody acknowledged it within {timeout:g} s and "
+              f"{nobody or f'no robot is alive under {prefix!r}'}", file=sys.stderr)
         return 1
-    return _finish(found, args.timeout, "the E-STOP")
+    states = link.states()
+    for rid, o in found.items():
+        if any(a.stage == AckStage.ESTOPPED for a in o.acks):
+            print(f"{rid}: estopped")
+        elif o.refused:
+            print(answers.line(o, timeout))
+        else:
+            heard = states.get(rid)
+            how = (f"its last state came {time.monotonic() - heard.at:.1f} s ago"
+                   if heard is not None else "it holds a liveliness token")
+            print(f"{rid}: NOT CONFIRMED: alive ({how}) but no e-stop acknowledgement within "
+                  f"{timeout:g} s; make sure it is stopped")
+    good = sum(any(a.stage == AckStage.ESTOPPED for a in o.acks) for o in found.values())
+    if good == len(found) and settled:
+        print(f"E-STOP confirmed by all {good} live robot(s)", file=sys.stderr)
+        return 0
+    why = "" if settled else (f"; discovery had not settled within {timeout:g} s, so robots "
+                              "may be missing (a larger --timeout waits longer)")
+    print(f"E-STOP NOT CONFIRMED: {good} of {len(found)} live robot(s) acknowledged it{why}",
+          file=sys.stderr)
+    return 1
 
 
 def lease(args: argparse.Namespace) -> int:
