@@ -192,6 +192,36 @@ def test_a_direction_no_body_has_near_drives_alone_through_sdls_joystick_path(
     assert max(abs(h.state.q[j] - hs[0].state.q[j]) for h in hs for j in arm) < 0.01
 
 
+def test_a_centred_stick_holds_the_pose_through_sdls_joystick_path(
+    fleet: ClientFleet, pygame_up: None
+) -> None:
+    """The youBot's arm pushed away from neutral, the deadman let go, then pressed again with
+    the stick centred (SDL virtual GameController): the arm holds where it is; nothing sends
+    it home."""
+
+    def push(vpad: VirtualPad) -> None:
+        vpad.deadman()
+        vpad.right(-0.7, -0.7)  # left-forward
+
+    def let_go(vpad: VirtualPad) -> None:
+        vpad.deadman(False)
+        vpad.right(0.0, 0.0)
+
+    done = through_sdl(fleet, YB, {0: push, 45: let_go, 60: lambda vpad: vpad.deadman()},
+                       release_at=105)
+    held = [v for v in done.views[61:] if v.engaged]
+    assert len(held) > 30 and all(v.stick_holds for v in held), "engaged, the stick centred"
+    assert {v.source for v in held} == {"controller"}
+    pressed = fleet.track.wait(YB, lambda h: True, "a state", after=done.t0 + 62 / 30)
+    hs = [h for h in fleet.track.since(YB, pressed.at) if h.at <= done.released]
+    names = hs[0].state.joint_names
+    arm = [i for i, n in enumerate(names) if n.startswith("arm_joint")]
+    start, before = hs[0].state.q, fleet.track.since(YB, done.t0)[0].state.q
+    assert max(abs(start[i] - before[i]) for i in arm) > 0.05, "the push moved the arm"
+    drift = max(abs(h.state.q[i] - start[i]) for h in hs for i in arm)
+    assert drift < 0.02, f"the arm held its pose (moved {drift:.3f} rad)"
+
+
 def test_deadman_release_stops_within_the_ttl(fleet: ClientFleet, pygame_up: None) -> None:
     p = Pad()
     released: list[float] = []

@@ -97,7 +97,9 @@ def view(**kw: Unpack[ReadoutChanges]) -> Readout:
                                 detail="alice@laptop holds this robot's lease"),
         },
         notice="packbot-2 refuses your commands: alice@laptop holds this robot's lease; "
-               "press Back (take) to take over",
+               "press Back to take control",
+        presses={"release": "Start", "deadman": "LB", "take": "Back", "estop": "B"},
+        input_name="kinesphere virtual pad (game controller)",
     )
     return dataclasses.replace(base, **kw)
 
@@ -144,7 +146,22 @@ def test_pushing_the_stick_lights_the_cell_on_that_side(
     assert {"left": x < px, "right": x > px, "up": y < py, "down": y > py}[side], lit
 
 
-def test_missing_directions_are_crossed_out(window: hud.Hud) -> None:
+def diagonals(surf: pygame.Surface, d: Direction) -> list[tuple[int, int, int]]:
+    """The colours along both diagonals of ``d``'s cell, corner to corner."""
+    r = hud.cell_rect(d).inflate(-6, -6)
+    n = r.width - 8
+    return ([rgb(surf, (r.left + 4 + k, r.top + 4 + k)) for k in range(n)]
+            + [rgb(surf, (r.right - 5 - k, r.top + 4 + k)) for k in range(n)])
+
+
+def crossed(surf: pygame.Surface, d: Direction, colour: tuple[int, int, int]) -> bool:
+    """Crossed out corner to corner: most of both diagonals is the cross's colour (the word
+    and symbol may cover a little)."""
+    line = diagonals(surf, d)
+    return sum(c == colour for c in line) > 0.8 * len(line)
+
+
+def test_missing_directions_are_crossed_out_corner_to_corner(window: hud.Hud) -> None:
     have = frozenset({Direction.LEFT_FORWARD_LOW, Direction.FORWARD_LOW, Direction.PLACE_HIGH})
     hud.render(window.screen, view(available=have, asked=Direction.LEFT_LOW,
                intent=Intent(direction=Direction.LEFT_FORWARD_LOW, size=3.0, deadman=True)),
@@ -152,18 +169,15 @@ def test_missing_directions_are_crossed_out(window: hud.Hud) -> None:
     surf = window.screen
     for d in Direction:
         r = hud.cell_rect(d)
-        bg = rgb(surf, (r.left + 3, r.bottom - 12))
-        diagonal = [rgb(surf, (r.left + 4 + k, r.top + 4 + k)) for k in range(4, 8)]
+        bg = rgb(surf, (r.left + 3, r.top + 12))
         if d is Direction.LEFT_FORWARD_LOW:
             assert bg == hud.LIT
         elif d in have or d is Direction.PLACE_MIDDLE:
             assert bg == hud.CELL_BG, d
-            assert hud.UNAVAILABLE not in diagonal and hud.BAD not in diagonal, d
+            assert not crossed(surf, d, hud.UNAVAILABLE) and not crossed(surf, d, hud.BAD), d
         else:
-            assert bg == hud.UNAVAILABLE_BG, d
             cross = hud.BAD if d is Direction.LEFT_LOW else hud.UNAVAILABLE
-            assert cross in diagonal, d
-    assert rgb(surf, hud.cell_rect(Direction.LEFT_LOW).topleft) != hud.UNAVAILABLE_BG
+            assert crossed(surf, d, cross), d
 
 
 def test_the_commanded_cell_is_lit(window: hud.Hud, tmp_path: Path) -> None:
@@ -237,7 +251,70 @@ def test_a_direction_with_no_pose_near_is_crossed_out_in_red_while_driving(
     for holds in (False, True):
         hud.render(window.screen, view(available=have, limb_holds=holds, intent=intent),
                    window.fonts)
-        r = hud.cell_rect(Direction.LEFT_MIDDLE)
-        diagonal = [rgb(window.screen, (r.left + 4 + k, r.top + 4 + k))
-                    for k in range(4, 8)]
-        assert (hud.BAD in diagonal) is holds, (holds, diagonal)
+        assert crossed(window.screen, Direction.LEFT_MIDDLE, hud.BAD) is holds, holds
+
+
+def shows(shot: pygame.Surface, drawn: hud.Drawn, fonts: dict[str, pygame.font.Font],
+          bg: tuple[int, int, int] = hud.BG) -> bool:
+    """Whether the screenshot shows ``drawn``'s text where the HUD says it drew it: the
+    pixels there are exactly that text in that font and colour on the background."""
+    expected = pygame.Surface(drawn.rect.size)
+    expected.fill(bg)
+    expected.blit(fonts[drawn.font].render(drawn.text, True, drawn.colour), (0, 0))
+    region = shot.subsurface(drawn.rect).convert(expected)
+    return pygame.image.tobytes(region, "RGB") == pygame.image.tobytes(expected, "RGB")
+
+
+@pytest.mark.parametrize(("stage", "code", "words", "colour"), [
+    (AckStage.REACHED, "", "pb-1: reached", hud.GOOD),
+    (AckStage.MOVING, "", "pb-1: moving", hud.GOOD),
+    (AckStage.HOLDING, "", "pb-1: holding", hud.WARN),
+    (AckStage.REJECTED, "lease_held", "pb-1: refused: lease_held", hud.BAD),
+])
+def test_a_screenshot_shows_the_answer_largest_after_the_target(
+    window: hud.Hud, tmp_path: Path, stage: AckStage, code: str, words: str,
+    colour: tuple[int, int, int],
+) -> None:
+    """The robot's answer is on the saved picture, in its colour, larger than everything but
+    the target; the target is there too."""
+    one = view(target=tg.robot("pb-1"), members=["pb-1"],
+               robots={"pb-1": state("pb-1", "packbot", "moving")},
+               answers={"pb-1": answer("pb-1", 9, stage, code=code, detail="why")})
+    window._last = 0.0
+    window.draw(one)
+    window.screenshot(tmp_path / "hud.png")
+    shot = pygame.image.load(str(tmp_path / "hud.png"))
+    layout = window.layout
+    (said,) = layout["answer"]
+    assert said.text.startswith(f"{words}  (") and said.colour == colour
+    assert shows(shot, said, window.fonts)
+    (target,) = layout["target"]
+    assert target.text == "target: pb-1" and shows(shot, target, window.fonts)
+    tallest = {role: max(d.rect.height for d in ds) for role, ds in layout.items()}
+    others = max(h for role, h in tallest.items() if role not in ("target", "answer"))
+    assert tallest["target"] > tallest["answer"] > others
+
+
+def test_every_cell_says_its_direction_in_words(window: hud.Hud, tmp_path: Path) -> None:
+    layout = hud.render(window.screen, view(engaged=False), window.fonts)
+    window.screenshot(tmp_path / "hud.png")
+    shot = pygame.image.load(str(tmp_path / "hud.png"))
+    for d in Direction:
+        (word,) = layout[f"cell:{d.slug}"]
+        assert word.text == hud.CELL_WORDS[d.horizontal]
+        assert hud.cell_rect(d).contains(word.rect), d
+        cell_bg = hud.DIM if d is Direction.LEFT_LOW else hud.CELL_BG
+        assert shows(shot, word, window.fonts, cell_bg), d
+    assert "crossed out" in " ".join(x.text for x in layout["legend"]).lower()
+    for lvl in ("HIGH", "MIDDLE", "LOW"):
+        assert lvl in [x.text for x in layout["chart"]]
+
+
+def test_the_right_half_carries_each_robots_answer_and_link(window: hud.Hud) -> None:
+    layout = hud.render(window.screen, view(), window.fonts)
+    said = {d.text for d in layout["robot_answer"]}
+    assert {"moving", "refused: lease_held"} <= said
+    robot_text = [d for d in layout["robot"]]
+    assert all(d.rect.left >= hud.RIGHT_X for d in robot_text)
+    assert any(d.text.startswith("link ") for d in robot_text), "link health per robot"
+    assert any(d.text == "no answer to you yet" for d in layout["robot_answer"])

@@ -139,6 +139,66 @@ def test_without_a_deadman_a_deflected_stick_streams(
     assert [kind(c) for c in cmds] == ["move", "move", "let go"]
 
 
+def test_a_centred_stick_holds_until_pushed_then_its_return_is_neutral(
+    link: RobotLink, inboxes: dict[str, Inbox], inp: pad.PygameInput
+) -> None:
+    """Pressing the deadman with the stick centred moves nothing: the commands carry no part
+    (the limb holds, as a zero command holds in MoveIt Servo). After a push, the stick's return
+    to the centre is the limb's neutral pose (the stick is a position); a new press of the
+    deadman starts holding again."""
+    p = Pad()
+    p.plug()
+    op = teleop(link, tg.robot("r1"))
+    p.deadman()
+    views = [op.tick(inp.poll()) for _ in range(3)]  # centred
+    assert all(v.engaged and v.stick_holds for v in views)
+    p.right(-1.0, 0.0)  # pushed left
+    op.tick(inp.poll())
+    p.right(0.0, 0.0)  # back to the centre
+    back = op.tick(inp.poll())
+    assert back.engaged and not back.stick_holds
+    p.deadman(False)
+    op.tick(inp.poll())
+    p.deadman()
+    again = op.tick(inp.poll())  # pressed anew, centred: holds again
+    assert again.stick_holds
+    settle(link, inboxes)
+    cmds = [c for c in inboxes["r1"].commands() if kind(c) == "move"]
+    assert [[(x.direction, x.size) for x in c.parts] for c in cmds] == [
+        [], [], [], [("left-middle", 3.0)], [("place-middle", 0.0)], []]
+
+
+def test_a_target_nobody_has_says_so_and_names_who_is_alive(
+    hub: tuple[zenoh.Session, str], link: RobotLink, inp: pad.PygameInput,
+    pygame_up: None,
+) -> None:
+    """``--target yb-9`` when only yb-1 exists: after a moment the HUD says the commands
+    reach nobody, in the target's place and the deadman banner, and names who is alive."""
+    session, _ = hub
+    robot = FakeRobot(session, "yb-1", "youbot")
+    robot.state()
+    assert link.wait_for(lambda lk: "yb-1" in lk.states(), WAIT_S)
+    p = Pad()
+    p.plug()
+    p.deadman()
+    op = teleop(link, tg.robot("yb-9"))
+    t0 = 1000.0
+    first = op.tick(inp.poll(), now=t0)
+    assert first.engaged and not first.unheard, "a moment to be heard"
+    later = op.tick(inp.poll(), now=t0 + 1.5)
+    assert later.unheard and later.notice.startswith(
+        "no robot 'yb-9' is heard: your commands reach nobody (live: ")
+    assert "yb-1" in later.notice and "did you mean 'yb-1'?" in later.notice
+    from kinesphere.clients.gamepad import hud
+
+    surf = pygame.Surface(hud.SIZE)
+    layout = hud.render(surf, later, hud.load_fonts())
+    assert {d.colour for d in layout["target"]} == {hud.BAD}
+    assert [d.text for d in layout["deadman"]] == ["deadman held: streaming to NOBODY"]
+    assert layout["answer"][0].text == "nobody answers: no robot heard"
+    zconfig.undeclare(robot.pub)
+
+
 def status_of(link: RobotLink, robot_id: str) -> str | None:
     seen = link.states().get(robot_id)
     return seen.state.status if seen else None

@@ -45,9 +45,10 @@ def gamepad(args: argparse.Namespace) -> int:
         from kinesphere.clients.gamepad.inputs import pad
 
         pad.init_pygame(args.headless)
-        if args.headless and replay is None and joy_topic is None and pad.controllers() == 0:
-            print("no game controller found: waiting for one to be plugged in; nothing moves "
-                  "until then (--headless has no keyboard)", file=sys.stderr)
+    if replay is not None:
+        print(f"input: the recording {args.replay}", file=sys.stderr)
+    elif joy_topic is None:
+        _say_input(pad.found(), args.headless, mapping)
     try:
         with link_for(args, ros2=joy_topic is not None) as link, ExitStack() as stack:
             op = teleop.Teleop(link, mapping, target, options, take=args.take)
@@ -105,6 +106,21 @@ def gamepad(args: argparse.Namespace) -> int:
 
             pygame.quit()
     return 0
+
+
+def _say_input(pads: list[str], headless: bool, mapping: mapfile.MapFile) -> None:
+    """Which input this session reads, on stderr, before anything else happens."""
+    keys = "" if headless else (f"; the keyboard works in the HUD window too (hold "
+                                f"{mapping.press('deadman', 'keyboard')} as the deadman)")
+    if pads:
+        print(f"input: {', '.join(pads)}{keys}", file=sys.stderr)
+    elif headless:
+        print("input: no game controller found: waiting for one to be plugged in; nothing "
+              "moves until then (--headless has no keyboard)", file=sys.stderr)
+    else:
+        print("input: no game controller found: the keyboard, in the HUD window (hold "
+              f"{mapping.press('deadman', 'keyboard')} as the deadman; a pad plugged in later "
+              "works at once)", file=sys.stderr)
 
 
 def _joy_topic(text: str) -> str | None:

@@ -131,6 +131,15 @@ class KeyboardMap:
     buttons: dict[str, tuple[str, ...]]
 
 
+PAD_NAMES = {"leftshoulder": "LB", "rightshoulder": "RB", "leftstick": "L3",
+             "rightstick": "R3", "dpup": "d-pad up", "dpdown": "d-pad down",
+             "dpleft": "d-pad left", "dpright": "d-pad right"}
+"""How an operator calls SDL's controller buttons (the rest: ``a`` -> ``A``, ``start`` ->
+``Start``)."""
+KEY_NAMES = {"return": "Enter", "escape": "Escape", "space": "Space"}
+"""How an operator calls pygame's key names (the rest: ``k`` -> ``K``, ``f10`` -> ``F10``)."""
+
+
 @dataclass(frozen=True)
 class MapFile:
     """Everything a mapping file configures."""
@@ -140,6 +149,24 @@ class MapFile:
     joystick: JoystickMap
     keyboard: KeyboardMap
     source: str
+
+    def press(self, action: str, source: str) -> str:
+        """What the operator presses for ``action`` on the input ``source`` gives
+        (``ControllerState.source``: ``Start`` on a game controller, ``Enter`` on the
+        keyboard, ``button 7`` on a raw joystick), in their words; "" when it is unbound
+        there. With no device yet (``none``), the keyboard's: it is what works."""
+        if source == "keyboard" or source not in ("controller", "joystick"):
+            names = [KEY_NAMES.get(k, k.upper() if len(k) <= 3 else k.title())
+                     for k in self.keyboard.buttons.get(action, ())]
+        elif source == "joystick":
+            names = [f"button {b}" for b in self.joystick.buttons.get(action, ())]
+            names += [f"hat {h} {d}" for h, d in self.joystick.hats.get(action, ())]
+        else:
+            by_number = {v: k for k, v in CONTROLLER_BUTTONS.items()}
+            names = [PAD_NAMES.get(by_number[b], by_number[b].title() if len(by_number[b]) > 1
+                                   else by_number[b].upper())
+                     for b in self.controller.buttons.get(action, ())]
+        return " or ".join(names)
 
 
 def default_text() -> str:

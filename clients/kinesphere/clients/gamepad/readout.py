@@ -39,9 +39,19 @@ class Readout:
     sender: str = ""
     """This operator's sender id (robots name it as their lease holder or e-stop latcher)."""
     answers: dict[str, AckAnswer] = field(default_factory=dict)
-    """Each robot's newest ack to this operator's commands, and when it came."""
+    """Each robot's answer to this operator's commands (``report.current_answer``: what it
+    does with them now), and when it came."""
     notice: str = ""
-    """A standing problem the operator must see (robots refusing us for another's lease)."""
+    """A standing problem the operator must see (nobody hears the target; robots refusing us
+    for another's lease)."""
+    unheard: bool = False
+    """Nobody the target names is heard: the commands reach nobody."""
+    stick_holds: bool = False
+    """Engaged with the stick still centred since the deadman was pressed: the limb holds."""
+    presses: dict[str, str] = field(default_factory=dict)
+    """What the operator presses for an action on the current input (``Start``, ``Enter``)."""
+    input_name: str = ""
+    """Which device the hands come from."""
     available: frozenset[Direction] | None = None
     """Directions the limb has poses for (None: no catalogue yet)."""
     asked: Direction | None = None

@@ -28,6 +28,7 @@ from collections.abc import Callable
 from dataclasses import replace
 from typing import Protocol
 
+from kinesphere import hints
 from kinesphere.clients import targets as tg
 from kinesphere.clients.gamepad.drive import Steering, base_kind, steering_for
 from kinesphere.clients.gamepad.lease import LeaseKeeper
@@ -52,6 +53,8 @@ from kinesphere.clients.gamepad.readout import Readout
 from kinesphere.clients.gamepad.state import Action, ControllerState
 from kinesphere.clients.link import RobotLink, Seen
 from kinesphere.clients.options import TeleopOptions
+from kinesphere.clients.report import current_answer
+from kinesphere.errors import did_you_mean
 from kinesphere.laban import Direction
 from kinesphere.protocol import SpatialCommand, Status
 
@@ -59,6 +62,9 @@ log = logging.getLogger(__name__)
 
 RELEASE_GRACE_S = 0.5
 """After a release, ``estop`` states this young may predate it and are not a new e-stop."""
+TARGET_GRACE_S = 1.0
+"""How long a new target may go unheard before the HUD says nobody receives the commands
+(robots' states come at 50 Hz: a live robot is heard within milliseconds)."""
 
 
 class Source(Protocol):
@@ -100,6 +106,12 @@ class Teleop:
         self._available: frozenset[Direction] | None = None
         self._asked: Direction | None = None
         self._limb_holds = False
+        self._deflected = False
+        """The stick (or a trigger) left its centre since the deadman was pressed: until it
+        does, the limb holds its pose (nothing is sent for it)."""
+        self._target_since: float | None = None
+        self.input_name = ""
+        """Which device the hands come from (the source's own description)."""
 
     # --- decisions ----------------------------------------------------------------------
 
@@ -170,6 +182,7 @@ class Teleop:
             self._leave_target()
             robots = self.link.robot_groups()
             self.target = tg.cycle(self.target, robots)
+            self._target_since = None
             reached = tg.members(self.target, robots)
             self.message = f"target: {self.target.label} ({', '.join(reached) or 'nobody yet'})"
         sel = self.selection
@@ -220,6 +233,7 @@ class Teleop:
         engaged = (
             cs.connected and wants and not self.need_fresh and not self.estopped and not remote
         )
+        self._deflected = engaged and (self._deflected or self.intent.size > 0.0)
         if engaged:
             part = SpatialCommand(
                 limb=self.selection.limb,
@@ -228,17 +242,28 @@ class Teleop:
                 size=self.intent.size,
             )
             lease = self.lease.action_for_command(self.target)
-            parts = [] if self._limb_holds else [part]
+            parts = [part] if self._deflected and not self._limb_holds else []
             cmd = self.seq.command(parts, self.intent.drive, deadman=True, lease=lease)
             self.link.put(self.target.keys(self.link.keys), cmd)
             self.streaming = True
         else:
             self._stop_stream()
             self.lease.idle(self.target, self._targeted(), now)
-        return self.view(cs, engaged, remote)
+        if self._target_since is None:
+            self._target_since = now
+        return self.view(cs, engaged, remote, now)
 
-    def view(self, cs: ControllerState, engaged: bool, remote: list[str]) -> Readout:
+    def view(self, cs: ControllerState, engaged: bool, remote: list[str],
+             now: float | None = None) -> Readout:
+        now = time.monotonic() if now is None else now
         targeted = self._targeted()
+        unheard = self._unheard(targeted, now)
+        presses: dict[str, str] = {a: self.map.press(a, cs.source) for a in (
+            Action.RELEASE, Action.TAKE, Action.DEADMAN, Action.ESTOP)}
+        answers = {}
+        for rid, got in self.link.answers().items():
+            ack = current_answer([a.ack for a in got])
+            answers[rid] = next(a for a in reversed(got) if a.ack is ack)
         return Readout(
             target=self.target,
             limb=self.selection.limb,
@@ -261,18 +286,41 @@ class Teleop:
             limb_holds=self._limb_holds,
             members=sorted(targeted),
             sender=self.seq.sender,
-            answers=self.link.last_answers(),
-            notice=self._notice(targeted),
+            answers=answers,
+            notice=unheard or self._notice(targeted, presses[Action.TAKE]),
+            unheard=bool(unheard),
+            stick_holds=engaged and not self._deflected,
+            presses=presses,
+            input_name=self.input_name or cs.source,
         )
 
-    def _notice(self, targeted: dict[str, Seen]) -> str:
+    def _unheard(self, targeted: dict[str, Seen], now: float) -> str:
+        """That nobody the target names is heard, once it had time to be: the commands reach
+        nobody. Says who is alive instead."""
+        since = self._target_since
+        if targeted or since is None or now - since < TARGET_GRACE_S:
+            return ""
+        alive = self.link.robots()
+        if self.target.kind == "robot":
+            what = f"no robot {self.target.name!r} is heard"
+            near = did_you_mean(self.target.name, alive)
+        elif self.target.kind == "group":
+            what, near = f"no robot of group {self.target.name!r} is heard", ""
+        else:
+            what, near = "no robot is heard", ""
+        live = f"live: {', '.join(alive)}" if alive else "no robot is alive"
+        return f"{what}: your commands reach nobody ({live}){near}"
+
+    def _notice(self, targeted: dict[str, Seen], take: str) -> str:
         """What the operator must know now: robots that refuse us for another's lease."""
         refused = self.lease.refused(targeted)
         if not refused:
             return ""
         rid, why = next(iter(sorted(refused.items())))
         more = f" (and {len(refused) - 1} more)" if len(refused) > 1 else ""
-        return f"{rid} refuses your commands{more}: {why}; press Back (take) to take over"
+        how = (f"press {take} to take control" if take
+               else f"take control with '{hints.take_lease(rid)}'")
+        return f"{rid} refuses your commands{more}: {why}; {how}"
 
     def shutdown(self) -> None:
         """On exit (Ctrl-C, SIGTERM too): let go if still streaming, then give the lease back."""
@@ -289,15 +337,20 @@ def run(
 ) -> None:
     """Tick at ``rate_hz`` on absolute deadlines (no drift) until quit or ``finished()``.
 
+    A source with a ``describe()`` says which device the hands come from (the HUD shows it).
+
     Falls behind gracefully: a late tick is not followed by a burst of catch-up ticks.
     The final stop is sent however the loop ends.
     """
     period = 1.0 / teleop.options.rate_hz
     start = next_t = time.monotonic()
+    describe: Callable[[], str] | None = getattr(source, "describe", None)
     try:
         while not teleop.quit and not (finished is not None and finished()):
             now = time.monotonic()
             cs = source.poll()
+            if describe is not None:
+                teleop.input_name = describe()
             if record is not None:
                 record(now - start, cs)
             view = teleop.tick(cs, now)

@@ -65,6 +65,19 @@ def controllers() -> int:
     return int(pygame.joystick.get_count())
 
 
+def found() -> list[str]:
+    """The pads SDL sees now, in the operator's words (``Xbox 360 Controller (game
+    controller)``)."""
+    out = []
+    for i in range(controllers()):
+        try:
+            kind = "game controller" if sdl_controller.is_controller(i) else "joystick"
+            out.append(f"{pygame.joystick.Joystick(i).get_name() or 'unnamed'} ({kind})")
+        except pygame.error:  # unplugged meanwhile
+            continue
+    return out
+
+
 def axis_value(value: float | int) -> float:
     """pygame gives controller axes as ints (-32768..32767) and joystick axes as floats."""
     v = value / AXIS_MAX if isinstance(value, int) else float(value)
@@ -228,6 +241,16 @@ class PygameInput:
         for name, size in (("near", 1.0), ("mid", 2.0), ("far", far)):
             if key in self._key_axes[name]:
                 self._kb_reach = min(1.0, size / far)
+
+    def describe(self) -> str:
+        """The device input comes from, in the operator's words: the active pad (or the
+        first one plugged in), else the keyboard."""
+        iid = self.active if self.active in self.devices else next(iter(self.devices), None)
+        if iid is None:
+            return "keyboard (no game controller found)"
+        dev = self.devices[iid]
+        kind = "game controller" if dev.kind == "controller" else "joystick"
+        return f"{dev.name or 'unnamed'} ({kind})"
 
     # --- snapshot -----------------------------------------------------------------------
 
