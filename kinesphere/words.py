@@ -7,10 +7,16 @@ one command reads naturally on every body.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable, Mapping
 
 from kinesphere.protocol import BodyWord, Command, Drive, SpatialCommand
 from kinesphere.sizes import size_name
+
+
+def degrees(angle_rad: float) -> str:
+    """An angle for people: ``+12°``, never ``-0°``."""
+    return f"{round(math.degrees(angle_rad)) + 0:+d}°"
 
 
 def label_names(aliases: Mapping[str, str]) -> dict[str, str]:

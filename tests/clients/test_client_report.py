@@ -13,10 +13,10 @@ from kinesphere.clients.report import (
     Line,
     answer_headline,
     current_answer,
-    degrees,
     robot_lines,
 )
 from kinesphere.protocol import Ack, AckStage, RobotState, Substitution
+from kinesphere.words import degrees
 
 ME = "gamepad-me"
 

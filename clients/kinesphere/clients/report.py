@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 from kinesphere import hints
 from kinesphere.protocol import ANONYMOUS, Ack, AckStage, RobotState, Status
+from kinesphere.words import degrees
 
 STALE_S = 0.5
 """A robot whose last state is older than this is shown as silent (states come at >= 50 Hz)."""
@@ -28,11 +29,6 @@ class Line:
 
     text: str
     tone: str = "info"
-
-
-def degrees(angle_rad: float) -> str:
-    """``+12°``; never ``-0°``."""
-    return f"{round(math.degrees(angle_rad)) + 0:+d}°"
 
 
 def odometry(base_pose: list[float]) -> str:

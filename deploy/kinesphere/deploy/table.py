@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 import os
 import time
 from collections.abc import Iterable, Mapping
@@ -13,6 +12,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from kinesphere.protocol import RobotState
+from kinesphere.words import degrees
 
 STYLE = {
     "idle": "green",
@@ -26,16 +26,6 @@ STYLE = {
 }
 
 
-DETAIL_CHARS = 60
-"""A longer detail is cut at a word and ends in "…", so a row stays on one line and says so."""
-
-
-def _clip(text: str, limit: int = DETAIL_CHARS) -> str:
-    if len(text) <= limit:
-        return text
-    return text[: limit - 1].rsplit(" ", 1)[0].rstrip(" ,;:") + "…"
-
-
 def _age(state: RobotState, now_ns: int) -> str:
     return f"{max(0.0, (now_ns - state.stamp_ns) / 1e9):.1f}s"
 
@@ -47,15 +37,17 @@ def robot_table(
     title: str = "kinesphere robots",
 ) -> Table:
     """One row per robot seen (live token, state, or both); missing state shows as '-'.
-    Names and details come from the network: shown as text, never read as rich markup."""
+    Names and details come from the network: shown as text, never read as rich markup. A
+    detail wraps at words, whole (a release it names stays a command that runs)."""
     now = time.time_ns()
     live = set(alive)
     dbs = sorted(databanks)
     caption = escape(f"databanks: {', '.join(dbs) if dbs else 'none alive'}")
     table = Table(title=title, caption=caption, expand=False)
-    for col in ("robot", "platform", "status", "cmd", "base x, y, yaw", "max |qd|", "age",
-                "detail"):
-        table.add_column(col, no_wrap=col != "detail")
+    for col in ("robot", "platform", "status", "last cmd", "base x, y, yaw", "max |qd|",
+                "age", "detail"):
+        table.add_column(col, no_wrap=col != "detail", overflow="fold" if col == "detail"
+                         else "ellipsis")
     for rid in sorted(set(states) | live):
         st = states.get(rid)
         mark = "" if rid in live or not live else " (no token)"
@@ -68,11 +60,11 @@ def robot_table(
             escape(rid + mark),
             escape(st.platform),
             f"[{STYLE.get(st.status, 'white')}]{escape(st.status)}[/]",
-            str(st.last_command_seq),
-            f"{x:+.2f}, {y:+.2f}, {math.degrees(yaw):+.0f}°",
+            str(st.last_command_seq) if st.last_command_seq >= 0 else "none",
+            f"{x:+.2f}, {y:+.2f}, {degrees(yaw)}",
             f"{qd:.3f}",
             _age(st, now),
-            escape(_clip(st.detail)),
+            escape(st.detail),
         )
     return table
 
