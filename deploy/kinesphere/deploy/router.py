@@ -117,6 +117,8 @@ def run_router(
         log_denials = acl
     base = os.environ.get("RUST_LOG") or "info"
     endpoints = json.loads(config.get_json("listen/endpoints"))
+    if not os.isatty(2 if log_denials else 1):  # a log file: plain text (Zenoh's own colours
+        os.environ.setdefault("NO_COLOR", "1")  # are for terminals; NO_COLOR turns them off)
     filt: DenialFilter | None = None
     if log_denials:
         filt = capture_zenoh_log(sys.stderr, f"{base},{INTERCEPTOR}=trace",
