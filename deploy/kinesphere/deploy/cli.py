@@ -173,7 +173,13 @@ def _film(args: argparse.Namespace) -> int:
 
     out = Path(args.output or f"{Path(args.phrase).stem}.mp4")
     gif = None if args.no_gif else Path(args.gif or out.with_suffix(".gif"))
-    n = render(args.phrase, out, gif, args.bodies, args.width, args.height, args.fps,
-               args.gesture, 1.0 if args.speed is None else args.speed)
-    print(f"wrote {n} frames to {out}" + (f" and {gif}" if gif else ""), file=sys.stderr)
+    try:
+        n = render(args.phrase, out, gif, args.bodies, args.width, args.height, args.fps,
+                   args.gesture, 1.0 if args.speed is None else args.speed)
+    except KeyboardInterrupt:
+        print(f"film interrupted: nothing written to {out}" + (f" nor {gif}" if gif else ""),
+              file=sys.stderr)
+        return 130
+    print(f"wrote {n} frames to {out}" + (f" and {gif}" if gif else "") + " (the phrase, "
+          "then every body coming to rest)", file=sys.stderr)
     return 0

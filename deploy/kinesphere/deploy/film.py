@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import logging
 import math
+import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -233,11 +234,34 @@ def _short(skipped: dict[str, str], lacking: list[str]) -> list[str]:
     return out
 
 
+SETTLE_MAX_S: Final = 20.0
+"""Robot time a film runs past its phrase at most, for every body to come to rest."""
+SETTLED_QD: Final = 0.01
+"""Joint speed (rad/s or m/s) below which a body whose trajectories ended is at rest."""
+REST_S: Final = 1.0
+"""How long a film shows every body at rest before it ends."""
+
+
+def settled(p: Performer) -> bool:
+    """The body's trajectories are done and it no longer moves."""
+    ctrl = p.controller
+    return not ctrl.moving and max(map(abs, ctrl.qd()), default=0.0) < SETTLED_QD
+
+
+def aside(path: Path) -> Path:
+    """Where ``path`` is written until it is whole (renamed over it at the end; the suffix
+    stays, as ffmpeg picks the format from it)."""
+    return path.with_name(f".{path.stem}.{os.getpid()}.partial{path.suffix}")
+
+
 def render(phrase_ref: str | Path, out: Path, gif: Path | None, platforms: Sequence[str],
            width: int = 320, height: int = 240, fps: float = 15.0, gesture: str | None = None,
            speed: float = 1.0) -> int:
     """Render the phrase, or one gesture of a score (``gesture``, default its first, its
-    times divided by ``speed``); returns the number of frames written to each file."""
+    times divided by ``speed``), then every body until it is at rest (at most
+    :data:`SETTLE_MAX_S`) and :data:`REST_S` more, so the film ends where the robots are left,
+    still; returns the number of frames written to each file. The files are written aside and
+    renamed when whole: an interrupted film leaves nothing behind."""
     import imageio_ffmpeg
 
     from kinesphere.casting import cast
@@ -248,6 +272,7 @@ def render(phrase_ref: str | Path, out: Path, gif: Path | None, platforms: Seque
         raise KinesphereError("malformed", "--width and --height must be even and >= 64")
     if not 1 <= fps <= 60:
         raise KinesphereError("malformed", f"--fps must be 1..60, got {fps}")
+    logging.getLogger("OpenGL").setLevel(logging.WARNING)  # PyOpenGL's "module loaded" INFO
     if not 0.01 <= speed <= 100:
         raise KinesphereError("malformed", f"--speed must be 0.01..100, got {speed:g}")
     if score_play.is_score(str(phrase_ref)):
@@ -277,37 +302,59 @@ def render(phrase_ref: str | Path, out: Path, gif: Path | None, platforms: Seque
     size = (total_w, height + CAPTION_H)
     frames = math.ceil(duration * fps)
     starts = [c.at for c in cues]
-    writer = imageio_ffmpeg.write_frames(str(out), size, fps=fps, macro_block_size=1,
+    partial = [aside(out), *([aside(gif)] if gif is not None else [])]
+    writer = imageio_ffmpeg.write_frames(str(partial[0]), size, fps=fps, macro_block_size=1,
                                          quality=7)
     writer.send(None)
     gif_frames: list[Image.Image] = []
     cue_i = -1
+    k = 0
+    done = False
+    rested_at: float | None = None
     try:
-        for k in range(frames):
+        while not done:
             t = k / fps
-            i = int(np.searchsorted(starts, t, side="right") - 1)
-            if i != cue_i:
-                cue_i = i
-                for p in performers:
-                    cues[i].start(p)
+            if k < frames:
+                i = int(np.searchsorted(starts, t, side="right") - 1)
+                if i != cue_i:
+                    cue_i = i
+                    for p in performers:
+                        cues[i].start(p)
+            elif k == frames:
+                for p in performers:  # the operator lets go: a drive stops, poses go on
+                    if p.controller.base is not None and p.controller.base.driving:
+                        p.controller.base.stop()
             for p in performers:
                 while p.controller.time < t - 1e-9:
                     p.controller.step()
             cue = cues[cue_i]
+            heading = cue.heading
+            if k >= frames:
+                rest = all(settled(p) for p in performers)
+                rested_at = (t if rested_at is None else rested_at) if rest else None
+                done = (rested_at is not None and t - rested_at >= REST_S - 1e-9
+                        ) or t >= duration + SETTLE_MAX_S
+                heading += " · every body at rest" if rest else " · coming to rest"
             canvas = Image.new("RGB", size, (255, 255, 255))
-            canvas.paste(_caption(f"{cue.heading}\nt = {t:4.1f} s"
-                                  if "\n" not in cue.heading else
-                                  f"{cue.heading}   t = {t:4.1f} s", total_w), (0, 0))
+            canvas.paste(_caption(f"{heading}\nt = {t:4.1f} s"
+                                  if "\n" not in heading else
+                                  f"{heading}   t = {t:4.1f} s", total_w), (0, 0))
             for j, p in enumerate(performers):
                 canvas.paste(_tile(p, cue.words(p), width, height), (j * width, CAPTION_H))
             writer.send(np.ascontiguousarray(np.asarray(canvas)))
             if gif is not None:
                 gif_frames.append(canvas.quantize(colors=128))
+            k += 1
+        writer.close()
+        if gif is not None and gif_frames:
+            gif_frames[0].save(partial[1], save_all=True, append_images=gif_frames[1:],
+                               duration=round(1000 / fps), loop=0, optimize=False)
+            os.replace(partial[1], gif)
+        os.replace(partial[0], out)
     finally:
         writer.close()
         for p in performers:
             p.camera.close()
-    if gif is not None and gif_frames:
-        gif_frames[0].save(gif, save_all=True, append_images=gif_frames[1:],
-                           duration=round(1000 / fps), loop=0, optimize=False)
-    return frames
+        for path in partial:
+            path.unlink(missing_ok=True)
+    return k
