@@ -26,6 +26,8 @@ ERROR_CODES: frozenset[str] = frozenset(
         "incompatible_version",
         "unavailable",
         "invalid_eurdf",
+        "not_found",
+        "id_taken",
         "lease_held",
         "estopped",
         "stale",

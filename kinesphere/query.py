@@ -1,4 +1,5 @@
-"""One answer to a Zenoh ``get``: the first reply, decoded, or the error it carries.
+"""One answer to a Zenoh ``get``: the first reply, decoded, or the error it carries; and which
+``get`` asks a databank what some parts mean (:func:`pose_query`).
 
 A ``get`` that ends without any reply means no queryable was reachable at that moment (the
 one that had the query died, or declarations have not arrived yet). With ``retry=True`` such
@@ -10,12 +11,20 @@ answered in time or Zenoh itself failed.
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from typing import TypeVar
 
 import zenoh
 
 from kinesphere.errors import KinesphereError
-from kinesphere.protocol import decode, error_from_reply
+from kinesphere.keyexpr import Keys
+from kinesphere.protocol import (
+    CompoundRequest,
+    SpatialCommand,
+    decode,
+    encode,
+    error_from_reply,
+)
 
 T = TypeVar("T")
 RETRY_PAUSE_S = 0.02
@@ -75,3 +84,14 @@ def get_one(
             break
         time.sleep(min(RETRY_PAUSE_S, max(0.0, deadline - time.monotonic())))
     raise KinesphereError("unavailable", no_answer or f"no answer to {key} within {timeout:g} s")
+
+
+def pose_query(keys: Keys, platform: str, parts: Sequence[SpatialCommand]
+               ) -> tuple[str, bytes | None]:
+    """The key and payload that ask ``platform``'s databank what ``parts`` mean: one part's
+    own pose key, or the compound key with the parts (several, or one that must be exact:
+    a pose key cannot say "exact only")."""
+    if len(parts) == 1 and not parts[0].exact:
+        p = parts[0]
+        return keys.pose(platform, p.limb, p.origin, p.direction, p.size), None
+    return keys.compound(platform), encode(CompoundRequest(parts=list(parts)))

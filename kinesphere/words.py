@@ -19,6 +19,11 @@ def degrees(angle_rad: float) -> str:
     return f"{round(math.degrees(angle_rad)) + 0:+d}°"
 
 
+def signed(value: float, digits: int = 2) -> str:
+    """A signed number for people: ``+1.20``, never ``-0.00``."""
+    return f"{round(value, digits) + 0.0:+.{digits}f}"
+
+
 def label_names(aliases: Mapping[str, str]) -> dict[str, str]:
     """label -> alias, from an eURDF's or catalogue's alias -> label map."""
     return {label: alias for alias, label in sorted(aliases.items())}

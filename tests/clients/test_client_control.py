@@ -25,7 +25,7 @@ from kinesphere.clients.gamepad.readout import Readout
 from kinesphere.clients.gamepad.state import Action, ControllerState
 from kinesphere.clients.gamepad.teleop import Teleop
 from kinesphere.protocol import AckStage
-from support.client_fleet import PB, PLATFORMS, ClientFleet, Heard, operator
+from support.client_fleet import PB, PLATFORMS, YB, ClientFleet, Heard, operator
 from support.paths import ROOT
 from support.wait import WAIT_S
 
@@ -99,6 +99,47 @@ def test_estop_is_acknowledged_by_every_robot_and_released_by_target(
     assert capsys.readouterr().out.splitlines() == [f"{r}: released" for r in sorted(PLATFORMS)]
 
 
+def test_a_phrase_a_body_cannot_play_fails_before_anything_moves(
+    free: ClientFleet, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """tour_guide names right_arm and left_arm: neither the youBot nor the PackBot has them.
+    play asks each platform's databank first, names the step, and sends nothing."""
+    start = time.monotonic()
+    code = main(["play", "tour_guide", "--target", "all", "--connect", free.endpoint,
+                 "--sender", "tourist"])
+    out, err = capsys.readouterr()
+    assert code == 1
+    lines = out.splitlines()
+    assert [ln.split(":")[0] for ln in lines] == [f"{PB} (packbot)", f"{YB} (youbot)"]
+    assert all("CANNOT PLAY tour-guide: step 1 (right_arm right_shoulder "
+               "right-forward-middle 2): unknown_limb" in ln for ln in lines), out
+    assert "cannot play on 2 of 2 robot(s) of all robots: nothing was sent" in err
+    assert "playing" not in err
+    for rid in PLATFORMS:  # no command from 'tourist' was ever acted on
+        h = free.track.wait(rid, lambda h: True, "a state", after=time.monotonic())
+        assert h.state.lease_holder != "tourist"
+    assert all(h.state.lease_holder != "tourist" for r in PLATFORMS
+               for h in free.track.since(r, start))
+
+
+def test_a_phrase_ends_with_its_robots_where_it_says(
+    free: ClientFleet, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """left_high ends 'back to neutral': play goes on until the youBot is there, then says it
+    reached it (not 'holding: deadman released'); the robot is at rest at its neutral pose."""
+    code = main(["play", "left_high", "--target", YB, "--connect", free.endpoint])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    assert out.startswith(f"{YB}: reached") and len(out.splitlines()) == 1, out
+    end = time.monotonic()
+    rest = free.track.wait(YB, lambda h: True, "a state", after=end)
+    assert max(map(abs, rest.state.qd)) < 0.01, "at rest when play returns"
+    neutral = {"arm_joint_1": 2.9496, "arm_joint_2": 1.1345, "arm_joint_3": -2.0482,
+               "arm_joint_4": 2.389, "arm_joint_5": 2.9234}  # platform.toml
+    q = dict(zip(rest.state.joint_names, rest.state.q, strict=True))
+    assert all(abs(q[j] - v) < 0.02 for j, v in neutral.items()), q
+
+
 def test_two_operators_only_the_lease_holder_moves_the_robot(
     free: ClientFleet, pygame_up: None
 ) -> None:
@@ -112,7 +153,7 @@ def test_two_operators_only_the_lease_holder_moves_the_robot(
         refusal = bob.link.last_answers()[PB].ack
         assert (refusal.stage, refusal.code, refusal.lease_holder) == (
             AckStage.REJECTED, "lease_held", "alice")
-        assert "alice" in views[-1].notice and "take over" in views[-1].notice
+        assert "alice" in views[-1].notice and "press K to take control" in views[-1].notice
         mine = alice.link.last_answers()[PB].ack
         assert mine.stage != AckStage.REJECTED, mine
         tick_together([(alice, LET_GO), (bob, LET_GO)], 0.2)

@@ -16,7 +16,7 @@ from kinesphere.protocol import RobotState
 def state(**kw: object) -> RobotState:
     base: dict[str, object] = dict(
         robot_id="yb-1", platform="youbot", seq=1, stamp_ns=time.time_ns(), joint_names=["a"],
-        q=[0.0], qd=[0.0], base_pose=[0.0, 0.0, -1e-4], status="estop", last_command_seq=-1,
+        q=[0.0], qd=[0.0], base_pose=[-1e-4, 0.0, -1e-4], status="estop", last_command_seq=-1,
         detail="e-stop from alice; release with 'kinesphere estop --release --target yb-1 "
                "--sender alice'")
     base.update(kw)
@@ -37,6 +37,7 @@ def test_details_wrap_whole_and_numbers_read_right() -> None:
     shown = [w for cell in cells for w in cell]
     assert shown == detail.split() * 2, "every word of each detail, whole, in order"
     assert "-0°" not in text and "+0°" in text and "+90°" in text
+    assert "-0.00" not in text and "+0.00, +0.00" in text
     rows = {line.split("│")[1].strip(): [c.strip() for c in line.split("│")[1:-1]]
             for line in text.splitlines() if line.startswith("│ yb")}
     assert rows["yb-1"][3] == "none" and rows["yb-2"][3] == "12"

@@ -38,7 +38,7 @@ def test_left_high_film(tmp_path: Path) -> None:
     mp4, gif = tmp_path / "left_high.mp4", tmp_path / "left_high.gif"
     n = render(PHRASE, mp4, gif, PLATFORMS, W, H, FPS)
     phrase = math.ceil(load_phrase(PHRASE).duration * FPS)
-    assert phrase < n <= phrase + (SETTLE_MAX_S + REST_S) * FPS + 1, "the phrase, then coming to rest"
+    assert phrase < n <= phrase + (SETTLE_MAX_S + REST_S) * FPS + 1, "the phrase, then rest"
     expected = n
     reader = imageio_ffmpeg.read_frames(str(mp4))
     meta = reader.__next__()

@@ -23,6 +23,7 @@ from kinesphere.deploy.plan import (
     parse_robots,
     shipped_phrases_dir,
 )
+from kinesphere.deploy.up import SETTLED_QD
 from kinesphere.errors import KinesphereError
 from support.paths import ROOT
 from support.system import SHIPPED_DBS
@@ -98,6 +99,9 @@ def test_up_runs_the_demo_and_leaves_nothing_behind(tmp_path: Path) -> None:
     summary = json.loads((out / "summary.json").read_text())
     assert summary["endpoint"] == endpoint
     assert summary["robots"]["youbot"]["platform"] == "youbot"
+    assert summary["robots"]["youbot"]["max_qd"] < SETTLED_QD, "the demo ends at rest"
+    assert summary["robots"]["youbot"]["status"] == "holding"
+    assert "robots at rest" in text
     assert summary["problems"] == {}
     for name in ("final_poses.png", "peak_poses.png", "trajectory_youbot.png"):
         assert (out / name).stat().st_size > 1000, name

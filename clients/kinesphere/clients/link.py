@@ -37,7 +37,7 @@ import threading
 import time
 import uuid
 from collections import deque
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 from types import FrameType
@@ -57,12 +57,13 @@ from kinesphere.protocol import (
     Command,
     Drive,
     LeaseAction,
+    Pose,
     RobotState,
     SpatialCommand,
     decode,
     encode,
 )
-from kinesphere.query import get_one
+from kinesphere.query import get_one, pose_query
 from kinesphere.signals import handle_signals
 
 log = logging.getLogger(__name__)
@@ -378,6 +379,14 @@ class RobotLink:
         with self._lock:
             self._catalogues[platform] = cat
         return cat
+
+    def pose(self, platform: str, parts: Sequence[SpatialCommand], timeout: float = 2.0
+             ) -> Pose:
+        """What ``parts`` mean on ``platform``, from its databank (as its robots resolve
+        them); the databank's error (``unknown_limb``, ``direction_unavailable``...) raised."""
+        key, payload = pose_query(self.keys, platform, parts)
+        return get_one(self.session, key, Pose, payload, timeout=timeout, retry=True,
+                       no_answer=f"no databank answers for platform {platform!r}")
 
     # --- commands -----------------------------------------------------------------------
 

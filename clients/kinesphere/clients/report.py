@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 from kinesphere import hints
 from kinesphere.protocol import ANONYMOUS, Ack, AckStage, RobotState, Status
-from kinesphere.words import degrees
+from kinesphere.words import degrees, signed
 
 STALE_S = 0.5
 """A robot whose last state is older than this is shown as silent (states come at >= 50 Hz)."""
@@ -36,7 +36,7 @@ def odometry(base_pose: list[float]) -> str:
     where the robot started)."""
     x, y, yaw = base_pose
     return (
-        f"x {x:+.2f} y {y:+.2f} m, heading {degrees(yaw)}, "
+        f"x {signed(x)} y {signed(y)} m, heading {degrees(yaw)}, "
         f"{math.hypot(x, y):.2f} m from start"
     )
 

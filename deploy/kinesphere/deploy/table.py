@@ -12,7 +12,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from kinesphere.protocol import RobotState
-from kinesphere.words import degrees
+from kinesphere.words import degrees, signed
 
 STYLE = {
     "idle": "green",
@@ -61,7 +61,7 @@ def robot_table(
             escape(st.platform),
             f"[{STYLE.get(st.status, 'white')}]{escape(st.status)}[/]",
             str(st.last_command_seq) if st.last_command_seq >= 0 else "none",
-            f"{x:+.2f}, {y:+.2f}, {degrees(yaw)}",
+            f"{signed(x)}, {signed(y)}, {degrees(yaw)}",
             f"{qd:.3f}",
             _age(st, now),
             escape(st.detail),
@@ -81,6 +81,7 @@ def state_dict(st: RobotState) -> dict[str, Any]:
         "last_command_seq": st.last_command_seq,
         "base_pose": list(st.base_pose),
         "joints": dict(zip(st.joint_names, st.q, strict=True)),
+        "max_qd": max((abs(v) for v in st.qd), default=0.0),
         "clamped": list(st.clamped),
     }
 

@@ -38,6 +38,8 @@ from kinesphere.zconfig import close_session, undeclare
 log = logging.getLogger(__name__)
 
 SETTLE_TIMEOUT_S = 15.0
+SETTLED_QD = 0.005
+"""Joint speed (rad/s or m/s) under which ``up`` calls a robot at rest."""
 
 
 def peak_states(recorder: StateRecorder) -> dict[str, RobotState]:
@@ -176,17 +178,21 @@ class Demo:
         self._mark(f"played {phrase.path.name} on {phrase.target}")
 
     def settle(self) -> None:
+        """Wait until every robot is at rest (a resting status, every joint slower than
+        :data:`SETTLED_QD`), so the table, the pictures and the summary show where the
+        phrases left them; name any robot still moving after :data:`SETTLE_TIMEOUT_S`."""
         ids = [r.robot_id for r in self.opts.robots]
 
-        def settled() -> bool:
+        def moving() -> list[str]:
             s = self.recorder.snapshot()
-            return all(r in s and is_settled(s[r], tol=0.02) for r in ids)
+            return [r for r in ids if r not in s or not is_settled(s[r], tol=SETTLED_QD)]
 
         try:
-            self._poll(settled, SETTLE_TIMEOUT_S, "robots to come to rest")
+            self._poll(lambda: not moving(), SETTLE_TIMEOUT_S, "robots to come to rest")
             self._mark("robots at rest")
         except KinesphereError:
-            self.console.log("[yellow]some robots still moving; pictures show them mid-motion")
+            self.console.log(f"[yellow]still moving after {SETTLE_TIMEOUT_S:g} s: "
+                             f"{', '.join(moving())}; the pictures show them mid-motion")
 
     def pictures(self) -> dict[str, str]:
         from kinesphere.deploy.pictures import (  # matplotlib and MuJoCo rendering

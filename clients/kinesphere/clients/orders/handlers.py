@@ -113,13 +113,32 @@ def play(args: argparse.Namespace) -> int:
         print(f"step {i + 1}/{len(phrase.steps)} ({step.duration:g} s){note}", file=sys.stderr)
 
     with _addressing(args, target, ttl) as (link, keys, robots, seq):
+        link.wait_for(lambda lk: set(robots) <= set(lk.states()), answers.DISCOVERY_S)
+        states = link.states()
+        cannot = phrases.unservable(link, phrase, {rid: states[rid].state.platform
+                                                   for rid in robots if rid in states})
+        if cannot:
+            for rid, why in sorted(cannot.items()):
+                print(f"{rid} ({states[rid].state.platform}): CANNOT PLAY {phrase.name}: {why}")
+            print(f"{phrase.name} cannot play on {len(cannot)} of {len(robots)} robot(s) of "
+                  f"{target.label}: nothing was sent", file=sys.stderr)
+            return 1
         first = seq.seq
         print(f"playing {phrase.name} ({phrase.duration:g} s) on {target.label}", file=sys.stderr)
+
+        def arrived(since: int) -> bool:
+            now = answers.outcomes(link.answers(since), robots)
+            return bool(now) and all(any(a.stage in answers.FINAL for a in o.acks)
+                                     for o in now.values())
+
         with signals(stop):
             phrases.play(link, phrase, keys, seq, rate_hz=args.rate, on_step=on_step,
-                         should_stop=lambda: stop.set)
-        last = seq.seq - 1
-        found = answers.wait(link, first, robots, args.timeout, lambda o: o.final_for(last))
+                         should_stop=lambda: stop.set, arrived=arrived)
+        let_go = seq.seq - 1
+        found = answers.wait(link, first, robots, args.timeout, lambda o: o.final_for(let_go))
+    if not stop.set:  # the let-go only ends the stream: what the phrase did is said before it
+        found = {rid: answers.Outcome(rid, [a for a in o.acks if a.seq != let_go] or o.acks)
+                 for rid, o in found.items()}
     code = _finish(found, args.timeout, f"the phrase ({seq.seq - first} commands)",
                    seq.seq - first)
     return 130 if stop.set else code
@@ -136,7 +155,13 @@ def estop(args: argparse.Namespace) -> int:
             link.put(keys, seq.release())
             found = answers.wait(link, first, robots, args.timeout,
                                  lambda o: o.answered(first))
-        return _finish(found, args.timeout, "the release")
+        for o in found.values():  # a robot without a latch accepts a release and does nothing
+            if o.acks and all(a.stage == AckStage.ACCEPTED for a in o.acks):
+                print(f"{o.robot}: not e-stopped: nothing to release")
+            else:
+                print(answers.line(o, args.timeout))
+        print(answers.summary(found, "the release"), file=sys.stderr)
+        return answers.exit_code(found)
     with link_for(args) as link:
         return _estop_all(link, args.timeout, args.prefix)
 

@@ -17,13 +17,17 @@ lets one phrase play on different platforms. Directions and sizes are checked he
 the same vocabulary everywhere) so a typo fails before anything moves.
 
 Each step is streamed at the loop rate rather than sent once: a drive lasts only as long as
-fresh commands arrive, and the robots' TTL stops them if this process dies mid-phrase.
+fresh commands arrive, and the robots' TTL stops them if this process dies mid-phrase. The
+last step goes on until the robots are there (``play``'s ``arrived``), so a phrase ends with
+its robots at rest where it says. Before anything moves, ``kinesphere play`` asks each
+target platform's databank for every step (:func:`unservable`): a phrase a body cannot play
+fails at once instead of being refused command after command.
 """
 
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
@@ -40,6 +44,8 @@ from kinesphere.protocol import MAX_NAME, MAX_TTL_MS, Drive, SpatialCommand
 from kinesphere.sizes import parse_size
 
 Label = Annotated[str, msgspec.Meta(min_length=1, max_length=MAX_NAME)]
+ARRIVE_S = 10.0
+"""How long a phrase's last step may go on after its time for the robots to get there."""
 
 
 # --- the file as written (checked by msgspec) ----------------------------------------------
@@ -172,12 +178,37 @@ def load_phrase(ref: str | Path) -> Phrase:
         name = path.name[: -len(".toml")] if path.name.endswith(".toml") else path.name
         if path.parent != Path(".") or name not in shipped():
             raise KinesphereError(
-                "malformed", f"no phrase file {ref}; shipped phrases: {', '.join(shipped())}"
+                "not_found", f"no phrase file {ref}; shipped phrases: {', '.join(shipped())}"
             )
         res = resources.files("kinesphere.clients.orders").joinpath(f"phrases/{name}.toml")
         text, source = res.read_text(encoding="utf-8"), f"{name}.toml"
     data = parse_toml(text, source)
     return parse_phrase(data, source)
+
+
+def unservable(link: RobotLink, phrase: Phrase, platforms: Mapping[str, str],
+               timeout: float = 2.0) -> dict[str, str]:
+    """Robots (id -> platform) that cannot play ``phrase``, each with why: the first step
+    whose parts its databank refuses (an unknown limb or origin, a direction it has nothing
+    near, a part the body lacks), asked before anything moves. Substitutions are fine: the
+    robot serves them. Each distinct step is asked once per platform."""
+    why: dict[str, str] = {}
+    for platform in sorted(set(platforms.values())):
+        problem = ""
+        for i, step in enumerate(phrase.steps, start=1):
+            if not step.parts:
+                continue
+            try:
+                link.pose(platform, step.parts, timeout)
+            except KinesphereError as exc:
+                said = " + ".join(f"{p.limb} {p.origin} {p.direction} {p.size:g}"
+                                  for p in step.parts)
+                problem = f"step {i} ({said}): {exc.code}: {exc.message}"
+                break
+        for rid, p in platforms.items():
+            if p == platform and problem:
+                why[rid] = problem
+    return why
 
 
 def play(
@@ -189,20 +220,28 @@ def play(
     rate_hz: float = TeleopOptions.rate_hz,
     on_step: Callable[[int, Step], None] | None = None,
     should_stop: Callable[[], bool] = lambda: False,
+    arrived: Callable[[int], bool] | None = None,
+    arrive_s: float = ARRIVE_S,
 ) -> int:
     """Stream each step for its duration, then a final stop; returns commands sent.
 
     Steps start on absolute deadlines, so a phrase takes its written duration however long
-    each put takes. The final stop also goes out when ``should_stop()`` ends it early.
+    each put takes. When the last step moves limbs and ``arrived`` is given, it goes on
+    streaming (without its drive) until ``arrived(first seq of the last step)`` says every
+    robot finished that motion (reached, clamped, blocked, refused), at most ``arrive_s``
+    more: the phrase ends where it says, not wherever the robots were when its time ran
+    out. The final stop also goes out when ``should_stop()`` ends it early.
     """
     period = 1.0 / rate_hz
     sent = 0
     t = time.monotonic()
+    last_from = seq.seq
     try:
         for i, step in enumerate(phrase.steps):
             if on_step is not None:
                 on_step(i, step)
             end = t + step.duration
+            last_from = seq.seq
             while (now := time.monotonic()) < end and not should_stop():
                 link.put(keys, seq.command(step.parts, step.drive, deadman=True))
                 sent += 1
@@ -211,6 +250,13 @@ def play(
             if should_stop():
                 break
             t = end
+        last = phrase.steps[-1]
+        if arrived is not None and last.parts and not should_stop():
+            end = time.monotonic() + arrive_s
+            while time.monotonic() < end and not should_stop() and not arrived(last_from):
+                link.put(keys, seq.command(last.parts, None, deadman=True))
+                sent += 1
+                time.sleep(period)
     finally:
         link.put(keys, seq.let_go())
     return sent + 1

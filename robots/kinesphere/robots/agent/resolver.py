@@ -43,13 +43,12 @@ from kinesphere.laban import Direction
 from kinesphere.lru import Lru
 from kinesphere.protocol import (
     Catalogue,
-    CompoundRequest,
     Pose,
     SpatialCommand,
     check_spatial,
     encode,
 )
-from kinesphere.query import get_one
+from kinesphere.query import get_one, pose_query
 from kinesphere.zconfig import undeclare, wait_matching
 
 log = logging.getLogger(__name__)
@@ -283,18 +282,9 @@ class Resolver:
         version = self.version
         timeout = self.solve_timeout_s if self._may_solve(key) else self.timeout_s
         try:
-            if len(key) == 1 and not key[0][4]:  # a pose key cannot say "exact only"
-                limb, origin, direction, size, _ = key[0]
-                pose = self._query(
-                    self.keys.pose(self.platform, limb, origin, direction, size), None, Pose,
-                    timeout=timeout,
-                )
-            else:
-                parts = [SpatialCommand(*p) for p in key]
-                pose = self._query(
-                    self.keys.compound(self.platform), encode(CompoundRequest(parts=parts)), Pose,
-                    timeout=timeout,
-                )
+            ask, payload = pose_query(self.keys, self.platform,
+                                      [SpatialCommand(*p) for p in key])
+            pose = self._query(ask, payload, Pose, timeout=timeout)
         except KinesphereError as exc:
             if exc.code == "unavailable":
                 self._unreachable(exc)
