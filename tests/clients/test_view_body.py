@@ -3,13 +3,18 @@ it serves, so a viewer draws any robot without local platform files."""
 
 from __future__ import annotations
 
+import io
 from collections.abc import Iterator
 
+import numpy as np
 import pytest
+import yourdfpy
 import zenoh
 
 from kinesphere import protocol as pr
 from kinesphere import zconfig
+from kinesphere.clients.view.body import BodyGeometry
+from kinesphere.clients.view.scene import Top
 from kinesphere.eurdf import load_eurdf
 from kinesphere.platforms.platform import load_platform, platform_names
 from kinesphere.query import get_one
@@ -95,3 +100,33 @@ def test_commands_in_words() -> None:
                                     stop=True)) == "E-STOP"
     assert command_words(pr.Command(seq=4, sent_ns=1, deadman=False, ttl_ms=0)) == \
         "let go: hold"
+
+
+def highest(model: pr.BodyModel, q: np.ndarray, lift: float) -> float:
+    """The top of the body at ``q`` by yourdfpy: every vertex of every shape, in the root's
+    frame (an independent forward kinematics)."""
+    urdf = yourdfpy.URDF.load(io.StringIO(model.eurdf), build_scene_graph=True,
+                              load_meshes=True)
+    urdf.update_cfg(q)
+    base = urdf.scene.graph.base_frame
+    top = 0.0
+    for name, mesh in urdf.scene.geometry.items():
+        world = urdf.get_transform(name, base)
+        top = max(top, float((mesh.vertices @ world[:3, :3].T + world[:3, 3])[:, 2].max()))
+    return top + lift
+
+
+def test_the_label_rides_above_a_raised_arm(net: zenoh.Session) -> None:
+    """Baxter's right arm raised to Left-High, far: the body's top (where the view puts the
+    label) rises with it, never below the body and close above it."""
+    model = get_one(net, OWN_KEYS.body("baxter"), pr.BodyModel, timeout=10.0)
+    body = BodyGeometry(model)
+    top = Top(body)
+    neutral = body.vector(body.neutral)
+    raised = body.vector(Ecl.open("baxter").query("limb_11", "distal_11", "left-high", 3).joints,
+                         body.neutral)
+    for q in (neutral, raised):
+        exact = highest(model, q, body.lift)
+        assert exact - 1e-6 <= top(q) <= exact + 0.25, (top(q), exact)
+    assert highest(model, raised, body.lift) > body.height + 0.2, "the arm goes above the head"
+    assert top(raised) > top(neutral) + 0.2

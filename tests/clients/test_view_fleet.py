@@ -10,7 +10,8 @@ import msgspec
 
 from kinesphere import protocol as pr
 from kinesphere import zconfig
-from kinesphere.clients.view.fleet import Fleet
+from kinesphere.clients.view.app import describe
+from kinesphere.clients.view.fleet import Fleet, Robot
 from support.network import OWN_KEYS
 from support.wait import until
 
@@ -73,3 +74,18 @@ def test_commands_reach_the_robots_they_address() -> None:
             zconfig.undeclare(tokens.pop("r1"))
         finally:
             fleet.close()
+
+
+def test_an_estop_is_shown_as_what_the_robot_did_not_what_was_sent() -> None:
+    """The view saw an e-stop go to every robot; one latched it, one did not: only the one
+    that latched shows it as its command."""
+    stopped = msgspec.structs.replace(state("r1", []), status="estop", estop_by="t")
+    now = time.monotonic()
+    latched = Robot("r1", state=stopped, state_at=now,
+                    command=command(4, estop=True, deadman=False))
+    missed = Robot("r2", state=state("r2", []), state_at=now,
+                   command=command(4, estop=True, deadman=False))
+    assert describe(latched, None) == ("estop by t", "E-STOP")
+    assert describe(missed, None)[1] == "E-STOP sent, but this robot reports no latch"
+    gone = Robot("r1", state=stopped, state_at=now - 5.0)
+    assert describe(gone, None)[0] == "silent (last said: estop by t)"

@@ -13,8 +13,10 @@ written and runs nothing.
 
 from __future__ import annotations
 
+import errno
 import logging
 import re
+import socket
 import threading
 import time
 from collections.abc import Sequence
@@ -78,13 +80,17 @@ def describe(robot: Robot, body: BodyGeometry | None) -> tuple[str, str]:
     if st is None:
         return "waiting for its state", ""
     silent = time.monotonic() - robot.state_at > SILENT_S
-    status = "silent" if silent else st.status
+    status = st.status
     if st.status == Status.ESTOP and st.estop_by:
         status += f" by {st.estop_by}"
+    if silent:
+        status = f"silent (last said: {status})"
     if st.lease_holder:
         status += f" · lease {st.lease_holder}"
     names = label_names(body.aliases) if body is not None else {}
     words = command_words(robot.command, names) if robot.command is not None else "no command"
+    if robot.command is not None and robot.command.estop and st.status != Status.ESTOP:
+        words = "E-STOP sent, but this robot reports no latch"  # what was sent is not what it did
     if robot.ack is not None and robot.command is not None and \
             robot.ack.seq == robot.command.seq and robot.ack.sender == robot.command.sender:
         words += f" [{robot.ack.stage}{' ' + robot.ack.code if robot.ack.code else ''}]"
@@ -92,6 +98,33 @@ def describe(robot: Robot, body: BodyGeometry | None) -> tuple[str, str]:
     if subs:
         words += f" (served {subs})"
     return status, words
+
+
+def _taken_message(host: str, port: int, extra: str = "") -> str:
+    return (f"port {port} on {host} is in use{extra}: stop what holds it (another kinesphere "
+            "view?) or serve on another with --port N; a bookmarked page keeps its port, so "
+            "the view never moves to another by itself")
+
+
+def _taken(host: str, port: int) -> str:
+    """Why the view cannot serve on ``host:port`` ("" when it can): viser would quietly move
+    to the next free port, and an operator's bookmarked page would show nothing."""
+    if port == 0:
+        return ""
+    try:
+        infos = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)
+    except OSError as exc:
+        return f"cannot serve on {host}:{port}: {exc.strerror or exc}"
+    family, kind, proto, _, address = infos[0]
+    with socket.socket(family, kind, proto) as probe:
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as the web server does
+        try:
+            probe.bind(address)
+        except OSError as exc:
+            if exc.errno == errno.EADDRINUSE:
+                return _taken_message(host, port)
+            return f"cannot serve on {host}:{port}: {exc.strerror or exc}"
+    return ""
 
 
 class FleetView:
@@ -104,8 +137,16 @@ class FleetView:
             raise KinesphereError("malformed", f"--fps must be > 0, got {fps}")
         self.period = 1.0 / fps
         self.gate = Gate(host, allow_origins, f"viser-v{viser.__version__}")
+        busy = _taken(host, port)
+        if busy:
+            raise KinesphereError("unavailable", busy)
         with guarding(self.gate):
             self.server = viser.ViserServer(host=host, port=port, verbose=False)
+        if port and self.server.get_port() != port:  # taken meanwhile: viser moved on
+            got = self.server.get_port()
+            self.server.stop()
+            raise KinesphereError("unavailable", _taken_message(host, port, f" (the view "
+                                  f"would have served on {got} instead)"))
         self.server.scene.set_up_direction("+z")
         self.server.gui.configure_theme(control_width="large", show_share_button=False)
         self.server.gui.main_panel.dock_right()  # beside the robots, never over them

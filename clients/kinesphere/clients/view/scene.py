@@ -78,6 +78,54 @@ class Skeleton:
         self.root.remove()
 
 
+LABEL_GAP_M: Final = 0.2
+"""How far above the body's highest point its label floats."""
+LABEL_STEP_M: Final = 0.05
+"""The label moves only when the body's top changed by more than this."""
+
+
+def _matrix(wxyz: Array) -> Array:
+    w, x, y, z = wxyz
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+
+
+class Top:
+    """The highest point of a body at a pose (each shape as its bounding sphere), so its label
+    goes above a raised arm instead of through it."""
+
+    def __init__(self, body: BodyGeometry) -> None:
+        self.body = body
+        paths = body.frame_paths
+        index = {p: i for i, p in enumerate(paths)}
+        self._parent = [index.get(p.rpartition("/")[0], -1) for p in paths]
+        self._order = sorted(range(len(paths)), key=lambda i: paths[i].count("/"))
+        self._spheres = []
+        for shape in body.shapes:
+            v = np.asarray(shape.mesh.vertices, dtype=float)
+            if v.size:
+                centre = (v.min(axis=0) + v.max(axis=0)) / 2
+                radius = float(np.linalg.norm(v - centre, axis=1).max())
+                self._spheres.append((index.get(shape.link_path, -1), centre, radius))
+
+    def __call__(self, q: Array) -> float:
+        """Height of the body's top above the floor at ``q``."""
+        wxyz, xyz = self.body.transforms(q)
+        rot = np.zeros((len(self._parent), 3, 3))
+        pos = np.zeros((len(self._parent), 3))
+        for i in self._order:
+            p = self._parent[i]
+            r0, p0 = (np.eye(3), np.zeros(3)) if p < 0 else (rot[p], pos[p])
+            rot[i] = r0 @ _matrix(wxyz[i])
+            pos[i] = p0 + r0 @ xyz[i]
+        top = 0.0
+        for frame, centre, radius in self._spheres:
+            z = (centre if frame < 0 else rot[frame] @ centre + pos[frame])[2]
+            top = max(top, float(z) + radius)
+        return top + self.body.lift
+
+
 class Drawing:
     """A robot's slot in the scene: body, ghost and label."""
 
@@ -94,20 +142,28 @@ class Drawing:
         self.solid = Skeleton(server, body, f"{root}/base/body", ghost=False)
         self.ghost = Skeleton(server, body, f"{root}/base/ghost", ghost=True)
         self.ghost.root.visible = False
+        self.top = Top(body)
+        self._label_z = body.height + LABEL_GAP_M
         self.label = scene.add_label(f"{root}/label", robot_id,
-                                     position=(0.0, 0.0, body.height + 0.25))
+                                     position=(0.0, 0.0, self._label_z))
         self._base_pose: tuple[float, float, float] | None = None
         self._text = robot_id
 
     def move(self, q: Array, base_pose: tuple[float, float, float]) -> int:
-        """The live joint state and odometry pose; returns how many frames were sent."""
+        """The live joint state and odometry pose; returns how many frames were sent. The
+        label rides above the body's top at this pose (a raised arm lifts it)."""
         sent = self.solid.pose(q)
-        if base_pose != self._base_pose:
+        label_z = self._label_z
+        if sent:
+            top = self.top(q) + LABEL_GAP_M
+            if abs(top - label_z) > LABEL_STEP_M:
+                label_z = top
+        if base_pose != self._base_pose or label_z != self._label_z:
             x, y, yaw = base_pose
             self.base.position = (x, y, 0.0)
             self.base.wxyz = yaw_wxyz(yaw)
-            self.label.position = (x, y, self.body.height + 0.25)
-            self._base_pose = base_pose
+            self.label.position = (x, y, label_z)
+            self._base_pose, self._label_z = base_pose, label_z
             sent += 1
         return sent
 
