@@ -144,7 +144,7 @@ def test_a_group_named_like_a_robot_is_suggested(
         assert cli(hub[1], "send", "field", "a", "b", "left", "1", "--wait", "0.5") == 2
     finally:
         field.close()
-    assert "did you mean --target group:field?" in capsys.readouterr().err
+    assert "did you mean 'group:field' (a group)?" in capsys.readouterr().err
 
 
 def test_a_misspelt_robot_id_is_answered_with_the_nearest_live_one(
@@ -153,7 +153,8 @@ def test_a_misspelt_robot_id_is_answered_with_the_nearest_live_one(
     assert cli(hub[1], "send", "c11", "a", "b", "left", "1", "--wait", "0.5") == 2
     err = capsys.readouterr().err
     missing = OWN_KEYS.command("c11")
-    assert f"no robot listens on {missing} (waited 0.5 s) (did you mean 'c1'?)" in err
+    assert (f"no robot listens on {missing} (waited 0.5 s); live robots: c1 (fakebot), "
+            "c2 (fakebot), c3 (fakebot) (did you mean 'c1'?)") in err
 
 
 def test_estop_reaches_every_robot_and_each_acknowledges(
@@ -164,7 +165,7 @@ def test_estop_reaches_every_robot_and_each_acknowledges(
         boxes[r].wait(lambda g: g.cmd.estop and g.key == OWN_KEYS.command("*"), f"e-stop at {r}")
     out, err = capsys.readouterr()
     assert out.splitlines() == [f"{r}: estopped" for r in ROBOTS]
-    assert "3 of 3 robot(s) accepted the E-STOP" in err
+    assert "E-STOP confirmed by all 3 live robot(s)" in err
     assert cli(hub[1], "estop", "--release") == 2, "whose e-stop: --target is required"
     assert cli(hub[1], "estop", "--release", "--target", "c2") == 0
     release = boxes["c2"].wait(lambda g: not g.cmd.estop, "the release").cmd
@@ -186,7 +187,10 @@ def test_estop_that_a_live_robot_does_not_acknowledge_exits_1(
         assert cli(hub[1], "estop", "--timeout", "0.5") == 1
         assert len([g for g in mute.got if g.cmd.estop]) >= 2, "sent again while unanswered"
     out = capsys.readouterr().out.splitlines()
-    assert [ln for ln in out if ln.startswith("mute:")][0].startswith("mute: NO ACKNOWLEDGEMENT")
+    (said,) = [ln for ln in out if ln.startswith("mute:")]
+    assert said.startswith("mute: NOT CONFIRMED: alive (its last state came ")
+    assert said.endswith(" s ago) but no e-stop acknowledgement within 0.5 s; make sure it is "
+                         "stopped")
     assert {f"{r}: estopped" for r in ROBOTS} <= set(out)
 
 
@@ -216,8 +220,7 @@ def test_play_reports_a_refusal_once_per_robot_and_code(
         sent = [c for c in yb.commands() if c.deadman]
     refused = sum(any(p.direction == "left-low" for p in c.parts) for c in sent)
     out = capsys.readouterr().out.splitlines()
-    assert out == [f"yb: holding: deadman released; REJECTED {refused} of {len(sent) + 1}: "
-                   f"direction_unavailable: {why}"]
+    assert out == [f"yb: REJECTED {refused} of {len(sent) + 1}: direction_unavailable: {why}"]
 
 
 def test_lease_acquire_and_a_refusal_naming_the_holder(
@@ -310,3 +313,11 @@ def test_headless_without_a_controller_says_so(hub: Hub) -> None:
     proc = _kinesphere(hub[1], "gamepad", "--headless", "--duration", "0.2", env=dict(os.environ))
     assert proc.returncode == 0
     assert "no game controller found" in proc.stderr
+
+
+def test_lease_without_arguments_says_what_to_give(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as stopped:
+        main(["lease"])
+    assert stopped.value.code == 2
+    err = capsys.readouterr().err
+    assert "the following arguments are required: acquire|take|release, TARGET" in err

@@ -250,7 +250,8 @@ def register(sub: Any) -> None:
         "after 3 s without a command from its holder; --hold keeps it alive that long and "
         "then releases it. E-stop works whoever holds the lease.",
     )
-    ls.add_argument("action", choices=("acquire", "take", "release"))
+    ls.add_argument("action", choices=("acquire", "take", "release"),
+                    metavar="acquire|take|release", help="what to do with the lease")
     add_target(ls, positional=True)
     ls.add_argument("--hold", type=float, default=0.0, metavar="S",
                     help="keep the lease alive for S seconds (Ctrl-C ends it), then release")

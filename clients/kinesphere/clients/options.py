@@ -111,7 +111,7 @@ def add_target(p: argparse.ArgumentParser, *, positional: bool = False,
     text = "robot id, group:NAME (agents run with --group) or 'all'" + (
         f" ({'; '.join(said)})" if said else "")
     if positional:
-        p.add_argument("target", help=text)
+        p.add_argument("target", metavar="TARGET", help=text)
     else:
         p.add_argument("--target", default=default, metavar="ID|group:NAME|all", help=text)
 

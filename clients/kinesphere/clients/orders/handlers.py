@@ -115,8 +115,11 @@ def play(args: argparse.Namespace) -> int:
     with _addressing(args, target, ttl) as (link, keys, robots, seq):
         link.wait_for(lambda lk: set(robots) <= set(lk.states()), answers.DISCOVERY_S)
         states = link.states()
-        cannot = phrases.unservable(link, phrase, {rid: states[rid].state.platform
-                                                   for rid in robots if rid in states})
+        cannot, unchecked = phrases.unservable(link, phrase, {
+            rid: states[rid].state.platform for rid in robots if rid in states})
+        for platform in unchecked:
+            print(f"could not check {phrase.name} on {platform}: no databank answers; playing "
+                  "anyway (its robots resolve it themselves)", file=sys.stderr)
         if cannot:
             for rid, why in sorted(cannot.items()):
                 print(f"{rid} ({states[rid].state.platform}): CANNOT PLAY {phrase.name}: {why}")

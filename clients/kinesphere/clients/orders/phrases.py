@@ -187,12 +187,14 @@ def load_phrase(ref: str | Path) -> Phrase:
 
 
 def unservable(link: RobotLink, phrase: Phrase, platforms: Mapping[str, str],
-               timeout: float = 2.0) -> dict[str, str]:
+               timeout: float = 2.0) -> tuple[dict[str, str], list[str]]:
     """Robots (id -> platform) that cannot play ``phrase``, each with why: the first step
     whose parts its databank refuses (an unknown limb or origin, a direction it has nothing
-    near, a part the body lacks), asked before anything moves. Substitutions are fine: the
-    robot serves them. Each distinct step is asked once per platform."""
+    near, a part the body lacks), asked before anything moves; and the platforms that could
+    not be checked (no databank answered: their robots resolve the phrase themselves).
+    Substitutions are fine: the robot serves them. Each step is asked once per platform."""
     why: dict[str, str] = {}
+    unchecked: list[str] = []
     for platform in sorted(set(platforms.values())):
         problem = ""
         for i, step in enumerate(phrase.steps, start=1):
@@ -201,6 +203,9 @@ def unservable(link: RobotLink, phrase: Phrase, platforms: Mapping[str, str],
             try:
                 link.pose(platform, step.parts, timeout)
             except KinesphereError as exc:
+                if exc.code == "unavailable":
+                    unchecked.append(platform)
+                    break
                 said = " + ".join(f"{p.limb} {p.origin} {p.direction} {p.size:g}"
                                   for p in step.parts)
                 problem = f"step {i} ({said}): {exc.code}: {exc.message}"
@@ -208,7 +213,7 @@ def unservable(link: RobotLink, phrase: Phrase, platforms: Mapping[str, str],
         for rid, p in platforms.items():
             if p == platform and problem:
                 why[rid] = problem
-    return why
+    return why, unchecked
 
 
 def play(
