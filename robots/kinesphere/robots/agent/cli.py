@@ -153,6 +153,17 @@ def _until_signal() -> Iterator[threading.Event]:
         yield stop
 
 
+def _say_if_alone(session: Any, who: str) -> None:
+    """A robot that reached no router runs, but nobody can command it: say so at once, with
+    the command that starts one (it joins by itself when one comes)."""
+    from kinesphere.zconfig import alone
+
+    why = alone(session)
+    if why:
+        log.warning("%s: %s; nobody can command it until then (it joins by itself when the "
+                    "router is there)", who, why)
+
+
 def _agent(args: argparse.Namespace) -> int:
     if args.robot:
         return _agent_robots(args)
@@ -189,6 +200,7 @@ def _agent(args: argparse.Namespace) -> int:
         try:
             agent = Agent(args.platform, robot_id, session, options)
             agent.declare()
+            _say_if_alone(session, f"robot {robot_id}")
             on_tick = None
             if args.viewer:
                 viewer = _viewer(agent.controller.body)
@@ -275,6 +287,7 @@ def _run_fleet(args: argparse.Namespace, robots: Sequence[Any], body: str) -> in
         try:
             fleet = FleetHost(robots, session, options, helpers=helpers)
             fleet.declare()
+            _say_if_alone(session, f"fleet host ({len(robots)} robots)")
             fleet.run(stop)
         finally:
             if fleet is not None:

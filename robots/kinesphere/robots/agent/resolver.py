@@ -37,6 +37,7 @@ from typing import Any, TypeVar
 
 import zenoh
 
+from kinesphere import zconfig
 from kinesphere.errors import KinesphereError
 from kinesphere.keyexpr import Keys
 from kinesphere.laban import Direction
@@ -309,10 +310,18 @@ class Resolver:
     def _query(self, key: str, payload: bytes | None, type_: type[T],
                querier: zenoh.Querier | None = None, timeout: float | None = None) -> T:
         """One ``get`` (the first answer wins; other replicas may answer too), no retry: the
-        worker's schedule does the retrying."""
-        return get_one(querier if querier is not None else self.session, key, type_, payload,
-                       timeout=self.timeout_s if timeout is None else timeout,
-                       no_answer=f"no databank answers {key}")
+        worker's schedule does the retrying. Nobody answering because this robot reached no
+        router at all is said so (with the command that starts one), not blamed on the
+        databank."""
+        try:
+            return get_one(querier if querier is not None else self.session, key, type_,
+                           payload, timeout=self.timeout_s if timeout is None else timeout,
+                           no_answer=f"no databank answers {key}")
+        except KinesphereError as exc:
+            alone = zconfig.alone(self.session) if exc.code == "unavailable" else ""
+            if alone:
+                raise KinesphereError("unavailable", f"{exc.message}: {alone}") from None
+            raise
 
     def _unreachable(self, exc: KinesphereError) -> None:
         if self.reachable or self.last_error != exc.message:
