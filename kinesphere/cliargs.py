@@ -21,6 +21,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+from kinesphere import hints
 from kinesphere.endpoints import DEFAULT_ENDPOINT, LOOPBACK_ANY_PORT
 from kinesphere.keyexpr import DEFAULT_PREFIX
 
@@ -68,7 +69,7 @@ class ZenohDefaults:
         return f"{text}.{' ' + self.note if self.note else ''}"
 
 
-HUB = "'kinesphere router' listens there (the hub, which serves nothing else)."
+HUB = f"'{hints.router()}' listens there (the hub, which serves nothing else)."
 """Every process joins the router at the well-known endpoint, never a service: a databank or
 an agent killed -9 takes nothing down with it."""
 AGENT = ZenohDefaults(listen=(LOOPBACK_ANY_PORT,), note=HUB)

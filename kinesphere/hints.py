@@ -70,14 +70,27 @@ def describe(platform: str) -> Hint:
 
 
 def build_ecl(platform: str) -> Hint:
-    """Build (or rebuild) a platform's databank."""
+    """Build (or rebuild) a platform's databank (a name, or a brought robot's folder)."""
     return _hint("ecl", "build", platform)
 
 
-def serve_databank(platform: str = "", allow_writes: bool = False) -> Hint:
-    """A databank serving ``platform`` (every shipped one without it)."""
+def platforms() -> Hint:
+    """The platforms this host knows."""
+    return _hint("platforms")
+
+
+def new_platform(name: str, urdf: str) -> Hint:
+    """A platform folder proposed from a URDF (how a brought robot's files began)."""
+    return _hint("platform", "new", name, "--urdf", urdf)
+
+
+def serve_databank(platform: str = "", db: str = "", allow_writes: bool = False) -> Hint:
+    """A databank serving ``platform`` (every shipped one without it), from its databank
+    file ``db`` when given (``PLATFORM=PATH``: the file a running databank serves)."""
     words = ["databank", "serve"]
-    if platform:
+    if db:
+        words += ["--db", f"{platform}={db}" if platform else db]
+    elif platform:
         words += ["--platform", platform]
     if allow_writes:
         words.append("--allow-writes")

@@ -228,3 +228,27 @@ def test_a_real_sdl_game_controller(inp: pad.PygameInput) -> None:
         assert not cs.connected and cs.held == frozenset() and cs.lt == 0.0
     finally:
         vpad.unplug()
+
+
+@pytest.mark.parametrize("action", [Action.RELEASE, Action.TAKE, Action.ESTOP, Action.DEADMAN])
+def test_the_keys_and_buttons_the_hud_names_do_what_it_says(
+    inp: pad.PygameInput, action: Action
+) -> None:
+    """The HUD says 'press Enter' on the keyboard and 'press Start' on a pad: pressing what it
+    names (spelled back into pygame's and SDL's names) is that action."""
+    m = mapfile.load()
+    named = m.press(action, "keyboard").split(" or ")
+    by_words = {v: k for k, v in mapfile.KEY_NAMES.items()}
+    for word in named:
+        key(pygame.key.key_code(by_words.get(word, word.lower())))
+        cs = inp.poll()
+        assert action in cs.pressed | cs.held, (action, word)
+        inp.keys.clear()
+    pads = {v: k for k, v in mapfile.PAD_NAMES.items()}
+    for word in m.press(action, "controller").split(" or "):
+        name = pads.get(word, word.lower())
+        button(mapfile.CONTROLLER_BUTTONS[name])
+        cs = inp.poll()
+        assert action in cs.pressed | cs.held, (action, word)
+        button(mapfile.CONTROLLER_BUTTONS[name], down=False)
+        inp.poll()

@@ -68,6 +68,7 @@ def register(sub: Any) -> None:
 
 
 def _platform_new(args: argparse.Namespace) -> int:
+    from kinesphere import hints
     from kinesphere.platforms.platform import search_path
     from kinesphere.platforms.scaffold import new_platform
 
@@ -97,8 +98,8 @@ def _platform_new(args: argparse.Namespace) -> int:
         if p.index[1] == 1:
             print(f"  {p.name:<8} {p.alias or '':<18} from {p.distal}: "
                   f"{len(e.limb_joints(p.name))} joints" + (f", tip {p.tip}" if p.tip else ""))
-    print("next: edit the three files, check with 'kinesphere describe "
-          f"{s.folder}', then 'kinesphere ecl build {s.folder}'")
+    print(f"next: edit the three files, check with '{hints.describe(str(s.folder))}', then "
+          f"'{hints.build_ecl(str(s.folder))}'")
     return 0
 
 

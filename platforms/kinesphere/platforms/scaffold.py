@@ -36,6 +36,7 @@ import mujoco
 import numpy as np
 import yourdfpy
 
+from kinesphere import hints
 from kinesphere.cliargs import MERGE_DISTANCE_M
 from kinesphere.errors import KinesphereError
 from kinesphere.eurdf import ACTUATED_TYPES, Eurdf, load_eurdf
@@ -244,14 +245,14 @@ def _write_eurdf(robot: ET.Element, mends: Mends, work: Path, name: str, urdf: P
     """The eURDF file, each mend in a comment at the top of ``<robot>``."""
     text = copy.deepcopy(robot)
     for k, line in enumerate(mends.lines):
-        text.insert(k, xml_comment(f"mended by 'kinesphere platform new': {line}"))
+        text.insert(k, xml_comment(f"mended by platform new: {line}"))
     ET.indent(text)
     path = work / f"{name}.eurdf"
     path.unlink(missing_ok=True)
     _write(path, "<?xml version=\"1.0\"?>\n"
-           + ET.tostring(xml_comment(f"proposed by 'kinesphere platform new' from {urdf.name}: "
-                                     "edit the body_part labels freely, then check with "
-                                     "'kinesphere describe'"), encoding="unicode") + "\n"
+           + ET.tostring(xml_comment(f"proposed by platform new from {urdf.name}: "
+                                     "edit the body_part labels freely, then check them with "
+                                     "the describe command"), encoding="unicode") + "\n"
            + ET.tostring(text, encoding="unicode") + "\n", mode)
     return path
 
@@ -403,6 +404,11 @@ def _comment(text: str) -> str:
     return "".join(c if c.isprintable() else "?" for c in text)
 
 
+def _commentable(text: str) -> str:
+    """``text`` inside an XML comment, which may not hold ``--``."""
+    return text.replace("--", "- -")
+
+
 def _platform_toml(
     name: str, urdf: Path, kind: str, height: float, neutral: dict[str, float],
     zero: dict[str, float], proposals: list[neutral_search.Proposal], legs: list[str],
@@ -411,7 +417,7 @@ def _platform_toml(
     speeds = {"fixed": dict.fromkeys(MOBILE_DEFAULTS, 0.0), "legged": LEGGED_DEFAULTS
               }.get(kind, MOBILE_DEFAULTS)
     lines = [
-        f"# Proposed by 'kinesphere platform new {name} --urdf {_comment(urdf.name)}'. Edit",
+        f"# Proposed by '{hints.new_platform(name, _comment(urdf.name))}'. Edit",
         "# freely: the title, the base (kind fixed | omni | diff | skid | legged and its limits),",
         "# the joint motion limits and above all the neutral pose (Place Middle) every pull",
         "# starts from.",
@@ -446,11 +452,13 @@ def _platform_toml(
     return "\n".join(lines) + "\n"
 
 
-def _vsam_toml(eurdf: Eurdf, limbs: list[str], hands: list[str], mobile: bool) -> str:
+def _vsam_toml(eurdf: Eurdf, limbs: list[str], hands: list[str], mobile: bool, folder: Path
+               ) -> str:
     lines = [
         f"# VSAM (k_o, k_d, k_s) of {eurdf.name}: the paper's Laban-27 instantiation, every",
         "# limb from its own joint location. Delete entries you do not want; hands and",
-        "# grippers are listed commented out. 'kinesphere ecl build FOLDER' generates the ECL.",
+        f"# grippers are listed commented out. '{hints.build_ecl(str(folder))}' generates the",
+        "# ECL.",
         "sizes = [1, 2, 3]",
         'directions = "laban-27"',
         "translation_step = 0.25   # metres per size unit past far" if mobile

@@ -11,6 +11,8 @@ import argparse
 from dataclasses import dataclass
 from pathlib import Path
 
+from kinesphere import hints
+
 
 @dataclass(frozen=True)
 class QueryOptions:
@@ -31,7 +33,7 @@ def add_platform(parser: argparse.ArgumentParser, *, omit: str | None = None) ->
     left out."""
     parser.add_argument(
         "platform", nargs="?" if omit else None,
-        help="platform name (see 'kinesphere platforms') or a platform folder"
+        help=f"platform name (see '{hints.platforms()}') or a platform folder"
         + (f" ({omit})" if omit else ""),
     )
     parser.add_argument("--db", type=Path, metavar="PATH",

@@ -43,6 +43,7 @@ import zenoh
 from mcap.records import Channel, Metadata
 from mcap.records import Schema as McapSchema
 
+from kinesphere import hints
 from kinesphere.clients.link import host_clock, new_session, operator_id
 from kinesphere.clients.mcaplog import (
     BY_NAME,
@@ -226,7 +227,7 @@ def replay(session: zenoh.Session, path: str | Path, kind: str = "commands",
         if found.gamepad:
             raise KinesphereError(
                 "malformed", f"{path} holds a gamepad's controller ticks, not messages: play "
-                f"it with 'kinesphere gamepad --replay {path}'")
+                f"it with '{hints.replay_ticks(str(path))}'")
         return Replayed(0, [])
     me = sender or operator_id()
     sessions: Lru[tuple[str, str], str] = Lru(MAX_SESSIONS)

@@ -15,6 +15,7 @@ from typing import TypeVar
 import msgspec
 import zenoh
 
+from kinesphere import hints
 from kinesphere.keyexpr import EXACT, KEYS, Keys
 from kinesphere.protocol import (
     Catalogue,
@@ -54,8 +55,8 @@ def request(
         timeout=timeout,
         retry=True,
         every_replica=every_replica,
-        no_answer=f"no databank answered {key} within {timeout:g} s; is 'kinesphere databank "
-        "serve' running for this platform and reachable (--connect)?",
+        no_answer=f"no databank answered {key} within {timeout:g} s; is "
+        f"'{hints.serve_databank()}' running for this platform and reachable (--connect)?",
     )
 
 

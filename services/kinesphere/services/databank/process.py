@@ -51,8 +51,8 @@ def open_ecls(platforms: Sequence[str] = (), dbs: Sequence[str] = ()) -> dict[st
         if not platforms:
             raise KinesphereError(
                 "unavailable",
-                f"no shipped databanks in {DATA_DIR}; build one with 'kinesphere ecl build "
-                "PLATFORM' or pass --db PATH",
+                f"no shipped databanks in {DATA_DIR}: reinstall kinesphere-services, or "
+                "serve a databank file with --db PLATFORM=PATH",
             )
     ecls: dict[str, Ecl] = {}
     for spec in dbs:

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import zenoh
 
+from kinesphere import hints
 from kinesphere.errors import KinesphereError
 from kinesphere.protocol import Pose, RecordRequest, decode, encode
 from kinesphere.ratelog import RateLog
@@ -54,7 +55,7 @@ def _forbidden(st: Served) -> KinesphereError:
     return KinesphereError(
         "forbidden",
         f"recording poses is disabled on this databank for {st.name}; "
-        "start it with 'kinesphere databank serve --allow-writes'",
+        f"start it with '{hints.serve_databank(st.name, str(st.ecl.db_path), True)}'",
     )
 
 

@@ -11,16 +11,17 @@ import threading
 
 import zenoh
 
-from kinesphere import zconfig
+from kinesphere import hints, zconfig
 from kinesphere.errors import KinesphereError
 from kinesphere.keyexpr import Keys
 from kinesphere.protocol import RobotState, decode
 
 
 def capture_state(
-    session: zenoh.Session, robot_id: str, keys: Keys, timeout: float
+    session: zenoh.Session, robot_id: str, keys: Keys, timeout: float, platform: str
 ) -> RobotState:
-    """The next RobotState the robot publishes, or ``unavailable`` after ``timeout`` s."""
+    """The next RobotState the robot publishes, or ``unavailable`` after ``timeout`` s (naming
+    the command that starts a ``platform`` robot with that id)."""
     got: list[RobotState] = []
     ready = threading.Event()
 
@@ -39,8 +40,8 @@ def capture_state(
             raise KinesphereError(
                 "unavailable",
                 f"no state from robot {robot_id!r} on {keys.state(robot_id)} within "
-                f"{timeout:g} s; is 'kinesphere agent ... --id {robot_id}' running and "
-                "reachable (--connect)?",
+                f"{timeout:g} s; is it running and reachable (--connect)? Start one with "
+                f"'{hints.start_agent(platform, robot_id)}'",
             )
     finally:
         zconfig.undeclare(sub)

@@ -172,7 +172,9 @@ def _record(args: argparse.Namespace) -> int:
         from kinesphere.zconfig import session_from_args
 
         with session_from_args(args) as session:
-            state = capture_state(session, args.from_robot, Keys(args.prefix), args.timeout)
+            plat = ecl.platform
+            state = capture_state(session, args.from_robot, Keys(args.prefix), args.timeout,
+                                  plat.name if plat.shipped else str(plat.folder))
         if state.platform != ecl.platform.name:
             raise KinesphereError(
                 "unknown_platform",

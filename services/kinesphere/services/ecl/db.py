@@ -22,6 +22,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+from kinesphere import hints
 from kinesphere.errors import KinesphereError
 
 META_KEYS = ("platform", "eurdf_sha256", "vsam", "generator_version", "created", "joints")
@@ -227,12 +228,18 @@ def _open_read(path: Path) -> sqlite3.Connection:
         return sqlite3.connect(f"file:{path}?mode=ro&immutable=1", uri=True, isolation_level=None)
 
 
+def _built_by(path: Path) -> str:
+    """What ``ecl build`` takes to make the databank at ``path``: the brought robot's folder
+    it sits in, or the platform it is named after (``data/youbot.sqlite``)."""
+    return str(path.parent) if (path.parent / "platform.toml").is_file() else path.stem
+
+
 def read_tables(path: str | Path) -> Tables:
     """Load a whole databank; a missing or foreign file is a clear error."""
     p = Path(path)
     if not p.is_file():
         raise KinesphereError(
-            "unavailable", f"no databank at {p}; build it with 'kinesphere ecl build PLATFORM'"
+            "unavailable", f"no databank at {p}; build it with '{hints.build_ecl(_built_by(p))}'"
         )
     try:
         conn = _open_read(p)

@@ -17,6 +17,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from kinesphere import hints
 from kinesphere.errors import KinesphereError, did_you_mean
 from kinesphere.laban import Direction
 from kinesphere.platforms.platform import Platform, load_platform
@@ -105,7 +106,8 @@ class Ecl:
         if t.joints != e.joint_names:
             raise KinesphereError(
                 "incompatible_version", f"{self.db_path} was built for other joints than "
-                f"{plat.name}'s eURDF; rebuild it with 'kinesphere ecl build {plat.name}'",
+                f"{plat.name}'s eURDF; rebuild it with "
+                f"'{hints.build_ecl(plat.name if plat.shipped else str(plat.folder))}'",
             )
         if t.meta["eurdf_sha256"] != e.sha256:
             log.warning("%s was built from another version of %s.eurdf", self.db_path, plat.name)

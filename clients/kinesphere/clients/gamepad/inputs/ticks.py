@@ -23,6 +23,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any, Final
 
+from kinesphere import hints
 from kinesphere.clients import mcaplog
 from kinesphere.clients.gamepad.state import NEUTRAL, ControllerState
 from kinesphere.errors import KinesphereError
@@ -74,8 +75,10 @@ def load(path: str | Path) -> tuple[dict[str, Any], list[tuple[float, Controller
         ) from None
     meta = mcaplog.metadata(path)
     if meta.get("kinesphere") != MAGIC:
+        what = (f"it is a session of messages: put them back with '{hints.replay(str(path))}'"
+                if "prefix" in meta else "a gamepad records one with --record FILE")
         raise KinesphereError("malformed", f"recording {path} has no gamepad-recording header "
-                              "(record one with 'kinesphere gamepad --record FILE')")
+                              f"({what})")
     if meta.get("version") != str(VERSION):
         raise KinesphereError("malformed", f"recording {path}: version {meta.get('version')!r}, "
                               f"this client reads {VERSION}")
