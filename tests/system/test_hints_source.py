@@ -10,7 +10,7 @@ from pathlib import Path
 
 from support.paths import ROOT
 
-QUOTED = re.compile(r"['`]kinesphere [a-z]")
+QUOTED = re.compile(r"['`(]kinesphere [a-z]")
 DOCUMENTATION = frozenset({"help", "description", "epilog", "usage"})
 PACKAGES = ("kinesphere", *(f"{d}/kinesphere" for d in
                             ("platforms", "robots", "services", "clients", "deploy")))

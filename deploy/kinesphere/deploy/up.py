@@ -123,7 +123,7 @@ class Demo:
         self._session = session
         self.recorder.start(session)
         self.alive, self._subs = watch_alive(session, self.keys)
-        self.console.log(f"hub {self.endpoint} (kinesphere router, serving nothing else); "
+        self.console.log(f"hub {self.endpoint} (a router process, serving nothing else); "
                          f"logs in {self.logs}")
         zargs = client_args(self.endpoint)
         prefix = [] if o.prefix == DEFAULT_PREFIX else ["--prefix", o.prefix]

@@ -56,7 +56,7 @@ from kinesphere.clients.options import TeleopOptions
 from kinesphere.clients.report import current_answer
 from kinesphere.errors import did_you_mean
 from kinesphere.laban import Direction
-from kinesphere.protocol import SpatialCommand, Status
+from kinesphere.protocol import ANONYMOUS, SpatialCommand, Status
 
 log = logging.getLogger(__name__)
 
@@ -144,8 +144,8 @@ class Teleop:
     def _release(self) -> None:
         """Release exactly the robots this operator's e-stop latched, and say which."""
         mine = self.latched_by_me()
-        others = sorted(rid for rid, seen in self.link.states().items()
-                        if seen.state.status == Status.ESTOP and rid not in mine)
+        others = {rid: seen.state.estop_by for rid, seen in sorted(self.link.states().items())
+                  if seen.state.status == Status.ESTOP and rid not in mine}
         cmd = self.seq.release()
         self.link.put([self.link.keys.command(rid) for rid in mine], cmd)
         self.estopped, self.need_fresh = False, True
@@ -153,8 +153,10 @@ class Teleop:
         said = (f"released the e-stop of {', '.join(mine)}" if mine
                 else "no robot reports an e-stop latched by you")
         if others:
-            said += (f"; still latched by others: {', '.join(others)} (kinesphere estop "
-                     "--release --target ID)")
+            said += "; still latched by others: " + ", ".join(
+                f"{rid} by {by or 'an operator without a name'} "
+                f"('{hints.release_estop(rid, by if by != ANONYMOUS else '')}')"
+                for rid, by in others.items())
         self.message = said
 
     def _stop_stream(self) -> None:
