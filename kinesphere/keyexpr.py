@@ -146,6 +146,22 @@ class Keys:
         """Liveliness token of a robot agent: ``{p}/alive/robot/{id}``; ``*`` for all."""
         return f"{self.prefix}/alive/robot/{check_segment(robot_id, 'robot id', wildcard=True)}"
 
+    def presence(self, robot_id: str) -> str:
+        """Where a robot says where it runs (queryable, :class:`Presence`):
+        ``{p}/robot/{id}/presence``."""
+        return f"{self._robot(robot_id)}/presence"
+
+    def fleet_estops(self, holder: str) -> str:
+        """Where a holder (an agent process) answers the fleet e-stops it knows
+        (queryable, :class:`FleetEstops`): ``{p}/estop/{holder}``; ``*`` asks them all."""
+        return f"{self.prefix}/estop/{check_segment(holder, 'holder', wildcard=True)}"
+
+    def is_fleet_command(self, key: str) -> bool:
+        """Whether a command key is every robot's (``{p}/robot/*/command``, signed or not):
+        an e-stop put there is a fleet e-stop."""
+        rest = str(key).split("/")[self.prefix.count("/") + 1:]
+        return len(rest) in (3, 4) and rest[:3] == ["robot", WILDCARD, "command"]
+
     def group_command(self, group: str) -> str:
         """Commands for a named group: ``{p}/group/{group}/command``.
 

@@ -467,9 +467,43 @@ class BodyModel(Message, tag="body_model", kw_only=True):
     ] = {}
 
 
+class FleetEstop(msgspec.Struct, forbid_unknown_fields=False):
+    """One sender's latest e-stop for every robot (put on ``{p}/robot/*/command``), or its
+    release of them all: ``engaged`` while in force. ``sent_ns`` is the sender's own clock,
+    which orders one sender's e-stops and releases."""
+
+    sender: Name
+    engaged: bool
+    sent_ns: Int
+
+
+MAX_FLEET_ESTOPS: Final = 64
+"""Senders one robot remembers fleet e-stops of (in force and released)."""
+
+
+class FleetEstops(Message, tag="fleet_estops", kw_only=True):
+    """The fleet e-stops a robot knows of, answered on ``{p}/estop/{holder}`` so that a robot
+    that starts, restarts or reconnects while one is in force comes up latched."""
+
+    holder: Name
+    estops: Annotated[list[FleetEstop], msgspec.Meta(max_length=MAX_FLEET_ESTOPS)] = []
+
+
+class Presence(Message, tag="presence", kw_only=True):
+    """Where a robot id runs, answered on ``{p}/robot/{id}/presence``: a second agent with the
+    same id refuses to start, naming it."""
+
+    robot_id: Name
+    platform: Name
+    host: Name
+    pid: NonNegInt
+    started_ns: Int
+    zid: Name
+
+
 AnyMessage = (
     Pose | Catalogue | Command | RobotState | Error | RecordRequest | CompoundRequest | Ack
-    | BodyModel
+    | BodyModel | FleetEstops | Presence
 )
 MESSAGE_TYPES: Final[tuple[type[Message], ...]] = get_args(AnyMessage)
 
@@ -481,7 +515,7 @@ ENCODER: Final = msgspec.msgpack.Encoder()
 _DECODERS: dict[Any, msgspec.msgpack.Decoder[Any]] = {
     t: msgspec.msgpack.Decoder(t)
     for t in (*MESSAGE_TYPES, AnyMessage, SpatialCommand, BodyJoint, LimbEntry, Drive,
-              Substitution, BodyWord)
+              Substitution, BodyWord, FleetEstop)
 }
 
 

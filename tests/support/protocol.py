@@ -105,4 +105,9 @@ SAMPLES: list[pr.Message] = [
         session="5f0c",
         lease=pr.LeaseAction.TAKE,
     ),
+    pr.FleetEstops(holder="3f2a9c", estops=[
+        pr.FleetEstop("alice@lab", engaged=True, sent_ns=1_700_000_000_000_000_002),
+        pr.FleetEstop("bob@lab", engaged=False, sent_ns=1_700_000_000_000_000_003)]),
+    pr.Presence(robot_id="yb-1", platform="youbot", host="robot-pc", pid=4242,
+                started_ns=1_700_000_000_000_000_004, zid="3f2a9c"),
 ]

@@ -27,6 +27,7 @@ from kinesphere.ratelog import RateLog
 from kinesphere.robots.agent.acks import Acks, Due, Meaning, Motion
 from kinesphere.robots.agent.base import drive_base
 from kinesphere.robots.agent.controller import BLOCKED_TOL, Controller
+from kinesphere.robots.agent.estops import FLEET_SESSION, FleetBoard
 from kinesphere.robots.agent.inbox import Resolved
 from kinesphere.robots.agent.lease import Lease, holder_name
 from kinesphere.robots.agent.ordering import Ordering, Received
@@ -92,6 +93,9 @@ class Conduct:
         """The move started this step, its status and acks not yet said (:meth:`_settle`)."""
         self._waiting_due: Due | None = None
         """When the command waiting for the databank is to arrive (robot seconds)."""
+        self.board: FleetBoard | None = None
+        """The process's fleet e-stops (set by the agent): an e-stop in force there is
+        released for every robot at once (the hint says ``--target all``)."""
 
     def watch(self, now: float) -> None:
         """The wall-clock timers: an expired lease frees, an expired watchdog holds."""
@@ -271,17 +275,21 @@ class Conduct:
             if lease.holder == holder_name(cmd):
                 self._taken(lease.taken_from, cmd)
         verdict = self.safety.on_command(cmd, item.mono_ns / 1e9)
-        if verdict is not Verdict.MOVE or not cmd.parts:
+        if (verdict is not Verdict.MOVE or not cmd.parts) and cmd.session != FLEET_SESSION:
             self.ordering.acted(cmd.seq)  # acted on now; poses count once resolved
         if verdict is Verdict.ESTOP:
             self.estop_lag.append(self.ticks - item.tick)
             by = cmd.sender or ANONYMOUS
-            release = hints.release_estop(self.robot_id, "" if by == ANONYMOUS else by)
+            fleet = self.board is not None and self.board.engaged(cmd.sender)
+            release = hints.release_estop("all" if fleet else self.robot_id,
+                                          "" if by == ANONYMOUS else by)
+            what = "fleet e-stop" if fleet else "e-stop"
+            if cmd.session == FLEET_SESSION:
+                what += " in force (sent before this robot heard it)"
             each = " (each holder releases their own)" if len(self.safety.latches) > 1 else ""
-            self.halt(Status.ESTOP, f"e-stop from {self.safety.holders()}; release with "
+            self.halt(Status.ESTOP, f"{what} from {self.safety.holders()}; release with "
                       f"'{release}'{each}", AckStage.SUPERSEDED)
-            log.warning("agent %s: e-stop by %s (seq %d)", self.robot_id, self.safety.estop_by,
-                        cmd.seq)
+            log.warning("agent %s: %s by %s (seq %d)", self.robot_id, what, by, cmd.seq)
             self.acks.send(cmd, AckStage.ESTOPPED)
         elif verdict is Verdict.LATCHED:
             self.acks.send(cmd, AckStage.REJECTED, self._latched(cmd), code="estopped")

@@ -41,9 +41,10 @@ import zenoh
 
 from kinesphere.configfile import load_toml
 from kinesphere.errors import KinesphereError
-from kinesphere.keyexpr import check_segment
+from kinesphere.keyexpr import Keys, check_segment
 from kinesphere.protocol import Status
 from kinesphere.robots.agent.body import Body
+from kinesphere.robots.agent.estops import FleetBoard
 from kinesphere.robots.agent.follow import Followers
 from kinesphere.robots.agent.inbox import clocks
 from kinesphere.robots.agent.mujoco_body import HardStops, MujocoBody
@@ -140,13 +141,15 @@ class FleetHost:
         self.stats = LoopStats()
         self._awake: deque[int] = deque()
         """Robots something arrived for (any thread): the whole cycle next step."""
+        self.board = FleetBoard(session, Keys(self.options.prefix))
+        """The fleet e-stops in force, one board for every robot of the process."""
         self.agents: list[Agent] = []
         try:
             for i, r in enumerate(robots):
                 self.agents.append(Agent(r.platform, r.robot_id, session,
                                          replace(self.options, groups=r.groups),
                                          wake=self.wake, phase=i, stats=self.stats,
-                                         notify=self._notify(i)))
+                                         notify=self._notify(i), board=self.board))
         except BaseException:
             self._close_agents()
             raise
@@ -173,9 +176,13 @@ class FleetHost:
         self._thread: threading.Thread | None = None
 
     def declare(self) -> None:
-        """Every robot's subscriptions, publishers and liveliness token."""
+        """The fleet e-stops in force, then every robot's id, subscriptions, publishers and
+        liveliness token (``id_taken`` when another agent runs one of the ids)."""
+        self.board.declare()
+        self.board.sync()
         for agent in self.agents:
             agent.declare()
+        self.board.start()
         log.info("fleet host up: %d robots, %d physics threads", len(self.agents),
                  self.stepper.threads)
 
@@ -298,6 +305,7 @@ class FleetHost:
             self._thread.join(timeout=5.0)
         self.complete()
         self.stepper.close()
+        self.board.close()
         self._close_agents()
         s = self.stats
         costs = sorted(s.costs_s)

@@ -35,6 +35,7 @@ from kinesphere.protocol import (
     MAX_TEXT,
     AckStage,
     Command,
+    FleetEstop,
     Payload,
     RobotState,
     Status,
@@ -48,10 +49,12 @@ from kinesphere.robots.agent.conduct import SETTLE_S as SETTLE_S
 from kinesphere.robots.agent.conduct import Conduct
 from kinesphere.robots.agent.controller import BLOCKED_TOL as BLOCKED_TOL
 from kinesphere.robots.agent.controller import Controller
+from kinesphere.robots.agent.estops import FleetBoard, latch_command
 from kinesphere.robots.agent.guard import make_guard
 from kinesphere.robots.agent.inbox import Inbox, clocks, received
 from kinesphere.robots.agent.options import AgentOptions as AgentOptions
 from kinesphere.robots.agent.pacing import LoopStats, Wake, run_paced
+from kinesphere.robots.agent.presence import Claim
 from kinesphere.robots.agent.resolver import Resolver
 from kinesphere.zconfig import undeclare
 
@@ -74,7 +77,7 @@ class Agent:
         self, platform: str, robot_id: str, session: zenoh.Session,
         options: AgentOptions | None = None, body: Body | None = None,
         wake: Wake | None = None, phase: int = 0, stats: LoopStats | None = None,
-        notify: Callable[[], None] | None = None,
+        notify: Callable[[], None] | None = None, board: FleetBoard | None = None,
     ) -> None:
         self.options = options or AgentOptions()
         self.keys = Keys(self.options.prefix)
@@ -111,12 +114,28 @@ class Agent:
         self._publisher: Any = None
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
+        self.board = board
+        """The process's fleet e-stops (``estops.py``); the agent's own when none is given."""
+        self._own_board = board is None
+        self._claim: Claim | None = None
 
     # --- lifetime ------------------------------------------------------------------------------
 
     def declare(self) -> None:
-        """Subscribe to commands, declare the state and ack publishers and liveliness token."""
+        """Claim the robot id (``id_taken`` when another agent runs it), latch every fleet
+        e-stop in force, then subscribe to commands, declare the state and ack publishers and
+        the liveliness token."""
         s = self.session
+        self._claim = Claim(s, self.keys, self.robot_id, self.platform)
+        self._claim.take()
+        if self.board is None:
+            self.board = FleetBoard(s, self.keys)
+            self.board.declare()
+            self.board.sync()
+        self.board.follow(self.latch_fleet)
+        for rec in self.board.in_force():  # before any command: the first step latches
+            self.latch_fleet(rec)
+        self.conduct.board = self.board
         keys = [self.keys.command(self.robot_id)]
         keys += [self.keys.group_command(g) for g in self.options.groups]
         self._entities = [s.declare_subscriber(Keys.subscribed(k), self._on_sample)
@@ -131,6 +150,8 @@ class Agent:
         self._entities += [self._publisher, acks, urgent]
         self._entities.append(s.liveliness().declare_token(self.keys.alive_robot(self.robot_id)))
         self.resolver.start()
+        if self._own_board:
+            self.board.start()
         log.info("agent %s (%s) up: %s", self.robot_id, self.platform, keys[0])
 
     def start(self) -> Agent:
@@ -152,6 +173,10 @@ class Agent:
         self.conduct.acks.flush()  # what the last step had to say
         undeclare(*reversed(self._entities))
         self._entities = []
+        if self._own_board and self.board is not None:
+            self.board.close()
+        if self._claim is not None:
+            self._claim.release()
         self._publisher = self.conduct.acks.publish = self.conduct.acks.publish_urgent = None
         if self.controller.guard is not None:
             self.controller.guard.close()
@@ -169,15 +194,17 @@ class Agent:
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
         try:
-            self.receive(sample.payload, self.keys.sender_of(str(sample.key_expr)))
+            key = str(sample.key_expr)
+            self.receive(sample.payload, self.keys.sender_of(key), key)
         except KinesphereError as exc:  # a key below .../command that names no sender
             self._ratelog(exc.code, "agent %s: command refused: %s", self.robot_id, exc)
             self.inbox.put_bad(exc)
         except Exception as exc:  # never a traceback in Zenoh's callback thread
             self._ratelog("receive", "agent %s: command not queued: %r", self.robot_id, exc)
 
-    def receive(self, payload: Payload, signer: str = "") -> None:
-        """Queue an encoded Command for the next control step (any thread; never blocks).
+    def receive(self, payload: Payload, signer: str = "", key: str = "") -> None:
+        """Queue an encoded Command for the next control step (any thread; never blocks);
+        ``key`` is where it was put (a fleet e-stop or release is remembered).
 
         ``signer`` is the sender the command's key names (:meth:`Keys.sender_of`): with the
         deploy's access control only that operator's certificate may put there, so it is who
@@ -196,6 +223,13 @@ class Agent:
             self.inbox.put_bad(exc)
             return
         self.inbox.put(received(cmd, self.stats.begun))
+        if self.board is not None:
+            self.board.heard(cmd, key)
+
+    def latch_fleet(self, rec: FleetEstop) -> None:
+        """A fleet e-stop in force that this robot did not hear: latch it in the next step,
+        ahead of any command (any thread)."""
+        self.inbox.put(received(latch_command(rec), self.stats.begun))
 
     # --- the loop ------------------------------------------------------------------------------
 
