@@ -17,9 +17,16 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-from kinesphere import zconfig
+from kinesphere import hints, zconfig
 from kinesphere.clients import targets
-from kinesphere.clients.link import RobotLink, Sequencer, link_for, reachable, signals
+from kinesphere.clients.link import (
+    RobotLink,
+    Sequencer,
+    link_for,
+    operator_id,
+    reachable,
+    signals,
+)
 from kinesphere.clients.options import TeleopOptions
 from kinesphere.clients.orders import answers, notated, phrases, score_play
 from kinesphere.clients.orders.answers import Outcome
@@ -27,8 +34,10 @@ from kinesphere.errors import KinesphereError
 from kinesphere.protocol import AckStage, LeaseAction, SpatialCommand
 
 ESTOP_RESEND_S = 0.1
-"""``kinesphere estop`` puts its e-stop at once, then again every 0.1 s to the robots that have
-not acknowledged it yet (it latches, so copies are harmless), until all did or the timeout."""
+"""``kinesphere estop`` puts its e-stop at once, then again every 0.1 s while a robot known
+alive has not acknowledged it (it latches, so copies are harmless), until all did or the
+timeout; ``--release`` likewise while an addressed robot has not answered (a robot released
+already answers a second release ``accepted``)."""
 KEEPALIVE_S = 1.0
 """``lease --hold`` renews the lease this often (robots free a lease after 3 s of silence)."""
 
@@ -155,11 +164,17 @@ def estop(args: argparse.Namespace) -> int:
                 "e-stop to release")
         with _addressing(args, targets.parse_target(args.target), 0) as (link, keys, robots, seq):
             first = seq.seq
+            left = answers.deadline(args.timeout)
             link.put(keys, seq.release())
-            found = answers.wait(link, first, robots, args.timeout,
-                                 lambda o: o.answered(first))
+            while not link.wait_for(lambda lk: _all_answered(lk, first, robots),
+                                    min(ESTOP_RESEND_S, left())) and left() > 0:
+                link.put(keys, seq.release())  # an answer lost on the way: ask again
+            found = answers.outcomes(link.answers(first), robots)
         for o in found.values():  # a robot without a latch accepts a release and does nothing
-            if o.acks and all(a.stage == AckStage.ACCEPTED for a in o.acks):
+            released = [a for a in o.acks if a.stage == AckStage.RELEASED]
+            if released:
+                print(answers.line(answers.Outcome(o.robot, released), args.timeout))
+            elif o.acks and all(a.stage == AckStage.ACCEPTED for a in o.acks):
                 print(f"{o.robot}: not e-stopped: nothing to release")
             else:
                 print(answers.line(o, args.timeout))
@@ -167,6 +182,19 @@ def estop(args: argparse.Namespace) -> int:
         return answers.exit_code(found)
     with link_for(args) as link:
         return _estop_all(link, args.timeout, args.prefix)
+
+
+def _all_answered(link: RobotLink, first: int, robots: list[str]) -> bool:
+    """Every robot addressed (and any other that answered) said something about a command
+    numbered ``first`` or later."""
+    now = answers.outcomes(link.answers(first), robots)
+    return bool(now) and all(o.acks for o in now.values())
+
+
+def _named(link: RobotLink) -> str:
+    """``link``'s sender when it is not this operator's default (a command repeating it must
+    say ``--sender``), else ""."""
+    return "" if link.sender == operator_id() else link.sender
 
 
 def _estop_all(link: RobotLink, timeout: float, prefix: str) -> int:
@@ -181,6 +209,7 @@ def _estop_all(link: RobotLink, timeout: float, prefix: str) -> int:
     """
     seq = link.sequencer(0)
     first = seq.seq
+    start = time.monotonic()
     link.estop_all(seq)  # at once: an e-stop never waits for discovery
     left = answers.deadline(timeout)
     discovery = answers.Discovery(link)
@@ -223,7 +252,11 @@ def _estop_all(link: RobotLink, timeout: float, prefix: str) -> int:
                   f"{timeout:g} s; make sure it is stopped")
     good = sum(any(a.stage == AckStage.ESTOPPED for a in o.acks) for o in found.values())
     if good == len(found) and settled:
-        print(f"E-STOP confirmed by all {good} live robot(s)", file=sys.stderr)
+        took = max(a.at for got in link.answers(first).values() for a in got
+                   if a.ack.stage == AckStage.ESTOPPED) - start
+        print(f"E-STOP confirmed by all {good} live robot(s) in {took:.2f} s; it stays in "
+              f"force for robots that start or rejoin until you release it with "
+              f"'{hints.release_estop('all', _named(link))}'", file=sys.stderr)
         return 0
     why = "" if settled else (f"; discovery had not settled within {timeout:g} s, so robots "
                               "may be missing (a larger --timeout waits longer)")

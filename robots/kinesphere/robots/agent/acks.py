@@ -15,8 +15,9 @@ Two small parts:
 from __future__ import annotations
 
 import logging
+import threading
 import time
-from collections import Counter
+from collections import Counter, deque
 from collections.abc import Callable, Hashable
 from dataclasses import dataclass
 from typing import NamedTuple
@@ -138,8 +139,8 @@ class Acks:
     """One robot's acknowledgements: the followed motion, the rate limit, the publisher.
 
     ``publish`` puts encoded bytes (None until the agent declared its publisher: nothing is
-    sent); ``publish_urgent`` puts e-stop and release acks on the highest priority, so a queue
-    full of ordinary acks and states never drops them (the same as ``publish`` when unset);
+    sent); ``publish_urgent`` puts e-stop and release acks on the highest priority, never
+    dropped (:class:`UrgentOut`; the same as ``publish`` when unset);
     ``lease_holder`` says who holds the robot's lease, for every ack.
     """
 
@@ -234,6 +235,52 @@ class Acks:
         m, self.motion = self.motion, None
         if m is not None:
             self.send(m.cmd, stage, detail, meaning=m.meaning, late_ms=self._late(m, False))
+
+
+class UrgentOut:
+    """E-stop and release acks, put by a thread of their own on a publisher that never drops
+    (congestion control BLOCK): a loaded process's transmit queue drops a DROP message after
+    a millisecond, and a client that never hears the e-stop acknowledged must report the
+    robot unconfirmed. The control loop only appends here, so a congested link never stalls
+    it. Bounded: at most :data:`URGENT_KEPT` acks wait (the oldest go first)."""
+
+    def __init__(self, put: Callable[[bytes], None], name: str) -> None:
+        self._put = put
+        self._queue: deque[bytes] = deque(maxlen=URGENT_KEPT)
+        self._wake = threading.Condition()
+        self._closing = False
+        self._thread = threading.Thread(target=self._run, name=f"urgent-acks-{name}",
+                                        daemon=True)
+        self._thread.start()
+
+    def __call__(self, payload: bytes) -> None:
+        with self._wake:
+            self._queue.append(payload)
+            self._wake.notify()
+
+    def _run(self) -> None:
+        while True:
+            with self._wake:
+                while not self._queue and not self._closing:
+                    self._wake.wait()
+                if not self._queue:
+                    return
+                payload = self._queue.popleft()
+            try:
+                self._put(payload)
+            except Exception as exc:  # session closing: nothing more gets out
+                log.debug("urgent ack not published: %s", exc)
+
+    def close(self, timeout: float = 1.0) -> None:
+        """Put what waits (within ``timeout``), then stop."""
+        with self._wake:
+            self._closing = True
+            self._wake.notify()
+        self._thread.join(timeout)
+
+
+URGENT_KEPT = 1024
+"""E-stop and release acks waiting for the network at most (64 KiB each at worst)."""
 
 
 def make_ack(robot_id: str, cmd: Command, stage: AckStage, *, code: str = "", detail: str = "",

@@ -43,6 +43,7 @@ from kinesphere.protocol import (
     encode,
 )
 from kinesphere.ratelog import RateLog
+from kinesphere.robots.agent.acks import UrgentOut
 from kinesphere.robots.agent.bodies import make_body
 from kinesphere.robots.agent.body import Body
 from kinesphere.robots.agent.conduct import SETTLE_S as SETTLE_S
@@ -118,6 +119,7 @@ class Agent:
         """The process's fleet e-stops (``estops.py``); the agent's own when none is given."""
         self._own_board = board is None
         self._claim: Claim | None = None
+        self._urgent: UrgentOut | None = None
 
     # --- lifetime ------------------------------------------------------------------------------
 
@@ -144,9 +146,11 @@ class Agent:
         self._publisher = s.declare_publisher(self.keys.state(self.robot_id),
                                               congestion_control=drop)
         acks = s.declare_publisher(self.keys.ack(self.robot_id), congestion_control=drop)
-        urgent = s.declare_publisher(self.keys.ack(self.robot_id), congestion_control=drop,
+        urgent = s.declare_publisher(self.keys.ack(self.robot_id),
+                                     congestion_control=zenoh.CongestionControl.BLOCK,
                                      priority=zenoh.Priority.REAL_TIME, express=True)
-        self.conduct.acks.publish, self.conduct.acks.publish_urgent = acks.put, urgent.put
+        self._urgent = UrgentOut(urgent.put, self.robot_id)
+        self.conduct.acks.publish, self.conduct.acks.publish_urgent = acks.put, self._urgent
         self._entities += [self._publisher, acks, urgent]
         self._entities.append(s.liveliness().declare_token(self.keys.alive_robot(self.robot_id)))
         self.resolver.start()
@@ -171,6 +175,8 @@ class Agent:
             self._thread.join(timeout=5.0)
         self.resolver.close()
         self.conduct.acks.flush()  # what the last step had to say
+        if self._urgent is not None:
+            self._urgent.close()
         undeclare(*reversed(self._entities))
         self._entities = []
         if self._own_board and self.board is not None:
