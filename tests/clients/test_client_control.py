@@ -92,8 +92,9 @@ def test_estop_is_acknowledged_by_every_robot_and_released_by_target(
     # carol's latch: another operator's release clears nothing (exit 1: nothing released)
     assert main(["estop", "--release", "--target", "all", "--connect", free.endpoint]) == 1
     assert all(line.endswith(": REJECTED: estopped: e-stop still latched by carol: each latch "
-                             "clears only with its own sender's release (or by restarting the "
-                             "agent)") for line in capsys.readouterr().out.splitlines())
+                             "clears only with its own sender's release (restarting the agent "
+                             "clears it only when no fleet e-stop of that sender is in force)")
+               for line in capsys.readouterr().out.splitlines())
     assert main(["estop", "--release", "--target", "all", "--connect", free.endpoint,
                  "--sender", "carol"]) == 0
     assert capsys.readouterr().out.splitlines() == [f"{r}: released" for r in sorted(PLATFORMS)]
@@ -102,8 +103,10 @@ def test_estop_is_acknowledged_by_every_robot_and_released_by_target(
 def test_a_phrase_a_body_cannot_play_fails_before_anything_moves(
     free: ClientFleet, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    """tour_guide names right_arm and left_arm: neither the youBot nor the PackBot has them.
-    play asks each platform's databank first, names the step, and sends nothing."""
+    """tour_guide's third step opens both arms: the youBot and the PackBot each answer
+    right_arm and left_arm with their only arm, so the step asks one limb two things (a
+    conflict). play asks each platform's databank first, names the step, and sends
+    nothing."""
     start = time.monotonic()
     code = main(["play", "tour_guide", "--target", "all", "--connect", free.endpoint,
                  "--sender", "tourist"])
@@ -111,8 +114,9 @@ def test_a_phrase_a_body_cannot_play_fails_before_anything_moves(
     assert code == 1
     lines = out.splitlines()
     assert [ln.split(":")[0] for ln in lines] == [f"{PB} (packbot)", f"{YB} (youbot)"]
-    assert all("CANNOT PLAY tour-guide: step 1 (right_arm right_shoulder "
-               "right-forward-middle 2): unknown_limb" in ln for ln in lines), out
+    assert all("CANNOT PLAY tour-guide: step 3 (right_arm right_shoulder right-forward-low 2 "
+               "+ left_arm left_shoulder left-forward-low 2): conflict: " in ln
+               for ln in lines), out
     assert "cannot play on 2 of 2 robot(s) of all robots: nothing was sent" in err
     assert "playing" not in err
     for rid in PLATFORMS:  # no command from 'tourist' was ever acted on

@@ -117,7 +117,7 @@ def test_a_refusal_for_another_operators_lease_is_shown_and_the_take_button_take
             assert link.wait_for(lambda k: "l2" in k.last_answers(), WAIT_S)
             view = op.tick(inp.poll())
             assert view.notice == ("l2 refuses your commands: dave holds this robot's lease; "
-                                   "press Back (take) to take over")
+                                   "press Back to take control")
             assert view.answers["l2"].ack.code == "lease_held"
             p.tap(pygame.CONTROLLER_BUTTON_BACK)
             view = op.tick(inp.poll())

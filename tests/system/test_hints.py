@@ -31,7 +31,7 @@ from kinesphere.services.databank.client import query_catalogue, record_pose
 from kinesphere.services.ecl.store import DATA_DIR
 from support.agents import Operator, running_agent
 from support.clients import Inbox
-from support.network import KEYS, Hub
+from support.network import OWN_KEYS, Hub
 from support.paths import TOY_EURDF
 from support.system import Observer
 from support.wait import WAIT_S, until
@@ -166,13 +166,13 @@ def test_the_recording_hints(hub: Hub, tmp_path: Path,
     ticks given to ``replay`` name ``gamepad --replay``. Both run."""
     session = tmp_path / "session.mcap"
     cmd = Command(seq=0, sent_ns=time.time_ns(), deadman=False, ttl_ms=0, sender="rec")
-    with McapWriter(session, {"prefix": KEYS.prefix}) as w:
-        w.write(KEYS.command("rr"), cmd, time.time_ns())
-    ep = ["--connect", hub.endpoint]
+    with McapWriter(session, {"prefix": OWN_KEYS.prefix}) as w:
+        w.write(OWN_KEYS.command("rr"), cmd, time.time_ns())
+    ep = ["--connect", hub.endpoint, "--prefix", OWN_KEYS.prefix]
     (replay,) = commands(error_of(capsys, "gamepad", "--replay", str(session), "--headless",
                                   *ep))
     assert replay == ["replay", str(session)]
-    box = Inbox(hub.session, KEYS.command("rr"))
+    box = Inbox(hub.session, OWN_KEYS.command("rr"))
     try:
         assert main([*replay, *ep]) == 0
         box.wait(lambda g: g.cmd.sender == "rec", "the replayed command")

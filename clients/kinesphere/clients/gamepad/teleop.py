@@ -6,11 +6,11 @@ repeats the last one: the stream is the robot's proof that the operator is still
 robot that stops hearing it holds within ``ttl_ms``. When the operator lets go, the device
 disconnects, the target changes or the client exits, one final stop goes out.
 
-E-stop goes to every robot (``{p}/robot/*/command``) and latches here too. Robots clear their
-latch only on a command with ``release=True``; the release button sends one to exactly the
-robots whose state says this operator latched them (``RobotState.estop_by``; robots that do not
-say who, only while this operator's own e-stop stands) and names them: a robot somebody else
-stopped needs an explicit ``kinesphere estop --release --target ID``. The loop also stops
+E-stop goes to every robot (``{p}/robot/*/command``) and latches here too; it stays in force
+for robots that start or rejoin until released. Robots clear a latch only on a release from
+the sender who latched it; the release button sends one to every robot (clearing this
+operator's latches and fleet e-stop, nobody else's) and names the robots it frees and those
+still latched by others, with the command that releases each. The loop also stops
 streaming while any targeted robot reports ``estop`` (pointless commands would only be
 refused), and after an e-stop, a release or a disconnect it streams again only after the
 deadman was let go and pressed anew.
@@ -142,12 +142,16 @@ class Teleop:
         )
 
     def _release(self) -> None:
-        """Release exactly the robots this operator's e-stop latched, and say which."""
+        """Release this operator's e-stops on every robot, and say which robots that frees.
+
+        The release goes to every robot's key: a robot clears only this sender's latch (each
+        sender's e-stop is its own), and the fleet e-stop this operator's button put in force
+        ends with it, so robots that start later come up free."""
         mine = self.latched_by_me()
         others = {rid: seen.state.estop_by for rid, seen in sorted(self.link.states().items())
                   if seen.state.status == Status.ESTOP and rid not in mine}
         cmd = self.seq.release()
-        self.link.put([self.link.keys.command(rid) for rid in mine], cmd)
+        self.link.put([self.link.keys.command("*")], cmd)
         self.estopped, self.need_fresh = False, True
         self.released_at = time.monotonic()
         said = (f"released the e-stop of {', '.join(mine)}" if mine

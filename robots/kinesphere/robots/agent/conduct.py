@@ -351,7 +351,8 @@ class Conduct:
         if not cmd.sender:
             return f"e-stop latched by {holders}; a release must name its sender"
         return (f"e-stop still latched by {holders}: each latch clears only with its own "
-                "sender's release (or by restarting the agent)")
+                "sender's release (restarting the agent clears it only when no fleet e-stop "
+                "of that sender is in force)")
 
     def _taken(self, previous: str, cmd: Command) -> None:
         """Remember the holder's last command; tell a holder whose lease was taken over."""

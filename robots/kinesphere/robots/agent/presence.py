@@ -6,9 +6,10 @@ Two agents with one id would share its keys: both obey its commands, their state
 two robots. So before an agent declares anything else it asks ``{p}/robot/{id}/presence``
 (and the id's liveliness token, for agents that do not answer there): any answer refuses the
 start (``id_taken``, exit 2) naming where the other runs. Then it answers there itself
-(:class:`~kinesphere.protocol.Presence`: platform, host, pid, start time) and asks once more:
-two agents that started at the same moment both see each other then, and the later one (by
-start time, then session id) gives way. The id is free again as soon as the first agent
+(:class:`~kinesphere.protocol.Presence`: platform, host, pid, start time) and asks once more
+a moment later (``zconfig.QUIET_S``, for a claim made at the same moment to arrive): two
+agents that started together both see each other then, and the later one (by claim time,
+then session id) gives way. The id is free again as soon as the first agent
 leaves (its answer goes with it; a process killed outright is forgotten after Zenoh's link
 lease, 10 s).
 """
@@ -24,6 +25,7 @@ import time
 import msgspec
 import zenoh
 
+from kinesphere import zconfig
 from kinesphere.errors import KinesphereError
 from kinesphere.keyexpr import Keys
 from kinesphere.protocol import Presence, decode, encode
@@ -100,6 +102,7 @@ class Claim:
         self.me = msgspec.structs.replace(self.me, started_ns=time.time_ns())  # claimed now
         self._queryable = self.session.declare_queryable(
             self.keys.presence(self.robot_id), self._on_query)
+        time.sleep(zconfig.QUIET_S)  # a claim made at the same moment reaches us meanwhile
         first = min([self.me, *self._others()], key=lambda p: (p.started_ns, p.zid))
         if first != self.me:  # another started at the same moment, a little earlier
             self.release()
