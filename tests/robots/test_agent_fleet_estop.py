@@ -9,7 +9,7 @@ from __future__ import annotations
 import time
 
 from kinesphere import zconfig
-from kinesphere.deploy.procs import Supervisor
+from kinesphere.procs import Supervisor
 from kinesphere.protocol import FleetEstops, decode
 from kinesphere.robots.agent.estops import SYNC_S
 from kinesphere.robots.agent.runtime import Agent, AgentOptions

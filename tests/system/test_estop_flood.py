@@ -19,7 +19,7 @@ import pytest
 
 from kinesphere import zconfig
 from kinesphere.cli import main
-from kinesphere.deploy.procs import Supervisor
+from kinesphere.procs import Supervisor
 from support.agents import StateWatch
 from support.soak import SCALE, Tally
 from support.system import Observer, databank_args, router_hub

@@ -23,9 +23,9 @@ from kinesphere.clients.gamepad.inputs import ticks
 from kinesphere.clients.gamepad.state import ControllerState
 from kinesphere.clients.mcaplog import McapWriter
 from kinesphere.clients.report import estop_words
-from kinesphere.deploy.procs import Supervisor
 from kinesphere.errors import KinesphereError
 from kinesphere.eurdf import plain_urdf
+from kinesphere.procs import Supervisor
 from kinesphere.protocol import Command
 from kinesphere.services.databank.client import query_catalogue, record_pose
 from kinesphere.services.ecl.store import DATA_DIR

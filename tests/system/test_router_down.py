@@ -9,7 +9,7 @@ from __future__ import annotations
 import pytest
 
 from kinesphere.cli import main
-from kinesphere.deploy.procs import Supervisor
+from kinesphere.procs import Supervisor
 from kinesphere.zconfig import free_port
 from support.system import port_open
 from support.wait import WAIT_S, until
