@@ -176,7 +176,7 @@ def _agent(args: argparse.Namespace) -> int:
              if given]
     if extra:
         raise KinesphereError("malformed", f"{', '.join(extra)}: for several robots (--robot "
-                              "PLATFORM:ID ..., or 'kinesphere fleet'), not one PLATFORM")
+                              "PLATFORM:ID ..., or a fleet file), not one PLATFORM")
     from kinesphere.platforms.platform import platform_spelling
     from kinesphere.robots.agent.runtime import Agent
     from kinesphere.zconfig import close_session, session_from_args
