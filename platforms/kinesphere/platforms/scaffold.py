@@ -218,8 +218,8 @@ def _build(name: str, urdf: Path, robot_el: ET.Element, model: yourdfpy.URDF, me
            _platform_toml(name, urdf, kind, height, chosen, zero, proposals, legs, knees), mode)
     limbs_kept = [p.name for p in eurdf.limbs if p.name not in proposal.hands]
     knees = knees if bearing else {}
-    _write(work / "vsam.toml", _vsam_toml(eurdf, limbs_kept, proposal.hands, kind != "fixed"),
-           mode)
+    _write(work / "vsam.toml", _vsam_toml(eurdf, limbs_kept, proposal.hands, kind != "fixed",
+                                          work.parent / name), mode)
     load_platform(str(work))  # the folder loads as a platform, neutral pose checked against P
     return Scaffold(work, eurdf, kind, height, imported, limbs_kept, proposal.hands,
                     mends.lines, proposals, legs, axis, None, knees)
