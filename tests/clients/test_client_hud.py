@@ -54,6 +54,8 @@ class ReadoutChanges(TypedDict, total=False):
     """Fields of :class:`Readout` a test sets on the busy example of :func:`view`."""
 
     target: tg.Target
+    members: list[str]
+    answers: dict[str, AckAnswer]
     aliases: dict[str, str]
     intent: Intent
     engaged: bool

@@ -34,8 +34,8 @@ def ack(stage: AckStage, **kw: object) -> Ack:
     return msgspec.structs.replace(base, **kw)
 
 
-def texts(st: RobotState, age_s: float = 0.12) -> list[str]:
-    return [ln.text for ln in robot_lines(st, age_s, ME)]
+def texts(st: RobotState, age_s: float = 0.12, release_press: str = "") -> list[str]:
+    return [ln.text for ln in robot_lines(st, age_s, ME, release_press)]
 
 
 def test_an_estop_says_who_latched_it_and_how_to_release_it() -> None:

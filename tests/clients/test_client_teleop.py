@@ -140,7 +140,7 @@ def test_without_a_deadman_a_deflected_stick_streams(
 
 
 def test_a_centred_stick_holds_until_pushed_then_its_return_is_neutral(
-    link: RobotLink, inboxes: dict[str, Inbox], inp: pad.PygameInput
+    link: RobotLink, inboxes: dict[str, CommandInbox], inp: pad.PygameInput
 ) -> None:
     """Pressing the deadman with the stick centred moves nothing: the commands carry no part
     (the limb holds, as a zero command holds in MoveIt Servo). After a push, the stick's return

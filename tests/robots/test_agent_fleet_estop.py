@@ -13,7 +13,7 @@ from kinesphere.procs import Supervisor
 from kinesphere.protocol import FleetEstops, decode
 from kinesphere.robots.agent.estops import SYNC_S
 from kinesphere.robots.agent.runtime import Agent, AgentOptions
-from support.agents import Operator, StateWatch, running_agent
+from support.agents import CommandSender, StateWatch, running_agent
 from support.network import KEYS, Hub
 from support.system import port_open
 from support.wait import WAIT_S, until
@@ -21,7 +21,7 @@ from support.wait import WAIT_S, until
 
 def test_a_robot_started_during_a_fleet_estop_comes_up_latched(hub: Hub) -> None:
     with zconfig.session(config=zconfig.loopback_config(hub.endpoint)) as s:
-        fleet = Operator(s, "*", sender="officer")
+        fleet = CommandSender(s, "*", sender="officer")
         with running_agent(hub.endpoint, "youbot", "fe-1") as (_, first):
             first.after(fleet.send(estop=True), lambda st: st.status == "estop", "the e-stop")
             with running_agent(hub.endpoint, "khepera", "fe-late") as (_, late):
@@ -47,7 +47,7 @@ def test_a_robot_that_joins_late_latches_from_the_others(hub: Hub, sup: Supervis
     with zconfig.session(config=zconfig.loopback_config(hub.endpoint)) as s, \
             zconfig.session(config=zconfig.session_config(
                 "peer", listen=[zconfig.LOOPBACK_ANY_PORT], connect=[behind])) as cut:
-        fleet = Operator(s, "*", sender="officer")
+        fleet = CommandSender(s, "*", sender="officer")
         watch = StateWatch(s, "fe-cut")
         late = Agent("khepera", "fe-cut", cut, AgentOptions(speed=1.0)).start()
         try:
@@ -73,7 +73,7 @@ def test_every_robot_process_answers_what_it_knows(hub: Hub) -> None:
     """The board on ``{p}/estop/{holder}``: the e-stop in force, then its release."""
     with zconfig.session(config=zconfig.loopback_config(hub.endpoint)) as s, \
             running_agent(hub.endpoint, "khepera", "fe-3") as (agent, watch):
-        officer = Operator(s, "*", sender="officer")
+        officer = CommandSender(s, "*", sender="officer")
         watch.after(officer.send(estop=True), lambda st: st.status == "estop", "the e-stop")
 
         def known() -> dict[str, bool]:
@@ -97,11 +97,17 @@ def test_a_robot_whose_copy_was_lost_latches_within_a_sync(hub: Hub) -> None:
     it): the other latches from the first's board within a sync period."""
     with running_agent(hub.endpoint, "khepera", "fe-4") as (a, wa), \
             running_agent(hub.endpoint, "khepera", "fe-5") as (b, wb):
-        b.board.heard = lambda cmd, key: None  # type: ignore[method-assign]
+        board = b.board
+        assert board is not None
+        board.heard = lambda cmd, key: None  # type: ignore[method-assign]
         b_receive = b.receive
-        b.receive = lambda payload, key="": None  # type: ignore[method-assign]
+
+        def deaf(payload: object, signer: str = "", key: str = "") -> None:
+            """fe-5 hears no command at all."""
+
+        b.receive = deaf  # type: ignore[method-assign]
         with zconfig.session(config=zconfig.loopback_config(hub.endpoint)) as s:
-            officer = Operator(s, "*", sender="officer")
+            officer = CommandSender(s, "*", sender="officer")
             wa.after(officer.send(estop=True), lambda st: st.status == "estop", "fe-4 latched")
             sent = time.monotonic()
             st = wb.wait(lambda st: st.status == "estop", "fe-5 latched from fe-4's board")

@@ -21,7 +21,7 @@ from kinesphere import zconfig
 from kinesphere.cli import main
 from kinesphere.procs import Supervisor
 from support.agents import StateWatch
-from support.soak import SCALE, Tally
+from support.soak import SCALE, FloodTally
 from support.system import Observer, databank_args, router_hub
 from support.wait import WAIT_S, until
 
@@ -37,7 +37,7 @@ CONFIRMED = re.compile(r"E-STOP confirmed by all (\d+) live robot\(s\) in ([\d.]
 
 
 def estop_round(capsys: pytest.CaptureFixture[str], endpoint: str, obs: Observer,
-                tally: Tally, times: list[float]) -> None:
+                tally: FloodTally, times: list[float]) -> None:
     """One ``kinesphere estop`` as a Zenoh client of the router: all eight listed and latched
     (by their own states), or exit 1; then the release."""
     capsys.readouterr()
@@ -80,7 +80,7 @@ def test_estop_lists_every_robot_or_exits_1_under_load(
         sup.spawn(host, ["agent", *(a for s in specs for a in ("--robot", s)), *join])
     obs = Observer(mode="client", connect=[endpoint])
     burners: list[subprocess.Popen[bytes]] = []
-    tally = Tally("estop flood")
+    tally = FloodTally("estop flood")
     times: list[float] = []
     try:
         obs.wait_alive(set(ROBOTS), databank=True, sup=sup)
@@ -89,9 +89,8 @@ def test_estop_lists_every_robot_or_exits_1_under_load(
                              "3600", "--rate", "100", "--sender", name, *join])
         burners = [subprocess.Popen([sys.executable, "-c", "while True: pass"])
                    for _ in range(BURNERS)]
-        until(lambda: sup.check() or any(st.status == "moving"
-                                         for st in obs.states.snapshot().values()),
-              WAIT_S, "the flood moving robots")
+        until(lambda: any(st.status == "moving" for st in obs.states.snapshot().values()),
+              WAIT_S, "the flood moving robots", guard=sup.check)
         for i in range(ROUNDS):
             sup.check()
             if i == ROUNDS // 2:
@@ -112,7 +111,7 @@ def test_estop_lists_every_robot_or_exits_1_under_load(
 
 def late_robot_comes_up_latched(sup: Supervisor, capsys: pytest.CaptureFixture[str],
                                 endpoint: str, join: list[str], obs: Observer,
-                                tally: Tally) -> None:
+                                tally: FloodTally) -> None:
     """An e-stop in force, then a robot starts: its first state is latched in the officer's
     name; the release reaches it too. It leaves before the next round (eight robots)."""
     capsys.readouterr()

@@ -29,8 +29,8 @@ from kinesphere.procs import Supervisor
 from kinesphere.protocol import Command
 from kinesphere.services.databank.client import query_catalogue, record_pose
 from kinesphere.services.ecl.store import DATA_DIR
-from support.agents import Operator, running_agent
-from support.clients import Inbox
+from support.agents import CommandSender, running_agent
+from support.clients import CommandInbox
 from support.network import OWN_KEYS, Hub
 from support.paths import TOY_EURDF
 from support.system import Observer
@@ -64,7 +64,7 @@ def test_the_release_lease_and_status_hints_of_a_live_robot(
     ep = ["--connect", hub.endpoint]
     with running_agent(hub.endpoint, "youbot", "yb-h") as (_, watch), \
             zconfig.session(config=zconfig.loopback_config(hub.endpoint)) as s:
-        op = Operator(s, "yb-h", sender="hint-op")
+        op = CommandSender(s, "yb-h", sender="hint-op")
         st = watch.after(op.send(estop=True), lambda st: st.status == "estop", "the e-stop")
         (release,) = commands(st.detail)
         assert release == ["estop", "--release", "--target", "yb-h", "--sender", "hint-op"]
@@ -72,7 +72,7 @@ def test_the_release_lease_and_status_hints_of_a_live_robot(
         assert main([*release, *ep]) == 0
         watch.wait(lambda st: st.status != "estop", "the release")
 
-        alice = Operator(s, "yb-h", sender="alice")
+        alice = CommandSender(s, "yb-h", sender="alice")
         watch.after(alice.send(lease="acquire"), lambda st: st.lease_holder == "alice",
                     "alice's lease")
         assert main([*hints.take_lease("yb-h").argv, *ep, "--sender", "bob"]) == 0
@@ -128,13 +128,13 @@ def test_the_databank_and_agent_hints(sup: Supervisor, tmp_path: Path,
             (serve,) = commands(nobody.value.message)
             assert serve == ["databank", "serve"]
             sup.spawn("databank", [*serve, *join])
-            until(lambda: sup.check() or bool(obs.alive.databanks), WAIT_S, "the databank")
+            until(lambda: bool(obs.alive.databanks), WAIT_S, "the databank", guard=sup.check)
             assert query_catalogue(hub, "youbot", timeout=WAIT_S).platform == "youbot"
             sup.stop("databank")
             until(lambda: not obs.alive.databanks, WAIT_S, "the databank gone")
 
             sup.spawn("readonly", ["databank", "serve", "--db", f"youbot={copy}", *join])
-            until(lambda: sup.check() or bool(obs.alive.databanks), WAIT_S, "the databank")
+            until(lambda: bool(obs.alive.databanks), WAIT_S, "the databank", guard=sup.check)
             joints = {"arm_joint_1": 2.9, "arm_joint_2": 1.0}
             args = ("youbot", "limb_11", "distal_11", "forward-middle", 2, joints)
             with pytest.raises(KinesphereError) as refused:
@@ -145,7 +145,7 @@ def test_the_databank_and_agent_hints(sup: Supervisor, tmp_path: Path,
             sup.stop("readonly")
             until(lambda: not obs.alive.databanks, WAIT_S, "the databank gone")
             sup.spawn("writable", [*writable, *join])
-            until(lambda: sup.check() or bool(obs.alive.databanks), WAIT_S, "the databank")
+            until(lambda: bool(obs.alive.databanks), WAIT_S, "the databank", guard=sup.check)
             assert record_pose(hub, *args, timeout=WAIT_S).joints
 
             record = ["ecl", "record", "youbot", "--db", str(copy), "--limb", "arm", "--origin",
@@ -172,7 +172,7 @@ def test_the_recording_hints(hub: Hub, tmp_path: Path,
     (replay,) = commands(error_of(capsys, "gamepad", "--replay", str(session), "--headless",
                                   *ep))
     assert replay == ["replay", str(session)]
-    box = Inbox(hub.session, OWN_KEYS.command("rr"))
+    box = CommandInbox(hub.session, OWN_KEYS.command("rr"))
     try:
         assert main([*replay, *ep]) == 0
         box.wait(lambda g: g.cmd.sender == "rec", "the replayed command")
