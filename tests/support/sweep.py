@@ -34,7 +34,7 @@ Row = dict[str, Any]
 OBJECTS = "random_urdfs"  # pybullet's 1000 random objects: each must be refused
 PULLS = 26
 MENDED = re.compile(r"^  mended: (.*)$", re.M)
-WRITTEN = re.compile(r"<!-- mended by 'kinesphere platform new': (.*?) -->")
+WRITTEN = re.compile(r"<!-- mended by platform new: (.*?) -->")
 
 
 def urdfs(objects: bool = True) -> list[tuple[str, str, Path]]:
