@@ -215,7 +215,8 @@ def _build(name: str, urdf: Path, robot_el: ET.Element, model: yourdfpy.URDF, me
         height = 0.0
         eurdf = load_eurdf(_write_eurdf(robot, mends, work, name, urdf, mode))
     _write(work / "platform.toml",
-           _platform_toml(name, urdf, kind, height, chosen, zero, proposals, legs, knees), mode)
+           _platform_toml(name, urdf, kind, height, chosen, zero, proposals, legs, knees,
+                          work.parent / name), mode)
     limbs_kept = [p.name for p in eurdf.limbs if p.name not in proposal.hands]
     knees = knees if bearing else {}
     _write(work / "vsam.toml", _vsam_toml(eurdf, limbs_kept, proposal.hands, kind != "fixed",
@@ -412,13 +413,14 @@ def _commentable(text: str) -> str:
 def _platform_toml(
     name: str, urdf: Path, kind: str, height: float, neutral: dict[str, float],
     zero: dict[str, float], proposals: list[neutral_search.Proposal], legs: list[str],
-    knees: dict[str, float],
+    knees: dict[str, float], folder: Path,
 ) -> str:
     speeds = {"fixed": dict.fromkeys(MOBILE_DEFAULTS, 0.0), "legged": LEGGED_DEFAULTS
               }.get(kind, MOBILE_DEFAULTS)
     lines = [
-        f"# Proposed by '{hints.new_platform(name, _comment(urdf.name))}'. Edit",
-        "# freely: the title, the base (kind fixed | omni | diff | skid | legged and its limits),",
+        f"# Proposed by '{hints.new_platform(name, _comment(urdf.name))}'; check the labels with",
+        f"# '{hints.describe(str(folder))}'. Edit freely: the title, the base (kind fixed |",
+        "# omni | diff | skid | legged and its limits),",
         "# the joint motion limits and above all the neutral pose (Place Middle) every pull",
         "# starts from.",
         "[platform]",
