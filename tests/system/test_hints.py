@@ -27,6 +27,7 @@ from kinesphere.errors import KinesphereError
 from kinesphere.eurdf import plain_urdf
 from kinesphere.procs import Supervisor
 from kinesphere.protocol import Command
+from kinesphere.robots.agent.runtime import Agent, AgentOptions
 from kinesphere.services.databank.client import query_catalogue, record_pose
 from kinesphere.services.ecl.store import DATA_DIR
 from support.agents import CommandSender, running_agent
@@ -163,7 +164,8 @@ def test_the_databank_and_agent_hints(sup: Supervisor, tmp_path: Path,
 def test_the_recording_hints(hub: Hub, tmp_path: Path,
                              capsys: pytest.CaptureFixture[str]) -> None:
     """A session of messages given to the gamepad names ``kinesphere replay``; a gamepad's
-    ticks given to ``replay`` name ``gamepad --replay``. Both run."""
+    ticks given to ``replay`` name ``gamepad --replay``. Both run (the session's command to a
+    robot that acts on it: a replay nobody answers exits 1)."""
     session = tmp_path / "session.mcap"
     cmd = Command(seq=0, sent_ns=time.time_ns(), deadman=False, ttl_ms=0, sender="rec")
     with McapWriter(session, {"prefix": OWN_KEYS.prefix}) as w:
@@ -172,12 +174,15 @@ def test_the_recording_hints(hub: Hub, tmp_path: Path,
     (replay,) = commands(error_of(capsys, "gamepad", "--replay", str(session), "--headless",
                                   *ep))
     assert replay == ["replay", str(session)]
-    box = CommandInbox(hub.session, OWN_KEYS.command("rr"))
-    try:
-        assert main([*replay, *ep]) == 0
-        box.wait(lambda g: g.cmd.sender == "rec", "the replayed command")
-    finally:
-        box.close()
+    with zconfig.session(config=zconfig.loopback_config(hub.endpoint)) as s:
+        robot = Agent("khepera", "rr", s, AgentOptions(prefix=OWN_KEYS.prefix)).start()
+        box = CommandInbox(hub.session, OWN_KEYS.command("rr"))
+        try:
+            assert main([*replay, *ep]) == 0  # the robot acted on it
+            box.wait(lambda g: g.cmd.sender == "rec", "the replayed command")
+        finally:
+            box.close()
+            robot.close()
 
     hands = tmp_path / "hands.mcap"
     ticks.save(hands, [(0.0, ControllerState()), (0.1, ControllerState())])

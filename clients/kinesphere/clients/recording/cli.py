@@ -50,7 +50,8 @@ def register(sub: Any) -> None:
         "refuses the whole file before anything is put), silences longer than --max-gap are "
         "shortened, and the file is read a chunk at a time, with every size bounded. Waits "
         "first for a subscriber on each recorded key (--wait); fails when nobody listens on "
-        "any.",
+        "any. Then says what the robots answered to the commands put: exits 0 only when "
+        "they acted on them and dropped or refused none (130 when stopped by Ctrl-C).",
     )
     p.add_argument("recording", metavar="FILE", help="MCAP file written by kinesphere record")
     p.add_argument("--what", choices=REPLAYED, default=d.what,
@@ -110,5 +111,14 @@ def replay(args: argparse.Namespace) -> int:
     if done.unheard:
         print(f"nobody listened on {len(done.unheard)} recorded key(s): "
               f"{few(done.unheard, 10)}", file=sys.stderr)
-    print(f"replayed {done.sent} {args.what} message(s) from {args.recording}", file=sys.stderr)
-    return 130 if stop.is_set() else 0
+    if done.interrupted:
+        print(f"replay interrupted: {done.sent} {args.what} message(s) from {args.recording} "
+              "put before it was stopped", file=sys.stderr)
+    else:
+        print(f"replayed {done.sent} {args.what} message(s) from {args.recording}",
+              file=sys.stderr)
+    code = 0
+    if done.commands:
+        said, code = done.answers.words(done.commands, args.recording, args.restamp)
+        print(said, file=sys.stderr)
+    return 130 if done.interrupted else code

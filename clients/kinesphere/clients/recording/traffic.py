@@ -26,6 +26,11 @@ ordering rule, not a fault), and behind the deploy's access control only the rec
 may put them. ``restamp`` makes them the replaying operator's: sent now by ``sender`` on keys
 signed with that name, each recorded session replaced by a fresh one (``seq`` kept, so the
 order within a session holds), which every robot takes as a new order.
+
+A replay of commands also listens to the robots' acks and counts what became of what it put
+(:class:`Answers`): acted on, dropped as stale or expired, refused; after the last command it
+waits a moment for the last answers. So ``kinesphere replay`` says when every robot dropped a
+session it had already heard, names the ``--restamp`` replay that works, and exits non-zero.
 """
 
 from __future__ import annotations
@@ -58,7 +63,15 @@ from kinesphere.clients.options import REPLAYED, TrafficOptions
 from kinesphere.errors import KinesphereError
 from kinesphere.keyexpr import WILDCARD, Keys
 from kinesphere.lru import Lru
-from kinesphere.protocol import Command, Message, RobotState, decode_any, encode
+from kinesphere.protocol import (
+    Ack,
+    AckStage,
+    Command,
+    Message,
+    RobotState,
+    decode_any,
+    encode,
+)
 from kinesphere.zconfig import undeclare, unmatched
 
 log = logging.getLogger(__name__)
@@ -142,14 +155,116 @@ def wanted(kind: str) -> tuple[type[Message], ...]:
     raise KinesphereError("malformed", f"replay {kind!r}? choose one of {', '.join(KINDS)}")
 
 
+ANSWERS_QUIET_S: Final = 0.5
+"""After the last command, a replay waits for the robots' answers until none came for this
+long (once one came) ..."""
+ANSWERS_MAX_S: Final = 3.0
+"""... or this long in all."""
+ACTED: Final = frozenset({AckStage.ACCEPTED, AckStage.ESTOPPED, AckStage.RELEASED,
+                          AckStage.STOPPED, AckStage.HOLDING, AckStage.LEASED})
+"""The first stage a robot gives a command it acts on (one per command and robot)."""
+DROPPED: Final = ("stale", "expired")
+"""Refusal codes of a command the robot dropped for its age (``--restamp`` sends anew)."""
+
+
+class Answers:
+    """The robots' acks to the commands a replay put, counted per command and robot by what
+    became of them: acted on, dropped as ``stale`` or ``expired`` (per robot), or refused
+    with another code. An ack counts when its ``(sender, session)`` is one the replay put and
+    its ``seq`` lies within what it put there (:data:`MAX_SESSIONS` pairs remembered), so
+    other clients' acks do not count. Fed on Zenoh's thread, read after the replay."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._put: Lru[tuple[str, str], list[int]] = Lru(MAX_SESSIONS)
+        self.acted = 0
+        self.dropped: dict[str, dict[str, int]] = {}
+        """Code (:data:`DROPPED`) -> robot -> commands."""
+        self.refused: dict[str, int] = {}
+        """Code -> commands."""
+        self.last_at: float | None = None
+        """When the last answer came (monotonic)."""
+
+    def sent(self, cmd: Command) -> None:
+        with self._lock:
+            span = self._put.get((cmd.sender, cmd.session))
+            if span is None:
+                self._put.put((cmd.sender, cmd.session), [cmd.seq, cmd.seq])
+            else:
+                span[0], span[1] = min(span[0], cmd.seq), max(span[1], cmd.seq)
+
+    def on_sample(self, sample: zenoh.Sample) -> None:
+        try:
+            ack = decode_any(sample.payload)
+        except KinesphereError:
+            return
+        if not isinstance(ack, Ack):
+            return
+        with self._lock:
+            span = self._put.get((ack.sender, ack.session))
+            if span is None or not span[0] <= ack.seq <= span[1]:
+                return
+            self.last_at = time.monotonic()
+            if ack.stage in ACTED:
+                self.acted += 1
+            elif ack.stage != AckStage.REJECTED:
+                return
+            elif ack.code in DROPPED:
+                by = self.dropped.setdefault(ack.code, {})
+                by[ack.robot_id] = by.get(ack.robot_id, 0) + 1
+            else:
+                self.refused[ack.code] = self.refused.get(ack.code, 0) + 1
+
+    def wait(self, should_stop: Callable[[], bool]) -> None:
+        """Give the robots a moment to answer the last commands put: until none came for
+        :data:`ANSWERS_QUIET_S` once one came, at most :data:`ANSWERS_MAX_S`, or a stop."""
+        start = time.monotonic()
+        end = start + ANSWERS_MAX_S
+        while (now := time.monotonic()) < end and not should_stop():
+            with self._lock:
+                last = self.last_at
+            if last is not None and now - max(last, start) >= ANSWERS_QUIET_S:
+                return
+            time.sleep(0.05)
+
+    def words(self, commands: int, path: str | Path, restamp: bool) -> tuple[str, int]:
+        """What became of the ``commands`` put, for people, and the exit status: 0 when
+        robots acted on them and dropped or refused none, 1 otherwise (nobody answered, a
+        command dropped or refused). Commands dropped for their age name the replay that
+        sends them as new (unless it was one)."""
+        with self._lock:
+            acted, dropped, refused = self.acted, dict(self.dropped), dict(self.refused)
+        if not (acted or dropped or refused):
+            return (f"no robot answered any of the {commands} command(s): none of the robots "
+                    "they address is running, or none heard them", 1)
+        said = [f"{acted} acted on"]
+        for code, by in sorted(dropped.items()):
+            robots = ", ".join(f"{rid} {n}" for rid, n in sorted(by.items()))
+            said.append(f"{sum(by.values())} dropped as {code} ({robots})")
+        if refused:
+            said.append("refused: " + ", ".join(f"{n} {code}" for code, n in
+                                                sorted(refused.items())))
+        text = f"the robots' answers to {commands} command(s), per robot: " + "; ".join(said)
+        if dropped and not restamp:
+            text += ("\nthe robots dropped them for their age: they had heard the recorded "
+                     "session (stale) or its commands are older than their ttl (expired); "
+                     f"send them as new commands with '{hints.replay(str(path), restamp=True)}'")
+        return text, 0 if acted and not (dropped or refused) else 1
+
+
 @dataclass(frozen=True)
 class Replayed:
-    """What a replay did: how many messages it put, the recorded keys nobody subscribed to
-    when it began (their messages went out to no one), and how many silences it shortened."""
+    """What a replay did: how many messages it put (``commands`` of them commands), the
+    recorded keys nobody subscribed to when it began (their messages went out to no one), how
+    many silences it shortened, what the robots answered to the commands, and whether it was
+    stopped before the end."""
 
     sent: int
     unheard: list[str]
     shortened: int = 0
+    commands: int = 0
+    answers: Answers = field(default_factory=Answers)
+    interrupted: bool = False
 
 
 def replay_key(keys: Keys, topic: str, kind: type[Message]) -> str:
@@ -239,8 +354,12 @@ def replay(session: zenoh.Session, path: str | Path, kind: str = "commands",
                                           else topic, me)
                        for topic, type_ in found.topics.items() if type_ is Command})
     publishers: dict[str, Any] = {}
-    sent = shortened = 0
+    sent = shortened = commands = 0
+    answers = Answers()
+    listener = None
     try:
+        if Command in found.topics.values():
+            listener = session.declare_subscriber(keys.ack(WILDCARD), answers.on_sample)
         for key in dict.fromkeys(put_on.values()):
             publishers[key] = _publisher(session, key)
         unheard = unmatched(publishers, wait)
@@ -260,10 +379,13 @@ def replay(session: zenoh.Session, path: str | Path, kind: str = "commands",
             due += gap / speed
             while (left := due - time.monotonic()) > 0:
                 if should_stop():
-                    return Replayed(sent, unheard, shortened)
+                    return Replayed(sent, unheard, shortened, commands, answers, True)
                 time.sleep(min(left, 0.05))
             if restamp and isinstance(msg, Command):
                 msg = _restamped(msg, me, clock, sessions)
+            if isinstance(msg, Command):
+                answers.sent(msg)
+                commands += 1
             key = put_on[raw.topic]
             try:
                 publishers[key].put(encode(msg))
@@ -272,9 +394,11 @@ def replay(session: zenoh.Session, path: str | Path, kind: str = "commands",
             sent += 1
             if on_put is not None:
                 on_put(key, msg)
+        if commands:
+            answers.wait(should_stop)
     finally:
-        undeclare(*publishers.values())
-    return Replayed(sent, unheard, shortened)
+        undeclare(*publishers.values(), listener)
+    return Replayed(sent, unheard, shortened, commands, answers, should_stop())
 
 
 def _publisher(session: zenoh.Session, key: str) -> Any:
