@@ -62,6 +62,10 @@ Int = Annotated[int, msgspec.Meta(ge=-MAX_INT, le=MAX_INT)]
 Name = Annotated[str, msgspec.Meta(max_length=MAX_NAME)]
 ANONYMOUS: Final = "anonymous"
 """Who a command without ``sender`` is, in ``RobotState.estop_by`` and ``lease_holder``."""
+OVERFLOW: Final = "*overflow*"
+"""Who holds the e-stop latch of every sender past those a robot names (``estop_by``,
+``FleetEstop.sender``): no release clears it, only restarting the robot's agent. Never a
+sender's name behind access control (``*`` is not in a key)."""
 MAX_TEXT: Final = 1024
 """Longest free text (``detail``) in characters; producers cut theirs to it."""
 Text = Annotated[str, msgspec.Meta(max_length=MAX_TEXT)]

@@ -9,12 +9,13 @@ from functools import partial
 import msgspec
 
 from kinesphere.errors import KinesphereError
-from kinesphere.protocol import Command, Drive, LeaseAction, SpatialCommand
+from kinesphere.protocol import OVERFLOW, Command, Drive, LeaseAction, SpatialCommand
 from kinesphere.robots.agent import acks
 from kinesphere.robots.agent.acks import AckLimiter
-from kinesphere.robots.agent.inbox import MAX_PENDING, PER_SENDER, Inbox, Resolved
+from kinesphere.robots.agent.inbox import MAX_ESTOPS, MAX_PENDING, PER_SENDER, Inbox, Resolved
 from kinesphere.robots.agent.lease import LEASE_TIMEOUT_S, Lease
 from kinesphere.robots.agent.ordering import MAX_CLOCK_AHEAD_S, Ordering, Received
+from kinesphere.robots.agent.safety import MAX_LATCHES, OVERFLOW_WORDS, Safety, Verdict
 
 MS = 1_000_000
 PART = SpatialCommand("limb_11", "distal_11", "left-high", 2.0)
@@ -182,3 +183,36 @@ def test_ack_rate_is_bounded_per_sender_and_in_all() -> None:
     assert limiter.allow("calm"), "another sender is not starved by the flood"
     total = sum(limiter.allow(f"s{i}") for i in range(10_000))
     assert total <= acks.TOTAL_BURST and len(limiter) == acks.MAX_BUCKETS
+
+
+def test_an_estop_always_latches_past_the_latches_a_robot_names() -> None:
+    """One more sender's e-stop than the named latches holds the overflow latch: no latch is
+    evicted, and no release, not even one in the overflow latch's name, clears it."""
+    safety = Safety()
+    senders = [f"op{i}" for i in range(MAX_LATCHES + 3)]
+    for i, who in enumerate(senders):
+        assert safety.on_command(cmd(i + 1, sender=who, estop=True), 0.0) is Verdict.ESTOP
+    assert safety.latches == [*senders[:MAX_LATCHES], OVERFLOW]
+    assert OVERFLOW_WORDS in safety.holders()
+    for who in [*senders, OVERFLOW]:
+        assert safety.on_command(cmd(99, sender=who, release=True), 0.0) is Verdict.LATCHED
+    assert safety.latches == [OVERFLOW] and safety.estop_by == OVERFLOW
+    assert safety.on_command(cmd(100, sender="late", estop=True), 0.0) is Verdict.ESTOP
+    assert safety.latches == [OVERFLOW, "late"], "room again: a named latch"
+
+
+def test_the_estop_lane_loses_no_latch() -> None:
+    """More e-stops in one step than the lane holds: a newer one of a sender waiting takes
+    the older one's place, and of the senders past the lane's room one is kept as the overflow
+    e-stop (every other sender waiting still latches in its own name)."""
+    box = Inbox()
+    seq = itertools.count(1)
+    senders = [f"e{i}" for i in range(MAX_ESTOPS + 10)]
+    for who in senders:
+        box.put(at(cmd(next(seq), sender=who, estop=True), 1))
+    again = next(seq)
+    box.put(at(cmd(again, sender="e0", estop=True), 1))
+    kept = box.drain().estops
+    assert len(kept) == MAX_ESTOPS
+    assert {r.cmd.sender for r in kept} == {*senders[:MAX_ESTOPS - 1], OVERFLOW}
+    assert [r.cmd.seq for r in kept if r.cmd.sender == "e0"] == [again]

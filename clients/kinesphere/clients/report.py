@@ -14,7 +14,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from kinesphere import hints
-from kinesphere.protocol import ANONYMOUS, Ack, AckStage, RobotState, Status
+from kinesphere.protocol import ANONYMOUS, OVERFLOW, Ack, AckStage, RobotState, Status
 from kinesphere.words import degrees, signed
 
 STALE_S = 0.5
@@ -50,11 +50,22 @@ def estop_words(st: RobotState, me: str, release_press: str = "") -> str:
         how = (f"press {release_press} to release" if release_press else
                f"release with '{hints.release_estop(st.robot_id)}'")
         return f"E-STOP latched by you: {how}"
+    if by == OVERFLOW:
+        return ("E-STOP latched by more senders than the robot names: no release clears "
+                "that latch, only restarting its agent at the robot")
     if not by or by == ANONYMOUS:
         return (f"E-STOP latched by an operator without a name: release with "
                 f"'{hints.release_estop(st.robot_id)}'")
     return (f"E-STOP latched by {by}: only {by} releases it "
             f"('{hints.release_estop(st.robot_id, by)}')")
+
+
+def still_latched(robot_id: str, by: str) -> str:
+    """A robot latched by another operator than this one, and the release that works."""
+    if by == OVERFLOW:
+        return f"{robot_id} by more senders than it names (only restarting its agent releases it)"
+    return (f"{robot_id} by {by or 'an operator without a name'} "
+            f"('{hints.release_estop(robot_id, by if by != ANONYMOUS else '')}')")
 
 
 def status_words(st: RobotState, me: str = "", release_press: str = "") -> Line:

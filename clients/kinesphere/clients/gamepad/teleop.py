@@ -53,10 +53,10 @@ from kinesphere.clients.gamepad.readout import Readout
 from kinesphere.clients.gamepad.state import Action, ControllerState
 from kinesphere.clients.link import RobotLink, Seen
 from kinesphere.clients.options import TeleopOptions
-from kinesphere.clients.report import current_answer
+from kinesphere.clients.report import current_answer, still_latched
 from kinesphere.errors import did_you_mean
 from kinesphere.laban import Direction
-from kinesphere.protocol import ANONYMOUS, SpatialCommand, Status
+from kinesphere.protocol import SpatialCommand, Status
 
 log = logging.getLogger(__name__)
 
@@ -158,9 +158,7 @@ class Teleop:
                 else "no robot reports an e-stop latched by you")
         if others:
             said += "; still latched by others: " + ", ".join(
-                f"{rid} by {by or 'an operator without a name'} "
-                f"('{hints.release_estop(rid, by if by != ANONYMOUS else '')}')"
-                for rid, by in others.items())
+                still_latched(rid, by) for rid, by in others.items())
         self.message = said
 
     def _stop_stream(self) -> None:

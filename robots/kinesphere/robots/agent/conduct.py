@@ -22,7 +22,15 @@ from collections.abc import Callable, Hashable
 from kinesphere import hints
 from kinesphere.errors import KinesphereError
 from kinesphere.lru import Lru
-from kinesphere.protocol import ANONYMOUS, AckStage, Command, LeaseAction, Pose, Status
+from kinesphere.protocol import (
+    ANONYMOUS,
+    OVERFLOW,
+    AckStage,
+    Command,
+    LeaseAction,
+    Pose,
+    Status,
+)
 from kinesphere.ratelog import RateLog
 from kinesphere.robots.agent.acks import Acks, Due, Meaning, Motion
 from kinesphere.robots.agent.base import drive_base
@@ -281,14 +289,19 @@ class Conduct:
             self.estop_lag.append(self.ticks - item.tick)
             by = cmd.sender or ANONYMOUS
             fleet = self.board is not None and self.board.engaged(cmd.sender)
-            release = hints.release_estop("all" if fleet else self.robot_id,
-                                          "" if by == ANONYMOUS else by)
             what = "fleet e-stop" if fleet else "e-stop"
             if cmd.session == FLEET_SESSION:
                 what += " in force (sent before this robot heard it)"
-            each = " (each holder releases their own)" if len(self.safety.latches) > 1 else ""
-            self.halt(Status.ESTOP, f"{what} from {self.safety.holders()}; release with "
-                      f"'{release}'{each}", AckStage.SUPERSEDED)
+            if by == OVERFLOW or by not in self.safety.latches:  # held by the overflow latch
+                how = "only restarting its agent at the robot releases it"
+            else:
+                release = hints.release_estop("all" if fleet else self.robot_id,
+                                              "" if by == ANONYMOUS else by)
+                each = " (each holder releases their own)" if len(self.safety.latches) > 1 \
+                    else ""
+                how = f"release with '{release}'{each}"
+            self.halt(Status.ESTOP, f"{what} from {self.safety.holders()}; {how}",
+                      AckStage.SUPERSEDED)
             log.warning("agent %s: %s by %s (seq %d)", self.robot_id, what, by, cmd.seq)
             self.acks.send(cmd, AckStage.ESTOPPED)
         elif verdict is Verdict.LATCHED:

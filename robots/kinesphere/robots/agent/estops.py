@@ -22,8 +22,12 @@ robot by itself: only a release that reaches the robot does (what the board lear
 only what robots that did not hear the e-stop do). Who holds the board when every robot
 process has stopped: nobody; a fleet restarted whole starts unlatched.
 
-Bounded: :data:`MAX_FLEET_ESTOPS` senders per board (released records are forgotten first),
-names by the protocol's bounds; a reply that does not decode is ignored.
+Bounded without losing an e-stop: a board keeps :data:`MAX_FLEET_ESTOPS` records. Released
+records are forgotten to make room; one in force never is. When every record is in force, the
+e-stop of one more sender puts the :data:`OVERFLOW` record in force instead (in one slot kept
+for it): robots latch it as their overflow latch (``safety.py``), which no release clears, and
+the board never learns it released, so it stays in force until every robot process that knew
+it has restarted. Names by the protocol's bounds; a reply that does not decode is ignored.
 """
 
 from __future__ import annotations
@@ -40,6 +44,7 @@ from kinesphere.keyexpr import Keys
 from kinesphere.protocol import (
     ANONYMOUS,
     MAX_FLEET_ESTOPS,
+    OVERFLOW,
     Command,
     FleetEstop,
     FleetEstops,
@@ -119,22 +124,40 @@ class FleetBoard:
                 self._learn(FleetEstop(ANONYMOUS, False, max(cmd.sent_ns, anonymous.sent_ns)))
 
     def _learn(self, rec: FleetEstop) -> bool:
-        """Keep ``rec`` if it is news; True when it puts an e-stop newly in force."""
+        """Keep ``rec`` if it is news; True when it puts an e-stop newly in force. A record in
+        force is never forgotten (module text: the overflow record takes one past the
+        bound)."""
+        if rec.sender == OVERFLOW and not rec.engaged:
+            return False  # nobody releases the overflow record
         with self._lock:
             old = self._records.get(rec.sender)
             if not newer(rec, old):
                 return False
+            if old is None and rec.sender != OVERFLOW and not self._room():
+                if not rec.engaged:
+                    return False  # the release of an e-stop it does not keep
+                log.warning("fleet e-stops: %d senders' in force; %s's is kept as the "
+                            "overflow e-stop, which only restarts clear", MAX_FLEET_ESTOPS - 1,
+                            rec.sender)
+                rec = FleetEstop(OVERFLOW, True, rec.sent_ns)
+                old = self._records.get(OVERFLOW)
+                if old is not None:
+                    return False  # in force already
             self._records[rec.sender] = rec
             self._records.move_to_end(rec.sender)
-            while len(self._records) > MAX_FLEET_ESTOPS:
-                released = next((s for s, r in self._records.items() if not r.engaged), None)
-                if released is None:
-                    dropped = self._records.popitem(last=False)[1]
-                    log.warning("fleet e-stops: %d in force; forgetting %s's, the oldest",
-                                MAX_FLEET_ESTOPS, dropped.sender)
-                else:
-                    del self._records[released]
             return rec.engaged and (old is None or not old.engaged)
+
+    def _room(self) -> bool:
+        """Whether a new sender's record fits (under the lock): below the bound, less the
+        slot kept for the overflow record, after forgetting a released record if need be."""
+        named = len(self._records) - (OVERFLOW in self._records)
+        if named < MAX_FLEET_ESTOPS - 1:
+            return True
+        released = next((s for s, r in self._records.items() if not r.engaged), None)
+        if released is None:
+            return False
+        del self._records[released]
+        return True
 
     # --- sharing it -------------------------------------------------------------------------
 

@@ -5,7 +5,10 @@ here; the control loop drains it once per step. Why not a plain queue:
 
 * **E-stops go ahead of everything**, in a lane of their own, so a flood of commands from one
   sender cannot delay another's e-stop: the loop handles every e-stop of a step before any
-  other command.
+  other command. The lane is bounded without losing a latch: when it is full, a newer e-stop
+  of a sender waiting there takes the older one's place (one latches that sender), and
+  another sender's e-stop becomes the lane's one :data:`OVERFLOW` e-stop, which latches the
+  robot's overflow latch (``safety.py``).
 * **Bounded**: the robot acts on the newest command of each sender, so a motion command
   replaces the one still waiting from the same ``(sender, session)`` (the replaced one is
   acknowledged ``superseded``). Commands that change more than the target (stop, e-stop
@@ -25,14 +28,16 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import NamedTuple
 
+import msgspec
+
 from kinesphere.errors import KinesphereError
-from kinesphere.protocol import Command, LeaseAction
+from kinesphere.protocol import ANONYMOUS, OVERFLOW, Command, LeaseAction
 from kinesphere.robots.agent.ordering import Received
 from kinesphere.robots.agent.pacing import Wake
 from kinesphere.robots.agent.resolver import PoseAnswer
 
 MAX_ESTOPS = 64
-"""E-stops kept per step (one is enough to latch; the rest only wait for their acks)."""
+"""E-stops kept per step (module text: past them, none is lost)."""
 MAX_PENDING = 64
 """``(sender, session)`` pairs with commands waiting for the next step."""
 PER_SENDER = 8
@@ -88,7 +93,7 @@ class Inbox:
         """Called after every put: sets ``wake`` (a fleet host's also notes the robot)."""
         self._lock = threading.Lock()
         self._arrivals = 0
-        self._estops: deque[Received] = deque(maxlen=MAX_ESTOPS)
+        self._estops: deque[Received] = deque()
         self._pairs: OrderedDict[tuple[str, str], deque[tuple[int, Received]]] = OrderedDict()
         self._other: deque[tuple[int, KinesphereError | Resolved]] = deque(maxlen=16)
         self._bad: tuple[int, KinesphereError] | None = None
@@ -98,7 +103,7 @@ class Inbox:
         cmd = item.cmd
         with self._lock:
             if cmd.estop:
-                self._estops.append(item)
+                self._put_estop(item)
                 self._notify()
                 return
             self._arrivals += 1
@@ -116,6 +121,21 @@ class Inbox:
                 self._superseded.append(queue.popleft()[1])
             queue.append((self._arrivals, item))
         self._notify()
+
+    def _put_estop(self, item: Received) -> None:
+        """Into the e-stop lane, bounded without losing a latch (module text; under the
+        lock)."""
+        lane = self._estops
+        if len(lane) >= MAX_ESTOPS - 1:
+            who = item.cmd.sender or ANONYMOUS
+            older = next((r for r in lane if (r.cmd.sender or ANONYMOUS) == who), None)
+            if older is not None:
+                lane.remove(older)  # this one latches its sender
+            elif any(r.cmd.sender == OVERFLOW for r in lane):
+                return  # the overflow e-stop waiting latches it
+            else:
+                item = item._replace(cmd=msgspec.structs.replace(item.cmd, sender=OVERFLOW))
+        lane.append(item)
 
     def _evict(self, keep: tuple[str, str]) -> deque[tuple[int, Received]]:
         """Make room: the least recently heard pair waiting with motion commands only (they

@@ -19,6 +19,11 @@ The rules (also in ``docs/protocol.md`` terms):
   every sender) is nobody's, so any named sender may release it. A latch whose sender is
   gone is cleared by restarting the agent, at the robot. The release only clears latches;
   its parts and drive are *not* executed, so the robot moves again only on the next command.
+* **An e-stop always latches.** The robot names :data:`MAX_LATCHES` senders' latches; the
+  e-stop of one more sender while they are all held latches the one :data:`OVERFLOW` latch
+  instead (no latch is ever evicted to make room). Nobody can say whose that latch is, so no
+  release clears it: only restarting the agent, at the robot. A fleet e-stop in force comes
+  back after the restart (``estops.py``), each in its sender's name.
 * ``stop=True`` halts everything in place the same way, without latching.
 * ``deadman=False`` means the operator let go: everything brakes to rest and holds; the
   command's parts and drive are ignored.
@@ -34,12 +39,16 @@ from __future__ import annotations
 import enum
 from dataclasses import dataclass, field
 
-from kinesphere.protocol import ANONYMOUS, Command
+from kinesphere.protocol import ANONYMOUS, OVERFLOW, Command
 
 DRIVE_TTL_S = 0.5
 """Watchdog for a Drive sent with ``ttl_ms=0``: a base never drives on a single message."""
 MAX_LATCHES = 16
-"""Senders whose e-stops are latched at once (more e-stop a robot already latched)."""
+"""Senders whose e-stops a robot latches by name; past them, :data:`OVERFLOW` latches."""
+
+
+OVERFLOW_WORDS = f"more senders than the {MAX_LATCHES} it names (only a restart clears theirs)"
+"""The :data:`OVERFLOW` latch in people's words."""
 
 
 class Verdict(enum.Enum):
@@ -70,20 +79,36 @@ class Safety:
         """Who latched the e-stop ("" when not latched; the first of several)."""
         return self.latches[0] if self.latches else ""
 
+    @property
+    def overflowed(self) -> bool:
+        """Whether the :data:`OVERFLOW` latch is held (only a restart clears it)."""
+        return OVERFLOW in self.latches
+
     def holders(self) -> str:
         """Every latch's sender, for people."""
-        return ", ".join(self.latches)
+        return ", ".join(OVERFLOW_WORDS if s == OVERFLOW else s for s in self.latches)
+
+    def latch(self, sender: str) -> str:
+        """Latch ``sender``'s e-stop (``""``: anonymous); the latch it holds now: its own,
+        or :data:`OVERFLOW` when :data:`MAX_LATCHES` others are held (never evicted)."""
+        who = sender or ANONYMOUS
+        if who in self.latches:
+            return who
+        if who != OVERFLOW and len(self.latches) - self.overflowed < MAX_LATCHES:
+            self.latches.append(who)
+            return who
+        if not self.overflowed:
+            self.latches.append(OVERFLOW)
+        return OVERFLOW
 
     def on_command(self, cmd: Command, now: float) -> Verdict:
         """Classify ``cmd`` received at ``now`` and arm or disarm the watchdog."""
         if cmd.estop:
-            who = cmd.sender or ANONYMOUS
-            if who not in self.latches and len(self.latches) < MAX_LATCHES:
-                self.latches.append(who)
+            self.latch(cmd.sender)
             self.deadline = None
             return Verdict.ESTOP
         if self.estopped:
-            if cmd.release and cmd.sender:
+            if cmd.release and cmd.sender and cmd.sender != OVERFLOW:
                 for latch in (cmd.sender, ANONYMOUS):  # nobody's latch: any named sender
                     if latch in self.latches:
                         self.latches.remove(latch)
