@@ -17,9 +17,11 @@ from typing import Any
 
 from kinesphere.cliargs import (
     PLATFORMS_ENV,
+    Subcommands,
     add_merge_distance,
     add_output,
     add_platforms_argument,
+    command,
     use_platform_dirs,
 )
 from kinesphere.errors import KinesphereError
@@ -36,9 +38,9 @@ ROLE_COMMANDS: dict[str, tuple[str, ...]] = {
 (names only: the core imports no role). A test keeps it equal to the registered commands."""
 
 
-def _register_core(sub: Any) -> None:
-    p = sub.add_parser(
-        "label",
+def _register_core(sub: Subcommands) -> None:
+    p = command(
+        sub, "label", _label,
         help="propose an eURDF (body_part labels) for a plain URDF file",
         description="Derive the paper's hierarchical labels (c_1, limb_ij, distal_ij) from a "
         "URDF tree and print the eURDF; edit it, then check it with 'kinesphere describe FILE'.",
@@ -46,7 +48,6 @@ def _register_core(sub: Any) -> None:
     p.add_argument("urdf", type=Path, help="a plain URDF file")
     add_merge_distance(p)
     add_output(p, "the eURDF", default="stdout")
-    p.set_defaults(func=_label)
 
 
 def _label(args: argparse.Namespace) -> int:

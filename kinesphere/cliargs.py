@@ -17,9 +17,10 @@ from __future__ import annotations
 
 import argparse
 import os
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any, TypeAlias
 
 from kinesphere import hints
 from kinesphere.endpoints import DEFAULT_ENDPOINT, LOOPBACK_ANY_PORT
@@ -83,6 +84,30 @@ QUERY = ZenohDefaults(mode="client", note=HUB)
 WATCHER = ZenohDefaults(mode="client", note=HUB)
 """A short-lived observer (``status``) joins the router as a client: the router answers for
 everyone at once, where a peer would first have to discover the others."""
+
+
+Subcommands: TypeAlias = "argparse._SubParsersAction[argparse.ArgumentParser]"
+"""Where a role registers its commands (``kinesphere.commands`` entry points get one)."""
+
+
+def command(sub: Subcommands, name: str, run: Callable[[argparse.Namespace], int],
+            help: str, description: str | None = None, **more: Any) -> argparse.ArgumentParser:
+    """Register the sub-command ``name`` that ``run`` handles; ``help`` is its line in the
+    list of commands, ``description`` heads its own ``--help`` (``more``: epilog, a
+    formatter). The caller adds the options to the parser returned."""
+    parser: argparse.ArgumentParser = sub.add_parser(name, help=help, description=description,
+                                                     **more)
+    parser.set_defaults(func=run)
+    return parser
+
+
+def command_group(sub: Subcommands, name: str, help: str, description: str | None = None, *,
+                  dest: str, metavar: str = "COMMAND", required: bool = True) -> Subcommands:
+    """Register ``name`` as a word that takes sub-commands of its own (``kinesphere ecl
+    build``), named in ``args.<dest>``; returns where to register them."""
+    parser = sub.add_parser(name, help=help, description=description)
+    group: Subcommands = parser.add_subparsers(dest=dest, metavar=metavar, required=required)
+    return group
 
 
 def add_zenoh_arguments(
@@ -274,6 +299,9 @@ __all__ = [
     "SERVICE",
     "WATCHER",
     "ZenohDefaults",
+    "Subcommands",
+    "command",
+    "command_group",
     "add_zenoh_arguments",
     "PLATFORMS_ENV",
     "add_platforms_argument",

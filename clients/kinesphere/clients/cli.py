@@ -10,14 +10,14 @@ streaming loop (~0.2 s), which ``kinesphere --help`` does not need.
 from __future__ import annotations
 
 import argparse
-from collections.abc import Callable
-from typing import Any
 
 from kinesphere.cliargs import (
+    Subcommands,
     add_ros_distro,
     add_ros_domain,
     add_score_options,
     add_zenoh_arguments,
+    command,
 )
 from kinesphere.clients.options import (
     ANSWER,
@@ -90,23 +90,21 @@ def _lease(args: argparse.Namespace) -> int:
     return lease(args)
 
 
-def _sends(p: argparse.ArgumentParser, run: Callable[[argparse.Namespace], int],
-           ttl: str = f"{STREAM.ttl_ms}", answers: tuple[OrderOptions, str] | None = None
-           ) -> None:
+def _sends(p: argparse.ArgumentParser, ttl: str = f"{STREAM.ttl_ms}",
+           answers: tuple[OrderOptions, str] | None = None) -> None:
     """What every command that sends takes last: how long robots keep to its commands (and,
-    when it waits for ``answers``, how long), who sends, the Zenoh session; then ``run``."""
+    when it waits for ``answers``, how long), who sends, the Zenoh session."""
     add_lifetime(p, ttl, wait=answers is not None)
     if answers is not None:
         add_answers(p, *answers)
     add_identity(p)
     add_zenoh_arguments(p)
-    p.set_defaults(func=run)
 
 
-def register(sub: Any) -> None:
+def register(sub: Subcommands) -> None:
     fmt = argparse.RawDescriptionHelpFormatter
-    g = sub.add_parser(
-        "gamepad",
+    g = command(
+        sub, "gamepad", _gamepad,
         formatter_class=fmt,
         help="teleoperate robots with a gamepad (or the keyboard) and a HUD",
         description="Stream spatial commands from a gamepad: the right stick moves the "
@@ -158,10 +156,10 @@ def register(sub: Any) -> None:
         help="take control (the lease) of the target from another operator on every engage, "
         "instead of being refused while they hold it",
     )
-    _sends(g, _gamepad)
+    _sends(g)
 
-    s = sub.add_parser(
-        "send",
+    s = command(
+        sub, "send", _send,
         formatter_class=fmt,
         help="send one command (L O D S ...) to a robot, a group or all",
         description="Send one Command with the given spatial parts, e.g.\n"
@@ -193,11 +191,11 @@ def register(sub: Any) -> None:
         help="repeat the command for S seconds, then stop",
     )
     add_rate(s, "with --for")
-    _sends(s, _send, f"0: the pose is reached whatever happens next; {STREAM.ttl_ms} with --for",
+    _sends(s, f"0: the pose is reached whatever happens next; {STREAM.ttl_ms} with --for",
            (SEND, "(the last command's final stage: reached, clamped, blocked...)"))
 
-    p = sub.add_parser(
-        "play",
+    p = command(
+        sub, "play", _play,
         formatter_class=fmt,
         help="play a movement phrase (TOML) or a Labanotation score (JSON) on robots",
         description="Play a phrase: steps of spatial commands (and drives) with durations, "
@@ -224,12 +222,12 @@ def register(sub: Any) -> None:
                    "cannot) and move nothing")
     p.add_argument("--report", metavar="FILE.json",
                    help="a score: write every keyframe's measured cells per robot to FILE.json")
-    _sends(p, _play, f"the phrase's ttl_ms, else {STREAM.ttl_ms}",
+    _sends(p, f"the phrase's ttl_ms, else {STREAM.ttl_ms}",
            (SEND, "after the phrase (a score: also the longest wait for a body's catalogue, "
             "and for the starting pose)"))
 
-    e = sub.add_parser(
-        "estop",
+    e = command(
+        sub, "estop", _estop,
         help="emergency-stop every robot (or --release the target's latch)",
         description="Put an e-stop Command on <prefix>/robot/*/command: every robot halts "
         "in place and latches until released; repeated until every live robot acknowledged "
@@ -238,10 +236,10 @@ def register(sub: Any) -> None:
     )
     e.add_argument("--release", action="store_true", help="release instead of stopping")
     add_target(e, default=None, note="with --release: whose e-stop to release")
-    _sends(e, _estop, answers=(ANSWER, "(estopped, released)"))
+    _sends(e, answers=(ANSWER, "(estopped, released)"))
 
-    ls = sub.add_parser(
-        "lease",
+    ls = command(
+        sub, "lease", _lease,
         formatter_class=fmt,
         help="acquire, take over or release control of a robot, a group or all",
         description="A robot obeys one operator (sender) at a time. 'acquire' asks for its "
@@ -255,4 +253,4 @@ def register(sub: Any) -> None:
     add_target(ls, positional=True)
     ls.add_argument("--hold", type=float, default=0.0, metavar="S",
                     help="keep the lease alive for S seconds (Ctrl-C ends it), then release")
-    _sends(ls, _lease, answers=(ANSWER, "(leased, or refused naming the holder)"))
+    _sends(ls, answers=(ANSWER, "(leased, or refused naming the holder)"))

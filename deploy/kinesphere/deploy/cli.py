@@ -9,11 +9,11 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
-from typing import Any
 
 from kinesphere.cliargs import (
     DEFAULT_ENDPOINT,
     WATCHER,
+    Subcommands,
     add_bodies,
     add_json,
     add_output,
@@ -21,6 +21,7 @@ from kinesphere.cliargs import (
     add_score_options,
     add_timeout,
     add_zenoh_arguments,
+    command,
 )
 from kinesphere.deploy.plan import DEFAULT_ROBOTS, UpOptions
 from kinesphere.errors import KinesphereError
@@ -31,9 +32,9 @@ STATUS_TIMEOUT_S = 2.0
 """How long ``kinesphere status`` listens at most."""
 
 
-def register(sub: Any) -> None:
-    up = sub.add_parser(
-        "up",
+def register(sub: Subcommands) -> None:
+    up = command(
+        sub, "up", _up,
         help="start a whole local system (databank + robots), play a demo, stop it all",
         description="Start a router (the hub, serving nothing else), a databank and one robot "
         "agent per robot as separate processes on loopback, all Zenoh clients of the router "
@@ -64,10 +65,9 @@ def register(sub: Any) -> None:
     up.add_argument("--db", action="append", default=[], metavar="PLATFORM=PATH",
                     help="serve this databank file instead of the shipped one (repeatable)")
     add_prefix(up, UP.prefix)
-    up.set_defaults(func=_up)
 
-    st = sub.add_parser(
-        "status",
+    st = command(
+        sub, "status", _status,
         help="list live databanks and robots and each robot's last state",
         description="Listen to who is alive (liveliness, with history) and to every robot's "
         "state until discovery settles: every live robot has reported and nothing new turned "
@@ -78,10 +78,9 @@ def register(sub: Any) -> None:
                 then="exit 1 when nothing answered by then")
     add_json(st, "the databanks and robots found (instead of a table)")
     add_zenoh_arguments(st, WATCHER, listen=False)
-    st.set_defaults(func=_status)
 
-    rt = sub.add_parser(
-        "router",
+    rt = command(
+        sub, "router", _router,
         help="run a Zenoh router (TLS, access control) until SIGTERM/Ctrl-C",
         description="Run a Zenoh router from the Python package with a JSON5 config file (see "
         "deploy/router.json5). With access control on, every denied message is logged as "
@@ -104,10 +103,9 @@ def register(sub: Any) -> None:
                     "other's clients, see deploy/README.md, 'Several sites')")
     rt.add_argument("--log-denials", action=argparse.BooleanOptionalAction, default=None,
                     help="log access-control denials (default: on when access control is)")
-    rt.set_defaults(func=_router)
 
-    fm = sub.add_parser(
-        "film",
+    fm = command(
+        sub, "film", _film,
         help="film a movement phrase or a Labanotation score performed by every body side by "
         "side (MP4 and GIF)",
         description="Render PHRASE (a phrase file or shipped name) on each platform's real "
@@ -127,7 +125,6 @@ def register(sub: Any) -> None:
     fm.add_argument("--width", type=int, default=320, help="tile width in pixels (default 320)")
     fm.add_argument("--height", type=int, default=240, help="tile height (default 240)")
     fm.add_argument("--fps", type=float, default=15.0, help="frames per second (default 15)")
-    fm.set_defaults(func=_film)
 
 
 def _up(args: argparse.Namespace) -> int:

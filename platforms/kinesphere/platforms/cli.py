@@ -8,17 +8,17 @@ import math
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from kinesphere.cliargs import add_json, add_merge_distance
+from kinesphere.cliargs import Subcommands, add_json, add_merge_distance, command, command_group
 
 if TYPE_CHECKING:  # imported lazily: yourdfpy/trimesh cost ~1 s at every CLI start
     from kinesphere.eurdf import Eurdf
 
 
-def register(sub: Any) -> None:
-    n = sub.add_parser("platform", help="bring your own robot: 'platform new NAME --urdf FILE'")
-    nsub = n.add_subparsers(dest="platform_command", metavar="ACTION", required=True)
-    new = nsub.add_parser(
-        "new",
+def register(sub: Subcommands) -> None:
+    nsub = command_group(sub, "platform", "bring your own robot: 'platform new NAME --urdf FILE'",
+                         dest="platform_command", metavar="ACTION")
+    new = command(
+        nsub, "new", _platform_new,
         help="scaffold a platform folder from any URDF",
         description="Write DIR/NAME/: the eURDF (proposed labels, meshes copied beside it), "
         "platform.toml (base kind, height, neutral pose) and vsam.toml (Laban-27 for every "
@@ -47,12 +47,10 @@ def register(sub: Any) -> None:
     new.add_argument("--force", action="store_true",
                      help="replace an existing platform folder (as a whole, once the new one "
                      "is complete)")
-    new.set_defaults(func=_platform_new)
-    p = sub.add_parser("platforms", help="list the known platforms (shipped and brought)")
+    p = command(sub, "platforms", _platforms, help="list the known platforms (shipped and brought)")
     add_json(p, "the list")
-    p.set_defaults(func=_platforms)
-    d = sub.add_parser(
-        "describe",
+    d = command(
+        sub, "describe", _describe,
         help="print a platform's labels C, J, L, configuration space P and body vocabulary",
         description="Print C (core), J (joint locations), L (limbs, with the links each covers), "
         "the DOF count, P (joint limits) and the body vocabulary: which label answers each "
@@ -64,7 +62,6 @@ def register(sub: Any) -> None:
         "--json: one list), or an eURDF path"
     )
     add_json(d, "the description")
-    d.set_defaults(func=_describe)
 
 
 def _platform_new(args: argparse.Namespace) -> int:

@@ -11,18 +11,25 @@ import sys
 import threading
 import time
 from pathlib import Path
-from typing import Any
 
-from kinesphere.cliargs import OPERATOR, WATCHER, add_output, add_wait, add_zenoh_arguments
+from kinesphere.cliargs import (
+    OPERATOR,
+    WATCHER,
+    Subcommands,
+    add_output,
+    add_wait,
+    add_zenoh_arguments,
+    command,
+)
 from kinesphere.clients.options import REPLAYED, TrafficOptions, add_duration, add_identity
 from kinesphere.errors import KinesphereError
 from kinesphere.keyexpr import Keys
 from kinesphere.signals import handle_signals
 
 
-def register(sub: Any) -> None:
-    r = sub.add_parser(
-        "record",
+def register(sub: Subcommands) -> None:
+    r = command(
+        sub, "record", record,
         help="record every command, state, ack and recorded pose to an MCAP file",
         description="Record {prefix}/robot/*/command, {prefix}/group/*/command, "
         "{prefix}/robot/*/state, {prefix}/robot/*/ack and {prefix}/ecl/*/changed and write "
@@ -36,10 +43,9 @@ def register(sub: Any) -> None:
     r.add_argument("--max-mb", type=float, default=d.max_mb, metavar="MB",
                    help=f"stop when MB megabytes of messages are written (default {d.max_mb:g})")
     add_zenoh_arguments(r, WATCHER)
-    r.set_defaults(func=record)
 
-    p = sub.add_parser(
-        "replay",
+    p = command(
+        sub, "replay", replay,
         help="re-publish a recorded session's commands (or states) with the original timing",
         description="Put the messages of an MCAP recording back on their keys, spaced as "
         "they were recorded: 'commands' drive running robots again; 'states' replay what "
@@ -68,7 +74,6 @@ def register(sub: Any) -> None:
     add_wait(p, d.wait_s, "a subscriber on each recorded key before the first put")
     add_identity(p)
     add_zenoh_arguments(p, OPERATOR)
-    p.set_defaults(func=replay)
 
 
 def record(args: argparse.Namespace) -> int:

@@ -10,9 +10,16 @@ import argparse
 import sys
 import threading
 from types import FrameType
-from typing import Any
 
-from kinesphere.cliargs import ZenohDefaults, add_ros_distro, add_ros_domain, add_zenoh_arguments
+from kinesphere.cliargs import (
+    Subcommands,
+    ZenohDefaults,
+    add_ros_distro,
+    add_ros_domain,
+    add_zenoh_arguments,
+    command,
+    command_group,
+)
 from kinesphere.clients.options import BridgeOptions
 
 BRIDGE_EPILOG = """topics, for robot ID (made a ROS name: baxter-1 -> baxter_1), relative to NS:
@@ -33,18 +40,18 @@ BRIDGE_ZENOH = ZenohDefaults(
 """The bridge joins the default endpoint and listens (ROS peers connect to it directly)."""
 
 
-def register(sub: Any) -> None:
-    r = sub.add_parser(
-        "ros2",
+def register(sub: Subcommands) -> None:
+    rsub = command_group(
+        sub, "ros2",
         help="ROS 2 over rmw_zenoh: show the robots to ROS tools",
         description="Speak ROS 2's Zenoh middleware (rmw_zenoh_cpp, Jazzy) without a ROS "
         "installation. The gamepad takes a ROS joystick with --input ros2:/joy; the agent "
         "drives a ros2_control robot with --body ros2.",
+        dest="ros2_command",
     )
-    rsub = r.add_subparsers(dest="ros2_command", metavar="COMMAND", required=True)
     d = BridgeOptions()
-    b = rsub.add_parser(
-        "bridge",
+    b = command(
+        rsub, "bridge", bridge,
         formatter_class=argparse.RawDescriptionHelpFormatter,
         help="publish every live robot's joint states, URDF, frames and odometry to ROS 2",
         description="Run one ROS node that republishes every live kinesphere robot for ROS 2 "
@@ -60,7 +67,6 @@ def register(sub: Any) -> None:
     add_ros_distro(b, d.distro, "the ROS nodes'",
                    note="the keys written follow it: humble's carry no type hash")
     add_zenoh_arguments(b, BRIDGE_ZENOH)
-    b.set_defaults(func=bridge)
 
 
 def bridge(args: argparse.Namespace) -> int:

@@ -9,17 +9,16 @@ from __future__ import annotations
 import argparse
 import sys
 import threading
-from typing import Any
 
-from kinesphere.cliargs import WATCHER, add_zenoh_arguments
+from kinesphere.cliargs import WATCHER, Subcommands, add_zenoh_arguments, command
 from kinesphere.clients.options import ViewOptions, add_duration
 from kinesphere.keyexpr import Keys
 from kinesphere.signals import handle_signals
 
 
-def register(sub: Any) -> None:
-    v = sub.add_parser(
-        "view",
+def register(sub: Subcommands) -> None:
+    v = command(
+        sub, "view", view,
         help="a live 3D view of every robot, in the browser",
         description="Serve a web page (viser) that draws every robot on the Zenoh network at "
         "its live joint state and base pose, with its id, status, current command in words, "
@@ -43,7 +42,6 @@ def register(sub: Any) -> None:
                    "--host address, or (with --host 0.0.0.0) this machine's names")
     add_duration(v)
     add_zenoh_arguments(v, WATCHER)
-    v.set_defaults(func=view)
 
 
 def view(args: argparse.Namespace) -> int:

@@ -15,7 +15,14 @@ from pathlib import Path
 from types import FrameType
 from typing import Any
 
-from kinesphere.cliargs import AGENT, add_ros_distro, add_ros_domain, add_zenoh_arguments
+from kinesphere.cliargs import (
+    AGENT,
+    Subcommands,
+    add_ros_distro,
+    add_ros_domain,
+    add_zenoh_arguments,
+    command,
+)
 from kinesphere.errors import KinesphereError
 from kinesphere.robots.agent.bodies import BODIES
 from kinesphere.robots.agent.options import ROS2_INTERFACES, AgentOptions, Ros2BodyOptions
@@ -28,9 +35,9 @@ VIEWER_HZ = 60.0
 DEFAULTS = AgentOptions()
 
 
-def register(sub: Any) -> None:
-    p = sub.add_parser(
-        "agent",
+def register(sub: Subcommands) -> None:
+    p = command(
+        sub, "agent", _agent,
         help="run a robot (simulated, or a ROS 2 one) that follows spatial commands",
         description="Run PLATFORM's body (its MuJoCo model, or with --body ros2 a ros2_control "
         "robot) in real time: it subscribes to "
@@ -78,10 +85,9 @@ def register(sub: Any) -> None:
                       help=f"a mobile base's nav_msgs/Odometry topic (default {r.odom})")
     add_ros_distro(ros2, r.distro, "the robot's")
     add_zenoh_arguments(p, AGENT)
-    p.set_defaults(func=_agent)
 
-    f = sub.add_parser(
-        "fleet",
+    f = command(
+        sub, "fleet", _fleet_file,
         help="run many simulated robots in one process (a fleet host)",
         description="Run every robot of FLEET.toml on this host: the robots are dealt to "
         "--workers processes (one per core by default), each stepping its share of MuJoCo "
@@ -94,7 +100,6 @@ def register(sub: Any) -> None:
     f.add_argument("fleet", type=Path, metavar="FLEET.toml", help="the robots to run")
     _loop_options(f)
     add_zenoh_arguments(f, AGENT)
-    f.set_defaults(func=_fleet_file)
 
 
 def _loop_options(p: argparse.ArgumentParser) -> None:

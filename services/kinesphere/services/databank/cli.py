@@ -10,21 +10,30 @@ import json
 import sys
 from typing import Any
 
-from kinesphere.cliargs import QUERY, SERVICE, add_json, add_timeout, add_zenoh_arguments
+from kinesphere.cliargs import (
+    QUERY,
+    SERVICE,
+    Subcommands,
+    add_json,
+    add_timeout,
+    add_zenoh_arguments,
+    command,
+    command_group,
+)
 from kinesphere.errors import KinesphereError
 from kinesphere.services.options import QueryOptions, add_exact
 
 
-def register(sub: Any) -> None:
-    db = sub.add_parser(
-        "databank",
+def register(sub: Subcommands) -> None:
+    dsub = command_group(
+        sub, "databank",
         help="serve ECL databanks over Zenoh (pose queries for agents and clients)",
         description="The databank service: answers pose, compound, catalogue and record "
         "queries under <prefix>/ecl/<platform>/ (see docs/protocol.md).",
+        dest="databank_command",
     )
-    dsub = db.add_subparsers(dest="databank_command", metavar="COMMAND", required=True)
-    s = dsub.add_parser(
-        "serve",
+    s = command(
+        dsub, "serve", _serve,
         help="serve databanks until SIGTERM or Ctrl-C",
         description="Serve every shipped databank (embedded SQLite, no set-up), or those "
         "named. Several replicas may serve the same platforms: each query gets one answer, and "
@@ -56,10 +65,9 @@ def register(sub: Any) -> None:
         "(shipped platforms are always known)",
     )
     add_zenoh_arguments(s, SERVICE)
-    s.set_defaults(func=_serve)
 
-    q = sub.add_parser(
-        "query",
+    q = command(
+        sub, "query", _query,
         help="ask the databank for a pose (or a platform's catalogue)",
         description="Print the joint targets f_SB(L, O, D, S) of PLATFORM, plus the base "
         "translation when S is beyond the largest stored size. L and O are labels or aliases "
@@ -75,7 +83,6 @@ def register(sub: Any) -> None:
     add_exact(q)
     add_timeout(q, QueryOptions.timeout_s, "an answer")
     add_zenoh_arguments(q, QUERY)
-    q.set_defaults(func=_query)
 
 
 def _serve(args: argparse.Namespace) -> int:

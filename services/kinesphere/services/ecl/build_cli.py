@@ -21,7 +21,7 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from kinesphere.cliargs import add_bodies, add_json, add_output
+from kinesphere.cliargs import Subcommands, add_bodies, add_json, add_output, command
 from kinesphere.errors import KinesphereError
 from kinesphere.services.options import (
     SHEET_SIZE,
@@ -31,10 +31,10 @@ from kinesphere.services.options import (
 )
 
 
-def register_build(ecl_sub: Any, top_sub: Any) -> None:
+def register_build(ecl_sub: Subcommands, top_sub: Subcommands) -> None:
     """Add build/report/render/compare under ``ecl`` and ``pose`` at the top level."""
-    b = ecl_sub.add_parser(
-        "build",
+    b = command(
+        ecl_sub, "build", _build,
         help="generate a platform's ECL with IK (the paper's Algorithm 1) and store it",
         description="Run Algorithm 1 with mink IK in the platform's MuJoCo model: every VSAM "
         "(limb, origin) pair is pulled toward each direction at each size; directions the limb "
@@ -52,10 +52,9 @@ def register_build(ecl_sub: Any, top_sub: Any) -> None:
     )
     b.add_argument("--jobs", type=int, metavar="N",
                    help="worker processes, one (limb, origin) pair each (default: one per core)")
-    b.set_defaults(func=_build)
 
-    r = ecl_sub.add_parser(
-        "report",
+    r = command(
+        ecl_sub, "report", _report,
         help="quality of a databank: size rules, pulls kept, medians of cosine, reach, margin",
         description="Summarise the generator's quality figures per limb and overall: the size "
         "rule each limb follows (reach: near, mid and far are the tip's distance from the "
@@ -71,10 +70,9 @@ def register_build(ecl_sub: Any, top_sub: Any) -> None:
     add_platform(r)
     r.add_argument("--rows", action="store_true",
                    help="also print every row's figures and why each unstable pull toppled")
-    r.set_defaults(func=_report)
 
-    a = ecl_sub.add_parser(
-        "audit",
+    a = command(
+        ecl_sub, "audit", _audit,
         help="what the databank's words mean on its body, measured by forward kinematics",
         description="Measure every stored row by forward kinematics (MuJoCo on the platform's "
         "model, from the stored joint values alone, not the generator's quality table): per "
@@ -90,20 +88,18 @@ def register_build(ecl_sub: Any, top_sub: Any) -> None:
     )
     add_platform(a)
     add_json(a, "every figure")
-    a.set_defaults(func=_audit)
 
-    v = ecl_sub.add_parser(
-        "coverage",
+    v = command(
+        ecl_sub, "coverage", _coverage,
         help="pulls each body keeps and the directions every body shares (markdown)",
         description="Count, from the shipped databanks, the pulls of Laban's 26 each (limb, "
         "origin) pair keeps, and list the directions every platform with limb_11, limb_12, "
         "limb_13 keeps: a fleet command in one of those is exact on every robot.",
     )
     add_bodies(v)
-    v.set_defaults(func=_coverage)
 
-    s = ecl_sub.add_parser(
-        "render",
+    s = command(
+        ecl_sub, "render", _render,
         help="contact sheet of one (limb, origin) pair: 27 directions as a 3x9 grid",
         description="Render every direction of a (limb, origin) pair at one size off-screen "
         "(rows high/middle/low, columns the 9 horizontals); missing directions are greyed.",
@@ -112,10 +108,9 @@ def register_build(ecl_sub: Any, top_sub: Any) -> None:
     add_cell(s, required=True, direction=False)
     s.add_argument("--size", default=str(SHEET_SIZE), help=f"size (default {SHEET_SIZE}, far)")
     add_output(s, "the PNG file")
-    s.set_defaults(func=_render)
 
-    c = ecl_sub.add_parser(
-        "compare",
+    c = command(
+        ecl_sub, "compare", _compare,
         help="the same command on every platform, side by side",
         description="The paper's 'same command, different bodies' figure: one (limb, origin, "
         "direction, size) rendered on each platform's shipped databank.",
@@ -123,10 +118,9 @@ def register_build(ecl_sub: Any, top_sub: Any) -> None:
     add_spatial_words(c)
     add_output(c, "the PNG file")
     add_bodies(c)
-    c.set_defaults(func=_compare)
 
-    p = top_sub.add_parser(
-        "pose",
+    p = command(
+        top_sub, "pose", _pose,
         help="render one ECL pose to a PNG",
         description="Look up (limb, origin, direction, size) in the platform's ECL and render "
         "the pose off-screen.",
@@ -134,7 +128,6 @@ def register_build(ecl_sub: Any, top_sub: Any) -> None:
     add_platform(p)
     add_spatial_words(p)
     add_output(p, "the PNG file")
-    p.set_defaults(func=_pose)
 
 
 def _console() -> Console:

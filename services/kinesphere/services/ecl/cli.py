@@ -15,7 +15,14 @@ import msgspec
 from rich.console import Console
 from rich.table import Table
 
-from kinesphere.cliargs import add_json, add_output, add_timeout, add_zenoh_arguments
+from kinesphere.cliargs import (
+    Subcommands,
+    add_json,
+    add_output,
+    add_timeout,
+    add_zenoh_arguments,
+    command,
+)
 from kinesphere.errors import KinesphereError
 from kinesphere.protocol import Pose
 from kinesphere.services.options import (
@@ -27,10 +34,10 @@ from kinesphere.services.options import (
 )
 
 
-def register(sub: Any) -> None:
+def register(sub: Subcommands) -> None:
     """Add the ``ecl`` command and its sub-commands to the top-level parser."""
-    ecl = sub.add_parser(
-        "ecl",
+    ecl = command(
+        sub, "ecl", lambda args: _usage(ecl),
         help="the Embodied Configuration Library: look up, show, record, export, import poses",
         description="Each platform's ECL maps a spatial command (limb, origin, direction, size) "
         "to a pose. These commands read and edit its SQLite databank directly (no robot or "
@@ -38,10 +45,9 @@ def register(sub: Any) -> None:
         "directions any Laban spelling ('Left-High', 'left high').",
     )
     ecl_sub = ecl.add_subparsers(dest="ecl_command", metavar="SUBCOMMAND")
-    ecl.set_defaults(func=lambda args: _usage(ecl))
 
-    g = ecl_sub.add_parser(
-        "get",
+    g = command(
+        ecl_sub, "get", _get,
         help="f_SB: print the pose for LIMB ORIGIN DIRECTION SIZE",
         description="Evaluate f_SB locally: integer sizes give the stored row, fractions "
         "interpolate in joint space, sizes past the largest stored one add a base translation "
@@ -54,10 +60,9 @@ def register(sub: Any) -> None:
     add_spatial_words(g)
     add_json(g, "the protocol Pose")
     add_exact(g)
-    g.set_defaults(func=_get)
 
-    r = ecl_sub.add_parser(
-        "record",
+    r = command(
+        ecl_sub, "record", _record,
         help="store a pose given as joint values for one (limb, origin, direction, size)",
         description="Store joint values as the pose of one cell, in one transaction; the "
         "cell's quality figures become unknown. Joints must belong to the limb and lie within "
@@ -80,30 +85,27 @@ def register(sub: Any) -> None:
     add_timeout(r, QueryOptions.capture_timeout_s, "the robot's state with --from-robot")
     add_json(r, "the stored Pose")
     add_zenoh_arguments(r, listen=False)  # used with --from-robot only
-    r.set_defaults(func=_record)
 
-    s = ecl_sub.add_parser(
-        "show",
+    s = command(
+        ecl_sub, "show", _show,
         help="print stored rows as a table, optionally filtered",
         description="Print the databank's rows (k_id, size, joint values and the generator's "
         "quality figures: cosine to the direction, reach fraction, joint-limit margin).",
     )
     add_platform(s)
     add_cell(s, required=False)
-    s.set_defaults(func=_show)
 
-    x = ecl_sub.add_parser(
-        "export",
+    x = command(
+        ecl_sub, "export", _export,
         help="write the whole databank to a JSON file",
         description="Export every table (meta, vsam, pose, quality) as JSON for review or "
         "editing; 'ecl import' of the file restores the same content (round trip identical).",
     )
     add_platform(x)
     add_output(x, "the JSON file")
-    x.set_defaults(func=_export)
 
-    i = ecl_sub.add_parser(
-        "import",
+    i = command(
+        ecl_sub, "import", _import,
         help="replace the databank with the content of a JSON export",
         description="Validate an export against the platform (labels, VSAM pairs, joint "
         "limits, NULLs outside each limb) and replace the databank with it atomically; a "
@@ -111,7 +113,6 @@ def register(sub: Any) -> None:
     )
     add_platform(i)
     i.add_argument("file", type=Path, help="JSON file written by 'kinesphere ecl export'")
-    i.set_defaults(func=_import)
 
     try:
         from kinesphere.services.ecl.build_cli import register_build
