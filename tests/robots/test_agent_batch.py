@@ -27,6 +27,7 @@ from kinesphere.robots.agent.resolver import parts_key
 from kinesphere.robots.agent.runtime import Agent, AgentOptions
 from support.agents import DatabankProcess, far
 from support.network import Hub
+from support.wait import WAIT_S
 
 DT = 0.002
 
@@ -234,6 +235,12 @@ def test_a_fleet_robot_steps_exactly_like_a_lone_agent(
                     assert named(f.status(), f.robot_id) == named(a.status(), a.robot_id), \
                         (f.platform, step)  # a detail may name the robot (a release's --target)
                     assert said[f.robot_id] == said[a.robot_id], (f.platform, step)
+                # every way checked before the next step on both sides alike: unpaced, a check
+                # late by the guard's UNCHECKED_S of robot time would brake one side only
+                for agent in (*fleet.agents, *lone):
+                    guard = agent.controller.guard
+                    if guard is not None:
+                        assert guard.settle(WAIT_S), agent.robot_id
             followed.pop("khepera joints")  # no limb: its joints never move
             assert min(followed.values()) > 200, followed  # the bases' steps too
             for p in PLATFORMS:
