@@ -67,9 +67,9 @@ def serve(endpoint: str, platform: str, db: str, reply_size: int, mode: str = "p
 
     ecl = Ecl.open(platform, db)
     if mode == "client":
-        session = open_session("client", listen=[], connect=[endpoint])
+        session = open_session(session_config("client", listen=[], connect=[endpoint]))
     else:
-        session = open_session("peer", listen=[endpoint], connect=[])
+        session = open_session(session_config("peer", listen=[endpoint], connect=[]))
     payload = zenoh.ZBytes(b"\x00" * reply_size)
 
     def echo(query: zenoh.Query) -> None:

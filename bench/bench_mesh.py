@@ -32,7 +32,7 @@ from bench.bench_databank import (
 from kinesphere.errors import KinesphereError
 from kinesphere.procs import Supervisor
 from kinesphere.robots.agent.runtime import Agent, AgentOptions
-from kinesphere.zconfig import close_session, free_port, open_session
+from kinesphere.zconfig import close_session, free_port, open_session, session_config
 
 ROOT = Path(__file__).resolve().parents[1]
 HOPS = (0, 1, 2)
@@ -55,7 +55,7 @@ def _client(endpoint: str, sup: Supervisor, timeout: float = 30.0) -> zenoh.Sess
     while True:
         sup.check()
         try:
-            return open_session("client", listen=[], connect=[endpoint])
+            return open_session(session_config("client", listen=[], connect=[endpoint]))
         except KinesphereError:
             if time.monotonic() > deadline:
                 raise

@@ -119,26 +119,15 @@ def session_config(
     return config
 
 
-def open_session(
-    mode: str | None = None,
-    listen: Sequence[str] | None = None,
-    connect: Sequence[str] | None = None,
-    config_file: str | Path | None = None,
-    scouting: bool | None = None,
-    *,
-    gossip: bool | None = None,
-    lease_ms: int | None = None,
-    config: zenoh.Config | None = None,
-) -> zenoh.Session:
-    """Open a session from ``config`` or :func:`session_config` arguments; the caller closes it.
+def open_session(config: zenoh.Config | None = None) -> zenoh.Session:
+    """Open a session from ``config`` (made by :func:`session_config`; without one, its
+    defaults); the caller closes it.
 
     A session that cannot open (port taken, client without a router) raises
     KinesphereError("unavailable").
     """
     if config is None:
-        config = session_config(
-            mode, listen, connect, config_file, scouting, gossip=gossip, lease_ms=lease_ms
-        )
+        config = session_config()
     mode = json.loads(config.get_json("mode"))
     connect = json.loads(config.get_json("connect/endpoints"))
     connect = connect.get(mode, []) if isinstance(connect, dict) else connect
@@ -334,7 +323,8 @@ def open_hub(mode: str = "peer", attempts: int = 5) -> tuple[zenoh.Session, str]
     for _ in range(attempts):
         endpoint = loopback_endpoint()
         try:
-            return open_session(mode, listen=[endpoint], connect=[], scouting=False), endpoint
+            config = session_config(mode, listen=[endpoint], connect=[], scouting=False)
+            return open_session(config), endpoint
         except KinesphereError as exc:
             last = exc
     assert last is not None

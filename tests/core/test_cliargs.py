@@ -110,7 +110,7 @@ def test_session_takes_the_endpoint_or_joins_whoever_holds_it() -> None:
     with zc.session_from_args(parse(defaults, [])) as first:
         with zc.session_from_args(parse(defaults, [])) as second:
             assert [str(z) for z in second.info.peers_zid()] == [str(first.zid())]
-        with zc.session(connect=[endpoint], scouting=False) as third:
+        with zc.session(zc.session_config(connect=[endpoint], scouting=False)) as third:
             assert [str(z) for z in third.info.peers_zid()] == [str(first.zid())]
 
 

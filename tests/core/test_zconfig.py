@@ -88,7 +88,7 @@ def test_free_port_is_bindable() -> None:
 def test_taken_port_is_unavailable() -> None:
     with zc.loopback_hub() as (_hub, endpoint):
         with pytest.raises(KinesphereError) as info:
-            zc.open_session(listen=[endpoint], scouting=False)
+            zc.open_session(zc.session_config(listen=[endpoint], scouting=False))
         assert info.value.code == "unavailable"
 
 
@@ -133,7 +133,7 @@ def test_unconnected_session_sees_nothing() -> None:
     """With multicast off, a session that connects nowhere finds no one."""
     with (
         zc.loopback_hub() as (hub, _endpoint),
-        zc.session(listen=[zc.LOOPBACK_ANY_PORT], scouting=False) as lonely,
+        zc.session(zc.session_config(listen=[zc.LOOPBACK_ANY_PORT], scouting=False)) as lonely,
     ):
         sub = hub.declare_subscriber("kstest/lonely")
         pub = lonely.declare_publisher("kstest/lonely")

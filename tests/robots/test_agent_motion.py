@@ -259,7 +259,8 @@ BEHIND_THE_LEFT_ARM = {  # baxter's right hand reaching high to the left, across
 
 
 def test_a_body_caught_on_itself_is_reported_not_called_at_target() -> None:
-    with zconfig.session(listen=[zconfig.LOOPBACK_ANY_PORT], connect=[]) as s:
+    alone = zconfig.session_config(listen=[zconfig.LOOPBACK_ANY_PORT], connect=[])
+    with zconfig.session(alone) as s:
         agent = Agent("baxter", "blocked", s)
         agent.controller.joints.retarget(BEHIND_THE_LEFT_ARM)  # past the guard's planning
         agent.conduct.set("moving", "test")

@@ -57,7 +57,8 @@ def test_a_trajectory_without_the_time_arrives_as_soon_as_its_limits_allow() -> 
 
 
 def _agent(platform: str) -> Iterator[tuple[Agent, list[Ack]]]:
-    with zconfig.session(listen=[zconfig.LOOPBACK_ANY_PORT], connect=[]) as s:
+    alone = zconfig.session_config(listen=[zconfig.LOOPBACK_ANY_PORT], connect=[])
+    with zconfig.session(alone) as s:
         agent = Agent(platform, f"timing-{platform}", s)
         said: list[Ack] = []
         agent.conduct.acks.publish = lambda b: said.append(decode(b, Ack))

@@ -122,7 +122,7 @@ class Observer:
 
     def __init__(self, config: zenoh.Config | None = None, mode: str | None = None,
                  connect: Sequence[str] | None = None) -> None:
-        self.session = open_session(mode, connect=connect, config=config)
+        self.session = open_session(config or session_config(mode, connect=connect))
         self.states = StateRecorder(KEYS, history=False).start(self.session)
         self.alive: Alive
         self.alive, self._subs = watch_alive(self.session, KEYS)

@@ -132,7 +132,7 @@ def test_only_the_operator_moves_robots(secured: Secured) -> None:
 def _record(role_config: Path, pose: Pose) -> list[zenoh.Reply]:
     req = RecordRequest(limb=pose.limb, origin=pose.origin, direction=pose.direction,
                         size=int(pose.size), joints=pose.joints)
-    with session(config_file=role_config) as s:
+    with session(session_config(config_file=role_config)) as s:
         return list(s.get(KEYS.record("youbot"), payload=encode(req), timeout=3.0))
 
 
@@ -220,7 +220,7 @@ def test_a_robot_cannot_speak_for_another(secured: Secured) -> None:
         # traffic crossed the router after the spoofs and the command
         stop = Command(seq=1, sent_ns=time.time_ns(), deadman=False, ttl_ms=0, stop=True,
                        sender="security-test")
-        with session(config_file=s.configs["operator"]) as op:
+        with session(session_config(config_file=s.configs["operator"])) as op:
             op.put(KEYS.command(OTHER), encode(stop))
         assert obs.states.wait_fresh([ROBOT], time.time_ns() + 300_000_000, WAIT_S)
         undeclare(ghost, eavesdrop)
