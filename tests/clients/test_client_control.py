@@ -11,7 +11,7 @@ import subprocess
 import sys
 import time
 from collections.abc import Iterator
-from contextlib import ExitStack
+from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
@@ -144,12 +144,18 @@ def test_a_phrase_ends_with_its_robots_where_it_says(
     assert all(abs(q[j] - v) < 0.02 for j, v in neutral.items()), q
 
 
+@contextmanager
+def alice_and_bob(free: ClientFleet) -> Iterator[tuple[Teleop, Teleop]]:
+    """Two operators of the PackBot, each on a session of their own: alice, then bob."""
+    with (operator(free, tg.robot(PB), sender="alice") as (alice, _),
+          operator(free, tg.robot(PB), sender="bob") as (bob, _)):
+        yield alice, bob
+
+
 def test_two_operators_only_the_lease_holder_moves_the_robot(
     free: ClientFleet, pygame_up: None
 ) -> None:
-    with ExitStack() as stack:
-        alice, _ = stack.enter_context(operator(free, tg.robot(PB), sender="alice"))
-        bob, _ = stack.enter_context(operator(free, tg.robot(PB), sender="bob"))
+    with alice_and_bob(free) as (alice, bob):
         t0 = time.monotonic()
         tick_together([(alice, LEFT_LOW)], 0.2)  # alice engages first: the lease is hers
         views = tick_together([(alice, LEFT_LOW), (bob, RIGHT_LOW)], 2.0)
@@ -211,9 +217,7 @@ def test_a_killed_holders_lease_lapses_on_time_and_the_other_operator_gets_it(
 def test_an_estop_from_the_operator_without_the_lease_stops_the_robot_at_once(
     free: ClientFleet, pygame_up: None
 ) -> None:
-    with ExitStack() as stack:
-        alice, _ = stack.enter_context(operator(free, tg.robot(PB), sender="alice"))
-        bob, _ = stack.enter_context(operator(free, tg.robot(PB), sender="bob"))
+    with alice_and_bob(free) as (alice, bob):
         start = time.monotonic()
         tick_together([(alice, LEFT_LOW)], 1.0)
         assert lease_of(free, time.monotonic()) == "alice"
