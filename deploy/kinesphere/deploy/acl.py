@@ -116,6 +116,8 @@ def fleet_acl(fleet: FleetFile) -> dict[str, list[dict[str, Any]]]:
         admit("robot", rid, [
             ("put", [keys.state(rid), keys.ack(rid)]),
             ("liveliness_token", [keys.alive_robot(rid)]),
+            # the fleet e-stops in force and who else claims this id (read only)
+            ("query", [keys.fleet_estops("*"), keys.presence(rid)]),
             ("declare_subscriber", [*(Keys.subscribed(k) for k in commands),
                                     keys.changed("*")]),
         ], SHARED_RULES)
