@@ -263,6 +263,7 @@ def test_the_same_target_again_restarts_nothing() -> None:
         try:
             assert guard.clearance.leg(ctrl.reading().q, goal_of(ctrl, pose.joints)) is None
             ctrl.move(pose.joints)
+            assert guard.settle(WAIT_S)  # checked before the first step in both runs
             path = []
             for _ in range(300):
                 if repeat:
@@ -309,7 +310,8 @@ def test_a_goal_on_a_way_found_clear_needs_no_new_check() -> None:
         start = ctrl.reading().q.copy()
         far = goal_of(ctrl, pose.joints)
         ctrl.move(pose.joints)
-        while guard.pending:  # the way checked clear, the arm a little way along it
+        assert guard.settle(WAIT_S)  # the way checked clear before the arm sets out ...
+        for _ in range(20):  # ... and the arm a little way along it
             ctrl.step()
         half = start + 0.5 * (far - start)
         ctrl.move({j: float(half[ctrl.joint_names.index(j)]) for j in pose.joints})
