@@ -90,7 +90,7 @@ def test_an_interrupted_film_leaves_no_partial_file(tmp_path: Path) -> None:
     out = tmp_path / "film.mp4"
     proc = subprocess.Popen(
         [sys.executable, "-m", "kinesphere.cli", "film", str(PHRASE), "-o", str(out),
-         "--width", "96", "--height", "80", "--fps", "6", "--bodies", "youbot"],
+         "--width", "96", "--height", "80", "--fps", "60", "--bodies", "youbot"],
         cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         until(lambda: proc.poll() is not None or any(
