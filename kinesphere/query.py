@@ -1,5 +1,6 @@
-"""One answer to a Zenoh ``get``: the first reply, decoded, or the error it carries; and which
-``get`` asks a databank what some parts mean (:func:`pose_query`).
+"""One answer to a Zenoh ``get``: the first reply, decoded, or the error it carries; every
+good answer (:func:`get_all`); and which ``get`` asks a databank what some parts mean
+(:func:`pose_query`).
 
 A ``get`` that ends without any reply means no queryable was reachable at that moment (the
 one that had the query died, or declarations have not arrived yet). With ``retry=True`` such
@@ -10,6 +11,7 @@ answered in time or Zenoh itself failed.
 
 from __future__ import annotations
 
+import logging
 import time
 from collections.abc import Sequence
 from typing import TypeVar
@@ -25,6 +27,8 @@ from kinesphere.protocol import (
     encode,
     error_from_reply,
 )
+
+log = logging.getLogger(__name__)
 
 T = TypeVar("T")
 RETRY_PAUSE_S = 0.02
@@ -84,6 +88,28 @@ def get_one(
             break
         time.sleep(min(RETRY_PAUSE_S, max(0.0, deadline - time.monotonic())))
     raise KinesphereError("unavailable", no_answer or f"no answer to {key} within {timeout:g} s")
+
+
+def get_all(session: zenoh.Session, key: str, decode_type: type[T], *, timeout: float
+            ) -> list[T]:
+    """Every good reply to ``get(key)`` within ``timeout``, decoded as ``decode_type``, from
+    every queryable (no consolidation): for gathering what several holders know. Error replies
+    and replies that do not decode are skipped (logged at debug): one bad peer must not hide
+    the others. Raises KinesphereError ``unavailable`` when Zenoh itself fails (the session is
+    closing)."""
+    found: list[T] = []
+    try:
+        replies = session.get(key, timeout=timeout, consolidation=zenoh.ConsolidationMode.NONE)
+        for reply in replies:
+            if reply.ok is None:
+                continue
+            try:
+                found.append(decode(reply.ok.payload, decode_type))
+            except KinesphereError as exc:
+                log.debug("reply from %s ignored: %s", reply.ok.key_expr, exc)
+    except zenoh.ZError as exc:
+        raise KinesphereError("unavailable", f"zenoh: {exc}") from None
+    return found
 
 
 def pose_query(keys: Keys, platform: str, parts: Sequence[SpatialCommand]

@@ -48,9 +48,9 @@ from kinesphere.protocol import (
     Command,
     FleetEstop,
     FleetEstops,
-    decode,
     encode,
 )
+from kinesphere.query import get_all
 from kinesphere.zconfig import undeclare
 
 log = logging.getLogger(__name__)
@@ -184,21 +184,14 @@ class FleetBoard:
         (each follower is told of them)."""
         fresh: list[FleetEstop] = []
         try:
-            replies = self.session.get(self.keys.fleet_estops("*"), timeout=timeout,
-                                       consolidation=zenoh.ConsolidationMode.NONE)
-            for reply in replies:
-                if reply.ok is None:
-                    continue
-                try:
-                    board = decode(reply.ok.payload, FleetEstops)
-                except KinesphereError as exc:
-                    log.debug("fleet e-stops from %s ignored: %s", reply.ok.key_expr, exc)
-                    continue
-                if board.holder == self.holder:
-                    continue
-                fresh += [r for r in board.estops if self._learn(r)]
-        except zenoh.ZError as exc:  # the session is closing
+            boards = get_all(self.session, self.keys.fleet_estops("*"), FleetEstops,
+                             timeout=timeout)
+        except KinesphereError as exc:  # the session is closing
             log.debug("fleet e-stops not asked: %s", exc)
+            boards = []
+        for board in boards:
+            if board.holder != self.holder:
+                fresh += [r for r in board.estops if self._learn(r)]
         self.syncs += 1
         for rec in fresh:
             log.warning("fleet e-stop of %s in force (sent while this process was away): "

@@ -28,7 +28,8 @@ import zenoh
 from kinesphere import zconfig
 from kinesphere.errors import KinesphereError
 from kinesphere.keyexpr import Keys
-from kinesphere.protocol import Presence, decode, encode
+from kinesphere.protocol import Presence, encode
+from kinesphere.query import get_all
 from kinesphere.zconfig import undeclare
 
 log = logging.getLogger(__name__)
@@ -67,22 +68,13 @@ class Claim:
         self._queryable: zenoh.Queryable[None] | None = None
 
     def _others(self) -> list[Presence]:
-        found = []
         try:
-            replies = self.session.get(self.keys.presence(self.robot_id), timeout=ASK_S,
-                                       consolidation=zenoh.ConsolidationMode.NONE)
-            for reply in replies:
-                if reply.ok is None:
-                    continue
-                try:
-                    p = decode(reply.ok.payload, Presence)
-                except KinesphereError:
-                    continue
-                if p != self.me:
-                    found.append(p)
-        except zenoh.ZError as exc:
+            answers = get_all(self.session, self.keys.presence(self.robot_id), Presence,
+                              timeout=ASK_S)
+        except KinesphereError as exc:
             log.debug("presence of %s not asked: %s", self.robot_id, exc)
-        return found
+            return []
+        return [p for p in answers if p != self.me]
 
     def _token_alive(self) -> bool:
         try:
