@@ -6,7 +6,10 @@ operators), declare another's liveliness token and hear every robot's commands; 
 someone else leased, release someone else's e-stop). The router instead admits the robots and
 operators listed in a fleet file (``deploy/robots.toml``) and gives each one rules naming its
 own keys. A robot: put its state and acks, declare its own liveliness token, subscribe to its
-own commands, its groups' commands and the ECL's change notices, and read the ECL. An
+own commands, its groups' commands and the ECL's change notices, read the ECL, and ask and
+answer the fleet e-stops in force (``{p}/estop/*``: a board's key is its session id, so any
+robot may answer any holder's key; a board's records are as trusted as the robots' own
+certificates) and who runs its id (``{p}/robot/<id>/presence``). An
 operator (certificate CN = the operator's name): put commands only under keys that end with
 that name (``{p}/robot/*/command/<name>``, ``{p}/group/*/command/<name>``: clients sign every
 command key so, :meth:`~kinesphere.keyexpr.Keys.signed`), read the ECL and watch; robots
@@ -102,11 +105,15 @@ def fleet_acl(fleet: FleetFile) -> dict[str, list[dict[str, Any]]]:
 
     def admit(kind: str, name: str, own: list[tuple[str, list[str]]],
               shared: tuple[str, ...]) -> None:
+        """``own``: (message, key expressions) it may send; ``message:egress``: that the
+        router may deliver to it (beyond the shared ``deliver`` rule)."""
         ids = []
         for message, key_exprs in own:
+            what, _, flow = message.partition(":")
             ids.append(f"{kind}:{name}:{message}")
-            out["rules"].append({"id": ids[-1], "messages": [message], "flows": ["ingress"],
-                                 "permission": "allow", "key_exprs": key_exprs})
+            out["rules"].append({"id": ids[-1], "messages": [what],
+                                 "flows": [flow or "ingress"], "permission": "allow",
+                                 "key_exprs": key_exprs})
         out["subjects"].append({"id": f"{kind}:{name}", "cert_common_names": [name]})
         out["policies"].append({"id": f"{kind}:{name}", "rules": [*ids, *shared],
                                 "subjects": [f"{kind}:{name}"]})
@@ -116,8 +123,10 @@ def fleet_acl(fleet: FleetFile) -> dict[str, list[dict[str, Any]]]:
         admit("robot", rid, [
             ("put", [keys.state(rid), keys.ack(rid)]),
             ("liveliness_token", [keys.alive_robot(rid)]),
-            # the fleet e-stops in force and who else claims this id (read only)
-            ("query", [keys.fleet_estops("*"), keys.presence(rid)]),
+            # the fleet e-stops in force and who else claims this id: asked, and answered
+            # (the holder of a board is a session id, so any holder's key)
+            *((message, [keys.fleet_estops("*"), keys.presence(rid)]) for message in (
+                "query", "declare_queryable", "reply", "query:egress")),
             ("declare_subscriber", [*(Keys.subscribed(k) for k in commands),
                                     keys.changed("*")]),
         ], SHARED_RULES)
