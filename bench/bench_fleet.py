@@ -17,12 +17,21 @@ keep real time per number of worker processes.
    robots moving, judged as ``bench_agent``'s scale test judges processes and threads (the worst
    robot's state rate over 3 s >= 98 %), with the bare ``mj_step`` of the same bodies measured
    after each count (the host's phase: its speed moves by up to 2x between runs).
+
+Part 1 ends with the Python function calls per robot per tick at N = 48 (cProfile over
+:data:`RETARGET` ticks, robots moving): a count the machine's load does not change, so a change
+to the per-robot work shows in it even when the timings are noisy.
+
+``BENCH_FLEET_PARTS=13 python -m bench fleet`` runs only the parts named (default ``123``).
 """
 
 from __future__ import annotations
 
 import copy
+import cProfile
 import logging
+import os
+import pstats
 import time
 from collections.abc import Callable, Iterator
 from contextlib import AbstractContextManager, contextmanager
@@ -151,6 +160,20 @@ def curve(endpoint: str, parts: Parts) -> None:
               f"{b / n * 1e6:6.1f} us {t / b:5.2f}x", flush=True)
     print("  (ratio: the cost per robot against the bare mj_step per body; a 500 Hz loop has "
           "2 ms per tick)")
+    print(f"  python calls per robot per tick at N = {N_ABLATE} (cProfile, {RETARGET} ticks, "
+          f"robots moving; the load does not change it): {calls_per_robot(endpoint, parts):.1f}",
+          flush=True)
+
+
+def calls_per_robot(endpoint: str, parts: Parts, n: int = N_ABLATE) -> float:
+    """Function calls (Python's and builtins') per robot per tick of a moving fleet of ``n``."""
+    with moving(endpoint, n, parts, "calls") as m:
+        m.ticks(RETARGET)  # past the first plans
+        profile = cProfile.Profile()
+        profile.enable()
+        m.ticks(RETARGET)
+        profile.disable()
+    return float(pstats.Stats(profile).total_calls) / n / RETARGET  # type: ignore[attr-defined]
 
 
 def private_models(fleet: FleetHost) -> None:
@@ -347,9 +370,13 @@ def main() -> None:
     logging.getLogger("kinesphere.robots.agent").setLevel(logging.ERROR)
     with zconfig.loopback_hub() as (hub, endpoint), databank(endpoint, hub):
         parts = fleet_parts(endpoint)
-        curve(endpoint, parts)
-        ablations(endpoint, parts)
-        realtime(endpoint, hub)
+        wanted = os.environ.get("BENCH_FLEET_PARTS", "123")
+        if "1" in wanted:
+            curve(endpoint, parts)
+        if "2" in wanted:
+            ablations(endpoint, parts)
+        if "3" in wanted:
+            realtime(endpoint, hub)
 
 
 if __name__ == "__main__":
