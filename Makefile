@@ -14,7 +14,7 @@ export SDL_VIDEODRIVER ?= dummy
 export SDL_AUDIODRIVER ?= dummy
 export PYTHONDONTWRITEBYTECODE := 1
 
-.PHONY: install demo test lint typecheck layers browser bench soak sweep lock clean
+.PHONY: install demo test lint typecheck layers browser xserver bench soak sweep lock clean
 
 $(STAMP): $(addsuffix /pyproject.toml,$(PARTS)) constraints.txt
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -31,19 +31,28 @@ demo: $(STAMP)
 # `processes`: the databank, agents, routers, kinesphere commands, pip) then run one at a time, as
 # today. Each run ends with its ten slowest tests.
 PYTEST := $(BIN)/python -m pytest -q --durations=10
-test: lint typecheck layers browser
+test: lint typecheck layers browser xserver
 	$(PYTEST) -m "not processes" -n auto
 	$(PYTEST) -m processes
 
-# The view's test drives Debian's Chromium (Playwright's own browser download is not used).
-CHROMIUM_INSTALL := apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium
-browser:
-	@if ! command -v chromium >/dev/null 2>&1; then \
-	  if [ "$$(id -u)" = 0 ]; then echo "installing Debian's chromium for the view test"; \
-	    $(CHROMIUM_INSTALL) >/dev/null; \
-	  else echo "make test needs Debian's chromium for the view test; install it with:" >&2; \
-	    echo "  sudo sh -c 'apt-get update && apt-get install -y chromium'" >&2; exit 1; fi; \
+# Debian programs some tests drive: installed when missing and make runs as root, otherwise
+# make stops with the install command. $(1): the command, $(2): the package, $(3): who needs it.
+define debian_tool
+	@if ! command -v $(1) >/dev/null 2>&1; then \
+	  if [ "$$(id -u)" = 0 ]; then echo "installing Debian's $(2) for $(3)"; \
+	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $(2) >/dev/null; \
+	  else echo "make test needs Debian's $(2) for $(3); install it with:" >&2; \
+	    echo "  sudo sh -c 'apt-get update && apt-get install -y $(2)'" >&2; exit 1; fi; \
 	fi
+endef
+
+# The view's test drives Debian's Chromium (Playwright's own browser download is not used).
+browser:
+	$(call debian_tool,chromium,chromium,the view test)
+
+# The HUD's tests draw on a virtual X server and take screenshots from it.
+xserver:
+	$(call debian_tool,Xvfb,xvfb,the HUD screenshots)
 
 lint: $(STAMP)
 	$(BIN)/ruff check $(SRC)

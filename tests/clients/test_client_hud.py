@@ -1,6 +1,9 @@
-"""The HUD renders under SDL's dummy driver: the commanded cell is lit where the stick points,
-missing directions are crossed out, statuses are in operator words and never cut off, and a
-screenshot can be saved (``KINESPHERE_HUD_PNG=path`` keeps one to look at)."""
+"""The HUD on a virtual X server (Xvfb), through SDL's x11 driver, as a user would see it:
+screenshots are taken from the X server, not from pygame's surface. The commanded cell is lit
+where the stick points, missing directions are crossed out, every cell says its direction in
+words, the robot's answer is on the screen and its letters are the tallest after the target's,
+and statuses are in operator words and never cut off (``KINESPHERE_HUD_PNG=path`` keeps a
+screenshot to look at)."""
 
 from __future__ import annotations
 
@@ -8,33 +11,48 @@ import dataclasses
 import os
 import time
 from collections.abc import Iterator
-from pathlib import Path
 from typing import TypedDict, Unpack
 
-os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
+import msgspec
+import pygame
+import pytest
 
-import msgspec  # noqa: E402
-import pygame  # noqa: E402
-import pytest  # noqa: E402
+from kinesphere.clients import targets as tg
+from kinesphere.clients.gamepad import hud
+from kinesphere.clients.gamepad.drive import Steering
+from kinesphere.clients.gamepad.mapping import Intent, MapperState, map_controls
+from kinesphere.clients.gamepad.readout import Readout
+from kinesphere.clients.gamepad.state import ControllerState
+from kinesphere.clients.gamepad.sticks import Tuning
+from kinesphere.clients.gamepad.symbols import draw_symbol
+from kinesphere.clients.link import AckAnswer, Seen
+from kinesphere.laban import Direction, Horizontal, Level
+from kinesphere.protocol import Ack, AckStage, Drive, RobotState, Substitution
+from support.xserver import screenshot, sdl_window_on, virtual_display
 
-from kinesphere.clients import targets as tg  # noqa: E402
-from kinesphere.clients.gamepad import hud  # noqa: E402
-from kinesphere.clients.gamepad.drive import Steering  # noqa: E402
-from kinesphere.clients.gamepad.mapping import Intent, MapperState, map_controls  # noqa: E402
-from kinesphere.clients.gamepad.readout import Readout  # noqa: E402
-from kinesphere.clients.gamepad.state import ControllerState  # noqa: E402
-from kinesphere.clients.gamepad.sticks import Tuning  # noqa: E402
-from kinesphere.clients.gamepad.symbols import draw_symbol  # noqa: E402
-from kinesphere.clients.link import AckAnswer, Seen  # noqa: E402
-from kinesphere.laban import Direction, Horizontal, Level  # noqa: E402
-from kinesphere.protocol import Ack, AckStage, Drive, RobotState, Substitution  # noqa: E402
+pytestmark = pytest.mark.processes  # Xvfb
 
 
 @pytest.fixture(scope="module")
-def window() -> Iterator[hud.Hud]:
-    pygame.display.init()
+def display() -> Iterator[str]:
+    """A virtual X screen the size of the HUD, pygame's display on it."""
+    with virtual_display(hud.SIZE) as name, sdl_window_on(name):
+        yield name
+
+
+@pytest.fixture(scope="module")
+def window(display: str) -> Iterator[hud.Hud]:
     yield hud.Hud()
-    pygame.quit()
+
+
+def shown(window: hud.Hud, display: str, readout: Readout) -> pygame.Surface:
+    """The HUD draws ``readout`` in its window (a frame as the gamepad draws it); what the X
+    server then shows."""
+    window._last = 0.0
+    window.draw(readout)
+    shot = screenshot(display)
+    assert shot.get_size() == hud.SIZE
+    return shot
 
 
 def state(robot_id: str, platform: str, status: str, **kw: object) -> Seen:
@@ -138,11 +156,10 @@ def test_the_chart_is_laid_out_as_the_stick_points() -> None:
 @pytest.mark.parametrize(("sx", "sy", "side"), [(-1.0, 0.0, "left"), (1.0, 0.0, "right"),
                                                 (0.0, -1.0, "up"), (0.0, 1.0, "down")])
 def test_pushing_the_stick_lights_the_cell_on_that_side(
-    window: hud.Hud, sx: float, sy: float, side: str
+    window: hud.Hud, display: str, sx: float, sy: float, side: str
 ) -> None:
     intent = map_controls(ControllerState(rx=sx, ry=sy, lt=1.0), MapperState(), 0.0, Tuning())[0]
-    hud.render(window.screen, view(intent=intent), window.fonts)
-    (lit,) = lit_cells(window.screen)
+    (lit,) = lit_cells(shown(window, display, view(intent=intent)))
     x, y = hud.cell_rect(lit).center
     px, py = hud.cell_rect(Direction.PLACE_LOW).center
     assert {"left": x < px, "right": x > px, "up": y < py, "down": y > py}[side], lit
@@ -163,12 +180,13 @@ def crossed(surf: pygame.Surface, d: Direction, colour: tuple[int, int, int]) ->
     return sum(c == colour for c in line) > 0.8 * len(line)
 
 
-def test_missing_directions_are_crossed_out_corner_to_corner(window: hud.Hud) -> None:
+def test_missing_directions_are_crossed_out_corner_to_corner(
+    window: hud.Hud, display: str,
+) -> None:
     have = frozenset({Direction.LEFT_FORWARD_LOW, Direction.FORWARD_LOW, Direction.PLACE_HIGH})
-    hud.render(window.screen, view(available=have, asked=Direction.LEFT_LOW,
-               intent=Intent(direction=Direction.LEFT_FORWARD_LOW, size=3.0, deadman=True)),
-               window.fonts)
-    surf = window.screen
+    surf = shown(window, display, view(
+        available=have, asked=Direction.LEFT_LOW,
+        intent=Intent(direction=Direction.LEFT_FORWARD_LOW, size=3.0, deadman=True)))
     for d in Direction:
         r = hud.cell_rect(d)
         bg = rgb(surf, (r.left + 3, r.top + 12))
@@ -182,19 +200,16 @@ def test_missing_directions_are_crossed_out_corner_to_corner(window: hud.Hud) ->
             assert crossed(surf, d, cross), d
 
 
-def test_the_commanded_cell_is_lit(window: hud.Hud, tmp_path: Path) -> None:
-    hud.render(window.screen, view(), window.fonts)
-    lit = rgb(window.screen, cell_centre(Direction.LEFT_LOW))
-    other = rgb(window.screen, cell_centre(Direction.RIGHT_HIGH))
+def test_the_commanded_cell_is_lit(window: hud.Hud, display: str) -> None:
+    shot = shown(window, display, view())
+    lit = rgb(shot, cell_centre(Direction.LEFT_LOW))
+    other = rgb(shot, cell_centre(Direction.RIGHT_HIGH))
     assert lit == hud.LIT and other == hud.CELL_BG
-    hud.render(window.screen, view(engaged=False), window.fonts)
-    assert rgb(window.screen, cell_centre(Direction.LEFT_LOW)) == hud.DIM
-    window.screenshot(tmp_path / "hud.png")
-    assert (tmp_path / "hud.png").stat().st_size > 5000
     keep = os.environ.get("KINESPHERE_HUD_PNG")
     if keep:
-        hud.render(window.screen, view(), window.fonts)
-        window.screenshot(keep)
+        pygame.image.save(shot, keep)
+    shot = shown(window, display, view(engaged=False))
+    assert rgb(shot, cell_centre(Direction.LEFT_LOW)) == hud.DIM
 
 
 def test_status_lines_wrap_and_are_never_cut_off(window: hud.Hud) -> None:
@@ -244,16 +259,15 @@ def test_every_state_renders(window: hud.Hud, kw: ReadoutChanges) -> None:
 
 
 def test_a_direction_with_no_pose_near_is_crossed_out_in_red_while_driving(
-    window: hud.Hud,
+    window: hud.Hud, display: str,
 ) -> None:
     """The stick points where no targeted body has a pose within the limit: its lit cell is
     crossed out in the refusal colour (the command carries the drive alone)."""
     have = frozenset({Direction.LEFT_FORWARD_LOW, Direction.FORWARD_LOW, Direction.PLACE_HIGH})
     intent = Intent(direction=Direction.LEFT_MIDDLE, size=3.0, deadman=True)
     for holds in (False, True):
-        hud.render(window.screen, view(available=have, limb_holds=holds, intent=intent),
-                   window.fonts)
-        assert crossed(window.screen, Direction.LEFT_MIDDLE, hud.BAD) is holds, holds
+        shot = shown(window, display, view(available=have, limb_holds=holds, intent=intent))
+        assert crossed(shot, Direction.LEFT_MIDDLE, hud.BAD) is holds, holds
 
 
 def shows(shot: pygame.Surface, drawn: hud.Drawn, fonts: dict[str, pygame.font.Font],
@@ -267,6 +281,18 @@ def shows(shot: pygame.Surface, drawn: hud.Drawn, fonts: dict[str, pygame.font.F
     return pygame.image.tobytes(region, "RGB") == pygame.image.tobytes(expected, "RGB")
 
 
+def ink_height(shot: pygame.Surface, rect: pygame.Rect) -> int:
+    """How tall the letters in ``rect`` are on the screen, in pixels: the rows holding a pixel
+    other than the background (the colour of the rect's top left corner, above any
+    letter)."""
+    region = shot.subsurface(rect)
+    ink = pygame.mask.from_threshold(region, region.get_at((0, 0)), (1, 1, 1, 255))
+    ink.invert()
+    width, height = ink.get_size()
+    rows = [y for y in range(height) if any(ink.get_at((x, y)) for x in range(width))]
+    return rows[-1] - rows[0] + 1 if rows else 0
+
+
 @pytest.mark.parametrize(("stage", "code", "words", "colour"), [
     (AckStage.REACHED, "", "pb-1: reached", hud.GOOD),
     (AckStage.MOVING, "", "pb-1: moving", hud.GOOD),
@@ -274,33 +300,35 @@ def shows(shot: pygame.Surface, drawn: hud.Drawn, fonts: dict[str, pygame.font.F
     (AckStage.REJECTED, "lease_held", "pb-1: refused: lease_held", hud.BAD),
 ])
 def test_a_screenshot_shows_the_answer_largest_after_the_target(
-    window: hud.Hud, tmp_path: Path, stage: AckStage, code: str, words: str,
+    window: hud.Hud, display: str, stage: AckStage, code: str, words: str,
     colour: tuple[int, int, int],
 ) -> None:
-    """The robot's answer is on the saved picture, in its colour, larger than everything but
-    the target; the target is there too."""
+    """The robot's answer is on the screen, in its colour, and its letters are taller than
+    every other text's but the target's (measured on the screenshot: "pb-1" has a letter
+    above and one below the line, so both lines show their font's full height); the target
+    is there too."""
     one = view(target=tg.robot("pb-1"), members=["pb-1"],
                robots={"pb-1": state("pb-1", "packbot", "moving")},
                answers={"pb-1": answer("pb-1", 9, stage, code=code, detail="why")})
-    window._last = 0.0
-    window.draw(one)
-    window.screenshot(tmp_path / "hud.png")
-    shot = pygame.image.load(str(tmp_path / "hud.png"))
+    shot = shown(window, display, one)
     layout = window.layout
     (said,) = layout["answer"]
     assert said.text.startswith(f"{words}  (") and said.colour == colour
     assert shows(shot, said, window.fonts)
     (target,) = layout["target"]
     assert target.text == "target: pb-1" and shows(shot, target, window.fonts)
-    tallest = {role: max(d.rect.height for d in ds) for role, ds in layout.items()}
-    others = max(h for role, h in tallest.items() if role not in ("target", "answer"))
-    assert tallest["target"] > tallest["answer"] > others
+    heights = {(role, d.text): ink_height(shot, d.rect) for role, ds in layout.items()
+               for d in ds}
+    answer_h, target_h = heights["answer", said.text], heights["target", target.text]
+    tallest_other = max((h, what) for what, h in heights.items()
+                        if what[0] not in ("target", "answer"))
+    assert target_h > answer_h > tallest_other[0], (target_h, answer_h, tallest_other)
+    assert answer_h >= 1.2 * tallest_other[0], "larger at a glance, not by a pixel"
 
 
-def test_every_cell_says_its_direction_in_words(window: hud.Hud, tmp_path: Path) -> None:
-    layout = hud.render(window.screen, view(engaged=False), window.fonts)
-    window.screenshot(tmp_path / "hud.png")
-    shot = pygame.image.load(str(tmp_path / "hud.png"))
+def test_every_cell_says_its_direction_in_words(window: hud.Hud, display: str) -> None:
+    shot = shown(window, display, view(engaged=False))
+    layout = window.layout
     for d in Direction:
         (word,) = layout[f"cell:{d.slug}"]
         assert word.text == hud.CELL_WORDS[d.horizontal]
