@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import mujoco
 import numpy as np
 import pytest
 
@@ -82,6 +83,34 @@ def test_baxters_forearm_points_where_told_whatever_the_upper_arm_does(baxter: E
         assert all(limits[j].lower <= v <= limits[j].upper for j, v in pose.joints.items())
         assert [w.word for w in pose.words] == ["right_upper_arm"]
         assert pose.words[0].label == "limb_11" and pose.words[0].end == "distal_12"
+
+
+def test_two_arms_crossed_in_front_pass_one_another(baxter: Ecl) -> None:
+    """Crossed forearms (LabanotationSuite's ``think``: upper arms forward-low, each forearm
+    toward the other side, high): each arm answered alone is clean, but the two answers
+    mirrored put Baxter's forearms through each other. The arm answered second is pointed
+    with the first one in place, so the joined pose touches nothing (MuJoCo's contacts) and
+    still points every segment where told (yourdfpy)."""
+    body = MeasuredBody("baxter")
+    left_upper, left_fore = SegmentEnds("distal_21", "distal_22"), SegmentEnds("distal_22",
+                                                                              "limb_22")
+    parts = [*arm_pair("forward-low", "left-forward-high"),
+             SpatialCommand("left_upper_arm", "left_shoulder", "forward-low", 3),
+             SpatialCommand("left_forearm", "left_elbow", "right-forward-high", 3)]
+    pose = baxter.compound(parts)
+    pm = platform_model("baxter")
+    data = mujoco.MjData(pm.model)
+    data.qpos[:] = pm.qpos(pose.joints)
+    mujoco.mj_kinematics(pm.model, data)
+    mujoco.mj_collision(pm.model, data)
+    assert data.ncon == 0, [(pm.model.body(pm.model.geom_bodyid[c.geom1]).name,
+                             pm.model.body(pm.model.geom_bodyid[c.geom2]).name)
+                            for c in data.contact[: data.ncon]]
+    for seg, d in ((UPPER_ARM, "forward-low"), (FOREARM, "left-forward-high"),
+                   (left_upper, "forward-low"), (left_fore, "right-forward-high")):
+        assert float(degrees(measured(body, pose.joints, seg), unit(Direction.parse(d)))) < 15
+    alone = baxter.compound(parts[2:])  # the left arm alone is answered as before
+    assert alone.joints != {j: pose.joints[j] for j in alone.joints}
 
 
 def test_the_same_part_twice_is_still_a_conflict(nao: Ecl) -> None:

@@ -275,7 +275,11 @@ class Ecl:
         if not parts:
             raise KinesphereError("malformed", "a compound pose needs at least one part")
         resolved = [self._part(i, p) for i, p in enumerate(parts)]
-        answered = [Answered(g, self._answer(g)) for g in groups(resolved, last_wins)]
+        answered: list[Answered] = []
+        placed: dict[str, float] = {}
+        for g in groups(resolved, last_wins):
+            answered.append(Answered(g, self._answer(g, placed)))
+            placed.update(answered[-1].pose.joints)
         return join(self._name, answered, last_wins)
 
     def solves(self, parts: Sequence[PartLike]) -> bool:
@@ -321,21 +325,23 @@ class Ecl:
         return Part(i, lname, oname, cut.end if cut is not None else None, slug, s,
                     bool(exact), index[0] if index else None, index[1] if index else 0, words)
 
-    def _answer(self, group: tuple[Part, ...]) -> Pose:
+    def _answer(self, group: tuple[Part, ...], placed: Mapping[str, float]) -> Pose:
         if len(group) == 1 and group[0].end is None:
             p = group[0]
             return self.query(p.limb, p.origin, p.direction, p.size, p.exact)
-        return self._solved(group)
+        return self._solved(group, placed)
 
-    def _solved(self, group: tuple[Part, ...]) -> Pose:
-        """Nested parts (or a cut limb) pointed together by the nested solver; the measured
-        angle is the worst segment's."""
+    def _solved(self, group: tuple[Part, ...], placed: Mapping[str, float] | None = None
+                ) -> Pose:
+        """Nested parts (or a cut limb) pointed together by the nested solver, touching
+        nothing of the body as the compound's earlier parts ``placed`` it (two forearms
+        crossed in front pass one another); the measured angle is the worst segment's."""
         from kinesphere.services.ecl.nested import Segment
 
         solver = self.nested()
         segments = [Segment(p.limb, p.origin, p.end, Direction.parse(p.direction), p.size)
                     for p in group]
-        solution = solver.solve(segments)
+        solution = solver.solve(segments, placed)
         translation: list[float] | None = None
         for p in group:
             if p.size > self.vsam.k_smax:

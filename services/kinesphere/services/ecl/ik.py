@@ -13,6 +13,8 @@ randomness, no wall clock, only iteration caps and convergence tests.
 from __future__ import annotations
 
 import copy
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
 from dataclasses import dataclass
 
 import mink
@@ -205,6 +207,25 @@ class LimbSolver:
                     continue
                 pairs.append((int(a), b))
         return pairs
+
+    @contextmanager
+    def placing(self, joints: Mapping[str, float]) -> Iterator[None]:
+        """Within the block, the rest of the body stands as ``joints`` place it (others at
+        neutral) instead of all at neutral: every pose, contact and path test of the limb
+        sees it so (another arm already answered in the same compound)."""
+        own = set(self.joints)
+        rest = {j: v for j, v in joints.items() if j not in own and j in self.pm.qpos_index}
+        if not rest:
+            yield
+            return
+        neutral = self.neutral
+        self.neutral = neutral.copy()
+        for j, v in rest.items():
+            self.neutral[self.pm.qpos_index[j]] = v
+        try:
+            yield
+        finally:
+            self.neutral = neutral
 
     # --- queries ---------------------------------------------------------------------------
     def full_q(self, values: np.ndarray) -> np.ndarray:

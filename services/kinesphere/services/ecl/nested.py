@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import math
 import threading
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import mink
@@ -80,6 +80,8 @@ POSTURE = 0.01
 """Posture weight per radian, against 1 per unit of direction error (about a radian)."""
 SOLUTIONS = 4096
 """Solutions remembered per platform (a few hundred bytes each)."""
+Placed = tuple[tuple[str, float], ...]
+"""Joint values of the rest of the body a solution was found with (empty: all neutral)."""
 
 
 @dataclass(frozen=True)
@@ -470,28 +472,45 @@ class Nested:
         """The VSAM's sizes, near to far (k_smax): a segment's size rule."""
         self.max_angle = max_angle
         self._chains: dict[tuple[str, str], ChainSolver] = {}
-        self._solutions: Lru[tuple[Segment, ...], Solution] = Lru(SOLUTIONS)
+        self._solutions: Lru[tuple[tuple[Segment, ...], Placed], Solution] = Lru(SOLUTIONS)
         self._lock = threading.Lock()
         self.solves = 0
         """Solves computed (not remembered), for tests and benches."""
 
-    def cached(self, segments: Sequence[Segment]) -> Solution | None:
-        return self._solutions.get(tuple(segments))
+    def cached(self, segments: Sequence[Segment], placed: Mapping[str, float] | None = None
+               ) -> Solution | None:
+        return self._solutions.get((tuple(segments), self._placed(segments, placed)))
 
-    def solve(self, segments: Sequence[Segment]) -> Solution:
-        """The joints pointing every segment where told, or ``direction_unavailable`` naming
-        the segment that stays more than ``max_angle`` degrees away."""
+    def _placed(self, segments: Sequence[Segment], placed: Mapping[str, float] | None
+                ) -> Placed:
+        """The joints of the rest of the body that stand away from neutral (those of the
+        chain's own limb are its to choose), as a cache key."""
+        if not placed:
+            return ()
+        own = set(self.pm.platform.eurdf.limb_joints(segments[0].limb))
+        neutral = self.pm.platform.neutral
+        return tuple(sorted((j, v) for j, v in placed.items()
+                            if j not in own and v != neutral.get(j, 0.0)))
+
+    def solve(self, segments: Sequence[Segment], placed: Mapping[str, float] | None = None
+              ) -> Solution:
+        """The joints pointing every segment where told, touching nothing of the body as
+        ``placed`` stands it (joint values of other limbs; neutral elsewhere), or
+        ``direction_unavailable`` naming the segment that stays more than ``max_angle``
+        degrees away."""
+        key = (tuple(segments), self._placed(segments, placed))
         with self._lock:
-            hit = self.cached(segments)
+            hit = self._solutions.get(key)
             if hit is None:
                 outer = segments[0]
                 chain = self._chains.get((outer.limb, outer.origin))
                 if chain is None:
                     chain = self._chains[(outer.limb, outer.origin)] = ChainSolver(
                         self.pm, outer.limb, outer.origin)
-                hit = chain.solve(segments, self.sizes)
+                with chain.limb.placing(dict(key[1])):
+                    hit = chain.solve(segments, self.sizes)
                 self.solves += 1
-                self._solutions.put(tuple(segments), hit)
+                self._solutions.put(key, hit)
         for s, angle in zip(segments, hit.angles, strict=True):
             if angle > self.max_angle:
                 raise KinesphereError(
