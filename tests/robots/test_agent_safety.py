@@ -9,6 +9,7 @@ from collections.abc import Callable
 from contextlib import ExitStack
 
 import numpy as np
+import pytest
 
 from kinesphere.protocol import Command, RobotState, encode
 from kinesphere.robots.agent.runtime import Agent
@@ -47,34 +48,28 @@ def check_braked(trace: Trace, max_acceleration: float, dt: float) -> None:
     assert np.abs(np.diff(twist[:, :2], axis=0)).max() <= max_acceleration * dt * (1 + 1e-6)
 
 
-def test_deadman_release_stops_the_base(hub: Hub) -> None:
-    session, endpoint = hub
-    trace = Trace()
-    with running_agent(endpoint, "youbot", speed=1.0, trace=trace) as (agent, watch):
-        op = CommandSender(session, agent.robot_id)
-        seq = op.send(drive=("forward", 1.0), ttl_ms=10_000)
-        watch.after(seq, driving(0.05), "youbot driving")
-        seq = op.send(drive=("forward", 1.0), deadman=False, ttl_ms=10_000)
-        held = watch.after(seq, status("holding"), "holding after deadman release")
-        assert "deadman" in held.detail
-        watch.after(seq, lambda s: not agent.controller.moving, "base at rest")
-        op.close()
-    spec = agent.controller.platform.base
-    check_braked(trace, spec.max_acceleration, agent.controller.dt)
-
-
-def test_ttl_expiry_stops_a_drive_when_the_client_goes_quiet(
-    hub: Hub,
+@pytest.mark.parametrize(
+    ("platform", "speed", "ttl_ms", "min_speed", "cause"),
+    [("youbot", 1.0, 10_000, 0.05, "deadman"), ("packbot", 0.6, 300, 0.02, "ttl")],
+    ids=["deadman-release", "ttl-expiry"],
+)
+def test_the_base_brakes_when_the_operator_lets_go(
+    hub: Hub, platform: str, speed: float, ttl_ms: int, min_speed: float, cause: str,
 ) -> None:
+    """Driving, the operator lets go: of the deadman button (still pushing the stick), or of
+    everything (the client dies: no stop, no deadman release, just silence until the ttl
+    runs out). The robot holds, says why, and the base brakes along a jerk-limited profile."""
     session, endpoint = hub
     trace = Trace()
-    with running_agent(endpoint, "packbot", speed=1.0, trace=trace) as (agent, watch):
+    with running_agent(endpoint, platform, speed=1.0, trace=trace) as (agent, watch):
         op = CommandSender(session, agent.robot_id)
-        seq = op.send(drive=("forward", 0.6), ttl_ms=300)
-        watch.after(seq, driving(0.02), "packbot driving")
-        op.close()  # the client dies: no stop, no deadman release, just silence
-        held = watch.after(seq, status("holding"), "holding after the ttl")
-        assert "ttl" in held.detail
+        seq = op.send(drive=("forward", speed), ttl_ms=ttl_ms)
+        watch.after(seq, driving(min_speed), f"{platform} driving")
+        if cause == "deadman":
+            seq = op.send(drive=("forward", speed), deadman=False, ttl_ms=ttl_ms)
+        op.close()
+        held = watch.after(seq, status("holding"), f"holding after the {cause}")
+        assert cause in held.detail
         watch.after(seq, lambda s: not agent.controller.moving, "base at rest")
     spec = agent.controller.platform.base
     check_braked(trace, spec.max_acceleration, agent.controller.dt)
