@@ -77,6 +77,14 @@ def nothing_in(folder: Path) -> None:
     assert not folder.exists() or list(folder.iterdir()) == [], list(folder.iterdir())
 
 
+def new_refused(capsys: pytest.CaptureFixture[str], name: str, urdf: Path, out: Path,
+                words: str) -> None:
+    """``platform new NAME --urdf URDF --dir OUT`` is :func:`refused` with ``words`` and
+    leaves :func:`nothing_in` OUT."""
+    refused(capsys, ["platform", "new", name, "--urdf", str(urdf), "--dir", str(out)], words)
+    nothing_in(out)
+
+
 def test_a_mesh_symlinked_out_of_the_package_is_never_read(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -85,19 +93,14 @@ def test_a_mesh_symlinked_out_of_the_package_is_never_read(
     secret.chmod(0o600)
     urdf = package(tmp_path, arm(geometry=mesh("meshes/link.stl")))
     (urdf.parent / "meshes" / "link.stl").symlink_to(secret)
-    out = tmp_path / "out"
-    refused(capsys, ["platform", "new", "bot", "--urdf", str(urdf), "--dir", str(out)],
-            "outside its package")
-    nothing_in(out)
+    new_refused(capsys, "bot", urdf, tmp_path / "out", "outside its package")
     # a symlinked folder leads out just the same
     (urdf.parent / "meshes" / "link.stl").unlink()
     (urdf.parent / "meshes").rmdir()
     (tmp_path / "elsewhere").mkdir()
     binary_stl(tmp_path / "elsewhere" / "link.stl", 4)
     (urdf.parent / "meshes").symlink_to(tmp_path / "elsewhere")
-    refused(capsys, ["platform", "new", "bot", "--urdf", str(urdf), "--dir", str(out)],
-            "outside its package")
-    nothing_in(out)
+    new_refused(capsys, "bot", urdf, tmp_path / "out", "outside its package")
 
 
 def test_no_file_is_written_more_readable_than_its_source(tmp_path: Path) -> None:
@@ -166,20 +169,15 @@ def test_a_run_past_its_time_bound_stops_with_a_clear_error(tmp_path: Path) -> N
 def test_nan_anywhere_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str],
                                  where: str) -> None:
     urdf = package(tmp_path, arm().replace('xyz="0 0 0.2"', where, 1))
-    out = tmp_path / "out"
-    refused(capsys, ["platform", "new", "nan", "--urdf", str(urdf), "--dir", str(out)],
-            "not a finite number")
-    nothing_in(out)
+    new_refused(capsys, "nan", urdf, tmp_path / "out", "not a finite number")
 
 
 def test_nan_in_an_inertia_or_a_shape_is_refused(tmp_path: Path,
                                                  capsys: pytest.CaptureFixture[str]) -> None:
     for text in (arm().replace('ixx="0.01"', 'ixx="nan"', 1),
                  arm().replace('size="0.1 0.1 0.1"', 'size="0.1 nan 0.1"', 1)):
-        urdf = package(tmp_path, text)
-        refused(capsys, ["platform", "new", "nan", "--urdf", str(urdf), "--dir",
-                         str(tmp_path / "out")], "not a finite number")
-    nothing_in(tmp_path / "out")
+        new_refused(capsys, "nan", package(tmp_path, text), tmp_path / "out",
+                    "not a finite number")
 
 
 @pytest.mark.parametrize(("faces", "triangle", "words"), [
@@ -192,9 +190,7 @@ def test_an_stl_mujoco_cannot_read_is_a_clear_error(
 ) -> None:
     urdf = package(tmp_path, arm(geometry=mesh("meshes/part.stl")))
     binary_stl(urdf.parent / "meshes" / "part.stl", faces, triangle)
-    out = tmp_path / "out"
-    refused(capsys, ["platform", "new", "part", "--urdf", str(urdf), "--dir", str(out)], words)
-    nothing_in(out)
+    new_refused(capsys, "part", urdf, tmp_path / "out", words)
 
 
 def test_a_kinematic_cycle_is_a_clear_error(tmp_path: Path,
@@ -204,10 +200,7 @@ def test_a_kinematic_cycle_is_a_clear_error(tmp_path: Path,
               + JOINT.format(name="bc", parent="b", child="c", xyz="0 0 0.1")
               + JOINT.format(name="ca", parent="c", child="a", xyz="0 0 0.1"))
     urdf = package(tmp_path, f'<robot name="loop">{links}{joints}</robot>')
-    out = tmp_path / "out"
-    refused(capsys, ["platform", "new", "loop", "--urdf", str(urdf), "--dir", str(out)],
-            "cycle")
-    nothing_in(out)
+    new_refused(capsys, "loop", urdf, tmp_path / "out", "cycle")
 
 
 def test_a_missing_urdf_creates_nothing(tmp_path: Path,
