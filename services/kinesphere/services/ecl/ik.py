@@ -13,7 +13,7 @@ randomness, no wall clock, only iteration caps and convergence tests.
 from __future__ import annotations
 
 import copy
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 
@@ -330,15 +330,10 @@ class LimbSolver:
         self.iterations = 0
         previous = np.zeros(len(self.joints))
         for _ in range(iterations):
-            try:
-                v = mink.solve_ik(
-                    self.config, [self.tip_task, self.posture], dt=1.0, solver=SOLVER,
-                    damping=DAMPING, limits=self.limits, constraints=self.constraints,
-                )
-            except mink.NoSolutionFound:
+            found = self.ik_step([self.tip_task, self.posture], self.limits, self.constraints)
+            if found is None:
                 break
-            step = np.zeros(len(self.joints))
-            step[self.moving] = v[self._dof_adr]
+            v, step = found
             if float(np.linalg.norm(step + previous)) < DITHER * float(np.linalg.norm(step)):
                 step = step / 2  # bouncing across the optimum (a saturated, singular stretch):
                 nxt = self._clean_step(q, step)  # settle half-way between the two and stop
@@ -370,16 +365,11 @@ class LimbSolver:
         q = self.full_q(values)
         self.config.update(q)
         for _ in range(iterations):
-            try:
-                v = mink.solve_ik(
-                    self.config, [*self._balance_tasks, self.posture], dt=1.0, solver=SOLVER,
-                    damping=DAMPING, limits=self._balance_limits,
-                    constraints=self._balance_constraints,
-                )
-            except mink.NoSolutionFound:
+            found = self.ik_step([*self._balance_tasks, self.posture], self._balance_limits,
+                                 self._balance_constraints)
+            if found is None:
                 break
-            step = np.zeros(len(self.joints))
-            step[self.moving] = v[self._dof_adr]
+            v, step = found
             nxt = self._clean_step(q, step)
             if nxt is None:
                 break
@@ -388,6 +378,21 @@ class LimbSolver:
                 break
         self.config.update(q)
         return np.asarray(q[self.qadr].copy())
+
+    def ik_step(self, tasks: Sequence[mink.Task], limits: Sequence[mink.Limit],
+                constraints: Sequence[mink.Task]) -> tuple[np.ndarray, np.ndarray] | None:
+        """One mink step toward ``tasks`` from the configuration as it stands: the velocity
+        of every dof and the limb's step (its moving joints'), or None when mink finds no
+        solution. Every IK loop of the generator and the nested solver steps through here;
+        each keeps its own rule for when to stop."""
+        try:
+            v = mink.solve_ik(self.config, tasks, dt=1.0, solver=SOLVER, damping=DAMPING,
+                              limits=limits, constraints=constraints)
+        except mink.NoSolutionFound:
+            return None
+        step = np.zeros(len(self.joints))
+        step[self.moving] = v[self._dof_adr]
+        return v, step
 
     def clean(self, values: np.ndarray, step: np.ndarray) -> np.ndarray | None:
         """The limb's joint ``values`` advanced by ``step`` (hinge/slide only), or by a

@@ -48,7 +48,7 @@ from kinesphere.platforms.mjcf import PlatformModel
 from kinesphere.services.ecl.arcs import swing
 from kinesphere.services.ecl.balance import Balance
 from kinesphere.services.ecl.constraints import GAIN
-from kinesphere.services.ecl.ik import DAMPING, SOLVER, LimbSolver
+from kinesphere.services.ecl.ik import LimbSolver
 from kinesphere.services.ecl.measure import points_along, tip_point
 from kinesphere.substitution import MAX_ANGLE_DEG
 
@@ -208,7 +208,6 @@ class ChainSolver:
         self.model = pm.model
         self.data = ls.config.data
         dofs = [pm.dof_index[j] for j, go in zip(ls.joints, ls.moving, strict=True) if go]
-        self._dofs = np.array(dofs, dtype=int)
         self._posture = np.zeros(self.model.nv)
         self._posture[dofs] = POSTURE
         ls.config.update(ls.neutral)
@@ -440,14 +439,10 @@ class ChainSolver:
         values = start.copy()
         before = [t.unit(ls.config.data)[0] for t in tasks]
         for _ in range(iterations):
-            try:
-                v = mink.solve_ik(ls.config, [*tasks, ls.posture], dt=1.0, solver=SOLVER,
-                                  damping=DAMPING, limits=ls.limits, constraints=ls.constraints)
-            except mink.NoSolutionFound:
+            found = ls.ik_step([*tasks, ls.posture], ls.limits, ls.constraints)
+            if found is None:
                 break
-            step = np.zeros(len(ls.joints))
-            step[ls.moving] = v[self._dofs]
-            nxt = ls.clean(values, step)
+            nxt = ls.clean(values, found[1])
             if nxt is None:
                 break
             values = nxt
