@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import logging
 import os
-import signal
 import threading
 import time
 from functools import partial
@@ -28,10 +27,8 @@ from support.agents import (
     AckWatch,
     CommandSender,
     DatabankProcess,
-    StateWatch,
-    agent_process,
     far,
-    joints_close,
+    held_agent,
     running_agent,
 )
 from support.network import KEYS, Hub
@@ -50,48 +47,31 @@ def test_commands_queued_while_the_agent_was_frozen_never_run(
     """SIGSTOP a real agent while an operator streams at 30 Hz (ttl 300 ms), switch to another
     target while it is frozen, stop streaming, SIGCONT: nothing moves, the commands are
     dropped as expired and counted."""
-    session, endpoint = hub
-    cat = databank.catalogue("baxter")
-    here, there = far(cat, 0), far(cat, -1)
-    pose = databank.query("baxter", SpatialCommand(*here))
-    watch = StateWatch(session, "frozen")
-    acks = AckWatch(session, "frozen")
+    session, _ = hub
     op = CommandSender(session, "frozen", sender="ann", client_session="a")
     try:
-        with agent_process(endpoint, "baxter", "frozen") as proc:
-            watch.wait(lambda s: True, "the agent is up")
-            while True:  # stream the first target until the robot is there
-                seq = op.send(here, ttl_ms=300)
-                state = watch.after(seq, lambda s: True, "a state")
-                if "reached" in acks.stages("ann", seq):
-                    break
-            assert joints_close(state, pose.joints, 0.02)
-            before = np.array(state.q)
-            goal = databank.query("baxter", SpatialCommand(*there)).joints
-            index = [state.joint_names.index(j) for j in goal]
+        with held_agent(hub, databank, "frozen", partial(op.send, ttl_ms=300)) as robot:
+            goal = databank.query("baxter", SpatialCommand(*robot.there)).joints
+            index = [robot.state.joint_names.index(j) for j in goal]
+            before = np.array(robot.state.q)
             gap = np.abs(before[index] - np.array(list(goal.values()))).max()
             assert gap > 0.3, "the second target is a real motion away"
-            proc.send_signal(signal.SIGSTOP)
+            robot.freeze()
             frozen = []
             for _ in range(30):  # a client streaming at 30 Hz
                 time.sleep(1 / 30)
-                frozen.append(op.send(there, ttl_ms=300))
+                frozen.append(op.send(robot.there, ttl_ms=300))
             time.sleep(1.0)  # the operator stopped: a freeze that outlasts the ttl
-            seen = len(watch.states)
-            proc.send_signal(signal.SIGCONT)
+            seen = robot.thaw()
             for seq in frozen[-3:]:
-                ack = acks.wait(partial(_verdict_on, seq), "a verdict on a frozen command")
+                ack = robot.acks.wait(partial(_verdict_on, seq), "a verdict on a frozen command")
                 assert ack.stage != "accepted", ack
-            assert any(a.code == "expired" for a in acks.acks if a.seq in frozen)
-            after = watch.wait(lambda s: len(watch.states) > seen + 75, "1.5 s of states after")
-            moved = max(float(np.abs(np.array(s.q) - before).max())
-                        for s in watch.states[seen:])
+            assert any(a.code == "expired" for a in robot.acks.acks if a.seq in frozen)
+            after, moved = robot.moved_after(seen)
             assert moved < 5e-3, f"the robot moved {moved:.4f} rad after SIGCONT (of {gap:.2f})"
             assert after.dropped >= 1 and after.last_command_seq < frozen[0]
     finally:
         op.close()
-        watch.close()
-        acks.close()
 
 
 def test_a_flood_cannot_delay_an_estop_and_every_table_stays_bounded(

@@ -12,12 +12,10 @@ freeze with a real agent process.
 
 from __future__ import annotations
 
-import signal
 import time
 from functools import partial
 
 import msgspec
-import numpy as np
 import zenoh
 
 from kinesphere import zconfig
@@ -29,10 +27,8 @@ from kinesphere.robots.agent.safety import Safety, Verdict
 from support.agents import (
     AckWatch,
     DatabankProcess,
-    StateWatch,
-    agent_process,
-    far,
-    joints_close,
+    Part,
+    held_agent,
     running_agent,
 )
 from support.network import KEYS, Hub
@@ -232,48 +228,40 @@ def test_a_new_sessions_command_queued_while_the_robot_was_frozen_never_runs(
     """The operator was heard before (one session); the robot is frozen; a new session (the
     next `send`) and a sender never heard each put a command; 1.5 s later the robot thaws:
     both are dropped as expired and nothing moves."""
-    session, endpoint = hub
-    cat = databank.catalogue("baxter")
-    here, there = far(cat, 0), far(cat, -1)
-    pose = databank.query("baxter", SpatialCommand(*here))
-    watch = StateWatch(session, "thawed")
-    acks = AckWatch(session, "thawed")
+    session, _ = hub
     pub = session.declare_publisher(Keys.signed(KEYS.command("thawed"), "ann"),
                                     congestion_control=zenoh.CongestionControl.BLOCK)
     stranger = session.declare_publisher(Keys.signed(KEYS.command("thawed"), "zed"),
                                          congestion_control=zenoh.CongestionControl.BLOCK)
-    try:
-        with agent_process(endpoint, "baxter", "thawed") as proc:
-            watch.wait(lambda s: True, "the agent is up")
+    sent = 0
+
+    def session_one(part: Part) -> int:
+        """Session "one" takes the robot to the first target."""
+        nonlocal sent
+        if not sent:
             zconfig.wait_matching(pub)
             zconfig.wait_matching(stranger)
-            k = 0
-            while True:  # session "one" takes the robot to the first target
-                k += 1
-                pub.put(encode(cmd(k, time.time_ns(), session="one", clock="ann-host", ttl_ms=300,
-                                   drive=None, parts=[SpatialCommand(*here)])))
-                state = watch.after(k, lambda s: True, "a state")
-                if "reached" in acks.stages("ann", k):
-                    break
-            assert joints_close(state, pose.joints, 0.02)
-            before = np.array(state.q)
-            proc.send_signal(signal.SIGSTOP)
+        sent += 1
+        pub.put(encode(cmd(sent, time.time_ns(), session="one", clock="ann-host", ttl_ms=300,
+                           drive=None, parts=[SpatialCommand(*part)])))
+        return sent
+
+    try:
+        with held_agent(hub, databank, "thawed", session_one) as robot:
+            robot.freeze()
+            there = [SpatialCommand(*robot.there)]
             pub.put(encode(cmd(0, time.time_ns(), session="two", clock="ann-host", ttl_ms=1000,
-                               drive=None, parts=[SpatialCommand(*there)])))
+                               drive=None, parts=there)))
             stranger.put(encode(cmd(0, time.time_ns(), sender="zed", session="z",
-                                    clock="zed-host", ttl_ms=1000, drive=None,
-                                    parts=[SpatialCommand(*there)])))
+                                    clock="zed-host", ttl_ms=1000, drive=None, parts=there)))
             time.sleep(1.5)  # the freeze outlasts both ttls (the test's subject, not a wait)
-            seen = len(watch.states)
-            proc.send_signal(signal.SIGCONT)
+            seen = robot.thaw()
             for who in ("ann", "zed"):
-                ack = acks.wait(partial(_first_from, who), f"the verdict on {who}'s frozen command")
+                ack = robot.acks.wait(partial(_first_from, who),
+                                      f"the verdict on {who}'s frozen command")
                 assert ack.stage == "rejected" and ack.code == "expired", ack
-            after = watch.wait(lambda s: len(watch.states) > seen + 75, "1.5 s of states after")
-            moved = max(float(np.abs(np.array(s.q) - before).max()) for s in watch.states[seen:])
+            after, moved = robot.moved_after(seen)
             assert moved < 5e-3, f"the robot moved {moved:.4f} rad after SIGCONT"
             assert after.dropped >= 2
     finally:
         zconfig.undeclare(pub, stranger)
-        watch.close()
-        acks.close()

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 import os
+import signal
 import subprocess
 import sys
 import threading
@@ -42,7 +43,7 @@ from kinesphere.robots.agent.controller import Controller
 from kinesphere.robots.agent.fleet import FleetHost, RobotSpec
 from kinesphere.robots.agent.options import Ros2BodyOptions
 from kinesphere.robots.agent.runtime import Agent, AgentOptions
-from support.network import KEYS
+from support.network import KEYS, Hub
 from support.paths import ROOT
 from support.wait import WAIT_S, stop_process
 from support.watch import Watch
@@ -284,6 +285,70 @@ def far(cat: Catalogue, k: int = 0) -> tuple[str, str, str, float]:
 def joints_close(state: RobotState, joints: Mapping[str, float], tol: float) -> bool:
     q = dict(zip(state.joint_names, state.q, strict=True))
     return all(abs(q[j] - v) <= tol for j, v in joints.items())
+
+
+Part = tuple[str, str, str, float]
+"""One spatial command's words (limb, origin, direction, size), as :func:`far` gives them."""
+
+
+@dataclass
+class HeldAgent:
+    """A real Baxter agent process that sender "ann" took to a first far target and that is
+    held there, for a test that freezes it (SIGSTOP) while commands arrive and thaws it."""
+
+    proc: subprocess.Popen[bytes]
+    watch: StateWatch
+    acks: AckWatch
+    state: RobotState
+    """The state that reported the first target reached."""
+    there: Part
+    """A second far target (the limb's last pull)."""
+
+    def freeze(self) -> None:
+        self.proc.send_signal(signal.SIGSTOP)
+
+    def thaw(self) -> int:
+        """Let the process run again; how many states were heard before."""
+        seen = len(self.watch.states)
+        self.proc.send_signal(signal.SIGCONT)
+        return seen
+
+    def moved_after(self, seen: int) -> tuple[RobotState, float]:
+        """After 1.5 s of states since the thaw: the latest, and how far (rad) any joint
+        moved from the first target meanwhile."""
+        after = self.watch.wait(lambda s: len(self.watch.states) > seen + 75,
+                                "1.5 s of states after")
+        before = np.array(self.state.q)
+        moved = max(float(np.abs(np.array(s.q) - before).max())
+                    for s in self.watch.states[seen:])
+        return after, moved
+
+
+@contextmanager
+def held_agent(hub: Hub, databank: DatabankProcess, robot_id: str,
+               send: Callable[[Part], int]) -> Iterator[HeldAgent]:
+    """:func:`agent_process` of Baxter as ``robot_id``, taken to the far reach of its first
+    limb's first pull by ``send`` (put ann's command toward the part, return its seq), sent
+    again until the robot acknowledges it reached; its watches closed on exit."""
+    session, endpoint = hub
+    cat = databank.catalogue("baxter")
+    here = far(cat, 0)
+    pose = databank.query("baxter", SpatialCommand(*here))
+    watch = StateWatch(session, robot_id)
+    acks = AckWatch(session, robot_id)
+    try:
+        with agent_process(endpoint, "baxter", robot_id) as proc:
+            watch.wait(lambda s: True, "the agent is up")
+            while True:
+                seq = send(here)
+                state = watch.after(seq, lambda s: True, "a state")
+                if "reached" in acks.stages("ann", seq):
+                    break
+            assert joints_close(state, pose.joints, 0.02)
+            yield HeldAgent(proc, watch, acks, state, far(cat, -1))
+    finally:
+        watch.close()
+        acks.close()
 
 
 def finite_jerk(trace: Trace) -> tuple[np.ndarray, np.ndarray]:
