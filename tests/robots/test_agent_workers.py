@@ -11,18 +11,17 @@ from __future__ import annotations
 import signal
 import subprocess
 import sys
-import threading
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from functools import partial
 from pathlib import Path
 
 import psutil
 import pytest
-import zenoh
 
 from kinesphere import zconfig
 from kinesphere.cli import main
+from kinesphere.deploy.watch import Alive, watch_alive
 from kinesphere.errors import KinesphereError
 from kinesphere.protocol import SpatialCommand
 from kinesphere.robots.agent.fleet import RobotSpec
@@ -74,29 +73,11 @@ def test_worker_options_are_checked_before_anything_starts(
         assert named in capsys.readouterr().err, argv
 
 
-class Alive:
-    """The robots whose liveliness tokens the hub sees now."""
-
-    def __init__(self, session: zenoh.Session) -> None:
-        self.ids: set[str] = set()
-        self.changed = threading.Condition()
-        self._sub = session.liveliness().declare_subscriber(KEYS.alive_robot("*"), self._on,
-                                                            history=True)
-
-    def _on(self, sample: zenoh.Sample) -> None:
-        with self.changed:
-            rid = KEYS.robot_id_of(str(sample.key_expr))
-            (self.ids.add if sample.kind == zenoh.SampleKind.PUT else self.ids.discard)(rid)
-            self.changed.notify_all()
-
-    def wait(self, pred: object, what: str) -> set[str]:
-        with self.changed:
-            assert self.changed.wait_for(lambda: pred(self.ids), WAIT_S), (  # type: ignore[operator]
-                f"{what}: alive {sorted(self.ids)}")
-            return set(self.ids)
-
-    def close(self) -> None:
-        zconfig.undeclare(self._sub)
+def robots_alive(alive: Alive, pred: Callable[[set[str]], bool], what: str) -> set[str]:
+    """The robots whose liveliness tokens the hub sees, once ``pred`` holds of them."""
+    assert alive.wait_for(lambda a: pred(a.robots), WAIT_S), f"{what}: alive {sorted(alive.robots)}"
+    with alive.changed:
+        return set(alive.robots)
 
 
 @contextmanager
@@ -135,13 +116,13 @@ def test_workers_run_robots_of_their_own_and_one_killed_takes_only_its_robots(
     poses = {rid: far(databank.catalogue(p), 1) for rid, p in ROBOTS.items() if p != "khepera"}
     targets = {rid: databank.query(ROBOTS[rid], SpatialCommand(*pose)).joints
                for rid, pose in poses.items()}
-    alive = Alive(session)
+    alive, tokens = watch_alive(session, KEYS)
     acks = AckWatch(session, "*")
     watches = {rid: StateWatch(session, rid) for rid in ROBOTS}
     ops = {rid: CommandSender(session, rid, sender=f"op-{rid}") for rid in poses}
     try:
         with fleet_host(tmp_path, endpoint) as proc:
-            alive.wait(lambda ids: set(ROBOTS) <= ids, "every robot up")
+            robots_alive(alive, lambda ids: set(ROBOTS) <= ids, "every robot up")
             pids = workers(proc)
             assert sorted(pids) == [1, 2] and len({p.pid for p in pids.values()}) == 2
 
@@ -169,7 +150,8 @@ def test_workers_run_robots_of_their_own_and_one_killed_takes_only_its_robots(
             # a worker killed takes its own robots' liveliness, and only theirs
             pids[1].send_signal(signal.SIGKILL)
             pids[1].wait(WAIT_S)
-            left = alive.wait(lambda ids: not ids & shares[0], "the killed worker's robots gone")
+            left = robots_alive(alive, lambda ids: not ids & shares[0],
+                                "the killed worker's robots gone")
             assert shares[1] <= left, left
             assert proc.poll() is None, "the fleet host stops with its first worker"
             other = far(databank.catalogue(ROBOTS[two]), 0)  # the other worker's still obey
@@ -182,7 +164,7 @@ def test_workers_run_robots_of_their_own_and_one_killed_takes_only_its_robots(
             _, err = proc.communicate(timeout=WAIT_S)
             assert proc.returncode == 1, err.decode(errors="replace")[-2000:]
             assert "worker 1/2 exited with code -9" in err.decode(errors="replace")
-            alive.wait(lambda ids: not ids & set(ROBOTS), "every robot gone")
+            robots_alive(alive, lambda ids: not ids & set(ROBOTS), "every robot gone")
             assert not pids[2].is_running() or pids[2].status() == psutil.STATUS_ZOMBIE
     finally:
         for op in ops.values():
@@ -190,4 +172,4 @@ def test_workers_run_robots_of_their_own_and_one_killed_takes_only_its_robots(
         for w in watches.values():
             w.close()
         acks.close()
-        alive.close()
+        zconfig.undeclare(*tokens)

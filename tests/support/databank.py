@@ -10,7 +10,6 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
-import threading
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
@@ -20,6 +19,7 @@ import zenoh
 
 from kinesphere import protocol as pr
 from kinesphere import zconfig
+from kinesphere.deploy.watch import watch_alive
 from kinesphere.keyexpr import Keys
 from kinesphere.platforms.platform import load_platform
 from kinesphere.services.databank.service import DatabankService
@@ -132,31 +132,18 @@ def pose_of(replies: Raw) -> pr.Pose:
 
 
 class Tokens:
-    """Databank liveliness tokens seen by a subscriber (with history), as events."""
+    """Databank liveliness tokens seen by a subscriber (with history), as events: the
+    product's own watch (:func:`kinesphere.deploy.watch.watch_alive`, what ``up`` and
+    ``status`` see), waited on by replica name."""
 
     def __init__(self, session: zenoh.Session, keys: Keys = OWN_KEYS) -> None:
-        self.keys = keys
-        self.alive: set[str] = set()
-        self._cond = threading.Condition()
-        self._sub = session.liveliness().declare_subscriber(
-            keys.alive_databank_all(), self._on_sample, history=True
-        )
-
-    def _on_sample(self, sample: zenoh.Sample) -> None:
-        name = self.keys.replica_of(str(sample.key_expr))
-        with self._cond:
-            if sample.kind == zenoh.SampleKind.PUT:
-                self.alive.add(name)
-            else:
-                self.alive.discard(name)
-            self._cond.notify_all()
+        self._alive, self._subs = watch_alive(session, keys)
 
     def wait(self, name: str, present: bool = True, timeout: float = 20.0) -> bool:
-        with self._cond:
-            return self._cond.wait_for(lambda: (name in self.alive) == present, timeout)
+        return self._alive.wait_for(lambda a: (name in a.databanks) == present, timeout)
 
     def close(self) -> None:
-        zconfig.undeclare(self._sub)
+        zconfig.undeclare(*self._subs)
 
 
 def cli(*args: str) -> list[str]:
