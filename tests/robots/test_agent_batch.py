@@ -215,7 +215,11 @@ def test_a_fleet_robot_steps_exactly_like_a_lone_agent(
                 2700: lambda p: payload(29, [poses[p][1]]),
             }
             followed: dict[str, int] = {}  # steps the followers took, per robot and generator
+            kinds: dict[str, int] = {}  # steps of each kind the fleet's robots took
             for step in range(3600):
+                for i, f in enumerate(fleet.agents):
+                    kind = f"{f.platform} {fleet.step_kind(i)}"
+                    kinds[kind] = kinds.get(kind, 0) + 1
                 for f in fleet.agents:
                     for name, gen in zip(("joints", "base"), f.controller.generators,
                                          strict=False):
@@ -243,6 +247,9 @@ def test_a_fleet_robot_steps_exactly_like_a_lone_agent(
                         assert guard.settle(WAIT_S), agent.robot_id
             followed.pop("khepera joints")  # no limb: its joints never move
             assert min(followed.values()) > 200, followed  # the bases' steps too
+            for p in ("baxter", "nao", "youbot"):  # the fleet handed their setpoints over itself
+                assert kinds.get(f"{p} glide", 0) > 200, kinds
+            assert kinds.get("khepera lean", 0) > 200, kinds  # its base steps: lean
             for p in PLATFORMS:
                 stages = {stage for _, stage, _ in said[f"lean-f-{p}"]}
                 assert {"accepted", "moving", "reached", "superseded", "stopped", "estopped",
@@ -250,6 +257,62 @@ def test_a_fleet_robot_steps_exactly_like_a_lone_agent(
         finally:
             fleet.close()
             for a in lone:
+                a.close()
+
+
+def test_a_robot_at_rest_beside_gliding_ones_of_its_platform_stays_exactly_at_rest(
+    hub: Hub, databank: DatabankProcess
+) -> None:
+    """Robots of one platform on one fleet host, one moving, one at rest: the one at rest
+    steps exactly as a lone agent of its platform that got no command (its setpoints are
+    nobody else's), the moving one glides (the fleet hands its followed setpoints over), and
+    every joint of every robot stays within its limits at every step."""
+    _session, endpoint = hub
+    platforms = ("baxter", "nao")
+    poses = {p: moves(databank.catalogue(p)) for p in platforms}
+    with zconfig.session(config=zconfig.loopback_config(endpoint)) as s:
+        specs = [RobotSpec(p, f"rest-{role}-{p}") for p in platforms for role in ("go", "still")]
+        fleet = FleetHost(specs, s, AgentOptions(speed=0.0), helpers=0)
+        lone = {p: Agent(p, f"rest-lone-{p}", s, AgentOptions(speed=0.0)) for p in platforms}
+        try:
+            fleet.declare()
+            for a in lone.values():
+                a.declare()
+            movers = [a for a in fleet.agents if "-go-" in a.robot_id]
+            still = {a.platform: a for a in fleet.agents if "-still-" in a.robot_id}
+            for _ in range(50):  # everyone settles on their own, side by side
+                fleet.tick()
+                for a in lone.values():
+                    a.tick()
+            fleet.complete()
+            for p, a in still.items():  # the resting pair from the same state on
+                fb, ab = a.controller.body, lone[p].controller.body
+                assert isinstance(fb, MujocoBody) and isinstance(ab, MujocoBody)
+                mujoco.mj_copyData(ab.data, ab.model, fb.data)
+            ctrl = {p: a.controller.body.data.ctrl.copy() for p, a in still.items()}  # type: ignore[attr-defined]
+            for k, a in enumerate(movers):
+                a.receive(payload(1, [poses[a.platform][k % 2]]))
+            glided = 0
+            deadline = time.monotonic() + WAIT_S
+            while not all(a.status()[1] == "at target" for a in movers):
+                assert time.monotonic() < deadline, [a.status() for a in movers]
+                fleet.tick()
+                fleet.complete()
+                for a in lone.values():
+                    a.tick()
+                glided += sum(fleet.step_kind(i) == "glide" for i in range(len(fleet.agents)))
+                for p, a in still.items():
+                    fd, ld = a.controller.body.data, lone[p].controller.body.data  # type: ignore[attr-defined]
+                    assert np.array_equal(fd.qpos, ld.qpos), p
+                    assert np.array_equal(fd.ctrl, ctrl[p]), p
+                for a in fleet.agents:
+                    for name, q in zip(a.controller.joint_names, a.controller.q(), strict=True):
+                        lim = a.controller.platform.eurdf.limits[name]
+                        assert lim.lower <= q <= lim.upper, (a.robot_id, name, q)
+            assert glided > 300, glided  # steps the movers glided, one per robot and step
+        finally:
+            fleet.close()
+            for a in lone.values():
                 a.close()
 
 

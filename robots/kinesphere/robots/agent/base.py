@@ -89,7 +89,7 @@ class BaseController:
     def stepping(self) -> bool:
         """Whether :meth:`step` has something to do: a motion, or the followers' last step
         of one."""
-        return self.moving or self._otg.came_to_rest
+        return self._otg.came_to_rest or self.moving
 
     @property
     def followed(self) -> bool:

@@ -138,7 +138,9 @@ class Conduct:
         have done (a fleet host's lean step, ``Agent.followed``)."""
         self._moved_at = self.controller.time
         self._moved_wall = self.wall()
-        self._track(True)
+        motion = self.acks.motion
+        if motion is not None and motion.due is not None:  # else nothing to track: no call
+            self._track(True)
 
     def _track(self, under_way: bool) -> None:
         """A timed motion under way (or braked while the guard finds a way): when it would

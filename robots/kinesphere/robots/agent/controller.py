@@ -42,6 +42,8 @@ class Controller:
             start.q,
             margin,
         )
+        self._joints_otg = self.joints.generator
+        """The joints' generator (read every step: one attribute, not two properties)."""
         self.base: BaseController | None = make_base(self.platform.base, self.dt)
         if self.base is not None:
             self.base.reset(start.base_pose)
@@ -53,7 +55,7 @@ class Controller:
     @property
     def moving(self) -> bool:
         """A trajectory, drive or stop is still being followed."""
-        return self.joints.moving or (self.base is not None and self.base.moving)
+        return self._joints_otg.active or (self.base is not None and self.base.moving)
 
     def move(self, joints: Mapping[str, float] | Aim, duration: float | None = None
              ) -> list[Clamp]:
@@ -98,13 +100,13 @@ class Controller:
     def command(self) -> None:
         """Trajectories forward (a followed joint trajectory has been already: ``follow.py``),
         their setpoints to the body."""
-        self.joints.step()
+        self._joints_otg.step()
         base = self.base
         if base is not None and base.stepping:
             base.step()
-            self.body.command(self.joints.position, base.body_twist)
+            self.body.command(self._joints_otg.position, base.body_twist)
         else:  # a base at rest stays where its servos hold it
-            self.body.command(self.joints.position, AT_REST)
+            self.body.command(self._joints_otg.position, AT_REST)
 
     def finish(self) -> None:
         """The cycle after the body's step: one period of robot time has passed."""
@@ -125,9 +127,17 @@ class Controller:
     def followed(self) -> bool:
         """Whether a fleet host's followers take the steps of every motion under way
         (``follow.py``): nothing is planned or stepped here, nothing can fail here."""
-        joints = self.joints.generator
+        joints = self._joints_otg
         return ((joints.following or not joints.active)
                 and (self.base is None or self.base.followed))
+
+    @property
+    def glides(self) -> bool:
+        """Whether the next step, unless something arrives, is the joints' followed step and
+        nothing else: the followers take it, the base (if any) rests, so :meth:`command` would
+        only hand the joints' followed output to the body. A fleet host hands it over itself
+        for all such robots (``fleet.py``); it stays so while the followers take the steps."""
+        return self._joints_otg.following and (self.base is None or not self.base.stepping)
 
     @property
     def generators(self) -> list[Otg]:

@@ -15,7 +15,10 @@ commands, timers, the guard's verdicts, what it says) only when something is the
 something arrived (its inbox and guard ``notify`` the host), a timer runs out
 (``Conduct.deadline``), a motion's ``moving`` is to say. Otherwise it only moves
 (``Agent.follow``: the followed setpoint to its body, its base's step) or, at rest, nothing at
-all but its physics. A robot whose step fails is held and reported alone.
+all but its physics. A robot whose motion is the followers' alone and whose base rests glides
+(``Controller.glides``): the loop hands the followers' output to its body itself, with no call
+into the robot before the physics, and after it the robot only watches for contacts and counts
+robot time (``Agent.glided``). A robot whose step fails is held and reported alone.
 
 The physics of the bodies is split between the loop's thread and helper threads (``stepper.py``:
 MuJoCo releases the GIL); the loop returns once its own share is done, and the helpers' shares
@@ -43,7 +46,7 @@ from kinesphere.configfile import load_toml
 from kinesphere.errors import KinesphereError
 from kinesphere.keyexpr import Keys, check_segment
 from kinesphere.protocol import Status
-from kinesphere.robots.agent.body import Body
+from kinesphere.robots.agent.body import AT_REST, Body
 from kinesphere.robots.agent.estops import FleetBoard
 from kinesphere.robots.agent.follow import Followers
 from kinesphere.robots.agent.inbox import clocks
@@ -55,9 +58,11 @@ from kinesphere.robots.agent.stepper import Stepper
 
 log = logging.getLogger(__name__)
 
-_CYCLE, _LEAN, _REST = object(), object(), object()
-"""What a robot does in a tick: the whole cycle, only its motion (``Agent.follow``), or
-nothing but robot time (``Fleet.tick``)."""
+_CYCLE, _LEAN, _GLIDE, _REST = object(), object(), object(), object()
+"""What a robot does in a tick: the whole cycle, only its motion (``Agent.follow``), only the
+followers' setpoint to its body (``Controller.glides``, ``Agent.glided``), or nothing but robot
+time (``Fleet.tick``)."""
+_KINDS = {_CYCLE: "cycle", _LEAN: "lean", _GLIDE: "glide", _REST: "rest"}
 
 MAX_ROBOTS = 1024
 """Robots one fleet host runs (each holds a MuJoCo model instance and a resolver thread)."""
@@ -166,6 +171,8 @@ class FleetHost:
         """Robots whose state is due, by tick modulo the state period (``Agent.due``)."""
         for agent in self.agents:
             self._due[(-agent.phase) % every].append(agent)
+        self._joints = [a.controller.joints.generator for a in self.agents]
+        """Each robot's joint generator (a gliding robot's setpoint is its followed output)."""
         self._modes: list[object] = [_CYCLE] * len(self.agents)
         """What each robot does in the step in flight (:meth:`tick`), then in the next."""
         self._deadlines = np.full(len(self.agents), np.inf)
@@ -225,22 +232,32 @@ class FleetHost:
             modes[i] = _CYCLE
             deadlines[i] = np.inf
         failures: list[Exception | None] = [None] * len(agents)
-        for i, agent in enumerate(agents):
-            if modes[i] is _CYCLE:
-                failures[i] = _guarded(agent.react)
+        cycling = [i for i, mode in enumerate(modes) if mode is _CYCLE]
+        for i in cycling:
+            failures[i] = _guarded(agents[i].react)
         self.followers.advance()
-        for i, agent in enumerate(agents):
-            mode = modes[i]
-            if mode is _CYCLE:
-                if failures[i] is None:
-                    failures[i] = _guarded(agent.actuate)
-            elif mode is _LEAN:
-                failures[i] = agent.follow()
+        for i in cycling:
+            if failures[i] is None:
+                failures[i] = _guarded(agents[i].actuate)
+        joints = self._joints
+        for i, mode in enumerate(modes):
+            if mode is _GLIDE:
+                otg = joints[i]
+                if otg.following:  # the followers took the step: their output is the setpoint
+                    try:
+                        agents[i].controller.body.command(otg.position, AT_REST)
+                    except Exception as exc:  # reported for this robot; the others step on
+                        failures[i] = exc
+                    continue
+                mode = modes[i] = _LEAN  # the followers' step ended the motion: a lean step
+            if mode is _LEAN:
+                failures[i] = agents[i].follow()
         self._failures = failures
         bodies = [a.controller.body for a in agents]
         if bodies != self._bodies:
             self._regroup(bodies)
-        self.stepper.launch([b for b, f in zip(bodies, failures, strict=True) if f is None],
+        self.stepper.launch(bodies if not any(failures) else
+                            [b for b, f in zip(bodies, failures, strict=True) if f is None],
                             share=True)
         self.stats.steps += 1
 
@@ -251,20 +268,28 @@ class FleetHost:
         failures, self._failures = self._failures, None
         if failures is None:
             return
-        errors = iter(self.stepper.wait())
+        errors = self.stepper.wait()
+        if any(failures):  # the bodies stepped were those that had not failed before
+            stepped = iter(errors)
+            failures = [f if f is not None else next(stepped) for f in failures]
+        else:
+            failures = errors
         self._stops.apply()
         modes = self._modes
         for i, (agent, failure) in enumerate(zip(self.agents, failures, strict=True)):
-            if failure is None:
-                failure = next(errors)
             mode = modes[i]
             try:
                 if failure is not None or mode is _CYCLE:
                     agent.end_step(failure)
                     modes[i] = self._next(i, agent)
+                elif mode is _GLIDE:
+                    if not agent.glided():
+                        modes[i] = self._next(i, agent)
                 elif mode is _LEAN:
                     if not agent.followed():
                         modes[i] = self._next(i, agent)
+                    elif agent.controller.glides:
+                        modes[i] = _GLIDE
                 else:
                     agent.controller.elapse()
             except Exception:  # one robot's bug must not hold up the others
@@ -279,7 +304,14 @@ class FleetHost:
         self._deadlines[i] = agent.conduct.deadline()
         if not self.batched or agent.needs_cycle():
             return _CYCLE
-        return _REST if agent.at_rest else _LEAN
+        if agent.at_rest:
+            return _REST
+        return _GLIDE if agent.controller.glides else _LEAN
+
+    def step_kind(self, i: int) -> str:
+        """What robot ``i`` does in the step in flight (tests and tools): ``cycle``, ``lean``
+        (``Agent.follow``), ``glide`` (the followers' setpoint only) or ``rest``."""
+        return _KINDS[self._modes[i]]
 
     def _notify(self, i: int) -> Callable[[], None]:
         """What robot ``i``'s inbox and guard call when something arrives for it (any

@@ -98,8 +98,9 @@ class Otg:
         self._why = ""
         self.following = False
         """Whether :class:`Followers` take the steps of the trajectory now (not :meth:`step`)."""
-        self._arrived = False
-        """The followers' step just brought the motion to rest (:meth:`step` says so)."""
+        self.came_to_rest = False
+        """The followers' last step brought the motion to rest, and :meth:`step` has not said
+        so yet (its owner still has that step to account for)."""
         self.followable = True
         """Whether :class:`Followers` may take the steps once Ruckig planned (False: the
         owner plans again before every step, as a base turning while it drives does)."""
@@ -140,18 +141,12 @@ class Otg:
             return self._followers.left(self._slot)
         return self._remaining
 
-    @property
-    def came_to_rest(self) -> bool:
-        """The followers' last step brought the motion to rest, and :meth:`step` has not said
-        so yet (its owner still has that step to account for)."""
-        return self._arrived
-
     def arrived(self) -> None:
         """The followed trajectory ended (``Finished``): rest, unless it cruises on."""
         if self.cruising:
             return  # a cruise that reached its velocity extrapolates at it
         self._detach()
-        self._arrived = self._rest()
+        self.came_to_rest = self._rest()
 
     def _detach(self) -> None:
         """Take the steps here again: Ruckig's input continues from the followed state (what
@@ -170,7 +165,7 @@ class Otg:
     def reset(self, position: Values) -> None:
         """At rest at ``position`` (where the body was found)."""
         self._detach()
-        self._arrived = False
+        self.came_to_rest = False
         self.position[:] = position
         self._inp.current_position = list(self.position)
         self._inp.current_velocity = [0.0] * self.n
@@ -215,7 +210,7 @@ class Otg:
         """A new input for Ruckig (``position`` or ``velocity``: the target that changes;
         ``duration``: the minimum duration, None for none). The same input again changes
         nothing for Ruckig, which follows on (so do followers)."""
-        self._arrived = False
+        self.came_to_rest = False
         inp = self._inp
         if not (self.following and inp.control_interface == interface
                 and inp.synchronization == sync and inp.minimum_duration == duration
@@ -242,7 +237,7 @@ class Otg:
     def step(self) -> bool:
         """Advance one cycle; True when the motion just came to rest (reached or braked)."""
         if not self.active or self.following:
-            arrived, self._arrived = self._arrived, False
+            arrived, self.came_to_rest = self.came_to_rest, False
             return arrived  # the followers took this step
         result = self._update()
         if result is None:

@@ -316,14 +316,31 @@ class Agent:
         :meth:`end_step` says when a trajectory was stepped here, ended or was halted.
         True when the robot still moves and nothing changed (the next step is such a step
         again); else ask :meth:`needs_cycle` and :attr:`at_rest`."""
-        ctrl, conduct = self.controller, self.conduct
+        ctrl = self.controller
         ctrl.finish()  # the guard watches for contacts
         if self._followed_only and ctrl.moving and ctrl.followed:
-            conduct.followed()  # nothing else can have changed
+            self.conduct.followed()  # nothing else can have changed
             return True
+        return self._went_on()
+
+    def glided(self) -> bool:
+        """:meth:`followed` for a step in which a fleet host handed the followers' setpoint to
+        the body itself (``Controller.glides``): the base rests, so while the joints are still
+        the followers' (the guard halted nothing) the step went as planned."""
+        ctrl = self.controller
+        ctrl.finish()  # the guard watches for contacts
+        if ctrl.joints.generator.following:
+            self.conduct.followed()
+            return True
+        return self._went_on()
+
+    def _went_on(self) -> bool:
+        """The end of a lean step that did more than follow (or was halted): what
+        :meth:`end_step` says; whether the next step may be lean again."""
+        conduct = self.conduct
         changed = conduct.after_step()
         conduct.acks.flush()
-        return not changed and ctrl.moving  # a base stepped here, a joint plan: lean still
+        return not changed and self.controller.moving  # a base stepped here, a joint plan
 
     def react(self) -> Exception | None:
         """The first part of :meth:`begin_step` once the step is counted (``stats.begun``):
