@@ -444,6 +444,19 @@ def plain_urdf(text: str) -> str:
     return ET.tostring(root, encoding="unicode")
 
 
+def robot_root(data: str | bytes, source: str) -> ET.Element:
+    """The ``<robot>`` root element of URDF or eURDF text (bytes as read: XML's own encoding
+    declaration applies), or ``invalid_eurdf`` naming ``source``. Parses only: bounds are the
+    caller's."""
+    try:
+        root = ET.fromstring(data)
+    except ET.ParseError as exc:
+        raise invalid(f"{source}: not well-formed XML ({exc})") from None
+    if root.tag != "robot":
+        raise invalid(f"{source}: root element must be <robot>, found <{root.tag}>")
+    return root
+
+
 def _robot_element(text: str, source: str) -> ET.Element:
     """The ``<robot>`` root of eURDF text, or ``invalid_eurdf`` naming ``source``.
 
@@ -452,12 +465,7 @@ def _robot_element(text: str, source: str) -> ET.Element:
     standard library's serialiser recurses once per level)."""
     if "<!DOCTYPE" in text or "<!ENTITY" in text:
         raise invalid(f"{source}: a document type declaration is not allowed in a URDF")
-    try:
-        root = ET.fromstring(text)
-    except ET.ParseError as exc:
-        raise invalid(f"{source}: not well-formed XML ({exc})") from None
-    if root.tag != "robot":
-        raise invalid(f"root element must be <robot>, found <{root.tag}>")
+    root = robot_root(text, source)
     count = 0
     stack = [(root, 1)]
     while stack:

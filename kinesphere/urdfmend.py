@@ -33,7 +33,8 @@ import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from kinesphere.errors import KinesphereError
+from kinesphere.eurdf import robot_root
+from kinesphere.labels import invalid
 
 MAX_BYTES = 16 * 2**20  # a URDF file; the largest real ones are a few hundred KB
 MAX_LINKS = 256  # links (and joints) of one robot; the largest real ones have ~130
@@ -46,10 +47,6 @@ NUMERIC = frozenset({
 GEOMETRY_SIZES = {"box": ("size",), "cylinder": ("radius", "length"), "sphere": ("radius",),
                   "capsule": ("radius", "length")}
 RESERVED_ROOT = "world"  # MuJoCo's own world body
-
-
-def refused(message: str) -> KinesphereError:
-    return KinesphereError("invalid_eurdf", message)
 
 
 @dataclass
@@ -66,10 +63,10 @@ class Mends:
 def read_bytes(path: Path) -> bytes:
     """A URDF file's bytes, refused past MAX_BYTES before anything is read."""
     if not path.is_file():
-        raise refused(f"URDF file not found: {path}")
+        raise invalid(f"URDF file not found: {path}")
     size = path.stat().st_size
     if size > MAX_BYTES:
-        raise refused(f"{path}: {size} bytes; a URDF may have at most {MAX_BYTES}")
+        raise invalid(f"{path}: {size} bytes; a URDF may have at most {MAX_BYTES}")
     with path.open("rb") as fh:
         return fh.read(MAX_BYTES + 1)[:MAX_BYTES]
 
@@ -79,13 +76,7 @@ def parse(data: bytes, source: str, mends: Mends) -> ET.Element:
     trimmed = data.lstrip(b"\xef\xbb\xbf").strip(b" \t\r\n\x00")
     if trimmed != data.lstrip(b"\xef\xbb\xbf").rstrip(b" \t\r\n"):
         mends.add("stray bytes around the XML (whitespace before it, NULs after it) dropped")
-    try:
-        root = ET.fromstring(trimmed)
-    except ET.ParseError as exc:
-        raise refused(f"{source}: not well-formed XML ({exc})") from None
-    if root.tag != "robot":
-        raise refused(f"{source}: the root element is <{root.tag}>, not <robot>")
-    return root
+    return robot_root(trimmed, source)
 
 
 def check(root: ET.Element) -> None:
@@ -93,15 +84,15 @@ def check(root: ET.Element) -> None:
     links = root.findall("link")
     joints = root.findall("joint")
     if not links:
-        raise refused("it has no <link>: nothing to label")
+        raise invalid("it has no <link>: nothing to label")
     if len(links) > MAX_LINKS or len(joints) > MAX_LINKS:
-        raise refused(f"{len(links)} links and {len(joints)} joints; a robot may have at most "
+        raise invalid(f"{len(links)} links and {len(joints)} joints; a robot may have at most "
                       f"{MAX_LINKS} of each")
     for el in root.iter():
         for attr, value in el.attrib.items():
             if attr in NUMERIC and not all(_finite(x) for x in value.split()):
                 owner = _owner(root, el)
-                raise refused(f"{owner}: <{el.tag} {attr}={value!r}> is not a finite number")
+                raise invalid(f"{owner}: <{el.tag} {attr}={value!r}> is not a finite number")
     _check_tree(root)
 
 
@@ -125,9 +116,9 @@ def _check_tree(root: ET.Element) -> None:
     for i, el in enumerate(root.findall("link")):
         name = el.get("name")
         if not name:
-            raise refused(f"<link> number {i + 1} has no name")
+            raise invalid(f"<link> number {i + 1} has no name")
         if name in names:
-            raise refused(f"<link name={name!r}> appears twice")
+            raise invalid(f"<link name={name!r}> appears twice")
         names.add(name)
     parent_of: dict[str, str] = {}
     children: dict[str, list[str]] = {}
@@ -135,27 +126,27 @@ def _check_tree(root: ET.Element) -> None:
     for el in root.findall("joint"):
         jn = el.get("name")
         if not jn:
-            raise refused("a <joint> has no name")
+            raise invalid("a <joint> has no name")
         if jn in joint_names:
-            raise refused(f"<joint name={jn!r}> appears twice")
+            raise invalid(f"<joint name={jn!r}> appears twice")
         joint_names.add(jn)
         ends = []
         for tag in ("parent", "child"):
             ref = el.find(tag)
             target = ref.get("link") if ref is not None else None
             if not target or target not in names:
-                raise refused(f"<joint name={jn!r}> has no existing <{tag} link=...>")
+                raise invalid(f"<joint name={jn!r}> has no existing <{tag} link=...>")
             ends.append(target)
         parent, child = ends
         if child in parent_of:
-            raise refused(f"link {child!r} is the child of joints {parent_of[child]!r} and "
+            raise invalid(f"link {child!r} is the child of joints {parent_of[child]!r} and "
                           f"{jn!r}; a URDF is a tree")
         parent_of[child] = jn
         children.setdefault(parent, []).append(child)
     roots = [n for n in names if n not in parent_of]
     if len(roots) != 1:
         what = "none: the joints form a cycle" if not roots else ", ".join(sorted(roots)[:4])
-        raise refused(f"a URDF has exactly one root link; found {what}")
+        raise invalid(f"a URDF has exactly one root link; found {what}")
     seen, todo = set(), [roots[0]]
     while todo:
         link = todo.pop()
@@ -163,7 +154,7 @@ def _check_tree(root: ET.Element) -> None:
         todo.extend(children.get(link, []))
     cycle = sorted(names - seen)
     if cycle:
-        raise refused(f"links {', '.join(cycle[:4])} form a kinematic cycle; a URDF is a tree")
+        raise invalid(f"links {', '.join(cycle[:4])} form a kinematic cycle; a URDF is a tree")
 
 
 def mend(root: ET.Element, mends: Mends) -> None:
@@ -175,13 +166,13 @@ def mend(root: ET.Element, mends: Mends) -> None:
         kind = el.get("type")
         name = el.get("name")
         if kind not in ("revolute", "continuous", "prismatic", "fixed", "floating", "planar"):
-            raise refused(f"<joint name={name!r}> has type {kind!r}; URDF joints are revolute, "
+            raise invalid(f"<joint name={name!r}> has type {kind!r}; URDF joints are revolute, "
                           "continuous, prismatic, fixed, floating or planar")
         axis = el.find("axis")
         if kind in ("revolute", "continuous", "prismatic") and axis is not None:
             xyz = [float(x) for x in (axis.get("xyz") or "1 0 0").split()]
             if len(xyz) != 3 or math.hypot(*xyz) < 1e-9:
-                raise refused(f"<joint name={name!r}> has axis {axis.get('xyz')!r}; it needs "
+                raise invalid(f"<joint name={name!r}> has axis {axis.get('xyz')!r}; it needs "
                               "three numbers, not all zero")
         if kind == "revolute" and el.find("mimic") is None:
             _revolute_limits(el, mends)
@@ -189,7 +180,7 @@ def mend(root: ET.Element, mends: Mends) -> None:
         if kind == "prismatic" and lim is not None and el.find("mimic") is None:
             lower, upper = _float(lim.get("lower")), _float(lim.get("upper"))
             if lower is not None and upper is not None and lower > upper:
-                raise refused(f"<joint name={name!r}> (prismatic) has lower limit {lower:g} "
+                raise invalid(f"<joint name={name!r}> (prismatic) has lower limit {lower:g} "
                               f"above upper {upper:g}; a URDF slider cannot be unlimited")
     for el in root.iter("mesh"):
         scale = (el.get("scale") or "").split()
@@ -201,7 +192,7 @@ def mend(root: ET.Element, mends: Mends) -> None:
     _world_root(root, mends)
     for el in root.findall("joint"):
         if el.get("type") in ("floating", "planar"):
-            raise refused(f"<joint name={el.get('name')!r}> is {el.get('type')} inside the tree: "
+            raise invalid(f"<joint name={el.get('name')!r}> is {el.get('type')} inside the tree: "
                           "only a robot's root may float (make it fixed, or the root's joint)")
     check(root)  # the mends added links and joints: still within bounds
 
