@@ -13,7 +13,6 @@ module.
 
 from __future__ import annotations
 
-import importlib.util
 import os
 from collections.abc import Iterator
 from pathlib import Path
@@ -24,8 +23,8 @@ import pytest
 from kinesphere import zconfig
 from kinesphere.procs import Supervisor
 from support.agents import DatabankProcess
+from support.cells import load_laban_editor
 from support.network import Hub
-from support.paths import LABAN_EDITOR
 from support.system import supervisor
 
 PROCESS_FIXTURES = frozenset({"databank", "sup", "fleet", "secured"})
@@ -81,8 +80,4 @@ def pygame_up() -> Iterator[None]:
 def laban_editor() -> ModuleType:
     """LabanEditor's ``labanProcessor.py`` loaded as a module (``to_sphere``,
     ``coordinate2laban``): the cells it writes are what kinesphere's notation must write."""
-    spec = importlib.util.spec_from_file_location("labanProcessor", LABAN_EDITOR)
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_laban_editor()

@@ -14,11 +14,9 @@ from __future__ import annotations
 
 import json
 import sys
-from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 from types import ModuleType
-from typing import Any
 
 import numpy as np
 import pytest
@@ -27,21 +25,14 @@ from kinesphere.cli import main
 from kinesphere.robots.agent.fleet import RobotSpec
 from kinesphere.vocabulary import lookup, vocabulary
 from support.agents import DatabankProcess, running_fleet_host
-from support.cells import Reachable, reachable
-from support.nested import MeasuredBody, SegmentEnds, degrees
+from support.cells import Reachable, measured, player_vector, reachable, segments
+from support.nested import MeasuredBody
 from support.network import KEYS, Hub
 from support.wait import WAIT_S
 
 GESTURES = ("big2", "think_d_high_s")
 ROBOTS = [RobotSpec("baxter", "lab-baxter"), RobotSpec("nao", "lab-nao"),
           RobotSpec("youbot", "lab-youbot"), RobotSpec("packbot", "lab-packbot")]
-PARTS = {"head": ("head", "neck"),
-         "right elbow": ("right_upper_arm", "right_shoulder"),
-         "right wrist": ("right_forearm", "right_elbow"),
-         "left elbow": ("left_upper_arm", "left_shoulder"),
-         "left wrist": ("left_forearm", "left_elbow")}
-"""Score column -> the body words (limb, origin) of the part: the segment measured runs from
-the origin's pivot to where the limb ends (the next location, or the limb's tip link)."""
 AS_WRITTEN, WITHIN = 0.9, 45.0
 SPEED = "0.1"
 MEASURED = 8
@@ -52,32 +43,6 @@ def shipped_score(name: str) -> dict[str, dict[str, dict[str, list[str]]]]:
     res = resources.files("kinesphere.clients.orders").joinpath(f"scores/{name}.json")
     data: dict[str, dict[str, dict[str, list[str]]]] = json.loads(res.read_text())
     return data
-
-
-def player_vector(direction: str, level: str) -> np.ndarray:
-    """The score's direction as the suite's player draws it (labanotation.js: levels at 45,
-    90, 135 degrees from the vertical, horizontals every 45 degrees; Place is vertical)."""
-    if direction == "Place":
-        return np.array([0.0, 0.0, 1.0 if level == "High" else -1.0])
-    phi = np.radians({"Forward": 0, "Left Forward": 45, "Left": 90, "Left Backward": 135,
-                      "Backward": 180, "Right Backward": -135, "Right": -90,
-                      "Right Forward": -45}[direction])
-    theta = np.radians({"High": 45, "Normal": 90, "Low": 135}[level])
-    return np.array([np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.cos(theta)])
-
-
-def segments(body: MeasuredBody) -> dict[str, SegmentEnds]:
-    """Score column -> the segment the body's vocabulary names for it."""
-    words = lookup(vocabulary(body.eurdf))
-    out = {}
-    for column, (limb, origin) in PARTS.items():
-        if words[limb].label and words[origin].label:
-            out[column] = SegmentEnds(words[origin].label, words[limb].end or words[limb].label)
-    return out
-
-
-def side_of(column: str) -> str:
-    return column.split()[0]
 
 
 def test_play_scores_on_four_bodies_notated_back_by_labaneditor(
@@ -123,6 +88,8 @@ def test_play_scores_on_four_bodies_notated_back_by_labaneditor(
     assert "rotation     not performed: a fixed base" in check.split("lab-nao")[0]
     written = {next(iter(shipped_score(name))): next(iter(shipped_score(name).values()))
                for name in GESTURES}
+    assert all(kf["q"] for name in GESTURES for r in reports[name]["robots"]
+               for kf in r["keyframes"]), "a keyframe without a state to measure"
     tally = measured([reports[name] for name in GESTURES], written, laban_editor)
     for spec in ROBOTS:
         t = tally[spec.robot_id]
@@ -136,89 +103,6 @@ def test_play_scores_on_four_bodies_notated_back_by_labaneditor(
     nao = tally["lab-nao"]  # the head, measured where it looks
     assert nao.head_reachable >= len(GESTURES), nao
     assert nao.head_same >= AS_WRITTEN * nao.head_reachable, nao
-
-
-@dataclass
-class Tally:
-    """One robot's cells over the keyframes played: every arm cell and how many came back as
-    written; those the body can point its part into (:mod:`support.cells`, from its URDF
-    alone), how many of them came back as written (a late or blocked keyframe counts, measured
-    where the robot was) and their angles to the score's direction; the head's the same way."""
-
-    performs: list[str] = field(default_factory=list)
-    cells: int = 0
-    same: int = 0
-    reachable: int = 0
-    same_reachable: int = 0
-    angles: list[float] = field(default_factory=list)
-    late: int = 0
-    keyframes: int = 0
-    head_reachable: int = 0
-    head_same: int = 0
-
-    def line(self, platform: str) -> str:
-        return (f"{platform}: {self.same} of {self.cells} arm cells notated back as written; "
-                f"{self.reachable} the body can reach, {self.same_reachable} of them as "
-                f"written, worst angle {max(self.angles, default=0):.0f} degrees; late at "
-                f"{self.late} of {self.keyframes} keyframes; head {self.head_same} of "
-                f"{self.head_reachable} reachable cells as written")
-
-
-def measured(reports: list[dict[str, Any]], written: dict[str, dict[str, dict[str, list[str]]]],
-             laban_editor: ModuleType) -> dict[str, Tally]:
-    """Every robot's :class:`Tally` from ``--report`` files (the joint states it reported),
-    by yourdfpy and LabanEditor, against the scores as ``json`` read them."""
-    out: dict[str, Tally] = {}
-    bodies: dict[str, tuple[MeasuredBody, dict[str, SegmentEnds]]] = {}
-    for report in reports:
-        for robot in report["robots"]:
-            if robot["platform"] not in bodies:
-                body = MeasuredBody(robot["platform"])
-                bodies[robot["platform"]] = (body, segments(body))
-            body, parts = bodies[robot["platform"]]
-            t = out.setdefault(robot["robot"], Tally())
-            t.performs = [c for c in robot["performs"] if c in parts and c != "head"]
-            for kf in robot["keyframes"]:
-                raw = written[kf["gesture"]][kf["keyframe"]]
-                assert kf["q"], (robot["robot"], kf["keyframe"], kf["said"])
-                t.keyframes += 1
-                t.late += kf["late_ms"] > 0
-                body.pose(dict(zip(kf["joint_names"], kf["q"], strict=True)))
-                for column in [*t.performs, *(["head"] if "head" in parts else [])]:
-                    cell = tuple(raw[column])
-                    if cell == ("Place", "Normal"):
-                        continue  # no direction: LabanEditor never writes it
-                    v = body.direction(parts[column])
-                    _, theta, phi = laban_editor.to_sphere(v)
-                    as_written = tuple(laban_editor.coordinate2laban(theta, phi)) == cell
-                    can = can_reach(body, parts, laban_editor, raw, column)
-                    if column == "head":
-                        t.head_reachable += can
-                        t.head_same += can and as_written
-                        continue
-                    t.cells += 1
-                    t.same += as_written
-                    if can:
-                        t.reachable += 1
-                        t.same_reachable += as_written
-                        t.angles.append(float(degrees(v, player_vector(*cell))))
-    return out
-
-
-def can_reach(body: MeasuredBody, parts: dict[str, SegmentEnds], laban_editor: ModuleType,
-              raw: dict[str, list[str]], column: str) -> bool:
-    """Whether the body can point ``column``'s part into the score's cell (its joint limits,
-    touching nothing: :mod:`support.cells`); a forearm with its upper arm as written."""
-    side = side_of(column)
-    outer = "head" if column == "head" else f"{side} elbow"
-    inner = "head" if column == "head" else f"{side} wrist"
-    words = lookup(vocabulary(body.eurdf))
-    limb = words["head" if column == "head" else f"{side}_arm"].label
-    cells = reachable(body.platform.name, limb, parts[outer], parts[inner], laban_editor)
-    if column == outer:
-        return cells.has(" ".join(raw[column]))
-    return cells.has_inner(" ".join(raw[outer]), player_vector(*raw[outer]),
-                           " ".join(raw[column]))
 
 
 def test_reachable_cells_come_from_the_joint_limits(laban_editor: ModuleType) -> None:
