@@ -23,6 +23,7 @@ from rich.table import Table
 
 from kinesphere.cliargs import Subcommands, add_bodies, add_json, add_output, command
 from kinesphere.errors import KinesphereError
+from kinesphere.services.ecl.cli import table_console
 from kinesphere.services.options import (
     SHEET_SIZE,
     add_cell,
@@ -130,11 +131,6 @@ def register_build(ecl_sub: Subcommands, top_sub: Subcommands) -> None:
     add_output(p, "the PNG file")
 
 
-def _console() -> Console:
-    console = Console()
-    return console if console.is_terminal else Console(width=10_000)
-
-
 def _gl() -> None:
     if sys.platform.startswith("linux") and not os.environ.get("DISPLAY"):
         os.environ.setdefault("MUJOCO_GL", "egl")
@@ -156,7 +152,7 @@ def _build(args: argparse.Namespace) -> int:
         raise KinesphereError("malformed", f"--jobs must be at least 1, got {args.jobs}")
     names = platform_names() if args.all else [args.platform]
     workers = args.jobs or default_workers()
-    console = _console()
+    console = table_console()
     start = time.perf_counter()
     with Progress(
         TextColumn("[bold]generating[/]"), BarColumn(), MofNCompleteColumn(),
@@ -224,7 +220,7 @@ def _report(args: argparse.Namespace) -> int:
 
     ecl = Ecl.open(args.platform, db=args.db)
     rows = [r for r in ecl.rows() if r["joints"] and r["direction"] != "place-middle"]
-    console = _console()
+    console = table_console()
     if not rows and not ecl.dropped("unstable"):
         console.print(f"{ecl.platform.name}: no generated rows (only core translations and "
                       "neutral poses)", highlight=False)
@@ -303,7 +299,7 @@ def _audit(args: argparse.Namespace) -> int:
     if args.json:
         sys.stdout.write(result.to_json() + "\n")
         return 0
-    console = _console()
+    console = table_console()
     if not result.pairs:
         console.print(f"{result.platform}: no limbs in its VSAM (only core translations), "
                       "nothing to measure", highlight=False)

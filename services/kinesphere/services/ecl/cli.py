@@ -2,7 +2,8 @@
 
 These are the super-user's tools from the paper (store a pose for a cell, review rows, move a
 databank to and from JSON) plus a local f_SB lookup. The generator's commands (build, report,
-render) come from ``build_cli`` when that module is installed.
+render) come from ``build_cli`` when that module is installed; both print tables through
+:func:`table_console`.
 """
 
 from __future__ import annotations
@@ -128,7 +129,7 @@ def _usage(parser: argparse.ArgumentParser) -> int:
     return 2
 
 
-def _console() -> Console:
+def table_console() -> Console:
     """A terminal keeps its width; piped output is never truncated."""
     console = Console()
     return console if console.is_terminal else Console(width=10_000)
@@ -197,7 +198,7 @@ def _print_pose(pose: Pose, as_json: bool) -> None:
         print(msgspec.json.encode(pose).decode())
         return
     where = f"k_id {pose.k_id}" + (f", p_id {pose.p_id}" if pose.p_id is not None else "")
-    console = _console()
+    console = table_console()
     console.print(f"{pose.platform}: ({pose.limb}, {pose.origin}, {pose.direction}, "
                   f"{pose.size:g})  [{where}]", highlight=False, markup=False)
     table = Table()
@@ -234,7 +235,7 @@ def _show(args: argparse.Namespace) -> int:
         quality = ["-" if r[q] is None else f"{r[q]:.3f}" for q in ("cosine", "reach", "margin")]
         table.add_row(str(r["k_id"]), r["limb"], r["origin"], r["direction"], str(r["size"]),
                       *values, *quality)
-    _console().print(table)
+    table_console().print(table)
     return 0
 
 
