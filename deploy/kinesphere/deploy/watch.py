@@ -63,21 +63,6 @@ def watch_alive(session: zenoh.Session, keys: Keys) -> tuple[Alive, list[Any]]:
     return alive, subs
 
 
-def query_alive(session: zenoh.Session, keys: Keys, timeout: float) -> tuple[list[str], list[str]]:
-    """One liveliness ``get``: (databank replicas, robot ids) alive right now, sorted."""
-    found: tuple[set[str], set[str]] = (set(), set())
-    for which, key in enumerate((keys.alive_databank_all(), keys.alive_robot("*"))):
-        for reply in session.liveliness().get(key, timeout=timeout):
-            if reply.ok is None:
-                continue
-            k = str(reply.ok.key_expr)
-            try:
-                found[which].add(keys.replica_of(k) if which == 0 else keys.robot_id_of(k))
-            except KinesphereError:
-                continue
-    return sorted(found[0]), sorted(found[1])
-
-
 @dataclass
 class Track:
     """One robot's recorded states: the last one and a downsampled (t, q) history."""
