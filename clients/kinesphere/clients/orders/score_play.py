@@ -169,7 +169,9 @@ def casting_lines(performers: Iterable[Performer]) -> list[str]:
 def check(link: RobotLink, performers: Sequence[Performer], gestures: Sequence[Gesture],
           timeout: float = QUERY_TIMEOUT_S) -> None:
     """Ask the databank for every keyframe's chains on every platform once (module, step 1);
-    what it refuses is kept in each performer's ``refused``. Also warms its caches."""
+    what it refuses is kept in each performer's ``refused``. Also warms its caches: each
+    keyframe's whole command is asked once too, as the robot will ask it (a chain is pointed
+    with the ones before it placed, so the chains alone are not that answer)."""
     done: dict[tuple[str, str, int], dict[str, str]] = {}
     for p in performers:
         for g in gestures:
@@ -177,8 +179,24 @@ def check(link: RobotLink, performers: Sequence[Performer], gestures: Sequence[G
                 key = (p.platform, g.name, kf.index)
                 if key not in done:
                     done[key] = _refusals(link, p, kf, timeout)
-                if done[key]:
+                    if done[key]:
+                        p.refused[(g.name, kf.index)] = done[key]
+                    _warm(link, p.platform, p.command_parts(g, kf), timeout)
+                elif done[key]:
                     p.refused[(g.name, kf.index)] = done[key]
+
+
+def _warm(link: RobotLink, platform: str, parts: list[SpatialCommand], timeout: float) -> None:
+    """Ask the databank for ``parts`` together, for its cache only (what it says was said by
+    the chains already)."""
+    if len(parts) < 2:
+        return
+    try:
+        get_one(link.session, link.keys.compound(platform), Pose,
+                encode(CompoundRequest(parts=parts)), timeout=timeout, retry=True)
+    except KinesphereError as exc:
+        if exc.code == "unavailable":
+            raise
 
 
 def _refusals(link: RobotLink, p: Performer, kf: Keyframe, timeout: float) -> dict[str, str]:
