@@ -128,6 +128,25 @@ def test_an_estop_is_released_only_by_whoever_latched_it() -> None:
     assert s.on_command(c(sender="carol", release=True), 0.8) is Verdict.RELEASE  # a named one
 
 
+def test_a_release_clears_only_an_estop_sent_before_it() -> None:
+    """Before: a late copy of one round's release (copies are sent until every robot answers;
+    its session had ended) reached two robots just after the next round's e-stop and cleared
+    it, while ``kinesphere estop`` reported all eight latched (the e-stop flood, 200 rounds
+    under load)."""
+    s = Safety()
+    estop = cmd(0, T0 + 2 * S, session="round-2", sender="op", estop=True)
+    assert s.on_command(estop, 0.0) is Verdict.ESTOP
+    late = cmd(2, T0 + S, session="round-1", sender="op", release=True)
+    assert s.on_command(late, 0.1) is Verdict.LATCHED and s.predates(late)
+    assert s.latches == ["op"]
+    again = cmd(0, T0 + 2 * S, session="round-2-release", sender="op", release=True)
+    assert not s.predates(again) and s.on_command(again, 0.2) is Verdict.RELEASE
+    # nobody's latch: a release sent before it leaves it too
+    assert s.on_command(cmd(0, T0 + 5 * S, sender="", estop=True), 0.3) is Verdict.ESTOP
+    assert s.on_command(cmd(1, T0 + 4 * S, sender="bob", release=True), 0.4) is Verdict.LATCHED
+    assert s.on_command(cmd(2, T0 + 6 * S, sender="bob", release=True), 0.5) is Verdict.RELEASE
+
+
 # --- over the wire -----------------------------------------------------------------------------
 
 
@@ -175,6 +194,27 @@ def test_the_robot_takes_the_sender_from_the_key(hub: Hub) -> None:
         acks.of("alice", seq, "released")
         for op in (alice, bob, plain):
             op.close()
+    acks.close()
+
+
+def test_a_late_copy_of_a_release_leaves_the_next_estop_latched(hub: Hub) -> None:
+    session, endpoint = hub
+    acks = AckWatch(session, "late-copy")
+    with running_agent(endpoint, "khepera", robot_id="late-copy", speed=1.0) as (_, watch):
+        op = Signed(session, "late-copy", "")
+        before = time.time_ns()  # when the last round's release was sent
+        seq = op.send("op", estop=True, stop=True, deadman=False)
+        acks.of("op", seq, "estopped")
+        seq = op.send("op", release=True, sent_ns=before, session="ended")
+        refused = acks.of("op", seq, "rejected")
+        assert refused.code == "estopped", refused
+        assert "this release was sent before op's latest e-stop" in refused.detail
+        heard = time.time_ns()
+        watch.wait(lambda s: s.stamp_ns > heard and s.status == "estop" and s.estop_by == "op",
+                   "still latched after the late copy")
+        seq = op.send("op", release=True)
+        acks.of("op", seq, "released")
+        op.close()
     acks.close()
 
 

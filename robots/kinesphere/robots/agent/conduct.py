@@ -365,6 +365,10 @@ class Conduct:
             return f"e-stop latched by {holders}; only a release is obeyed"
         if not cmd.sender:
             return f"e-stop latched by {holders}; a release must name its sender"
+        if self.safety.predates(cmd):
+            return (f"e-stop still latched by {holders}: this release was sent before "
+                    f"{cmd.sender}'s latest e-stop (by its sender's clock), so it does not "
+                    "clear it; release again")
         return (f"e-stop still latched by {holders}: each latch clears only with its own "
                 "sender's release (restarting the agent clears it only when no fleet e-stop "
                 "of that sender is in force)")

@@ -19,6 +19,10 @@ The rules (also in ``docs/protocol.md`` terms):
   every sender) is nobody's, so any named sender may release it. A latch whose sender is
   gone is cleared by restarting the agent, at the robot. The release only clears latches;
   its parts and drive are *not* executed, so the robot moves again only on the next command.
+* **A release clears only an e-stop sent before it** (by the sender's clock, ``sent_ns``).
+  Each copy of a release is sent again until every robot answers, and copies from a session
+  that has ended can still be under way on another path; one arriving after its sender's next
+  e-stop would otherwise clear that e-stop while ``kinesphere estop`` reported it latched.
 * **An e-stop always latches.** The robot names :data:`MAX_LATCHES` senders' latches; the
   e-stop of one more sender while they are all held latches the one :data:`OVERFLOW` latch
   instead (no latch is ever evicted to make room). Nobody can say whose that latch is, so no
@@ -69,6 +73,8 @@ class Safety:
     deadline: float | None = None
     latches: list[str] = field(default_factory=list)
     """The senders whose e-stops are latched, first first."""
+    latched_ns: dict[str, int] = field(default_factory=dict)
+    """Per latch, the ``sent_ns`` of the newest e-stop it holds (its sender's clock)."""
 
     @property
     def estopped(self) -> bool:
@@ -88,30 +94,37 @@ class Safety:
         """Every latch's sender, for people."""
         return ", ".join(OVERFLOW_WORDS if s == OVERFLOW else s for s in self.latches)
 
-    def latch(self, sender: str) -> str:
-        """Latch ``sender``'s e-stop (``""``: anonymous); the latch it holds now: its own,
-        or :data:`OVERFLOW` when :data:`MAX_LATCHES` others are held (never evicted)."""
+    def latch(self, sender: str, sent_ns: int = 0) -> str:
+        """Latch ``sender``'s e-stop (``""``: anonymous) sent at ``sent_ns``; the latch it
+        holds now: its own, or :data:`OVERFLOW` when :data:`MAX_LATCHES` others are held
+        (never evicted)."""
         who = sender or ANONYMOUS
-        if who in self.latches:
-            return who
-        if who != OVERFLOW and len(self.latches) - self.overflowed < MAX_LATCHES:
-            self.latches.append(who)
-            return who
-        if not self.overflowed:
-            self.latches.append(OVERFLOW)
-        return OVERFLOW
+        if who not in self.latches:
+            if who == OVERFLOW or len(self.latches) - self.overflowed >= MAX_LATCHES:
+                who = OVERFLOW
+            if who not in self.latches:
+                self.latches.append(who)
+        self.latched_ns[who] = max(sent_ns, self.latched_ns.get(who, 0))
+        return who
+
+    def predates(self, cmd: Command) -> bool:
+        """Whether release ``cmd`` was sent before an e-stop of its sender's latch (or of the
+        nobody's latch it could clear): that latch stays."""
+        return any(latch in self.latches and cmd.sent_ns < self.latched_ns.get(latch, 0)
+                   for latch in (cmd.sender, ANONYMOUS))
 
     def on_command(self, cmd: Command, now: float) -> Verdict:
         """Classify ``cmd`` received at ``now`` and arm or disarm the watchdog."""
         if cmd.estop:
-            self.latch(cmd.sender)
+            self.latch(cmd.sender, cmd.sent_ns)
             self.deadline = None
             return Verdict.ESTOP
         if self.estopped:
             if cmd.release and cmd.sender and cmd.sender != OVERFLOW:
                 for latch in (cmd.sender, ANONYMOUS):  # nobody's latch: any named sender
-                    if latch in self.latches:
+                    if latch in self.latches and cmd.sent_ns >= self.latched_ns[latch]:
                         self.latches.remove(latch)
+                        del self.latched_ns[latch]
                 if not self.latches:
                     return Verdict.RELEASE
             return Verdict.LATCHED
