@@ -13,11 +13,9 @@ from __future__ import annotations
 
 import json
 import re
-import shlex
 import time
 import urllib.request
 from collections.abc import Iterator
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import pytest
@@ -33,6 +31,7 @@ from kinesphere.protocol import Ack, Command, SpatialCommand, decode, encode
 from kinesphere.zconfig import free_port, loopback_config, undeclare
 from support.paths import ROOT
 from support.system import Observer, at_pose, log_of
+from support.transcripts import Step, section, unprinted
 from support.wait import WAIT_S, until
 
 pytestmark = pytest.mark.processes
@@ -132,56 +131,19 @@ def test_kill_any_service_and_the_rest_keep_talking(
     assert status_lists(ep, "client", capsys) == alive
 
 
-@dataclass
-class TourStep:
-    """One command of the README's tour and the lines the README shows it print."""
-
-    words: list[str]
-    background: bool
-    shown: list[str] = field(default_factory=list)
-
-
 SETUP = (["make", "install"], [".", ".venv/bin/activate"])
 """The tour's commands that are not ``kinesphere``: the set-up this suite already ran."""
-NUMBER = re.compile(r"[-+]?\d+(?:\.\d+)?")
-ANSI = re.compile(r"\x1b\[[0-9;]*m")
+TOUR = "A five-minute tour"
 
 
-def tour() -> tuple[list[TourStep], str]:
-    """The console blocks of the README's "A five-minute tour", and the sender it names."""
+def tour() -> tuple[list[Step], str]:
+    """The steps of the README's "A five-minute tour", and the sender it names."""
+    steps = [step for block in section("README.md", TOUR) for step in block.steps]
     text = (ROOT / "README.md").read_text(encoding="utf-8")
-    start = text.index("\n## A five-minute tour\n")
-    section = text[start : text.find("\n## ", start + 1)]
-    steps: list[TourStep] = []
-    for block in re.findall(r"```console\n(.*?)```", section, flags=re.S):
-        for line in block.splitlines():
-            if line.startswith("$ "):
-                words = shlex.split(line[2:], comments=True)
-                background = words[-1] == "&"
-                steps.append(TourStep(words[:-1] if background else words, background))
-            else:
-                steps[-1].shown.append(line)
-    sender = re.search(r"\(here `([^`]+)`\)", section)
-    assert steps and sender, "the README lost its tour"
+    start = text.index(f"\n## {TOUR}\n")
+    sender = re.search(r"\(here `([^`]+)`\)", text[start : text.find("\n## ", start + 1)])
+    assert sender, "the README's tour no longer names its sender"
     return steps, sender.group(1)
-
-
-def normal(line: str) -> str:
-    """A line with every number made ``#`` and every run of blanks one space."""
-    return " ".join(NUMBER.sub("#", ANSI.sub("", line)).split())
-
-
-def unprinted(shown: list[str], output: str) -> list[str]:
-    """The lines the README shows that ``output`` lacks (numbers aside; ``…``: anything)."""
-    lines = [normal(line) for line in output.splitlines()]
-    missing = []
-    for line in shown:
-        if not re.search(r"\w", line):
-            continue  # a table's border
-        pattern = re.compile(".*".join(re.escape(part) for part in normal(line).split("…")))
-        if not any(pattern.fullmatch(out) for out in lines):
-            missing.append(line)
-    return missing
 
 
 def log(child: Child, since: int = 0) -> str:
