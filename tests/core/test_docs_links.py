@@ -23,7 +23,7 @@ from pathlib import Path
 
 import pytest
 
-from kinesphere.cli import build_parser
+from kinesphere.cli import build_parser, commands
 from support.names import MISSING, resolve
 from support.paths import ROOT
 
@@ -218,13 +218,6 @@ def command_lines(path: Path, program: str) -> Iterator[str]:
                 yield span.group(2).strip()
 
 
-def sub_commands(parser: argparse.ArgumentParser) -> dict[str, argparse.ArgumentParser]:
-    for action in parser._actions:
-        if isinstance(action, argparse._SubParsersAction):
-            return dict(action.choices)
-    return {}
-
-
 def unknown_in(line: str, root: argparse.ArgumentParser) -> str | None:
     """What in the ``kinesphere ...`` command ``line`` names no sub-command or option of
     ``root`` (a usage line's ``[--opt X]`` counts as ``--opt X``), else None. Words in
@@ -249,7 +242,7 @@ def unknown_in(line: str, root: argparse.ArgumentParser) -> str | None:
                 return f"{parser.prog} has no option {name}"
             value_next = not eq and options[name].nargs != 0
             continue
-        choices = sub_commands(parser)
+        choices = commands(parser)
         if commands_done or not choices:
             commands_done = True
             continue
