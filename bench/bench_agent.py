@@ -42,14 +42,15 @@ def pct(values: list[float] | np.ndarray, q: float) -> float:
 
 
 @contextmanager
-def databank(endpoint: str, watcher: zenoh.Session) -> Iterator[None]:
-    """The real databank service, connected to ``endpoint``; waits for its liveliness token."""
+def databank(endpoint: str, watcher: zenoh.Session, keys: Keys = KEYS) -> Iterator[None]:
+    """The real databank service, connected to ``endpoint`` under ``keys``' prefix; waits for
+    its liveliness token."""
     up = threading.Event()
     sub = watcher.liveliness().declare_subscriber(
-        KEYS.alive_databank_all(), lambda s: up.set(), history=True)
+        keys.alive_databank_all(), lambda s: up.set(), history=True)
     proc = subprocess.Popen(
         [sys.executable, "-m", "kinesphere.cli", "databank", "serve", "--connect", endpoint,
-         "--listen", zconfig.LOOPBACK_ANY_PORT],
+         "--listen", zconfig.LOOPBACK_ANY_PORT, "--prefix", keys.prefix],
         cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
         if not up.wait(60):
@@ -306,6 +307,25 @@ def scale(endpoint: str, hub: zenoh.Session,
     """How many agents at 500 Hz keep real time, per way of running them."""
     print(f"scale: agents at 500 Hz, mixed platforms, robots moving; 'keeps up' = worst agent's "
           f"state rate >= 98% of real time over {SCALE_WINDOW_S:.0f} s (n cores: {os.cpu_count()})")
+    with state_stamps(hub) as states:
+        for mode, ns in counts:
+            best = 0
+            for n in ns:
+                ids = [f"scale-{mode}-{n}-{i}" for i in range(n)]
+                platforms = [PLATFORMS[i % len(PLATFORMS)] for i in range(n)]
+                frac = realtime_share(mode, endpoint, hub, ids, platforms, states)
+                print(f"  {mode:<7} x{n:<2}: worst agent at {frac * 100:5.1f}% of real time"
+                      f"{'' if frac >= 0.98 else '  <- falls behind (twice)'}", flush=True)
+                if frac < 0.98:
+                    break
+                best = n
+            more = " (or more: the largest count tried)" if best == ns[-1] else ""
+            print(f"  => {best} agents keep real time, {WHERE[mode]}{more}")
+
+
+@contextmanager
+def state_stamps(hub: zenoh.Session) -> Iterator[dict[str, list[int]]]:
+    """The stamps (ns) of every robot state heard on ``hub`` while inside, by robot id."""
     states: dict[str, list[int]] = {}
 
     def on_state(sample: zenoh.Sample) -> None:
@@ -313,22 +333,21 @@ def scale(endpoint: str, hub: zenoh.Session,
         states.setdefault(st.robot_id, []).append(st.stamp_ns)
 
     sub = hub.declare_subscriber(KEYS.state("*"), on_state)
-    for mode, ns in counts:
-        best = 0
-        for n in ns:
-            ids = [f"scale-{mode}-{n}-{i}" for i in range(n)]
-            platforms = [PLATFORMS[i % len(PLATFORMS)] for i in range(n)]
-            frac = run_fleet(mode, endpoint, hub, ids, platforms, states)
-            if frac < 0.98:  # this machine is shared: one stray hiccup is not a verdict
-                frac = max(frac, run_fleet(mode, endpoint, hub, ids, platforms, states))
-            print(f"  {mode:<7} x{n:<2}: worst agent at {frac * 100:5.1f}% of real time"
-                  f"{'' if frac >= 0.98 else '  <- falls behind (twice)'}", flush=True)
-            if frac < 0.98:
-                break
-            best = n
-        more = " (or more: the largest count tried)" if best == ns[-1] else ""
-        print(f"  => {best} agents keep real time, {WHERE[mode]}{more}")
-    zconfig.undeclare(sub)
+    try:
+        yield states
+    finally:
+        zconfig.undeclare(sub)
+
+
+def realtime_share(mode: str, endpoint: str, hub: zenoh.Session, ids: list[str],
+                   platforms: list[str], states: dict[str, list[int]], workers: int = 1
+                   ) -> float:
+    """:func:`run_fleet`, run once more when it falls behind (this machine is shared: one
+    stray hiccup is not a verdict); the better share of the two."""
+    frac = run_fleet(mode, endpoint, hub, ids, platforms, states, workers)
+    if frac < 0.98:
+        frac = max(frac, run_fleet(mode, endpoint, hub, ids, platforms, states, workers))
+    return frac
 
 
 def run_fleet(mode: str, endpoint: str, hub: zenoh.Session, ids: list[str],

@@ -42,16 +42,16 @@ import zenoh
 from mujoco import rollout
 
 from bench.bench_agent import (
-    KEYS,
     PLATFORMS,
     command,
     databank,
     fleet_parts,
     pct,
-    run_fleet,
+    realtime_share,
+    state_stamps,
 )
 from kinesphere import zconfig
-from kinesphere.protocol import RobotState, SpatialCommand, decode
+from kinesphere.protocol import SpatialCommand
 from kinesphere.robots.agent.bodies import make_body
 from kinesphere.robots.agent.fleet import FleetHost, RobotSpec
 from kinesphere.robots.agent.follow import Followers
@@ -338,32 +338,25 @@ def realtime(endpoint: str, hub: zenoh.Session) -> None:
     print("real time: a fleet host at 500 Hz, mixed platforms, robots moving, per number of "
           "worker processes; 'keeps up' = the worst robot's state rate >= 98% of real time over "
           "3 s; then the bare mj_step of the same bodies (the host's phase):")
-    states: dict[str, list[int]] = {}
-
-    def on_state(sample: zenoh.Sample) -> None:
-        st = decode(sample.payload, RobotState)
-        states.setdefault(st.robot_id, []).append(st.stamp_ns)
-
-    sub = hub.declare_subscriber(KEYS.state("*"), on_state)
-    for w in WORKERS:
-        best = 0
-        for n in REALTIME:
-            ids = [f"rt-{w}-{n}-{i}" for i in range(n)]
-            platforms = [PLATFORMS[i % len(PLATFORMS)] for i in range(n)]
-            frac = run_fleet("fleet", endpoint, hub, ids, platforms, states, w)
-            if frac < 0.98:  # this machine is shared: one stray hiccup is not a verdict
-                frac = max(frac, run_fleet("fleet", endpoint, hub, ids, platforms, states, w))
-            per_body, baxter = bare_per_body(n)
-            print(f"  {w} worker{'s' if w > 1 else ' '} x{n:<3}: worst robot at {frac * 100:5.1f}%"
-                  f" of real time{'' if frac >= 0.98 else '  <- falls behind (twice)':<26}"
-                  f" bare mj_step {per_body:5.1f} us/body (Baxter {baxter:4.1f} us)", flush=True)
-            if frac < 0.98:
-                break
-            best = n
-        more = " (or more: the largest count tried)" if best == REALTIME[-1] else ""
-        print(f"  => {best} robots keep real time on a fleet host of {w} worker"
-              f"{'s' if w > 1 else ''}{more}", flush=True)
-    zconfig.undeclare(sub)
+    with state_stamps(hub) as states:
+        for w in WORKERS:
+            best = 0
+            for n in REALTIME:
+                ids = [f"rt-{w}-{n}-{i}" for i in range(n)]
+                platforms = [PLATFORMS[i % len(PLATFORMS)] for i in range(n)]
+                frac = realtime_share("fleet", endpoint, hub, ids, platforms, states, w)
+                per_body, baxter = bare_per_body(n)
+                print(f"  {w} worker{'s' if w > 1 else ' '} x{n:<3}: worst robot at "
+                      f"{frac * 100:5.1f}% of real time"
+                      f"{'' if frac >= 0.98 else '  <- falls behind (twice)':<26}"
+                      f" bare mj_step {per_body:5.1f} us/body (Baxter {baxter:4.1f} us)",
+                      flush=True)
+                if frac < 0.98:
+                    break
+                best = n
+            more = " (or more: the largest count tried)" if best == REALTIME[-1] else ""
+            print(f"  => {best} robots keep real time on a fleet host of {w} worker"
+                  f"{'s' if w > 1 else ''}{more}", flush=True)
 
 
 def main() -> None:

@@ -18,17 +18,13 @@ per row, and the generation time at the measured solve time.
 
 from __future__ import annotations
 
-import signal
 import sqlite3
 import statistics
-import subprocess
-import sys
-import threading
 import time
-from pathlib import Path
 
 import zenoh
 
+from bench.bench_agent import databank
 from kinesphere import zconfig
 from kinesphere.keyexpr import Keys
 from kinesphere.laban import Direction
@@ -39,27 +35,11 @@ from kinesphere.services.ecl.store import default_db_path
 from kinesphere.vocabulary import vocabulary
 
 KEYS = Keys("knest")
-ROOT = Path(__file__).resolve().parents[1]
 PLATFORMS = ("baxter", "nao")
 DIRECTIONS = [d for d in Direction if d.horizontal.value != "place"]
 PAIRS = [(DIRECTIONS[i], DIRECTIONS[(7 * i + 5) % 24]) for i in range(24)]
 PLAIN_QUERIES = 200
 TIMEOUT_S = 30.0
-
-
-def _serve(endpoint: str, watcher: zenoh.Session) -> subprocess.Popen[bytes]:
-    up = threading.Event()
-    sub = watcher.liveliness().declare_subscriber(
-        KEYS.alive_databank_all(), lambda s: up.set(), history=True)
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "kinesphere.cli", "databank", "serve", "--connect", endpoint,
-         "--listen", zconfig.LOOPBACK_ANY_PORT, "--prefix", KEYS.prefix],
-        cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    if not up.wait(60):
-        proc.kill()
-        raise RuntimeError("databank did not come up")
-    zconfig.undeclare(sub)
-    return proc
 
 
 def _ms(session: zenoh.Session, key: str, payload: bytes | None = None) -> tuple[float, Pose | str]:
@@ -135,13 +115,8 @@ def _stored_alternative(solve_ms: dict[str, float]) -> None:
 
 
 def main() -> None:
-    with zconfig.loopback_hub() as (hub, endpoint):
-        proc = _serve(endpoint, hub)
-        try:
-            solve_ms = {name: _platform(hub, name) for name in PLATFORMS}
-        finally:
-            proc.send_signal(signal.SIGTERM)
-            proc.wait(30)
+    with zconfig.loopback_hub() as (hub, endpoint), databank(endpoint, hub, KEYS):
+        solve_ms = {name: _platform(hub, name) for name in PLATFORMS}
     _stored_alternative(solve_ms)
 
 
