@@ -21,7 +21,7 @@ from typing import Final
 import yourdfpy
 
 from kinesphere.errors import KinesphereError
-from kinesphere.labels import BodyPart, invalid, label_order, parse_part, validate
+from kinesphere.labels import BodyPart, invalid, label_order, parse_part, subtree, validate
 
 ACTUATED_TYPES = ("revolute", "prismatic", "continuous")
 
@@ -175,13 +175,7 @@ class Eurdf:
 
     def subtree_links(self, link: str) -> list[str]:
         """``link`` and every link below it, depth first in document order."""
-        out: list[str] = []
-        stack = [link]
-        while stack:
-            cur = stack.pop()
-            out.append(cur)
-            stack.extend(c for _, c in reversed(self._children.get(cur, [])))
-        return out
+        return subtree(link, self._children)
 
     def followers(self, joint: str) -> tuple[str, ...]:
         """The mimic joints that ``joint`` drives (empty for most joints)."""

@@ -166,36 +166,38 @@ def _check_limb(
         raise invalid(f"<body_part name={limb.name!r}> refers to missing {limb.distal!r}")
     distal = distals[limb.distal]
     root = joint_map[distal.joints[0]].child
-    first = _subtree(root, children)
+    first = subtree(root, children)
     # A location's further joints run in series below its first joint (a shoulder's pitch,
     # roll and yaw) or in parallel beside it (the fingers leaving a palm): the limb is
     # everything below any of them.
-    subtree = list(first)
+    below = list(first)
     for jn in distal.joints[1:]:
         child = joint_map[jn].child
         if child not in first:
             if joint_map[jn].parent in first:
                 raise invalid(f"{distal.name}: joint {jn!r} is below {limb.name}'s root")
-            subtree += [ln for ln in _subtree(child, children) if ln not in subtree]
-    missing = sorted(set(subtree) - set(limb.links))
-    extra = sorted(set(limb.links) - set(subtree))
+            below += [ln for ln in subtree(child, children) if ln not in below]
+    missing = sorted(set(below) - set(limb.links))
+    extra = sorted(set(limb.links) - set(below))
     if missing or extra:
         what = f"misses {missing[:3]}" if missing else f"has links outside it: {extra[:3]}"
         raise invalid(
             f"<body_part name={limb.name!r}> must list exactly the subtree below joint "
             f"{distal.joints[0]!r} (root link {root!r}); it {what}"
         )
-    if not any(joint_map[j].child in set(subtree) for j in actuated):
+    if not any(joint_map[j].child in set(below) for j in actuated):
         raise invalid(f"<body_part name={limb.name!r}> contains no actuated joint")
 
 
-def _subtree(link: str, children: dict[str, list[tuple[str, str]]]) -> list[str]:
+def subtree(link: str, children: dict[str, list[tuple[str, str]]]) -> list[str]:
+    """``link`` and every link below it in the tree ``children`` (link -> (joint, child
+    link) in document order), depth first in document order."""
     out: list[str] = []
     stack = [link]
     while stack:
         cur = stack.pop()
         out.append(cur)
-        stack.extend(c for _, c in children.get(cur, []))
+        stack.extend(c for _, c in reversed(children.get(cur, [])))
     return out
 
 
