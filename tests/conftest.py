@@ -22,7 +22,7 @@ import pytest
 
 from kinesphere import zconfig
 from kinesphere.procs import Supervisor
-from support.agents import DatabankProcess
+from support.agents import DatabankProcess, databank_on
 from support.cells import load_laban_editor
 from support.network import Hub
 from support.system import supervisor
@@ -48,12 +48,8 @@ def hub() -> Iterator[Hub]:
 def databank(hub: Hub) -> Iterator[DatabankProcess]:
     """The real databank process serving every shipped platform on the hub (one per test
     session; stopped before the hub)."""
-    bank = DatabankProcess(hub.endpoint, hub.session)
-    bank.start()
-    try:
+    with databank_on(hub) as bank:
         yield bank
-    finally:
-        bank.stop()
 
 
 @pytest.fixture

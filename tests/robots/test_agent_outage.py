@@ -15,7 +15,13 @@ import pytest
 from kinesphere import zconfig
 from kinesphere.protocol import RecordRequest, SpatialCommand, encode
 from kinesphere.services.ecl.store import DATA_DIR
-from support.agents import CommandSender, DatabankProcess, joints_close, running_agent
+from support.agents import (
+    CommandSender,
+    DatabankProcess,
+    databank_on,
+    joints_close,
+    running_agent,
+)
 from support.network import KEYS, Hub
 from support.wait import WAIT_S, until
 
@@ -31,13 +37,8 @@ def own_hub() -> Iterator[Hub]:
 
 @pytest.fixture
 def own_databank(own_hub: Hub) -> Iterator[DatabankProcess]:
-    session, endpoint = own_hub
-    bank = DatabankProcess(endpoint, session)
-    bank.start()
-    try:
+    with databank_on(own_hub) as bank:
         yield bank
-    finally:
-        bank.stop()
 
 
 def test_outage_keeps_last_pose_and_recovers_without_restart(

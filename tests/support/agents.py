@@ -106,6 +106,18 @@ class DatabankProcess:
         raise RuntimeError(f"no catalogue for {platform}")
 
 
+@contextmanager
+def databank_on(hub: Hub) -> Iterator[DatabankProcess]:
+    """The real databank process serving every shipped platform on ``hub``, started and
+    stopped around the block."""
+    bank = DatabankProcess(hub.endpoint, hub.session)
+    bank.start()
+    try:
+        yield bank
+    finally:
+        bank.stop()
+
+
 # --- robots ------------------------------------------------------------------------------------
 
 
