@@ -17,7 +17,6 @@ import pytest
 
 from kinesphere import zconfig
 from kinesphere.errors import KinesphereError
-from kinesphere.laban import Direction
 from kinesphere.platforms.platform import load_platform
 from kinesphere.protocol import Drive, SpatialCommand
 from kinesphere.robots.agent.base import rotate
@@ -25,7 +24,13 @@ from kinesphere.robots.agent.bodies import BODIES, make_body
 from kinesphere.robots.agent.body import Body, Reading
 from kinesphere.robots.agent.options import BODY_KINDS
 from kinesphere.robots.agent.runtime import Agent, AgentOptions
-from support.agents import CommandSender, DatabankProcess, StateWatch, joints_close
+from support.agents import (
+    CommandSender,
+    DatabankProcess,
+    StateWatch,
+    horizontal_pulls,
+    joints_close,
+)
 from support.network import Hub
 
 
@@ -128,7 +133,7 @@ def test_an_agent_drives_a_kinematic_body_over_the_wire(
     session, endpoint = hub
     cat = databank.catalogue("youbot")
     entry = cat.limbs[0]
-    pulls = [d for d in entry.directions if Direction.parse(d).horizontal.name != "PLACE"]
+    pulls = horizontal_pulls(entry)
     reach = SpatialCommand(entry.limb, entry.origin, pulls[0], float(max(entry.sizes)))
     beyond = SpatialCommand(entry.limb, entry.origin, pulls[0], max(entry.sizes) + 2.0)
     pose, far = databank.query("youbot", reach), databank.query("youbot", beyond)

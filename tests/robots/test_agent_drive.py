@@ -12,7 +12,6 @@ from collections.abc import Callable
 
 import numpy as np
 
-from kinesphere.laban import Direction
 from kinesphere.protocol import AckStage, Drive, RobotState, SpatialCommand, Status
 from kinesphere.robots.agent.base import rotate
 from support.agents import (
@@ -22,6 +21,7 @@ from support.agents import (
     StateWatch,
     Trace,
     finite_jerk,
+    horizontal_pulls,
     joints_close,
     overlap,
     running_agent,
@@ -50,7 +50,7 @@ def test_youbot_turns_in_place_then_drives_diagonally_while_its_arm_moves(
 ) -> None:
     session, endpoint = hub
     entry = databank.catalogue("youbot").limbs[0]
-    pulls = [d for d in entry.directions if Direction.parse(d).horizontal.name != "PLACE"]
+    pulls = horizontal_pulls(entry)
     part = SpatialCommand(entry.limb, entry.origin, pulls[0], float(max(entry.sizes)))
     pose = databank.query("youbot", part)
     trace = Trace()

@@ -20,6 +20,7 @@ from support.agents import (
     DatabankProcess,
     databank_on,
     joints_close,
+    real_pulls,
     running_agent,
 )
 from support.network import KEYS, Hub
@@ -46,7 +47,7 @@ def test_outage_keeps_last_pose_and_recovers_without_restart(
 ) -> None:
     session, endpoint = own_hub
     entry = own_databank.catalogue("baxter").limbs[0]
-    pulls = [d for d in entry.directions if d != "place-middle"]
+    pulls = real_pulls(entry)
     first = SpatialCommand(entry.limb, entry.origin, pulls[0], 2.0)
     second = SpatialCommand(entry.limb, entry.origin, pulls[-1], 2.0)
     pose1, pose2 = own_databank.query("baxter", first), own_databank.query("baxter", second)
@@ -89,7 +90,7 @@ def test_cache_is_per_databank_version(
     bank.start()
     try:
         entry = bank.catalogue("youbot").limbs[0]
-        direction = [d for d in entry.directions if d != "place-middle"][0]
+        direction = real_pulls(entry)[0]
         part = (entry.limb, entry.origin, direction, 2.0)
         old = bank.query("youbot", SpatialCommand(*part))
         with running_agent(endpoint, "youbot", speed=4.0) as (agent, watch):

@@ -18,6 +18,7 @@ from support.agents import (
     Trace,
     finite_jerk,
     joints_close,
+    real_pulls,
     running_agent,
 )
 from support.network import Hub
@@ -30,7 +31,7 @@ TOL = 5e-3
 def far_part(cat: Catalogue, direction: str | None = None) -> SpatialCommand:
     """A far reach of the first limb, in ``direction`` or its first real pull."""
     entry = cat.limbs[0]
-    pulls = [d for d in entry.directions if d != "place-middle"]
+    pulls = real_pulls(entry)
     d = direction if direction is not None else pulls[len(pulls) // 2]
     return SpatialCommand(entry.limb, entry.origin, d, float(max(entry.sizes)))
 
@@ -92,7 +93,7 @@ def test_retarget_mid_motion_stays_continuous(
     session, endpoint = hub
     cat = databank.catalogue("baxter")
     entry = cat.limbs[0]
-    pulls = [d for d in entry.directions if d != "place-middle"]
+    pulls = real_pulls(entry)
     first, second = far_part(cat, pulls[0]), far_part(cat, pulls[-1])
     trace = Trace()
     with running_agent(endpoint, "baxter", speed=2.0, trace=trace) as (agent, watch):
@@ -116,7 +117,7 @@ def test_wildcard_command_moves_every_robot_to_its_own_pose(
     robots = ["baxter", "nao", "youbot"]
     cats = {r: databank.catalogue(r) for r in robots}
     shared = set.intersection(*(
-        {(e.limb, e.origin, d) for e in c.limbs for d in e.directions if d != "place-middle"}
+        {(e.limb, e.origin, d) for e in c.limbs for d in real_pulls(e)}
         for c in cats.values()
     ))
     assert shared, "no spatial command is valid on all three platforms"

@@ -14,7 +14,7 @@ import pytest
 from kinesphere.protocol import Command, RobotState, encode
 from kinesphere.robots.agent.runtime import Agent
 from kinesphere.robots.agent.safety import DRIVE_TTL_S
-from support.agents import CommandSender, DatabankProcess, Trace, running_agent
+from support.agents import CommandSender, DatabankProcess, Trace, real_pulls, running_agent
 from support.network import Hub
 
 
@@ -91,7 +91,7 @@ def test_estop_halts_every_robot_latches_and_releases(
     session, endpoint = hub
     cat = databank.catalogue("baxter")
     entry = cat.limbs[0]
-    pulls = [d for d in entry.directions if d != "place-middle"]
+    pulls = real_pulls(entry)
     reach = (entry.limb, entry.origin, pulls[0], 3.0)
     with ExitStack() as stack:
         baxter, bw = stack.enter_context(running_agent(endpoint, "baxter", speed=1.0))

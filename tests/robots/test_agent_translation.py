@@ -5,12 +5,12 @@ from __future__ import annotations
 
 import math
 
-from kinesphere.laban import Direction
 from kinesphere.protocol import SpatialCommand
 from support.agents import (
     CommandSender,
     DatabankProcess,
     Trace,
+    horizontal_pulls,
     joints_close,
     overlap,
     running_agent,
@@ -25,8 +25,7 @@ def test_translation_and_articulation_overlap_in_time(
     cat = databank.catalogue("youbot")
     assert cat.can_translate and cat.translation_step
     entry = cat.limbs[0]
-    horizontal = [d for d in entry.directions
-                  if Direction.parse(d).horizontal.name != "PLACE"]
+    horizontal = horizontal_pulls(entry)
     part = SpatialCommand(entry.limb, entry.origin, horizontal[0], max(entry.sizes) + 2.0)
     pose = databank.query("youbot", part)
     goal = pose.translation

@@ -26,12 +26,14 @@ import numpy as np
 import zenoh
 
 from kinesphere import zconfig
+from kinesphere.laban import Direction
 from kinesphere.protocol import (
     Ack,
     Catalogue,
     Command,
     Drive,
     LeaseAction,
+    LimbEntry,
     Pose,
     RobotState,
     SpatialCommand,
@@ -287,11 +289,21 @@ def newer_than(seq: int, state: RobotState) -> bool:
     return state.seq > seq
 
 
+def real_pulls(entry: LimbEntry) -> list[str]:
+    """The directions of a catalogue entry that pull somewhere: all but place-middle (the
+    limb's neutral pose)."""
+    return [d for d in entry.directions if d != "place-middle"]
+
+
+def horizontal_pulls(entry: LimbEntry) -> list[str]:
+    """The directions of a catalogue entry with a horizontal part (every place-* left out)."""
+    return [d for d in entry.directions if Direction.parse(d).horizontal.name != "PLACE"]
+
+
 def far(cat: Catalogue, k: int = 0) -> tuple[str, str, str, float]:
     """The far reach of the first limb in its ``k``-th real pull (place-middle left out)."""
     entry = cat.limbs[0]
-    pulls = [d for d in entry.directions if d != "place-middle"]
-    return (entry.limb, entry.origin, pulls[k], float(max(entry.sizes)))
+    return (entry.limb, entry.origin, real_pulls(entry)[k], float(max(entry.sizes)))
 
 
 def joints_close(state: RobotState, joints: Mapping[str, float], tol: float) -> bool:
