@@ -28,12 +28,6 @@ JOY = 9  # instance id of the posted raw joystick
 pytestmark = pytest.mark.usefixtures("pygame_up")
 
 
-@pytest.fixture
-def inp() -> pad.PygameInput:
-    pygame.event.clear()
-    return pad.PygameInput(mapfile.load())
-
-
 def axis(a: int, value: int, iid: int = CTRL) -> None:
     post(pygame.CONTROLLERAXISMOTION, instance_id=iid, axis=a, value=value)
 

@@ -37,12 +37,6 @@ def link(hub: Hub, robot: StandIn) -> Iterator[RobotLink]:
         yield lk
 
 
-@pytest.fixture
-def inp(pygame_up: None) -> pad.PygameInput:
-    pygame.event.clear()
-    return pad.PygameInput(mapfile.load())
-
-
 def settle(link: RobotLink, robot: StandIn) -> list[str]:
     sentinel(link, [OWN_KEYS.command("l1")], [robot])
     return [kind(c) for c in robot.commands()]

@@ -57,12 +57,6 @@ def link(hub: Hub, inboxes: dict[str, CommandInbox]) -> Iterator[RobotLink]:
         yield lk
 
 
-@pytest.fixture
-def inp(pygame_up: None) -> pad.PygameInput:
-    pygame.event.clear()
-    return pad.PygameInput(mapfile.load())
-
-
 def teleop(link: RobotLink, target: tg.Target, options: TeleopOptions | None = None) -> Teleop:
     return Teleop(link, mapfile.load(), target, options or TeleopOptions())
 
