@@ -30,6 +30,7 @@ from support.agents import (
     StateWatch,
     horizontal_pulls,
     joints_close,
+    running_agent,
 )
 from support.network import Hub
 
@@ -139,26 +140,19 @@ def test_an_agent_drives_a_kinematic_body_over_the_wire(
     pose, far = databank.query("youbot", reach), databank.query("youbot", beyond)
     assert far.translation is not None
     body = KinematicBody("youbot", 1.0 / 500.0)
-    with zconfig.session(config=zconfig.loopback_config(endpoint)) as s:
-        agent = Agent("youbot", "kinematic", s, AgentOptions(speed=0.0), body=body)
-        watch = StateWatch(s, "kinematic")
-        agent.start()
-        try:
-            op = CommandSender(session, agent.robot_id)
-            target, _ = agent.controller.joints.clamp(pose.joints)
-            seq = op.send((reach.limb, reach.origin, reach.direction, reach.size))
-            watch.after(seq, lambda st: st.status == "idle" and joints_close(st, target, 1e-9),
-                        "the kinematic body exactly at the pose")
-            seq = op.send((beyond.limb, beyond.origin, beyond.direction, beyond.size))
-            goal = far.translation
-            done = watch.after(seq, lambda st: st.status == "idle" and math.dist(
-                st.base_pose[:2], goal[:2]) < 1e-6, "the base translated")
-            seq = op.send(estop=True)
-            watch.after(seq, lambda st: st.status == "estop", "e-stop obeyed")
-            op.close()
-        finally:
-            agent.close()
-            watch.close()
+    with running_agent(endpoint, "youbot", "kinematic", own_body=body) as (agent, watch):
+        op = CommandSender(session, agent.robot_id)
+        target, _ = agent.controller.joints.clamp(pose.joints)
+        seq = op.send((reach.limb, reach.origin, reach.direction, reach.size))
+        watch.after(seq, lambda st: st.status == "idle" and joints_close(st, target, 1e-9),
+                    "the kinematic body exactly at the pose")
+        seq = op.send((beyond.limb, beyond.origin, beyond.direction, beyond.size))
+        goal = far.translation
+        done = watch.after(seq, lambda st: st.status == "idle" and math.dist(
+            st.base_pose[:2], goal[:2]) < 1e-6, "the base translated")
+        seq = op.send(estop=True)
+        watch.after(seq, lambda st: st.status == "estop", "e-stop obeyed")
+        op.close()
     assert done.robot_id == "kinematic" and done.platform == "youbot"
     q = np.array(body.commands)
     dv = np.abs(np.diff(q, n=2, axis=0)).max() / agent.controller.dt**2
@@ -169,16 +163,9 @@ def test_an_agent_drives_a_kinematic_body_over_the_wire(
 def test_a_body_that_fails_never_stops_the_state_stream(hub: Hub) -> None:
     _, endpoint = hub
     body = DriverLostBody("baxter", 1.0 / 500.0, after=50)
-    with zconfig.session(config=zconfig.loopback_config(endpoint)) as s:
-        agent = Agent("baxter", "failing", s, AgentOptions(speed=0.0), body=body)
-        watch = StateWatch(s, "failing")
-        agent.start()
-        try:
-            first = watch.wait(lambda st: st.status == "error", "the failure reported")
-            later = watch.wait(lambda st: st.seq >= first.seq + 20, "states keep coming")
-        finally:
-            agent.close()
-            watch.close()
+    with running_agent(endpoint, "baxter", "failing", own_body=body) as (_, watch):
+        first = watch.wait(lambda st: st.status == "error", "the failure reported")
+        later = watch.wait(lambda st: st.seq >= first.seq + 20, "states keep coming")
     assert "control step failed" in first.detail and "driver lost" in first.detail
     assert later.status == "error" and body.halts > 0
 

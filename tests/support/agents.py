@@ -41,6 +41,7 @@ from kinesphere.protocol import (
     encode,
     error_from_reply,
 )
+from kinesphere.robots.agent.body import Body
 from kinesphere.robots.agent.controller import Controller
 from kinesphere.robots.agent.fleet import FleetHost, RobotSpec
 from kinesphere.robots.agent.options import Ros2BodyOptions
@@ -178,12 +179,14 @@ class AgentOverrides(TypedDict, total=False):
 @contextmanager
 def running_agent(
     endpoint: str, platform: str, robot_id: str | None = None, speed: float = 0.0,
-    trace: Trace | None = None, **options: Unpack[AgentOverrides],
+    trace: Trace | None = None, own_body: Body | None = None,
+    **options: Unpack[AgentOverrides],
 ) -> Iterator[tuple[Agent, StateWatch]]:
-    """An agent in this process with its own session joined to the hub, and its state."""
+    """An agent in this process with its own session joined to the hub, and its state;
+    ``own_body`` is a body object it drives instead of the one its options make."""
     robot_id = robot_id or Path(platform).name
     with zconfig.session(config=zconfig.loopback_config(endpoint)) as s:
-        agent = Agent(platform, robot_id, s, AgentOptions(speed=speed, **options))
+        agent = Agent(platform, robot_id, s, AgentOptions(speed=speed, **options), body=own_body)
         if trace is not None:
             agent.controller.on_step = trace
         watch = StateWatch(s, robot_id)
