@@ -10,16 +10,15 @@ from __future__ import annotations
 import signal
 import subprocess
 import sys
-import threading
 from functools import partial
 from pathlib import Path
 
 import numpy as np
 import pytest
-import zenoh
 
 from kinesphere import zconfig
 from kinesphere.cli import main
+from kinesphere.deploy.watch import watch_alive
 from kinesphere.errors import KinesphereError
 from kinesphere.laban import Direction
 from kinesphere.platforms.mjcf import platform_model
@@ -41,6 +40,7 @@ from support.agents import (
     far,
     joints_close,
     newer_than,
+    robots_alive,
     running_fleet_host,
 )
 from support.network import KEYS, Hub
@@ -198,16 +198,7 @@ def test_fleet_command_runs_every_robot_and_stops_on_sigterm(
     session, endpoint = hub
     fleet = tmp_path / "fleet.toml"
     fleet.write_text('[robots.cli-y]\nplatform = "youbot"\n[robots.cli-k]\nplatform = "khepera"\n')
-    alive: set[str] = set()
-    changed = threading.Condition()
-
-    def on_token(sample: zenoh.Sample) -> None:
-        with changed:
-            rid = KEYS.robot_id_of(str(sample.key_expr))
-            (alive.add if sample.kind == zenoh.SampleKind.PUT else alive.discard)(rid)
-            changed.notify_all()
-
-    sub = session.liveliness().declare_subscriber(KEYS.alive_robot("*"), on_token, history=True)
+    alive, tokens = watch_alive(session, KEYS)
     try:
         for argv, ids in ((["fleet", str(fleet)], {"cli-y", "cli-k"}),
                           (["agent", "--robot", "youbot:arg-y", "--robot", "khepera:arg-k"],
@@ -217,16 +208,14 @@ def test_fleet_command_runs_every_robot_and_stops_on_sigterm(
                  "--listen", zconfig.LOOPBACK_ANY_PORT],
                 cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
             try:
-                with changed:
-                    assert changed.wait_for(partial(ids.issubset, alive), WAIT_S), alive
+                robots_alive(alive, ids.issubset, f"{argv[0]}'s robots up")
             finally:
                 proc.send_signal(signal.SIGTERM)
                 _, err = proc.communicate(timeout=WAIT_S)
             assert proc.returncode == 0, err.decode(errors="replace")[-2000:]
-            with changed:
-                assert changed.wait_for(partial(ids.isdisjoint, alive), WAIT_S), alive
+            robots_alive(alive, ids.isdisjoint, f"{argv[0]}'s robots gone")
     finally:
-        zconfig.undeclare(sub)
+        zconfig.undeclare(*tokens)
 
 
 @pytest.mark.processes

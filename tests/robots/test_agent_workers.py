@@ -11,7 +11,7 @@ from __future__ import annotations
 import signal
 import subprocess
 import sys
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from contextlib import contextmanager
 from functools import partial
 from pathlib import Path
@@ -21,12 +21,20 @@ import pytest
 
 from kinesphere import zconfig
 from kinesphere.cli import main
-from kinesphere.deploy.watch import Alive, watch_alive
+from kinesphere.deploy.watch import watch_alive
 from kinesphere.errors import KinesphereError
 from kinesphere.protocol import SpatialCommand
 from kinesphere.robots.agent.fleet import RobotSpec
 from kinesphere.robots.agent.workers import check_listen, deal, share, worker_flag
-from support.agents import AckWatch, CommandSender, DatabankProcess, StateWatch, far, joints_close
+from support.agents import (
+    AckWatch,
+    CommandSender,
+    DatabankProcess,
+    StateWatch,
+    far,
+    joints_close,
+    robots_alive,
+)
 from support.network import KEYS, Hub
 from support.paths import ROOT
 from support.wait import WAIT_S
@@ -71,13 +79,6 @@ def test_worker_options_are_checked_before_anything_starts(
                         (["fleet", str(fleet), "--worker", "1/2:" + "0" * 12], "edited")):
         assert main(argv) == 2, argv
         assert named in capsys.readouterr().err, argv
-
-
-def robots_alive(alive: Alive, pred: Callable[[set[str]], bool], what: str) -> set[str]:
-    """The robots whose liveliness tokens the hub sees, once ``pred`` holds of them."""
-    assert alive.wait_for(lambda a: pred(a.robots), WAIT_S), f"{what}: alive {sorted(alive.robots)}"
-    with alive.changed:
-        return set(alive.robots)
 
 
 @contextmanager

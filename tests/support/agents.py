@@ -14,7 +14,6 @@ import os
 import signal
 import subprocess
 import sys
-import threading
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
@@ -26,6 +25,7 @@ import numpy as np
 import zenoh
 
 from kinesphere import zconfig
+from kinesphere.deploy.watch import Alive
 from kinesphere.laban import Direction
 from kinesphere.protocol import (
     Ack,
@@ -46,7 +46,7 @@ from kinesphere.robots.agent.controller import Controller
 from kinesphere.robots.agent.fleet import FleetHost, RobotSpec
 from kinesphere.robots.agent.options import Ros2BodyOptions
 from kinesphere.robots.agent.runtime import Agent, AgentOptions
-from support.network import KEYS, Hub
+from support.network import KEYS, Hub, awaiting_token
 from support.paths import ROOT
 from support.wait import WAIT_S, stop_process
 from support.watch import Watch
@@ -64,16 +64,7 @@ class DatabankProcess:
         self.proc: subprocess.Popen[bytes] | None = None
 
     def start(self) -> None:
-        up = threading.Event()
-
-        def on_token(sample: zenoh.Sample) -> None:
-            if sample.kind == zenoh.SampleKind.PUT:
-                up.set()
-
-        sub = self.watcher.liveliness().declare_subscriber(
-            KEYS.alive_databank_all(), on_token, history=True
-        )
-        try:
+        with awaiting_token(self.watcher, KEYS.alive_databank_all()) as up:
             self.proc = subprocess.Popen(
                 [sys.executable, "-m", "kinesphere.cli", "databank", "serve",
                  "--connect", self.endpoint, "--listen", zconfig.LOOPBACK_ANY_PORT, *self.args],
@@ -83,8 +74,6 @@ class DatabankProcess:
             if not up.wait(WAIT_S):
                 self.stop()
                 raise RuntimeError("databank did not declare its liveliness token")
-        finally:
-            zconfig.undeclare(sub)
 
     def stop(self) -> None:
         if self.proc is None:
@@ -119,6 +108,14 @@ def databank_on(hub: Hub) -> Iterator[DatabankProcess]:
         yield bank
     finally:
         bank.stop()
+
+
+def robots_alive(alive: Alive, pred: Callable[[set[str]], bool], what: str) -> set[str]:
+    """The robots whose liveliness tokens ``alive`` (:func:`kinesphere.deploy.watch.watch_alive`)
+    sees, once ``pred`` holds of them; fails naming ``what`` after :data:`WAIT_S`."""
+    assert alive.wait_for(lambda a: pred(a.robots), WAIT_S), f"{what}: alive {sorted(alive.robots)}"
+    with alive.changed:
+        return set(alive.robots)
 
 
 # --- robots ------------------------------------------------------------------------------------

@@ -27,7 +27,7 @@ from kinesphere.clients.gamepad.teleop import Teleop
 from kinesphere.clients.link import RobotLink
 from kinesphere.clients.options import TeleopOptions
 from kinesphere.protocol import RobotState, decode
-from support.network import KEYS
+from support.network import KEYS, awaiting_token
 from support.paths import ROOT
 from support.system import databank_args
 from support.wait import WAIT_S, stop_process
@@ -42,26 +42,17 @@ class FleetProcess:
 
     def __init__(self, hub: zenoh.Session, endpoint: str, args: list[str], token: str,
                  log: Path) -> None:
-        up = threading.Event()
-
-        def on_token(sample: zenoh.Sample) -> None:
-            if sample.kind == zenoh.SampleKind.PUT:
-                up.set()
-
-        sub = hub.liveliness().declare_subscriber(token, on_token, history=True)
-        self.log = log.open("wb")
-        self.proc = subprocess.Popen(
-            [sys.executable, "-m", "kinesphere.cli", *args,
-             "--connect", endpoint, "--listen", zconfig.LOOPBACK_ANY_PORT],
-            cwd=ROOT, env={**os.environ, "PYTHONUNBUFFERED": "1"},
-            stdout=self.log, stderr=subprocess.STDOUT,
-        )
-        try:
+        with awaiting_token(hub, token) as up:
+            self.log = log.open("wb")
+            self.proc = subprocess.Popen(
+                [sys.executable, "-m", "kinesphere.cli", *args,
+                 "--connect", endpoint, "--listen", zconfig.LOOPBACK_ANY_PORT],
+                cwd=ROOT, env={**os.environ, "PYTHONUNBUFFERED": "1"},
+                stdout=self.log, stderr=subprocess.STDOUT,
+            )
             if not up.wait(WAIT_S):
                 self.stop()
                 raise RuntimeError(f"{args[:2]} did not come up; see {log}")
-        finally:
-            zconfig.undeclare(sub)
 
     def stop(self) -> None:
         stop_process(self.proc, timeout=15)

@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
 from typing import NamedTuple
 
 import zenoh
 
 from kinesphere.keyexpr import Keys
-from kinesphere.zconfig import loopback_config, open_session
+from kinesphere.zconfig import loopback_config, open_session, undeclare
 
 KEYS = Keys()
 """The default prefix: what every process uses unless told, so what a user's commands use,
@@ -27,3 +30,20 @@ class Hub(NamedTuple):
 def peer(endpoint: str) -> zenoh.Session:
     """A peer session joined to the hub at ``endpoint``."""
     return open_session(config=loopback_config(endpoint))
+
+
+@contextmanager
+def awaiting_token(session: zenoh.Session, key: str) -> Iterator[threading.Event]:
+    """For the block, a liveliness subscriber (with history) on ``key``: the event is set once
+    a token appears there (start a process inside, then wait on it)."""
+    up = threading.Event()
+
+    def on_token(sample: zenoh.Sample) -> None:
+        if sample.kind == zenoh.SampleKind.PUT:
+            up.set()
+
+    sub = session.liveliness().declare_subscriber(key, on_token, history=True)
+    try:
+        yield up
+    finally:
+        undeclare(sub)
