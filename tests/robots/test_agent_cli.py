@@ -5,13 +5,12 @@ from __future__ import annotations
 import signal
 import subprocess
 import sys
-import threading
 
 import pytest
-import zenoh
 
 from kinesphere import zconfig
-from support.agents import CommandSender, DatabankProcess, StateWatch
+from kinesphere.deploy.watch import watch_alive
+from support.agents import CommandSender, DatabankProcess, StateWatch, robots_alive
 from support.network import KEYS, Hub
 from support.paths import ROOT
 from support.wait import WAIT_S
@@ -23,13 +22,7 @@ def test_agent_process_obeys_its_group_and_stops_on_sigterm(
     hub: Hub, databank: DatabankProcess
 ) -> None:
     session, endpoint = hub
-    alive, gone = threading.Event(), threading.Event()
-
-    def on_token(sample: zenoh.Sample) -> None:
-        (alive if sample.kind == zenoh.SampleKind.PUT else gone).set()
-
-    tokens = session.liveliness().declare_subscriber(KEYS.alive_robot("arm-7"), on_token,
-                                                     history=True)
+    alive, tokens = watch_alive(session, KEYS)
     watch = StateWatch(session, "arm-7")
     proc = subprocess.Popen(
         [sys.executable, "-m", "kinesphere.cli", "agent", "youbot", "--id", "arm-7",
@@ -37,7 +30,7 @@ def test_agent_process_obeys_its_group_and_stops_on_sigterm(
         cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
     )
     try:
-        assert alive.wait(WAIT_S), "liveliness token declared"
+        robots_alive(alive, lambda ids: "arm-7" in ids, "liveliness token declared")
         first = watch.wait(lambda s: True, "state published")
         assert first.platform == "youbot" and first.robot_id == "arm-7"
         assert first.last_command_seq == -1
@@ -51,10 +44,10 @@ def test_agent_process_obeys_its_group_and_stops_on_sigterm(
         proc.send_signal(signal.SIGTERM)
         _, err = proc.communicate(timeout=WAIT_S)
         assert proc.returncode == 0, err.decode()
-        assert gone.wait(WAIT_S), "liveliness token undeclared on SIGTERM"
+        robots_alive(alive, lambda ids: "arm-7" not in ids, "token undeclared on SIGTERM")
     finally:
         if proc.poll() is None:
             proc.kill()
             proc.wait()
         watch.close()
-        zconfig.undeclare(tokens)
+        zconfig.undeclare(*tokens)
