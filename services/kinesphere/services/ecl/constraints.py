@@ -1,11 +1,12 @@
-"""mink building blocks for the ECL generator: the tip task and two limits.
+"""mink building blocks for the ECL generator: the tip task and three limits.
 
 Why custom limits: mink's CollisionAvoidanceLimit keeps only geom pairs that pass the
 contype/conaffinity test and ignores the model's excluded body pairs; the generator needs
 exactly the compiled model's self-collision rules, plus the floor, which the robot never
 touches in simulation (so it fails that test) but which a pose must not dip below. The floor
 is handled with sample points on each geom, because a single witness point per pair lets a
-flat foot rotate its toe into the ground.
+flat foot rotate its toe into the ground. Joint limits are mink's, kept only on the joints that
+move (see ``MovingJointLimit``).
 """
 
 from __future__ import annotations
@@ -90,6 +91,25 @@ class OverSoleTask(mink.Task):
             mujoco.mj_jac(model, data, self._jac, None, world, body)
             sole += self._jac / len(self.soles)
         return np.asarray((self._com - sole)[:2])
+
+
+class MovingJointLimit(mink.ConfigurationLimit):
+    """mink's joint limits, kept on the DoFs ``dofs`` only.
+
+    A joint the solve freezes is held exactly by the freezing constraint; its limit row would
+    add nothing, unless its range is narrower than twice the margin kept from the limits
+    (TIAGo's +-5 mm suspension joints against a 1 cm margin), where the row has no solution
+    and every step of every limb fails.
+    """
+
+    def __init__(
+        self, model: mujoco.MjModel, dofs: np.ndarray, gain: float, margin: float
+    ) -> None:
+        super().__init__(model, gain=gain, min_distance_from_limits=margin)
+        indices = self.indices[np.isin(self.indices, dofs)]
+        indices.setflags(write=False)
+        self.indices = indices
+        self.projection_matrix = np.eye(model.nv)[indices] if len(indices) else None
 
 
 class PairDistanceLimit(mink.Limit):

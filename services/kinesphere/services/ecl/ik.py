@@ -26,6 +26,7 @@ from kinesphere.platforms.mjcf import PlatformModel
 from kinesphere.services.ecl.constraints import (
     GAIN,
     FloorLimit,
+    MovingJointLimit,
     OverSoleTask,
     PairDistanceLimit,
     PointTask,
@@ -167,7 +168,7 @@ class LimbSolver:
         model = self.model
         geoms = [int(g) for g in self._limb_geoms if model.geom_bodyid[g] in bodies]
         limits: list[mink.Limit] = [
-            mink.ConfigurationLimit(model, gain=0.9, min_distance_from_limits=LIMIT_MARGIN),
+            MovingJointLimit(model, self._dof_adr, gain=0.9, margin=LIMIT_MARGIN),
             mink.VelocityLimit(model, {j: JOINT_STEP for j in moving}),
             FloorLimit(model, geoms),
         ]
