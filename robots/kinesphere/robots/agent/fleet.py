@@ -165,6 +165,7 @@ class FleetHost:
         self.followers = Followers([g for a in self.agents for g in a.controller.generators]
                                    if batched else [], 1.0 / self.options.control_rate)
         self._bodies: list[Body] = []
+        self._commands: list[Callable[[np.ndarray, Sequence[float]], None]] = []
         self._stops = HardStops([])
         every = self.agents[0].publish_every
         self._due: list[list[Agent]] = [[] for _ in range(every)]
@@ -231,6 +232,9 @@ class FleetHost:
         for i in (deadlines <= now_ns / 1e9).nonzero()[0].tolist():
             modes[i] = _CYCLE
             deadlines[i] = np.inf
+        bodies = [a.controller.body for a in agents]
+        if bodies != self._bodies:
+            self._regroup(bodies)
         failures: list[Exception | None] = [None] * len(agents)
         cycling = [i for i, mode in enumerate(modes) if mode is _CYCLE]
         for i in cycling:
@@ -239,13 +243,13 @@ class FleetHost:
         for i in cycling:
             if failures[i] is None:
                 failures[i] = _guarded(agents[i].actuate)
-        joints = self._joints
+        joints, commands = self._joints, self._commands
         for i, mode in enumerate(modes):
             if mode is _GLIDE:
                 otg = joints[i]
                 if otg.following:  # the followers took the step: their output is the setpoint
                     try:
-                        agents[i].controller.body.command(otg.position, AT_REST)
+                        commands[i](otg.position, AT_REST)
                     except Exception as exc:  # reported for this robot; the others step on
                         failures[i] = exc
                     continue
@@ -253,9 +257,6 @@ class FleetHost:
             if mode is _LEAN:
                 failures[i] = agents[i].follow()
         self._failures = failures
-        bodies = [a.controller.body for a in agents]
-        if bodies != self._bodies:
-            self._regroup(bodies)
         self.stepper.launch(bodies if not any(failures) else
                             [b for b, f in zip(bodies, failures, strict=True) if f is None],
                             share=True)
@@ -325,8 +326,10 @@ class FleetHost:
         return notify
 
     def _regroup(self, bodies: list[Body]) -> None:
-        """The hard stops of the bodies stepped from now on, all at once."""
+        """The hard stops of the bodies stepped from now on, all at once, and their
+        ``command`` (a gliding robot's setpoint goes straight to its body)."""
         self._bodies = bodies
+        self._commands = [b.command for b in bodies]
         self._stops = HardStops([b for b in bodies if isinstance(b, MujocoBody)])
 
     def close(self) -> None:
