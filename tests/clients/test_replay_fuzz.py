@@ -28,6 +28,7 @@ from kinesphere.clients.mcaplog import McapWriter, messages
 from kinesphere.clients.recording.traffic import replay
 from kinesphere.errors import KinesphereError
 from kinesphere.keyexpr import Keys
+from support.network import NO_ROBOTS
 from support.network import OWN_KEYS as KEYS
 from support.soak import MIB, SCALE, FloodTally, mib, rss
 from support.wait import WAIT_S, until
@@ -116,7 +117,7 @@ def test_the_projects_own_keys_are_replayed(tmp_path: Path) -> None:
                                    lambda sample: heard.append(str(sample.key_expr)))
         for i, topic in enumerate(good):
             done = replay(hub, _recording(tmp_path / f"{i}.mcap", 1, topic), keys=KEYS,
-                          wait=20.0)
+                          wait=20.0, answers_for=NO_ROBOTS)
             assert done.sent == 1 and done.unheard == []
         until(lambda: len(heard) >= len(good), WAIT_S, "every replayed key heard",
               explain=lambda: heard)
@@ -130,7 +131,7 @@ def test_a_long_silence_in_the_recording_is_shortened(tmp_path: Path) -> None:
             zconfig.session(config=zconfig.loopback_config(endpoint)) as s:
         sub = s.declare_subscriber(Keys.subscribed(KEYS.command("r1")), lambda sample: None)
         t0 = time.monotonic()
-        done = replay(hub, path, keys=KEYS, wait=20.0, max_gap=0.05)
+        done = replay(hub, path, keys=KEYS, wait=20.0, max_gap=0.05, answers_for=NO_ROBOTS)
         took = time.monotonic() - t0
         zconfig.undeclare(sub)
     assert done.sent == 3 and done.shortened == 2 and took < 30.0
@@ -159,7 +160,8 @@ def test_a_long_recording_streams_in_bounded_memory(tmp_path: Path) -> None:
         before = _rss()
         first_put: list[float] = []
         t0 = time.monotonic()
-        done = replay(hub, path, keys=KEYS, wait=20.0, speed=1e9, on_put=lambda k, m: (
+        done = replay(hub, path, keys=KEYS, wait=20.0, speed=1e9, answers_for=NO_ROBOTS,
+                      on_put=lambda k, m: (
             first_put.append(time.monotonic() - t0) if not first_put else None))
         grew = _rss() - before
         until(lambda: got[0] >= MESSAGES, WAIT_S, f"{MESSAGES} messages delivered",
@@ -207,7 +209,8 @@ def test_mutated_recordings_are_refused_by_name(tmp_path: Path) -> None:
             path.write_bytes(_mutate(source, rng))
             tally.sent += 1
             try:
-                done = replay(hub, path, keys=KEYS, wait=5.0, speed=1e9, max_gap=0.01)
+                done = replay(hub, path, keys=KEYS, wait=5.0, speed=1e9, max_gap=0.01,
+                              answers_for=NO_ROBOTS)
                 tally.add(f"replayed {'all' if done.sent == 40 else 'some'}")
             except KinesphereError as exc:
                 tally.add(exc.code)

@@ -23,7 +23,7 @@ from kinesphere.clients.recording.traffic import TrafficRecorder, replay, tapped
 from kinesphere.errors import KinesphereError
 from kinesphere.keyexpr import Keys
 from kinesphere.robots.agent.ordering import Ordering, Received
-from support.network import OWN_KEYS
+from support.network import NO_ROBOTS, OWN_KEYS
 from support.wait import until
 
 GAP_S = 0.05
@@ -91,7 +91,7 @@ def test_record_replay_round_trip(tmp_path: Path) -> None:
             # replay waits until its publishers match the recorder, which has just subscribed)
             rec2 = TrafficRecorder(rec_s, OWN_KEYS, second)
             put_at: list[float] = []
-            done = replay(pub_s, first, "all", wait=20.0, keys=OWN_KEYS,
+            done = replay(pub_s, first, "all", wait=20.0, keys=OWN_KEYS, answers_for=NO_ROBOTS,
                           on_put=lambda k, m: put_at.append(time.monotonic()))
             wanted = [(k, m) for k, m in sent if isinstance(m, (pr.Command, pr.RobotState))]
             assert done.sent == len(wanted) and done.unheard == []
@@ -148,7 +148,8 @@ def test_a_replay_says_which_keys_nobody_heard(tmp_path: Path) -> None:
             probe = hub.declare_publisher(OWN_KEYS.command("r1"))
             assert zconfig.wait_matching(probe, 20.0)  # the hub knows r1's subscriber now
             zconfig.undeclare(probe)
-            done = replay(hub, path, wait=0.2, keys=OWN_KEYS)  # r1 heard at once, r2 never
+            # r1 heard at once, r2 never
+            done = replay(hub, path, wait=0.2, keys=OWN_KEYS, answers_for=NO_ROBOTS)
             assert done.sent == 2 and done.unheard == [OWN_KEYS.command("r2")]
             until(lambda: got == [OWN_KEYS.command("r1")], 20.0, "r1's command",
                   explain=lambda: got)
@@ -196,11 +197,11 @@ def test_a_restamped_replay_is_new_to_robots_that_heard_the_original(tmp_path: P
             sub = s.declare_subscriber(Keys.subscribed(OWN_KEYS.command("r1")),
                                        lambda sample: got.append((str(sample.key_expr), pr.decode(
                                            sample.payload.to_bytes(), pr.Command))))
-            assert replay(hub, path, "commands", speed=100.0, wait=20.0,
-                          keys=OWN_KEYS).sent == 6
+            assert replay(hub, path, "commands", speed=100.0, wait=20.0, keys=OWN_KEYS,
+                          answers_for=NO_ROBOTS).sent == 6
             until(lambda: len(got) == 6, 20.0, "six messages")
             assert replay(hub, path, "commands", speed=100.0, restamp=True, keys=OWN_KEYS,
-                          sender="carol").sent == 6
+                          sender="carol", answers_for=NO_ROBOTS).sent == 6
             until(lambda: len(got) == 12, 20.0, "twelve messages")
             zconfig.undeclare(sub)
     as_recorded, restamped = [c for _, c in got[:6]], [c for _, c in got[6:]]

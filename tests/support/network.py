@@ -18,6 +18,9 @@ and what the shared databank (``tests/conftest.py``) serves."""
 OWN_KEYS = Keys("kstest")
 """A prefix of the tests' own: services a test declares itself on the shared hub must not meet
 the shared databank, which answers every platform under the default prefix."""
+NO_ROBOTS = 0.0
+"""A replay's ``answers_for`` when it puts to plain subscribers: no robot is there to answer,
+so it waits for none (else each replay of commands waits its full time for answers)."""
 
 
 class Hub(NamedTuple):

@@ -215,11 +215,11 @@ class Answers:
             else:
                 self.refused[ack.code] = self.refused.get(ack.code, 0) + 1
 
-    def wait(self, should_stop: Callable[[], bool]) -> None:
+    def wait(self, should_stop: Callable[[], bool], most: float = ANSWERS_MAX_S) -> None:
         """Give the robots a moment to answer the last commands put: until none came for
-        :data:`ANSWERS_QUIET_S` once one came, at most :data:`ANSWERS_MAX_S`, or a stop."""
+        :data:`ANSWERS_QUIET_S` once one came, at most ``most`` seconds, or a stop."""
         start = time.monotonic()
-        end = start + ANSWERS_MAX_S
+        end = start + most
         while (now := time.monotonic()) < end and not should_stop():
             with self._lock:
                 last = self.last_at
@@ -325,10 +325,12 @@ def replay(session: zenoh.Session, path: str | Path, kind: str = "commands",
            speed: float = 1.0, should_stop: Callable[[], bool] = lambda: False,
            on_put: Callable[[str, Message], None] | None = None, restamp: bool = False,
            wait: float = WAIT_S, *, keys: Keys | None = None, sender: str | None = None,
-           max_gap: float = MAX_GAP_S) -> Replayed:
+           max_gap: float = MAX_GAP_S, answers_for: float = ANSWERS_MAX_S) -> Replayed:
     """Put the recording's ``kind`` messages back on their keys with the original timing
     (commands as ``sender``'s new ones with ``restamp``), once each key has a subscriber or
-    ``wait`` seconds have passed; unavailable when no key has one by then."""
+    ``wait`` seconds have passed; unavailable when no key has one by then. The robots'
+    answers to the commands put are counted for at most ``answers_for`` seconds after the
+    last one (0: the caller does not count them)."""
     if not speed > 0:
         raise KinesphereError("malformed", f"--speed must be > 0, got {speed}")
     if not wait >= 0:
@@ -395,7 +397,7 @@ def replay(session: zenoh.Session, path: str | Path, kind: str = "commands",
             if on_put is not None:
                 on_put(key, msg)
         if commands:
-            answers.wait(should_stop)
+            answers.wait(should_stop, answers_for)
     finally:
         undeclare(*publishers.values(), listener)
     return Replayed(sent, unheard, shortened, commands, answers, should_stop())
