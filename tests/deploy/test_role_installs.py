@@ -1,6 +1,8 @@
 """Each host installs only its role: a fresh venv per host, built from this checkout's wheels
 with ``-c constraints.txt``, runs its commands, lacks the others' (with a clear message), and
-holds none of the packages that host must not carry."""
+holds none of the packages that host must not carry. The dependencies are fetched once, into
+the wheelhouse beside this checkout's wheels, and every host installs from there alone (pip
+still resolves each host's own set), so four hosts do not download the same wheels four times."""
 
 from __future__ import annotations
 
@@ -88,7 +90,8 @@ def _install(name: str, host: Host, wheels: dict[str, Path], base: Path) -> Path
     made = _run([sys.executable, "-m", "venv", "--without-pip", str(venv)], base)
     assert made.returncode == 0, made.stderr
     pip = [sys.executable, "-m", "pip", "--python", str(venv / "bin" / "python"), "install",
-           "--quiet", "--no-compile", "-c", str(ROOT / "constraints.txt")]
+           "--quiet", "--no-compile", "-c", str(ROOT / "constraints.txt"), "--no-index",
+           "--find-links", str(base / "wheels")]
     done = _run([*pip, *(str(wheels[DISTS[p]]) for p in host.parts)], base, INSTALL_TIMEOUT_S)
     assert done.returncode == 0, f"{name} host: pip failed:\n{done.stdout}\n{done.stderr}"
     return venv
@@ -96,7 +99,7 @@ def _install(name: str, host: Host, wheels: dict[str, Path], base: Path) -> Path
 
 @pytest.fixture(scope="module")
 def venvs(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, Path]]:
-    """One venv per host, installed concurrently from wheels built once."""
+    """One venv per host, installed concurrently from wheels built and fetched once."""
     base = tmp_path_factory.mktemp("hosts")
     built = _run([sys.executable, "-m", "pip", "wheel", "--quiet", "--no-deps", "-w",
                   str(base / "wheels"), *(str(ROOT / p) for p in DISTS)], base, 300)
@@ -105,6 +108,10 @@ def venvs(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, Path]]
     for dist in DISTS.values():
         (wheel,) = (base / "wheels").glob(f"{dist.replace('-', '_')}-*.whl")
         wheels[dist] = wheel
+    fetched = _run([sys.executable, "-m", "pip", "download", "--quiet", "-d", str(base / "wheels"),
+                    "-c", str(ROOT / "constraints.txt"), *map(str, wheels.values())], base,
+                   INSTALL_TIMEOUT_S)
+    assert fetched.returncode == 0, f"pip download failed:\n{fetched.stdout}\n{fetched.stderr}"
     with ThreadPoolExecutor(len(HOSTS)) as pool:
         jobs = {n: pool.submit(_install, n, h, wheels, base) for n, h in HOSTS.items()}
         yield {n: job.result() for n, job in jobs.items()}
