@@ -18,6 +18,8 @@ import numpy as np
 import numpy.typing as npt
 import pytest
 
+from support.wait import WAIT_S
+
 CHROMIUM = "/usr/bin/chromium"
 FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
          "--disable-background-networking", "--disable-component-update", "--disable-sync"]
@@ -35,7 +37,9 @@ def chromium() -> str:
 
 @contextmanager
 def browser_page(width: int = 1280, height: int = 720) -> Iterator[Any]:
-    """A page in a fresh headless Chromium profile."""
+    """A page in a fresh headless Chromium profile. Its actions (a screenshot, a click, a wait
+    for text) wait as long as every other wait of the tests, not Playwright's 30 s: on a loaded
+    machine the software-rendered canvas can take longer to give a frame."""
     from playwright.sync_api import sync_playwright
 
     exe = chromium()
@@ -45,7 +49,9 @@ def browser_page(width: int = 1280, height: int = 720) -> Iterator[Any]:
             profile, executable_path=exe, args=FLAGS, headless=True,
             viewport={"width": width, "height": height})
         try:
-            yield context.new_page()
+            page = context.new_page()
+            page.set_default_timeout(WAIT_S * 1000)
+            yield page
         finally:
             context.close()
 
