@@ -20,7 +20,10 @@ keep real time per number of worker processes.
 
 Part 1 ends with the Python function calls per robot per tick at N = 48 (cProfile over
 :data:`RETARGET` ticks, robots moving): a count the machine's load does not change, so a change
-to the per-robot work shows in it even when the timings are noisy.
+to the per-robot work shows in it even when the timings are noisy. Then the physics inside the
+tick at N = 48 against two bare baselines: the table's (copies taken at the start of each chunk,
+which hold their setpoints and settle) and copies taken from the bodies after every tick (the
+states the fleet stepped): how much of the ratio is physics of moving bodies, not Python.
 
 ``BENCH_FLEET_PARTS=13 python -m bench fleet`` runs only the parts named (default ``123``).
 """
@@ -33,7 +36,7 @@ import logging
 import os
 import pstats
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import AbstractContextManager, contextmanager
 
 import mujoco
@@ -53,6 +56,7 @@ from bench.bench_agent import (
 from kinesphere import zconfig
 from kinesphere.protocol import SpatialCommand
 from kinesphere.robots.agent.bodies import make_body
+from kinesphere.robots.agent.body import Body
 from kinesphere.robots.agent.fleet import FleetHost, RobotSpec
 from kinesphere.robots.agent.follow import Followers
 from kinesphere.robots.agent.mujoco_body import HardStops, MujocoBody
@@ -130,9 +134,17 @@ class Bare:
         assert all(isinstance(b, MujocoBody) for b in self.bodies)
         self.copies = [(b.model, copy.copy(b.data)) for b in self.bodies]  # type: ignore[attr-defined]
 
-    def steps(self, n: int) -> list[float]:
+    def take(self) -> None:
+        """The copies as the bodies are now."""
         for (m, d), b in zip(self.copies, self.bodies, strict=True):
             mujoco.mj_copyData(d, m, b.data)  # type: ignore[attr-defined]
+
+    def steps(self, n: int) -> list[float]:
+        """Seconds per step of all copies for ``n`` steps from the bodies' state now."""
+        self.take()
+        return self.steps_as_taken(n)
+
+    def steps_as_taken(self, n: int) -> list[float]:
         clock, out = time.perf_counter, []
         for _ in range(n):
             t0 = clock()
@@ -163,6 +175,37 @@ def curve(endpoint: str, parts: Parts) -> None:
     print(f"  python calls per robot per tick at N = {N_ABLATE} (cProfile, {RETARGET} ticks, "
           f"robots moving; the load does not change it): {calls_per_robot(endpoint, parts):.1f}",
           flush=True)
+    inside, chunked, same = physics_gap(endpoint, parts)
+    print(f"  physics inside the tick at N = {N_ABLATE}: {inside * 1e3:.3f} ms, "
+          f"{inside / chunked:.2f}x the bare mj_step of the chunk's copies, {inside / same:.2f}x "
+          "that of copies taken from the bodies at every tick (a chunk's copies hold their "
+          "setpoints and settle, cheaper physics than moving bodies: part of each ratio above is "
+          "not Python)", flush=True)
+
+
+def physics_gap(endpoint: str, parts: Parts, n: int = N_ABLATE) -> tuple[float, float, float]:
+    """Median seconds per tick of the fleet's physics (its stepper's share in the tick), of the
+    bare mj_step of copies taken at the start of each chunk (the table's baseline), and of
+    copies taken from the bodies after every tick (the same states the fleet stepped)."""
+    with moving(endpoint, n, parts, "gap") as m:
+        fleet, inside = m.fleet, []
+        launch = fleet.stepper.launch
+
+        def timed(bodies: Sequence[Body], share: bool = False) -> None:
+            t0 = time.perf_counter()
+            launch(bodies, share)
+            inside.append(time.perf_counter() - t0)
+
+        fleet.stepper.launch = timed  # type: ignore[method-assign]
+        bare, chunked, same = Bare(fleet), [], []
+        for _ in range(CHUNKS):
+            for _ in range(CHUNK):
+                m.ticks(1)
+                fleet.complete()
+                bare.take()
+                same += bare.steps_as_taken(1)
+            chunked += bare.steps(CHUNK)
+    return pct(inside, 50), pct(chunked, 50), pct(same, 50)
 
 
 def calls_per_robot(endpoint: str, parts: Parts, n: int = N_ABLATE) -> float:
