@@ -211,3 +211,15 @@ def test_a_missing_role_is_named_whatever_options_come_first() -> None:
     assert message is not None and "kinesphere-robots" in message and "label, send" in message
     assert missing_role("agent", ["agent"]) is None
     assert missing_role("no-such-command", ["label"]) is None  # argparse explains that one
+
+
+def test_the_parser_of_every_role_imports_no_numerics() -> None:
+    """Every ``kinesphere`` process builds the parser of every installed role before it runs
+    one command; that costs no NumPy, Ruckig, MuJoCo, yourdfpy nor SciPy, which a client's
+    command never needs (here, where every role is installed)."""
+    code = ("import sys\nfrom kinesphere.cli import build_parser\nbuild_parser()\n"
+            "print(sorted(m for m in ('numpy', 'ruckig', 'mujoco', 'yourdfpy', 'scipy')"
+            " if m in sys.modules))")
+    done = _run([sys.executable, "-c", code], ROOT)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "[]", done.stdout

@@ -27,10 +27,11 @@ from kinesphere.robots.agent.base import (
 )
 from kinesphere.robots.agent.bodies import make_body
 from kinesphere.robots.agent.controller import Controller
+from kinesphere.robots.agent.options import DEFAULT_MARGIN
 from kinesphere.robots.agent.otg import Otg
 from kinesphere.robots.agent.runtime import SETTLE_S, Agent, AgentOptions
 from kinesphere.robots.agent.safety import DRIVE_TTL_S, Safety, Verdict
-from kinesphere.robots.agent.trajectory import DEFAULT_MARGIN, JointTrajectory
+from kinesphere.robots.agent.trajectory import JointTrajectory
 
 DT = 0.002
 ACC, JERK = 4.0, 40.0

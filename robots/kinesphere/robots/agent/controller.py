@@ -15,8 +15,9 @@ import numpy as np
 from kinesphere.robots.agent.base import BaseController, make_base
 from kinesphere.robots.agent.body import AT_REST, Body, Reading
 from kinesphere.robots.agent.guard import Guard
+from kinesphere.robots.agent.options import DEFAULT_MARGIN
 from kinesphere.robots.agent.otg import Otg
-from kinesphere.robots.agent.trajectory import DEFAULT_MARGIN, Aim, Clamp, JointTrajectory
+from kinesphere.robots.agent.trajectory import Aim, Clamp, JointTrajectory
 
 BLOCKED_TOL = 0.05
 """rad (m): a joint this far from where its finished trajectory ended is blocked."""

@@ -9,8 +9,11 @@ from typing import Final
 from kinesphere.errors import KinesphereError
 from kinesphere.keyexpr import DEFAULT_PREFIX
 from kinesphere.rmw_zenoh import check_distro
-from kinesphere.robots.agent.trajectory import DEFAULT_MARGIN
 
+DEFAULT_MARGIN = 0.01
+"""Target clamp margin inside each limit, rad (or m); shrunk for joints with a tiny range
+(``trajectory.clamp_margin``). Here, not in ``trajectory``, so that a command line's parser
+imports neither NumPy nor Ruckig."""
 ROS2_INTERFACES = ("trajectory", "forward")
 BODY_KINDS: Final = ("mujoco", "ros2")
 """The bodies ``--body`` may name, the default first; ``bodies.BODIES`` makes each."""

@@ -23,13 +23,12 @@ from typing import TYPE_CHECKING
 import numpy as np
 from ruckig import Synchronization
 
+from kinesphere.robots.agent.options import DEFAULT_MARGIN
 from kinesphere.robots.agent.otg import Otg, Values
 
 if TYPE_CHECKING:
     from kinesphere.eurdf import JointLimit
 
-DEFAULT_MARGIN = 0.01
-"""Target clamp margin inside each limit, rad (or m); shrunk for joints with a tiny range."""
 LIMIT_SLACK = 1e-6
 """A request this close outside a limit is rounding, not a bad target."""
 DEFAULT_VELOCITY = 1.0
