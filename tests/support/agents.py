@@ -14,6 +14,7 @@ import os
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
@@ -64,16 +65,24 @@ class DatabankProcess:
         self.proc: subprocess.Popen[bytes] | None = None
 
     def start(self) -> None:
-        with awaiting_token(self.watcher, KEYS.alive_databank_all()) as up:
+        # its log goes to a file: a pipe nobody reads would stall a databank that logs 64 KB
+        # over a test session, and the file says what it did when it does not come up
+        with awaiting_token(self.watcher, KEYS.alive_databank_all()) as up, \
+                tempfile.TemporaryFile() as log:
             self.proc = subprocess.Popen(
                 [sys.executable, "-m", "kinesphere.cli", "databank", "serve",
                  "--connect", self.endpoint, "--listen", zconfig.LOOPBACK_ANY_PORT, *self.args],
                 cwd=ROOT, env={**os.environ, "PYTHONUNBUFFERED": "1"},
-                stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                stdout=subprocess.DEVNULL, stderr=log,
             )
             if not up.wait(WAIT_S):
+                running = self.proc.poll() is None
                 self.stop()
-                raise RuntimeError("databank did not declare its liveliness token")
+                log.seek(0)
+                said = log.read().decode(errors="replace")[-2000:] or "nothing"
+                raise RuntimeError(
+                    f"databank did not declare its liveliness token within {WAIT_S:g} s "
+                    f"({'still running' if running else 'it had exited'}); it logged: {said}")
 
     def stop(self) -> None:
         if self.proc is None:
