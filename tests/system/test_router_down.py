@@ -33,7 +33,7 @@ def test_every_command_names_the_missing_router_and_its_hint_starts_one(
         assert main([*args, "--connect", ep]) == code, name
         err = capsys.readouterr().err
         assert hint in err, (name, err)
-        assert "Unable to connect" not in err and "no robot is alive" not in err, (name, err)
+        assert "Unable to connect" not in err and "no robot seen alive" not in err, (name, err)
     agent = sup.spawn("agent", ["agent", "youbot", "--id", "yb-1", "--connect", ep])
     until(lambda: hint in agent.tail(50), WAIT_S, "the agent's warning",
           explain=lambda: agent.tail())

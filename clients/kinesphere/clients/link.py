@@ -499,10 +499,11 @@ def reachable(link: RobotLink, target: tg.Target, wait: float) -> list[str]:
 
 
 def live_robots(link: RobotLink) -> str:
-    """``live robots: baxter-1 (baxter), yb-1 (youbot)``, or that none is alive."""
+    """``live robots: baxter-1 (baxter), yb-1 (youbot)``, or that this client saw none alive
+    (no liveliness token, no state: what it saw, not a claim about the robots)."""
     alive = link.alive_robots()
     if not alive:
-        return f"no robot is alive under {link.keys.prefix!r}"
+        return f"no robot seen alive under {link.keys.prefix!r}"
     states = link.states()
     return "live robots: " + ", ".join(
         f"{rid} ({states[rid].state.platform})" if rid in states else rid for rid in alive)

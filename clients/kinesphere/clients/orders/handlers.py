@@ -236,7 +236,7 @@ def _estop_all(link: RobotLink, timeout: float, prefix: str) -> int:
     if not found:
         nobody = zconfig.alone(link.session)
         print(f"E-STOP REACHED NO ROBOT: nobody acknowledged it within {timeout:g} s and "
-              f"{nobody or f'no robot is alive under {prefix!r}'}", file=sys.stderr)
+              f"{nobody or f'no robot seen alive under {prefix!r}'}", file=sys.stderr)
         return 1
     states = link.states()
     for rid, o in found.items():
