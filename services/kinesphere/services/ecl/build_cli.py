@@ -23,7 +23,7 @@ from rich.table import Table
 
 from kinesphere.cliargs import Subcommands, add_bodies, add_json, add_output, command
 from kinesphere.errors import KinesphereError
-from kinesphere.services.ecl.cli import table_console
+from kinesphere.services.ecl.console import table_console
 from kinesphere.services.options import (
     SHEET_SIZE,
     add_cell,

@@ -3,7 +3,7 @@
 These are the super-user's tools from the paper (store a pose for a cell, review rows, move a
 databank to and from JSON) plus a local f_SB lookup. The generator's commands (build, report,
 render) come from ``build_cli`` when that module is installed; both print tables through
-:func:`table_console`.
+:func:`~kinesphere.services.ecl.console.table_console`.
 """
 
 from __future__ import annotations
@@ -26,6 +26,7 @@ from kinesphere.cliargs import (
 )
 from kinesphere.errors import KinesphereError
 from kinesphere.protocol import Pose
+from kinesphere.services.ecl.console import table_console
 from kinesphere.services.options import (
     QueryOptions,
     add_cell,
@@ -127,12 +128,6 @@ def register(sub: Subcommands) -> None:
 def _usage(parser: argparse.ArgumentParser) -> int:
     parser.print_help()
     return 2
-
-
-def table_console() -> Console:
-    """A terminal keeps its width; piped output is never truncated."""
-    console = Console()
-    return console if console.is_terminal else Console(width=10_000)
 
 
 def _open(args: argparse.Namespace) -> Any:
