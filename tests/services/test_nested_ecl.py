@@ -18,7 +18,15 @@ from kinesphere.platforms.platform import load_platform
 from kinesphere.protocol import NO_ID, SpatialCommand
 from kinesphere.services.ecl.ecl import Ecl
 from kinesphere.services.ecl.measure import Fk
-from kinesphere.services.ecl.nested import sized
+from kinesphere.services.ecl.nested import (
+    ENTRY_BYTES,
+    SOLUTION_BYTES,
+    SOLUTIONS,
+    Segment,
+    Solution,
+    sized,
+    solution_bytes,
+)
 from support.ecl import build
 from support.nested import MeasuredBody, SegmentEnds, degrees, unit
 from support.paths import TOY
@@ -218,3 +226,19 @@ def test_answers_are_deterministic_and_remembered(tmp_path: Path) -> None:
     assert second.compound(parts) == a  # and the same from a fresh start
     plat = load_platform("baxter")
     assert set(a.joints) == set(plat.eurdf.limb_joints("limb_11"))
+
+
+def test_remembered_solutions_are_bounded_in_bytes_by_what_their_keys_hold() -> None:
+    """A key holds the placed joints of the rest of the body: a large brought robot's keys
+    cost more, and the byte bound, not only the count, keeps the memory."""
+    segment = Segment("limb_11", "distal_11", None, Direction.parse("forward-middle"), 3.0)
+    solution = Solution({"a": 0.0}, (1.0,))
+    small = solution_bytes(((segment,), ()), solution)
+    placed = tuple((f"j{i}", 0.1) for i in range(500))
+    large = solution_bytes(((segment,), placed), solution)
+    assert large >= small + 500 * ENTRY_BYTES
+    assert SOLUTIONS * large > SOLUTION_BYTES  # the count alone would not bound it
+    nested = Ecl.open("baxter").nested()
+    for i in range(SOLUTIONS):
+        nested._solutions.put(((segment,), placed[:-1] + ((f"k{i}", 0.2),)), solution)
+    assert nested._solutions.bytes <= SOLUTION_BYTES < SOLUTIONS * large

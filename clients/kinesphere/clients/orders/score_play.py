@@ -54,7 +54,7 @@ from kinesphere.protocol import (
     SpatialCommand,
     encode,
 )
-from kinesphere.query import get_one
+from kinesphere.query import get_one, pose_query
 from kinesphere.scores import Gesture, Keyframe, Score, load_score
 
 SUFFIX = ".json"
@@ -191,9 +191,9 @@ def _warm(link: RobotLink, platform: str, parts: list[SpatialCommand], timeout: 
     the chains already)."""
     if len(parts) < 2:
         return
+    key, payload = pose_query(link.keys, platform, parts)
     try:
-        get_one(link.session, link.keys.compound(platform), Pose,
-                encode(CompoundRequest(parts=parts)), timeout=timeout, retry=True)
+        get_one(link.session, key, Pose, payload, timeout=timeout, retry=True)
     except KinesphereError as exc:
         if exc.code == "unavailable":
             raise

@@ -79,7 +79,13 @@ SETTLED_DEG = 0.05
 POSTURE = 0.01
 """Posture weight per radian, against 1 per unit of direction error (about a radian)."""
 SOLUTIONS = 4096
-"""Solutions remembered per platform (a few hundred bytes each)."""
+"""Solutions remembered per platform at most."""
+SOLUTION_BYTES = 16 << 20
+"""Bytes of remembered solutions per platform at most: a key holds the placed joints of the
+rest of the body, up to every joint of a large brought robot."""
+ENTRY_BYTES = 96
+"""What one joint value, segment or angle of a remembered solution costs, about (name, float,
+tuple slot): the measure the byte bound counts in."""
 Placed = tuple[tuple[str, float], ...]
 """Joint values of the rest of the body a solution was found with (empty: all neutral)."""
 
@@ -467,14 +473,11 @@ class Nested:
         """The VSAM's sizes, near to far (k_smax): a segment's size rule."""
         self.max_angle = max_angle
         self._chains: dict[tuple[str, str], ChainSolver] = {}
-        self._solutions: Lru[tuple[tuple[Segment, ...], Placed], Solution] = Lru(SOLUTIONS)
+        self._solutions: Lru[tuple[tuple[Segment, ...], Placed], Solution] = Lru(
+            SOLUTIONS, SOLUTION_BYTES, solution_bytes)
         self._lock = threading.Lock()
         self.solves = 0
         """Solves computed (not remembered), for tests and benches."""
-
-    def cached(self, segments: Sequence[Segment], placed: Mapping[str, float] | None = None
-               ) -> Solution | None:
-        return self._solutions.get((tuple(segments), self._placed(segments, placed)))
 
     def _placed(self, segments: Sequence[Segment], placed: Mapping[str, float] | None
                 ) -> Placed:
@@ -523,3 +526,11 @@ class Nested:
 
 def _named(s: Segment) -> str:
     return f"{s.limb} from {s.origin}" + (f" to {s.end}" if s.end else "")
+
+
+def solution_bytes(key: tuple[tuple[Segment, ...], Placed], solution: Solution) -> int:
+    """What a remembered solution costs, about: its placed joints, segments, joints and
+    angles, :data:`ENTRY_BYTES` each."""
+    segments, placed = key
+    items = len(segments) + len(placed) + len(solution.joints) + len(solution.angles)
+    return ENTRY_BYTES * (items + len(solution.measured) + 1)
