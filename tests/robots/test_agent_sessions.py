@@ -21,7 +21,16 @@ import zenoh
 from kinesphere import zconfig
 from kinesphere.clients.link import RobotLink
 from kinesphere.keyexpr import Keys
-from kinesphere.protocol import MAX_INT, Ack, Command, Drive, LeaseAction, SpatialCommand, encode
+from kinesphere.protocol import (
+    ANONYMOUS,
+    MAX_INT,
+    Ack,
+    Command,
+    Drive,
+    LeaseAction,
+    SpatialCommand,
+    encode,
+)
 from kinesphere.robots.agent.ordering import REBASE_S, SEQ_WINDOW, Ordering, Received
 from kinesphere.robots.agent.safety import Safety, Verdict
 from support.agents import (
@@ -137,13 +146,15 @@ def test_a_release_clears_only_an_estop_sent_before_it() -> None:
     estop = cmd(0, T0 + 2 * S, session="round-2", sender="op", estop=True)
     assert s.on_command(estop, 0.0) is Verdict.ESTOP
     late = cmd(2, T0 + S, session="round-1", sender="op", release=True)
-    assert s.on_command(late, 0.1) is Verdict.LATCHED and s.predates(late)
+    assert s.on_command(late, 0.1) is Verdict.LATCHED and s.predates(late) == "op"
     assert s.latches == ["op"]
     again = cmd(0, T0 + 2 * S, session="round-2-release", sender="op", release=True)
     assert not s.predates(again) and s.on_command(again, 0.2) is Verdict.RELEASE
     # nobody's latch: a release sent before it leaves it too
     assert s.on_command(cmd(0, T0 + 5 * S, sender="", estop=True), 0.3) is Verdict.ESTOP
-    assert s.on_command(cmd(1, T0 + 4 * S, sender="bob", release=True), 0.4) is Verdict.LATCHED
+    early = cmd(1, T0 + 4 * S, sender="bob", release=True)
+    assert s.predates(early) == ANONYMOUS  # the refusal names that latch, not bob's own
+    assert s.on_command(early, 0.4) is Verdict.LATCHED
     assert s.on_command(cmd(2, T0 + 6 * S, sender="bob", release=True), 0.5) is Verdict.RELEASE
 
 

@@ -365,7 +365,13 @@ class Conduct:
             return f"e-stop latched by {holders}; only a release is obeyed"
         if not cmd.sender:
             return f"e-stop latched by {holders}; a release must name its sender"
-        if self.safety.predates(cmd):
+        blocking = self.safety.predates(cmd)
+        if blocking == ANONYMOUS:
+            return (f"e-stop still latched by {holders}: this release was stamped (by "
+                    f"{cmd.sender}'s clock) before the unnamed e-stop was (by its sender's "
+                    "clock, which may be another host's), so it does not clear it; release "
+                    "again once this host's clock has passed that e-stop's time")
+        if blocking:
             return (f"e-stop still latched by {holders}: this release was sent before "
                     f"{cmd.sender}'s latest e-stop (by its sender's clock), so it does not "
                     "clear it; release again")

@@ -107,11 +107,13 @@ class Safety:
         self.latched_ns[who] = max(sent_ns, self.latched_ns.get(who, 0))
         return who
 
-    def predates(self, cmd: Command) -> bool:
-        """Whether release ``cmd`` was sent before an e-stop of its sender's latch (or of the
-        nobody's latch it could clear): that latch stays."""
-        return any(latch in self.latches and cmd.sent_ns < self.latched_ns.get(latch, 0)
-                   for latch in (cmd.sender, ANONYMOUS))
+    def predates(self, cmd: Command) -> str | None:
+        """The latch whose e-stop release ``cmd`` was sent before (its sender's own, or the
+        nobody's latch it could clear), which stays; None when there is none."""
+        for latch in (cmd.sender, ANONYMOUS):
+            if latch in self.latches and cmd.sent_ns < self.latched_ns.get(latch, 0):
+                return latch
+        return None
 
     def on_command(self, cmd: Command, now: float) -> Verdict:
         """Classify ``cmd`` received at ``now`` and arm or disarm the watchdog."""
