@@ -179,10 +179,8 @@ def check(link: RobotLink, performers: Sequence[Performer], gestures: Sequence[G
                 key = (p.platform, g.name, kf.index)
                 if key not in done:
                     done[key] = _refusals(link, p, kf, timeout)
-                    if done[key]:
-                        p.refused[(g.name, kf.index)] = done[key]
                     _warm(link, p.platform, p.command_parts(g, kf), timeout)
-                elif done[key]:
+                if done[key]:
                     p.refused[(g.name, kf.index)] = done[key]
 
 
