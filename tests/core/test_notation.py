@@ -1,6 +1,6 @@
 """kinesphere's notation writes the cells LabanEditor writes: checked against LabanEditor's own
 ``labanProcessor.py`` (Microsoft's LabanotationSuite, vendored unchanged with its MIT licence
-in ``tests/data/labanotationsuite``), its ``to_sphere`` and ``coordinate2laban`` run as the
+in ``tests/third_party/labanotationsuite``), its ``to_sphere`` and ``coordinate2laban`` run as the
 oracle on many vectors and on every boundary of its sectors and levels.
 """
 

@@ -13,6 +13,6 @@ DEPLOY = ROOT / "deploy"
 REFERENCE = ROOT.parent / "shared" / "reference" / "robots"
 """The reference joint tables (``shared/`` beside the repository, as on CI)."""
 TOY_EURDF = TOY / "toyarm.eurdf"
-LABAN_EDITOR = DATA / "labanotationsuite" / "labanProcessor.py"
+LABAN_EDITOR = ROOT / "tests" / "third_party" / "labanotationsuite" / "labanProcessor.py"
 """LabanEditor's own ``labanProcessor.py`` (Microsoft's LabanotationSuite, vendored unchanged
 with its MIT licence): the oracle a notation cell is checked against."""
