@@ -39,18 +39,18 @@ ROLE_COMMANDS: dict[str, tuple[str, ...]] = {
 
 
 def _register_core(sub: Subcommands) -> None:
-    p = command(
-        sub, "label", _label,
-        help="propose an eURDF (body_part labels) for a plain URDF file",
-        description="Derive the paper's hierarchical labels (c_1, limb_ij, distal_ij) from a "
-        "URDF tree and print the eURDF; edit it, then check it with 'kinesphere describe FILE'.",
-    )
+    p = command(sub, "label", _label)
     p.add_argument("urdf", type=Path, help="a plain URDF file")
     add_merge_distance(p)
     add_output(p, "the eURDF", default="stdout")
 
 
 def _label(args: argparse.Namespace) -> int:
+    """propose an eURDF (body_part labels) for a plain URDF file
+
+    Derive the paper's hierarchical labels (c_1, limb_ij, distal_ij) from a URDF tree and print the
+    eURDF; edit it, then check it with 'kinesphere describe FILE'.
+    """
     from kinesphere.labeller import propose_eurdf
 
     text = propose_eurdf(args.urdf, merge_distance=args.merge_distance)

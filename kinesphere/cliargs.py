@@ -16,6 +16,7 @@ Importing this module does not load Zenoh, so ``--help`` stays quick.
 from __future__ import annotations
 
 import argparse
+import inspect
 import os
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
@@ -91,14 +92,30 @@ Subcommands: TypeAlias = "argparse._SubParsersAction[argparse.ArgumentParser]"
 
 
 def command(sub: Subcommands, name: str, run: Callable[[argparse.Namespace], int],
-            help: str, description: str | None = None, **more: Any) -> argparse.ArgumentParser:
+            help: str | None = None, description: str | None = None,
+            **more: Any) -> argparse.ArgumentParser:
     """Register the sub-command ``name`` that ``run`` handles; ``help`` is its line in the
     list of commands, ``description`` heads its own ``--help`` (``more``: epilog, a
-    formatter). The caller adds the options to the parser returned."""
+    formatter). The caller adds the options to the parser returned.
+
+    Without ``help``, both come from ``run``'s docstring, as click and typer read one: the
+    handler is documented by the text its users read. Given here, they are for a lambda, a
+    trampoline into another module, or a description laid out by hand (a raw formatter)."""
+    if help is None:
+        help, description = handler_texts(run)
     parser: argparse.ArgumentParser = sub.add_parser(name, help=help, description=description,
                                                      **more)
     parser.set_defaults(func=run)
     return parser
+
+
+def handler_texts(run: Callable[..., object]) -> tuple[str, str | None]:
+    """A handler's docstring as a command's texts: the first paragraph is its line in the list
+    of commands, the rest its description (argparse wraps them, so each paragraph's line
+    breaks are only the source's). ``python -OO`` strips docstrings: then there are none."""
+    doc = inspect.getdoc(run) or ""
+    paragraphs = [" ".join(p.split()) for p in doc.split("\n\n") if p.strip()]
+    return (paragraphs[0] if paragraphs else "", "\n\n".join(paragraphs[1:]) or None)
 
 
 def command_group(sub: Subcommands, name: str, help: str, description: str | None = None, *,

@@ -33,16 +33,7 @@ STATUS_TIMEOUT_S = 2.0
 
 
 def register(sub: Subcommands) -> None:
-    up = command(
-        sub, "up", _up,
-        help="start a whole local system (databank + robots), play a demo, stop it all",
-        description="Start a router (the hub, serving nothing else), a databank and one robot "
-        "agent per robot as separate processes on loopback, all Zenoh clients of the router "
-        "(any of them can be killed and the rest keep talking), wait until each is alive, "
-        "play the demo phrases, show a live status table, write pictures of the final poses "
-        "and joint trajectories to --out, then stop every process (also on Ctrl-C). Exit 0 "
-        "after the demo.",
-    )
+    up = command(sub, "up", _up)
     up.add_argument(
         "--robots", default=",".join(DEFAULT_ROBOTS), metavar="LIST",
         help=f"comma-separated platforms, optionally PLATFORM:ID (default "
@@ -66,26 +57,13 @@ def register(sub: Subcommands) -> None:
                     help="serve this databank file instead of the shipped one (repeatable)")
     add_prefix(up, UP.prefix)
 
-    st = command(
-        sub, "status", _status,
-        help="list live databanks and robots and each robot's last state",
-        description="Listen to who is alive (liveliness, with history) and to every robot's "
-        "state until discovery settles: every live robot has reported and nothing new turned "
-        "up for 0.3 s (a peer waits at least 1 s for its gossip links), or --timeout. Exit 0 "
-        "when something answered, 1 when nothing did.",
-    )
+    st = command(sub, "status", _status)
     add_timeout(st, STATUS_TIMEOUT_S, "discovery to settle",
                 then="exit 1 when nothing answered by then")
     add_json(st, "the databanks and robots found (instead of a table)")
     add_zenoh_arguments(st, WATCHER, listen=False)
 
-    rt = command(
-        sub, "router", _router,
-        help="run a Zenoh router (TLS, access control) until SIGTERM/Ctrl-C",
-        description="Run a Zenoh router from the Python package with a JSON5 config file (see "
-        "deploy/router.json5). With access control on, every denied message is logged as "
-        "'access denied: ...'.",
-    )
+    rt = command(sub, "router", _router)
     rt.add_argument("--config", type=Path, metavar="FILE", help="Zenoh JSON5 config file")
     rt.add_argument("--listen", action="append", metavar="EP",
                     help="listen endpoint, overrides the file's (repeatable; default: the "
@@ -104,17 +82,7 @@ def register(sub: Subcommands) -> None:
     rt.add_argument("--log-denials", action=argparse.BooleanOptionalAction, default=None,
                     help="log access-control denials (default: on when access control is)")
 
-    fm = command(
-        sub, "film", _film,
-        help="film a movement phrase or a Labanotation score performed by every body side by "
-        "side (MP4 and GIF)",
-        description="Render PHRASE (a phrase file or shipped name) on each platform's real "
-        "agent controller with its real ECL, off-screen with MuJoCo, side by side with the "
-        "current command in words, as an MP4 and a GIF. Or a gesture of a Labanotation score "
-        "(a .json file or a shipped score's name, e.g. big2; see docs/labanotation.md): each "
-        "body performs the parts it has at the score's times, the caption is the keyframe's "
-        "notation.",
-    )
+    fm = command(sub, "film", _film)
     fm.add_argument("phrase", metavar="PHRASE|SCORE",
                     help="phrase file (TOML), score file (JSON) or a shipped name")
     add_score_options(fm, "the score's first")
@@ -128,6 +96,14 @@ def register(sub: Subcommands) -> None:
 
 
 def _up(args: argparse.Namespace) -> int:
+    """start a whole local system (databank + robots), play a demo, stop it all
+
+    Start a router (the hub, serving nothing else), a databank and one robot agent per robot as
+    separate processes on loopback, all Zenoh clients of the router (any of them can be killed and
+    the rest keep talking), wait until each is alive, play the demo phrases, show a live status
+    table, write pictures of the final poses and joint trajectories to --out, then stop every
+    process (also on Ctrl-C). Exit 0 after the demo.
+    """
     from kinesphere.deploy.plan import check_installed, default_phrases, parse_phrase, parse_robots
 
     check_installed()
@@ -142,6 +118,13 @@ def _up(args: argparse.Namespace) -> int:
 
 
 def _status(args: argparse.Namespace) -> int:
+    """list live databanks and robots and each robot's last state
+
+    Listen to who is alive (liveliness, with history) and to every robot's state until discovery
+    settles: every live robot has reported and nothing new turned up for 0.3 s (a peer waits at
+    least 1 s for its gossip links), or --timeout. Exit 0 when something answered, 1 when nothing
+    did.
+    """
     from kinesphere.deploy.status import collect, print_status
     from kinesphere.keyexpr import Keys
     from kinesphere.zconfig import session_from_args
@@ -152,6 +135,11 @@ def _status(args: argparse.Namespace) -> int:
 
 
 def _router(args: argparse.Namespace) -> int:
+    """run a Zenoh router (TLS, access control) until SIGTERM/Ctrl-C
+
+    Run a Zenoh router from the Python package with a JSON5 config file (see deploy/router.json5).
+    With access control on, every denied message is logged as 'access denied: ...'.
+    """
     from kinesphere.deploy.router import print_acl, run_router
 
     if args.print_acl:
@@ -163,6 +151,15 @@ def _router(args: argparse.Namespace) -> int:
 
 
 def _film(args: argparse.Namespace) -> int:
+    """film a movement phrase or a Labanotation score performed by every body side by side (MP4 and
+    GIF)
+
+    Render PHRASE (a phrase file or shipped name) on each platform's real agent controller with its
+    real ECL, off-screen with MuJoCo, side by side with the current command in words, as an MP4 and
+    a GIF. Or a gesture of a Labanotation score (a .json file or a shipped score's name, e.g. big2;
+    see docs/labanotation.md): each body performs the parts it has at the score's times, the caption
+    is the keyframe's notation.
+    """
     from kinesphere.deploy.plan import FILM_NEEDS, check_installed
 
     check_installed("kinesphere film runs the robots' controllers and ECLs here", FILM_NEEDS)

@@ -17,18 +17,7 @@ if TYPE_CHECKING:  # imported lazily: yourdfpy/trimesh cost ~1 s at every CLI st
 def register(sub: Subcommands) -> None:
     nsub = command_group(sub, "platform", "bring your own robot: 'platform new NAME --urdf FILE'",
                          dest="platform_command", metavar="ACTION")
-    new = command(
-        nsub, "new", _platform_new,
-        help="scaffold a platform folder from any URDF",
-        description="Write DIR/NAME/: the eURDF (proposed labels, meshes copied beside it), "
-        "platform.toml (base kind, height, neutral pose) and vsam.toml (Laban-27 for every "
-        "limb). The folder is written whole or not at all. What MuJoCo would refuse is "
-        "mended where the mend is standard (inertias balanced, zero-size shapes dropped, a "
-        "spherical joint as three revolutes, a missing mesh as a box from its link's "
-        "inertia) and every mend is listed; what cannot be mended is one error naming the "
-        "element. Edit the files, then 'kinesphere ecl build DIR/NAME' and run it with "
-        "'--platforms DIR' (or $KINESPHERE_PLATFORMS=DIR) like a shipped platform.",
-    )
+    new = command(nsub, "new", _platform_new)
     new.add_argument("name", help="platform name: a-z and 0-9 words joined by single _ or -, "
                      "starting with a letter")
     new.add_argument("--urdf", type=Path, required=True, help="the robot's URDF file")
@@ -47,16 +36,9 @@ def register(sub: Subcommands) -> None:
     new.add_argument("--force", action="store_true",
                      help="replace an existing platform folder (as a whole, once the new one "
                      "is complete)")
-    p = command(sub, "platforms", _platforms, help="list the known platforms (shipped and brought)")
+    p = command(sub, "platforms", _platforms)
     add_json(p, "the list")
-    d = command(
-        sub, "describe", _describe,
-        help="print a platform's labels C, J, L, configuration space P and body vocabulary",
-        description="Print C (core), J (joint locations), L (limbs, with the links each covers), "
-        "the DOF count, P (joint limits) and the body vocabulary: which label answers each "
-        "Motif/Labanotation body part (right_arm, upper_arm, forearm, left_leg, ...), read "
-        "from the labels' aliases. PLATFORM is a shipped name or an .eurdf file.",
-    )
+    d = command(sub, "describe", _describe)
     d.add_argument(
         "platform", help="platform name, any case (see 'kinesphere platforms'), 'all' (with "
         "--json: one list), or an eURDF path"
@@ -65,6 +47,16 @@ def register(sub: Subcommands) -> None:
 
 
 def _platform_new(args: argparse.Namespace) -> int:
+    """scaffold a platform folder from any URDF
+
+    Write DIR/NAME/: the eURDF (proposed labels, meshes copied beside it), platform.toml (base kind,
+    height, neutral pose) and vsam.toml (Laban-27 for every limb). The folder is written whole or
+    not at all. What MuJoCo would refuse is mended where the mend is standard (inertias balanced,
+    zero-size shapes dropped, a spherical joint as three revolutes, a missing mesh as a box from its
+    link's inertia) and every mend is listed; what cannot be mended is one error naming the element.
+    Edit the files, then 'kinesphere ecl build DIR/NAME' and run it with '--platforms DIR' (or
+    $KINESPHERE_PLATFORMS=DIR) like a shipped platform.
+    """
     from kinesphere import hints
     from kinesphere.platforms.platform import search_path
     from kinesphere.platforms.scaffold import new_platform
@@ -101,6 +93,7 @@ def _platform_new(args: argparse.Namespace) -> int:
 
 
 def _platforms(args: argparse.Namespace) -> int:
+    """list the known platforms (shipped and brought)"""
     from kinesphere.platforms.platform import load_platform, platform_names
 
     rows = []
@@ -168,6 +161,13 @@ def describe_dict(e: Eurdf, base: str | None = None) -> dict[str, Any]:
 
 
 def _describe(args: argparse.Namespace) -> int:
+    """print a platform's labels C, J, L, configuration space P and body vocabulary
+
+    Print C (core), J (joint locations), L (limbs, with the links each covers), the DOF count, P
+    (joint limits) and the body vocabulary: which label answers each Motif/Labanotation body part
+    (right_arm, upper_arm, forearm, left_leg, ...), read from the labels' aliases. PLATFORM is a
+    shipped name or an .eurdf file.
+    """
     from kinesphere.eurdf import load_eurdf
     from kinesphere.platforms.platform import load_platform, platform_names
 

@@ -28,15 +28,7 @@ from kinesphere.signals import handle_signals
 
 
 def register(sub: Subcommands) -> None:
-    r = command(
-        sub, "record", record,
-        help="record every command, state, ack and recorded pose to an MCAP file",
-        description="Record {prefix}/robot/*/command, {prefix}/group/*/command, "
-        "{prefix}/robot/*/state, {prefix}/robot/*/ack and {prefix}/ecl/*/changed and write "
-        "every message to an MCAP file (one channel per key, JSON with a JSON Schema per "
-        "message type: Foxglove and 'mcap info' read it). Stops on Ctrl-C, SIGTERM, "
-        "--duration or --max-mb.",
-    )
+    r = command(sub, "record", record)
     d = TrafficOptions()
     add_output(r, "the MCAP file")
     add_duration(r, "stop")
@@ -44,21 +36,7 @@ def register(sub: Subcommands) -> None:
                    help=f"stop when MB megabytes of messages are written (default {d.max_mb:g})")
     add_zenoh_arguments(r, WATCHER)
 
-    p = command(
-        sub, "replay", replay,
-        help="re-publish a recorded session's commands (or states) with the original timing",
-        description="Put the messages of an MCAP recording back on their keys, spaced as "
-        "they were recorded: 'commands' drive running robots again; 'states' replay what "
-        "the robots did, to watch it in 'kinesphere view' with no robot running. Commands "
-        "keep their recorded sender, session, seq and sent_ns, so robots that heard the "
-        "original session drop them as stale; --restamp sends them as new, as yours "
-        "(--sender). Only command and state keys under --prefix are replayed (another key "
-        "refuses the whole file before anything is put), silences longer than --max-gap are "
-        "shortened, and the file is read a chunk at a time, with every size bounded. Waits "
-        "first for a subscriber on each recorded key (--wait); fails when nobody listens on "
-        "any. Then says what the robots answered to the commands put: exits 0 only when "
-        "they acted on them and dropped or refused none (130 when stopped by Ctrl-C).",
-    )
+    p = command(sub, "replay", replay)
     p.add_argument("recording", metavar="FILE", help="MCAP file written by kinesphere record")
     p.add_argument("--what", choices=REPLAYED, default=d.what,
                    help=f"which messages to put back (default {d.what})")
@@ -77,6 +55,13 @@ def register(sub: Subcommands) -> None:
 
 
 def record(args: argparse.Namespace) -> int:
+    """record every command, state, ack and recorded pose to an MCAP file
+
+    Record {prefix}/robot/*/command, {prefix}/group/*/command, {prefix}/robot/*/state,
+    {prefix}/robot/*/ack and {prefix}/ecl/*/changed and write every message to an MCAP file (one
+    channel per key, JSON with a JSON Schema per message type: Foxglove and 'mcap info' read it).
+    Stops on Ctrl-C, SIGTERM, --duration or --max-mb.
+    """
     from kinesphere.clients.recording.traffic import TrafficRecorder, summary
     from kinesphere.zconfig import session_from_args
 
@@ -101,6 +86,19 @@ def record(args: argparse.Namespace) -> int:
 
 
 def replay(args: argparse.Namespace) -> int:
+    """re-publish a recorded session's commands (or states) with the original timing
+
+    Put the messages of an MCAP recording back on their keys, spaced as they were recorded:
+    'commands' drive running robots again; 'states' replay what the robots did, to watch it in
+    'kinesphere view' with no robot running. Commands keep their recorded sender, session, seq and
+    sent_ns, so robots that heard the original session drop them as stale; --restamp sends them as
+    new, as yours (--sender). Only command and state keys under --prefix are replayed (another key
+    refuses the whole file before anything is put), silences longer than --max-gap are shortened,
+    and the file is read a chunk at a time, with every size bounded. Waits first for a subscriber on
+    each recorded key (--wait); fails when nobody listens on any. Then says what the robots answered
+    to the commands put: exits 0 only when they acted on them and dropped or refused none (130 when
+    stopped by Ctrl-C).
+    """
     from kinesphere.clients.recording.traffic import few
     from kinesphere.clients.recording.traffic import replay as put_back
     from kinesphere.zconfig import session_from_args

@@ -17,16 +17,7 @@ from kinesphere.signals import handle_signals
 
 
 def register(sub: Subcommands) -> None:
-    v = command(
-        sub, "view", view,
-        help="a live 3D view of every robot, in the browser",
-        description="Serve a web page (viser) that draws every robot on the Zenoh network at "
-        "its live joint state and base pose, with its id, status, current command in words, "
-        "substitutions and e-stop state, and the target pose as a translucent ghost while "
-        "it moves. Bodies come from the databank ({prefix}/ecl/PLATFORM/body): no platform "
-        "files are needed here. Open http://HOST:PORT in a browser; no internet access is "
-        "needed.",
-    )
+    v = command(sub, "view", view)
     d = ViewOptions()
     v.add_argument("--host", default=d.host,
                    help=f"address to serve the page on (default {d.host}; 0.0.0.0 = every "
@@ -45,6 +36,14 @@ def register(sub: Subcommands) -> None:
 
 
 def view(args: argparse.Namespace) -> int:
+    """a live 3D view of every robot, in the browser
+
+    Serve a web page (viser) that draws every robot on the Zenoh network at its live joint state and
+    base pose, with its id, status, current command in words, substitutions and e-stop state, and
+    the target pose as a translucent ghost while it moves. Bodies come from the databank
+    ({prefix}/ecl/PLATFORM/body): no platform files are needed here. Open http://HOST:PORT in a
+    browser; no internet access is needed.
+    """
     from kinesphere.clients.view.app import FleetView
     from kinesphere.zconfig import session_from_args
 

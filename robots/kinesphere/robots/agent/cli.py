@@ -36,14 +36,7 @@ DEFAULTS = AgentOptions()
 
 
 def register(sub: Subcommands) -> None:
-    p = command(
-        sub, "agent", _agent,
-        help="run a robot (simulated, or a ROS 2 one) that follows spatial commands",
-        description="Run PLATFORM's body (its MuJoCo model, or with --body ros2 a ros2_control "
-        "robot) in real time: it subscribes to "
-        "{prefix}/robot/ID/command, resolves commands through the databank, moves along "
-        "jerk-limited Ruckig trajectories and publishes {prefix}/robot/ID/state.",
-    )
+    p = command(sub, "agent", _agent)
     p.add_argument("platform", nargs="?",
                    help="platform name (see 'kinesphere platforms') or folder")
     p.add_argument("--id", dest="robot_id", help="robot id (default: the platform name)")
@@ -86,17 +79,7 @@ def register(sub: Subcommands) -> None:
     add_ros_distro(ros2, r.distro, "the robot's")
     add_zenoh_arguments(p, AGENT)
 
-    f = command(
-        sub, "fleet", _fleet_file,
-        help="run many simulated robots in one process (a fleet host)",
-        description="Run every robot of FLEET.toml on this host: the robots are dealt to "
-        "--workers processes (one per core by default), each stepping its share of MuJoCo "
-        "bodies in one control loop on its own Zenoh session; each robot keeps its own keys, "
-        "liveliness token, state stream, acks, lease, watchdog and e-stop latch, and a worker "
-        "that dies takes only its own robots. SIGTERM or SIGINT stops them all. "
-        "FLEET.toml: [robots.ID] tables with platform = NAME and optional groups = [...], "
-        "and an optional prefix.",
-    )
+    f = command(sub, "fleet", _fleet_file)
     f.add_argument("fleet", type=Path, metavar="FLEET.toml", help="the robots to run")
     _loop_options(f)
     add_zenoh_arguments(f, AGENT)
@@ -170,6 +153,12 @@ def _say_if_alone(session: Any, who: str) -> None:
 
 
 def _agent(args: argparse.Namespace) -> int:
+    """run a robot (simulated, or a ROS 2 one) that follows spatial commands
+
+    Run PLATFORM's body (its MuJoCo model, or with --body ros2 a ros2_control robot) in real time:
+    it subscribes to {prefix}/robot/ID/command, resolves commands through the databank, moves along
+    jerk-limited Ruckig trajectories and publishes {prefix}/robot/ID/state.
+    """
     if args.robot:
         return _agent_robots(args)
     if args.platform is None:
@@ -246,7 +235,15 @@ def _agent_robots(args: argparse.Namespace) -> int:
 
 
 def _fleet_file(args: argparse.Namespace) -> int:
-    """``kinesphere fleet FLEET.toml``."""
+    """run many simulated robots in one process (a fleet host)
+
+    Run every robot of FLEET.toml on this host: the robots are dealt to --workers processes (one per
+    core by default), each stepping its share of MuJoCo bodies in one control loop on its own Zenoh
+    session; each robot keeps its own keys, liveliness token, state stream, acks, lease, watchdog
+    and e-stop latch, and a worker that dies takes only its own robots. SIGTERM or SIGINT stops them
+    all. FLEET.toml: [robots.ID] tables with platform = NAME and optional groups = [...], and an
+    optional prefix.
+    """
     from kinesphere.robots.agent.fleet import load_fleet_file
 
     robots, prefix = load_fleet_file(args.fleet)

@@ -32,14 +32,7 @@ def register(sub: Subcommands) -> None:
         "queries under <prefix>/ecl/<platform>/ (see docs/protocol.md).",
         dest="databank_command",
     )
-    s = command(
-        dsub, "serve", _serve,
-        help="serve databanks until SIGTERM or Ctrl-C",
-        description="Serve every shipped databank (embedded SQLite, no set-up), or those "
-        "named. Several replicas may serve the same platforms: each query gets one answer, and "
-        "when a replica stops the others answer. Logs one line on start and one on stop; exits "
-        "0 on SIGTERM/SIGINT.",
-    )
+    s = command(dsub, "serve", _serve)
     s.add_argument(
         "--platform", action="append", default=[], metavar="NAME",
         help="serve this platform's shipped databank (a name or platform folder; repeatable)",
@@ -66,15 +59,7 @@ def register(sub: Subcommands) -> None:
     )
     add_zenoh_arguments(s, SERVICE)
 
-    q = command(
-        sub, "query", _query,
-        help="ask the databank for a pose (or a platform's catalogue)",
-        description="Print the joint targets f_SB(L, O, D, S) of PLATFORM, plus the base "
-        "translation when S is beyond the largest stored size. L and O are labels or aliases "
-        "(limb_11, right_arm), D a Laban direction (left-high), S a size (1, 2.5, far). A "
-        "direction the limb lacks is served by the nearest one it has (and says so) unless "
-        "--exact. Exit 2 with the error code when the databank refuses or nobody answers.",
-    )
+    q = command(sub, "query", _query)
     q.add_argument("platform", help="platform name, e.g. baxter")
     q.add_argument("params", nargs="*", metavar="L O D S", help="limb origin direction size")
     q.add_argument("--catalogue", action="store_true",
@@ -86,6 +71,12 @@ def register(sub: Subcommands) -> None:
 
 
 def _serve(args: argparse.Namespace) -> int:
+    """serve databanks until SIGTERM or Ctrl-C
+
+    Serve every shipped databank (embedded SQLite, no set-up), or those named. Several replicas may
+    serve the same platforms: each query gets one answer, and when a replica stops the others
+    answer. Logs one line on start and one on stop; exits 0 on SIGTERM/SIGINT.
+    """
     from kinesphere.keyexpr import Keys
     from kinesphere.services.databank.process import default_replica_id, open_ecls, run
     from kinesphere.zconfig import session_from_args
@@ -98,6 +89,14 @@ def _serve(args: argparse.Namespace) -> int:
 
 
 def _query(args: argparse.Namespace) -> int:
+    """ask the databank for a pose (or a platform's catalogue)
+
+    Print the joint targets f_SB(L, O, D, S) of PLATFORM, plus the base translation when S is beyond
+    the largest stored size. L and O are labels or aliases (limb_11, right_arm), D a Laban direction
+    (left-high), S a size (1, 2.5, far). A direction the limb lacks is served by the nearest one it
+    has (and says so) unless --exact. Exit 2 with the error code when the databank refuses or nobody
+    answers.
+    """
     if not args.catalogue and len(args.params) != 4:
         raise KinesphereError(
             "malformed",

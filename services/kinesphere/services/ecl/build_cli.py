@@ -34,15 +34,7 @@ from kinesphere.services.options import (
 
 def register_build(ecl_sub: Subcommands, top_sub: Subcommands) -> None:
     """Add build/report/render/compare under ``ecl`` and ``pose`` at the top level."""
-    b = command(
-        ecl_sub, "build", _build,
-        help="generate a platform's ECL with IK (the paper's Algorithm 1) and store it",
-        description="Run Algorithm 1 with mink IK in the platform's MuJoCo model: every VSAM "
-        "(limb, origin) pair is pulled toward each direction at each size; directions the limb "
-        "cannot honestly reach, or only by toppling, are dropped and listed. Pairs are "
-        "generated in parallel (one process per core); the output is the same as a serial "
-        "run's. The databank is replaced atomically; the wall time is printed.",
-    )
+    b = command(ecl_sub, "build", _build)
     add_platform(b, omit="omit with --all")
     b.add_argument("--all", action="store_true", help="build every shipped platform")
     b.add_argument("--reasons", action="store_true", help="say why each direction was dropped")
@@ -54,78 +46,30 @@ def register_build(ecl_sub: Subcommands, top_sub: Subcommands) -> None:
     b.add_argument("--jobs", type=int, metavar="N",
                    help="worker processes, one (limb, origin) pair each (default: one per core)")
 
-    r = command(
-        ecl_sub, "report", _report,
-        help="quality of a databank: size rules, pulls kept, medians of cosine, reach, margin",
-        description="Summarise the generator's quality figures per limb and overall: the size "
-        "rule each limb follows (reach: near, mid and far are the tip's distance from the "
-        "origin as growing fractions of far's, the bearing held; swing: the size scales the "
-        "angle of the pull from neutral, for a limb whose extension cannot change; a leg that "
-        "cannot fold along a direction swings along it), pulls kept of Laban's 26, cosine "
-        "between the direction and the tip's offset from the origin, reach as the fraction of "
-        "the pull a size is, the smallest distance to a joint limit (rad), the kept directions "
-        "whose largest sizes stability removed and the directions dropped for stability (the "
-        "whole-body centre of mass would leave the support polygon even at near). For figures "
-        "measured independently of the generator, see 'ecl audit'.",
-    )
+    r = command(ecl_sub, "report", _report)
     add_platform(r)
     r.add_argument("--rows", action="store_true",
                    help="also print every row's figures and why each unstable pull toppled")
 
-    a = command(
-        ecl_sub, "audit", _audit,
-        help="what the databank's words mean on its body, measured by forward kinematics",
-        description="Measure every stored row by forward kinematics (MuJoCo on the platform's "
-        "model, from the stored joint values alone, not the generator's quality table): per "
-        "(limb, origin) pair the cosine between each row's bearing (tip - origin) and its "
-        "direction (min / 5th percentile / median), each size's tip distance as a fraction of "
-        "far's (median; near/far is the first), cells whose sizes go backwards (the tip closer, "
-        "or for a swinging limb the bearing turned away, as the size grows), "
-        "cells stopping short of far (sizes removed for stability), every missing pull asked "
-        "at every size (served by a neighbour: how many and the worst measured angle to the "
-        "request; refused), the pulls the neutral pose already points at and how they are "
-        "answered, and the smallest stability margin of any row (centre of mass inside the "
-        "support polygon; none on a fixed base).",
-    )
+    a = command(ecl_sub, "audit", _audit)
     add_platform(a)
     add_json(a, "every figure")
 
-    v = command(
-        ecl_sub, "coverage", _coverage,
-        help="pulls each body keeps and the directions every body shares (markdown)",
-        description="Count, from the shipped databanks, the pulls of Laban's 26 each (limb, "
-        "origin) pair keeps, and list the directions every platform with limb_11, limb_12, "
-        "limb_13 keeps: a fleet command in one of those is exact on every robot.",
-    )
+    v = command(ecl_sub, "coverage", _coverage)
     add_bodies(v)
 
-    s = command(
-        ecl_sub, "render", _render,
-        help="contact sheet of one (limb, origin) pair: 27 directions as a 3x9 grid",
-        description="Render every direction of a (limb, origin) pair at one size off-screen "
-        "(rows high/middle/low, columns the 9 horizontals); missing directions are greyed.",
-    )
+    s = command(ecl_sub, "render", _render)
     add_platform(s)
     add_cell(s, required=True, direction=False)
     s.add_argument("--size", default=str(SHEET_SIZE), help=f"size (default {SHEET_SIZE}, far)")
     add_output(s, "the PNG file")
 
-    c = command(
-        ecl_sub, "compare", _compare,
-        help="the same command on every platform, side by side",
-        description="The paper's 'same command, different bodies' figure: one (limb, origin, "
-        "direction, size) rendered on each platform's shipped databank.",
-    )
+    c = command(ecl_sub, "compare", _compare)
     add_spatial_words(c)
     add_output(c, "the PNG file")
     add_bodies(c)
 
-    p = command(
-        top_sub, "pose", _pose,
-        help="render one ECL pose to a PNG",
-        description="Look up (limb, origin, direction, size) in the platform's ECL and render "
-        "the pose off-screen.",
-    )
+    p = command(top_sub, "pose", _pose)
     add_platform(p)
     add_spatial_words(p)
     add_output(p, "the PNG file")
@@ -139,6 +83,14 @@ def _gl() -> None:
 
 # --- build -------------------------------------------------------------------------------------
 def _build(args: argparse.Namespace) -> int:
+    """generate a platform's ECL with IK (the paper's Algorithm 1) and store it
+
+    Run Algorithm 1 with mink IK in the platform's MuJoCo model: every VSAM (limb, origin) pair is
+    pulled toward each direction at each size; directions the limb cannot honestly reach, or only by
+    toppling, are dropped and listed. Pairs are generated in parallel (one process per core); the
+    output is the same as a serial run's. The databank is replaced atomically; the wall time is
+    printed.
+    """
     from kinesphere.platforms.platform import platform_names
     from kinesphere.services.ecl.parallel import default_workers, generate_many
 
@@ -216,6 +168,18 @@ def store_built(name: str, built: Any, db: Path | None, console: Console,
 
 # --- report ------------------------------------------------------------------------------------
 def _report(args: argparse.Namespace) -> int:
+    """quality of a databank: size rules, pulls kept, medians of cosine, reach, margin
+
+    Summarise the generator's quality figures per limb and overall: the size rule each limb follows
+    (reach: near, mid and far are the tip's distance from the origin as growing fractions of far's,
+    the bearing held; swing: the size scales the angle of the pull from neutral, for a limb whose
+    extension cannot change; a leg that cannot fold along a direction swings along it), pulls kept
+    of Laban's 26, cosine between the direction and the tip's offset from the origin, reach as the
+    fraction of the pull a size is, the smallest distance to a joint limit (rad), the kept
+    directions whose largest sizes stability removed and the directions dropped for stability (the
+    whole-body centre of mass would leave the support polygon even at near). For figures measured
+    independently of the generator, see 'ecl audit'.
+    """
     from kinesphere.services.ecl.ecl import Ecl
 
     ecl = Ecl.open(args.platform, db=args.db)
@@ -293,6 +257,19 @@ def _fmt(v: float | None) -> str:
 
 
 def _audit(args: argparse.Namespace) -> int:
+    """what the databank's words mean on its body, measured by forward kinematics
+
+    Measure every stored row by forward kinematics (MuJoCo on the platform's model, from the stored
+    joint values alone, not the generator's quality table): per (limb, origin) pair the cosine
+    between each row's bearing (tip - origin) and its direction (min / 5th percentile / median),
+    each size's tip distance as a fraction of far's (median; near/far is the first), cells whose
+    sizes go backwards (the tip closer, or for a swinging limb the bearing turned away, as the size
+    grows), cells stopping short of far (sizes removed for stability), every missing pull asked at
+    every size (served by a neighbour: how many and the worst measured angle to the request;
+    refused), the pulls the neutral pose already points at and how they are answered, and the
+    smallest stability margin of any row (centre of mass inside the support polygon; none on a fixed
+    base).
+    """
     from kinesphere.services.ecl.audit import audit, over_limit
 
     result = audit(args.platform, args.db)
@@ -332,6 +309,12 @@ def _audit(args: argparse.Namespace) -> int:
 
 
 def _coverage(args: argparse.Namespace) -> int:
+    """pulls each body keeps and the directions every body shares (markdown)
+
+    Count, from the shipped databanks, the pulls of Laban's 26 each (limb, origin) pair keeps, and
+    list the directions every platform with limb_11, limb_12, limb_13 keeps: a fleet command in one
+    of those is exact on every robot.
+    """
     from kinesphere.platforms.platform import platform_names
     from kinesphere.services.ecl.coverage import markdown
 
@@ -341,6 +324,11 @@ def _coverage(args: argparse.Namespace) -> int:
 
 # --- pictures ----------------------------------------------------------------------------------
 def _render(args: argparse.Namespace) -> int:
+    """contact sheet of one (limb, origin) pair: 27 directions as a 3x9 grid
+
+    Render every direction of a (limb, origin) pair at one size off-screen (rows high/middle/low,
+    columns the 9 horizontals); missing directions are greyed.
+    """
     _gl()
     from kinesphere.services.ecl.ecl import Ecl
     from kinesphere.services.ecl.render import contact_sheet
@@ -351,6 +339,11 @@ def _render(args: argparse.Namespace) -> int:
 
 
 def _compare(args: argparse.Namespace) -> int:
+    """the same command on every platform, side by side
+
+    The paper's 'same command, different bodies' figure: one (limb, origin, direction, size)
+    rendered on each platform's shipped databank.
+    """
     _gl()
     from kinesphere.platforms.platform import platform_names
     from kinesphere.services.ecl.render import compare_sheet
@@ -361,6 +354,10 @@ def _compare(args: argparse.Namespace) -> int:
 
 
 def _pose(args: argparse.Namespace) -> int:
+    """render one ECL pose to a PNG
+
+    Look up (limb, origin, direction, size) in the platform's ECL and render the pose off-screen.
+    """
     _gl()
     from kinesphere.services.ecl.ecl import Ecl
     from kinesphere.services.ecl.render import pose_image

@@ -48,30 +48,13 @@ def register(sub: Subcommands) -> None:
     )
     ecl_sub = ecl.add_subparsers(dest="ecl_command", metavar="SUBCOMMAND")
 
-    g = command(
-        ecl_sub, "get", _get,
-        help="f_SB: print the pose for LIMB ORIGIN DIRECTION SIZE",
-        description="Evaluate f_SB locally: integer sizes give the stored row, fractions "
-        "interpolate in joint space, sizes past the largest stored one add a base translation "
-        "(mobile platforms only), place-middle gives the limb's neutral pose; a direction the "
-        "limb lacks is served by the nearest one it has within 45 degrees (and says so) unless "
-        "--exact. Use 'c_1 c_1 DIRECTION SIZE' for a pure base translation on mobile "
-        "platforms.",
-    )
+    g = command(ecl_sub, "get", _get)
     add_platform(g)
     add_spatial_words(g)
     add_json(g, "the protocol Pose")
     add_exact(g)
 
-    r = command(
-        ecl_sub, "record", _record,
-        help="store a pose given as joint values for one (limb, origin, direction, size)",
-        description="Store joint values as the pose of one cell, in one transaction; the "
-        "cell's quality figures become unknown. Joints must belong to the limb and lie within "
-        "their limits. Limb joints you leave out keep the cell's stored value (or neutral for "
-        "a new cell). Sizes are positive integers; place-middle is the neutral pose and is "
-        "changed in platform.toml instead.",
-    )
+    r = command(ecl_sub, "record", _record)
     add_platform(r)
     add_cell(r, required=True)
     r.add_argument("--size", required=True, help="integer size (1 near, 2 mid, 3 far, ...)")
@@ -88,31 +71,15 @@ def register(sub: Subcommands) -> None:
     add_json(r, "the stored Pose")
     add_zenoh_arguments(r, listen=False)  # used with --from-robot only
 
-    s = command(
-        ecl_sub, "show", _show,
-        help="print stored rows as a table, optionally filtered",
-        description="Print the databank's rows (k_id, size, joint values and the generator's "
-        "quality figures: cosine to the direction, reach fraction, joint-limit margin).",
-    )
+    s = command(ecl_sub, "show", _show)
     add_platform(s)
     add_cell(s, required=False)
 
-    x = command(
-        ecl_sub, "export", _export,
-        help="write the whole databank to a JSON file",
-        description="Export every table (meta, vsam, pose, quality) as JSON for review or "
-        "editing; 'ecl import' of the file restores the same content (round trip identical).",
-    )
+    x = command(ecl_sub, "export", _export)
     add_platform(x)
     add_output(x, "the JSON file")
 
-    i = command(
-        ecl_sub, "import", _import,
-        help="replace the databank with the content of a JSON export",
-        description="Validate an export against the platform (labels, VSAM pairs, joint "
-        "limits, NULLs outside each limb) and replace the databank with it atomically; a "
-        "rejected file changes nothing.",
-    )
+    i = command(ecl_sub, "import", _import)
     add_platform(i)
     i.add_argument("file", type=Path, help="JSON file written by 'kinesphere ecl export'")
 
@@ -156,12 +123,27 @@ def parse_joints(tokens: list[str]) -> dict[str, float]:
 
 
 def _get(args: argparse.Namespace) -> int:
+    """f_SB: print the pose for LIMB ORIGIN DIRECTION SIZE
+
+    Evaluate f_SB locally: integer sizes give the stored row, fractions interpolate in joint space,
+    sizes past the largest stored one add a base translation (mobile platforms only), place-middle
+    gives the limb's neutral pose; a direction the limb lacks is served by the nearest one it has
+    within 45 degrees (and says so) unless --exact. Use 'c_1 c_1 DIRECTION SIZE' for a pure base
+    translation on mobile platforms.
+    """
     pose = _open(args).query(args.limb, args.origin, args.direction, args.size, args.exact)
     _print_pose(pose, args.json)
     return 0
 
 
 def _record(args: argparse.Namespace) -> int:
+    """store a pose given as joint values for one (limb, origin, direction, size)
+
+    Store joint values as the pose of one cell, in one transaction; the cell's quality figures
+    become unknown. Joints must belong to the limb and lie within their limits. Limb joints you
+    leave out keep the cell's stored value (or neutral for a new cell). Sizes are positive integers;
+    place-middle is the neutral pose and is changed in platform.toml instead.
+    """
     ecl = _open(args)
     if args.from_robot:
         from kinesphere.keyexpr import Keys
@@ -210,6 +192,11 @@ def _print_pose(pose: Pose, as_json: bool) -> None:
 
 
 def _show(args: argparse.Namespace) -> int:
+    """print stored rows as a table, optionally filtered
+
+    Print the databank's rows (k_id, size, joint values and the generator's quality figures: cosine
+    to the direction, reach fraction, joint-limit margin).
+    """
     ecl = _open(args)
     rows = ecl.rows(args.limb, args.origin, args.direction)
     names = {tuple(r["joints"]) for r in rows}
@@ -235,6 +222,11 @@ def _show(args: argparse.Namespace) -> int:
 
 
 def _export(args: argparse.Namespace) -> int:
+    """write the whole databank to a JSON file
+
+    Export every table (meta, vsam, pose, quality) as JSON for review or editing; 'ecl import' of
+    the file restores the same content (round trip identical).
+    """
     ecl = _open(args)
     out = ecl.export_json(args.output)
     Console(stderr=True).print(f"wrote {out} ({len(ecl.rows())} rows, version {ecl.version})")
@@ -242,6 +234,11 @@ def _export(args: argparse.Namespace) -> int:
 
 
 def _import(args: argparse.Namespace) -> int:
+    """replace the databank with the content of a JSON export
+
+    Validate an export against the platform (labels, VSAM pairs, joint limits, NULLs outside each
+    limb) and replace the databank with it atomically; a rejected file changes nothing.
+    """
     from kinesphere.platforms.platform import load_platform
     from kinesphere.services.ecl.ecl import Ecl
     from kinesphere.services.ecl.store import default_db_path
