@@ -43,6 +43,7 @@ from support.agents import (
     robots_alive,
     running_fleet_host,
 )
+from support.files import refused
 from support.network import KEYS, Hub
 from support.paths import ROOT
 from support.wait import WAIT_S
@@ -172,11 +173,7 @@ def test_fleet_file_and_robot_arguments(tmp_path: Path) -> None:
         "[robots.b1\n": "fleet file",
     }
     for text, named in cases.items():
-        bad = tmp_path / "bad.toml"
-        bad.write_text(text)
-        with pytest.raises(KinesphereError) as info:
-            load_fleet_file(bad)
-        assert info.value.code == "malformed" and named in info.value.message, text
+        assert named in refused(load_fleet_file, tmp_path, text).message, text
     with pytest.raises(KinesphereError, match="no such file|No such file"):
         load_fleet_file(tmp_path / "missing.toml")
     for robots, named in (([], "at least one"),
