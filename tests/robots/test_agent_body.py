@@ -28,7 +28,7 @@ from support.agents import (
     CommandSender,
     DatabankProcess,
     StateWatch,
-    horizontal_pulls,
+    far,
     joints_close,
     running_agent,
 )
@@ -133,21 +133,19 @@ def test_an_agent_drives_a_kinematic_body_over_the_wire(
 ) -> None:
     session, endpoint = hub
     cat = databank.catalogue("youbot")
-    entry = cat.limbs[0]
-    pulls = horizontal_pulls(entry)
-    reach = SpatialCommand(entry.limb, entry.origin, pulls[0], float(max(entry.sizes)))
-    beyond = SpatialCommand(entry.limb, entry.origin, pulls[0], max(entry.sizes) + 2.0)
-    pose, far = databank.query("youbot", reach), databank.query("youbot", beyond)
-    assert far.translation is not None
+    reach, beyond = far(cat, horizontal=True), far(cat, horizontal=True, past=2.0)
+    pose = databank.query("youbot", SpatialCommand(*reach))
+    translated = databank.query("youbot", SpatialCommand(*beyond))
+    assert translated.translation is not None
     body = KinematicBody("youbot", 1.0 / 500.0)
     with running_agent(endpoint, "youbot", "kinematic", own_body=body) as (agent, watch):
         op = CommandSender(session, agent.robot_id)
         target, _ = agent.controller.joints.clamp(pose.joints)
-        seq = op.send((reach.limb, reach.origin, reach.direction, reach.size))
+        seq = op.send(reach)
         watch.after(seq, lambda st: st.status == "idle" and joints_close(st, target, 1e-9),
                     "the kinematic body exactly at the pose")
-        seq = op.send((beyond.limb, beyond.origin, beyond.direction, beyond.size))
-        goal = far.translation
+        seq = op.send(beyond)
+        goal = translated.translation
         done = watch.after(seq, lambda st: st.status == "idle" and math.dist(
             st.base_pose[:2], goal[:2]) < 1e-6, "the base translated")
         seq = op.send(estop=True)

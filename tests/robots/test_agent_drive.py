@@ -20,8 +20,8 @@ from support.agents import (
     DatabankProcess,
     StateWatch,
     Trace,
+    far,
     finite_jerk,
-    horizontal_pulls,
     joints_close,
     overlap,
     running_agent,
@@ -49,10 +49,8 @@ def test_youbot_turns_in_place_then_drives_diagonally_while_its_arm_moves(
     hub: Hub, databank: DatabankProcess
 ) -> None:
     session, endpoint = hub
-    entry = databank.catalogue("youbot").limbs[0]
-    pulls = horizontal_pulls(entry)
-    part = SpatialCommand(entry.limb, entry.origin, pulls[0], float(max(entry.sizes)))
-    pose = databank.query("youbot", part)
+    part = far(databank.catalogue("youbot"), horizontal=True)
+    pose = databank.query("youbot", SpatialCommand(*part))
     trace = Trace()
     with running_agent(endpoint, "youbot", speed=2.0, trace=trace) as (agent, watch):
         op = CommandSender(session, agent.robot_id)
@@ -68,8 +66,7 @@ def test_youbot_turns_in_place_then_drives_diagonally_while_its_arm_moves(
         diagonal = stream(
             op, watch, lambda s: joints_close(s, target, 5e-3)
             and math.dist(s.base_pose[:2], start) > 0.3, "arm at the pose and base 0.3 m away",
-            (part.limb, part.origin, part.direction, part.size),
-            drive=Drive(forward=0.5, left=0.5))
+            part, drive=Drive(forward=0.5, left=0.5))
         op.send(stop=True, ttl_ms=TTL_MS)
         op.close()
     end = diagonal[-1]

@@ -55,25 +55,25 @@ def test_outage_keeps_last_pose_and_recovers_without_restart(
         target1, _ = agent.controller.joints.clamp(pose1.joints)
         target2, _ = agent.controller.joints.clamp(pose2.joints)
         op = CommandSender(session, agent.robot_id)
-        seq = op.send((first.limb, first.origin, first.direction, first.size))
+        seq = op.send(first)
         watch.after(seq, lambda s: s.status == "idle" and joints_close(s, target1, 5e-3),
                     "at the first pose")
 
         own_databank.stop()
-        seq = op.send((second.limb, second.origin, second.direction, second.size))
+        seq = op.send(second)
         down = watch.after(seq, lambda s: s.status == "databank_unreachable",
                            "outage reported")
         assert joints_close(down, target1, 5e-3), "keeps its last pose"
         assert not agent.controller.moving
 
         # a pose it already knows still works while the databank is away (cached)
-        seq = op.send((first.limb, first.origin, first.direction, first.size))
+        seq = op.send(first)
         watch.after(seq, lambda s: joints_close(s, target1, 5e-3), "cached pose during outage")
 
         own_databank.start()
         watch.wait(lambda s: s.status not in ("databank_unreachable", "error"),
                    "recovered without a new command")
-        seq = op.send((second.limb, second.origin, second.direction, second.size))
+        seq = op.send(second)
         watch.after(seq, lambda s: s.status == "idle" and joints_close(s, target2, 5e-3),
                     "the second pose after recovery")
         op.close()

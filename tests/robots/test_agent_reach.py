@@ -10,12 +10,13 @@ from contextlib import ExitStack
 import numpy as np
 import pytest
 
-from kinesphere.protocol import Catalogue, Pose, RobotState, SpatialCommand
+from kinesphere.protocol import Pose, RobotState, SpatialCommand
 from kinesphere.robots.agent.runtime import Agent
 from support.agents import (
     CommandSender,
     DatabankProcess,
     Trace,
+    far,
     finite_jerk,
     joints_close,
     real_pulls,
@@ -26,18 +27,6 @@ from support.network import Hub
 PLATFORMS = ["baxter", "nao", "youbot", "packbot", "khepera"]
 TOL = 5e-3
 """rad (m): how close the simulated joints come to the (clamped) target once at rest."""
-
-
-def far_part(cat: Catalogue, direction: str | None = None) -> SpatialCommand:
-    """A far reach of the first limb, in ``direction`` or its first real pull."""
-    entry = cat.limbs[0]
-    pulls = real_pulls(entry)
-    d = direction if direction is not None else pulls[len(pulls) // 2]
-    return SpatialCommand(entry.limb, entry.origin, d, float(max(entry.sizes)))
-
-
-def as_tuple(p: SpatialCommand) -> tuple[str, str, str, float]:
-    return (p.limb, p.origin, p.direction, p.size)
 
 
 def reached(agent: Agent, pose: Pose) -> Callable[[RobotState], bool]:
@@ -69,14 +58,14 @@ def test_one_command_reaches_the_ecl_pose(
     session, endpoint = hub
     cat = databank.catalogue(platform)
     if cat.limbs:
-        part = far_part(cat)
+        part = SpatialCommand(*far(cat, len(real_pulls(cat.limbs[0])) // 2))
     else:  # a limbless robot (khepera): its ECL is the core's translations
         part = SpatialCommand(cat.core[0], cat.core[0], cat.directions_for_core[0], 3.0)
     pose = databank.query(platform, part)
     trace = Trace()
     with running_agent(endpoint, platform, speed=4.0, trace=trace) as (agent, watch):
         op = CommandSender(session, agent.robot_id)
-        seq = op.send(as_tuple(part))
+        seq = op.send(part)
         state = watch.after(seq, reached(agent, pose), f"{platform} at {pose}")
         op.close()
     assert state.platform == platform
@@ -92,17 +81,15 @@ def test_retarget_mid_motion_stays_continuous(
 ) -> None:
     session, endpoint = hub
     cat = databank.catalogue("baxter")
-    entry = cat.limbs[0]
-    pulls = real_pulls(entry)
-    first, second = far_part(cat, pulls[0]), far_part(cat, pulls[-1])
+    first, second = far(cat, 0), far(cat, -1)
     trace = Trace()
     with running_agent(endpoint, "baxter", speed=2.0, trace=trace) as (agent, watch):
         op = CommandSender(session, agent.robot_id)
-        seq = op.send(as_tuple(first))
+        seq = op.send(first)
         watch.after(seq, lambda s: max(map(abs, s.qd)) > 0.3, "baxter under way")
         at_retarget = len(trace.t)
-        seq = op.send(as_tuple(second))
-        pose = databank.query("baxter", second)
+        seq = op.send(second)
+        pose = databank.query("baxter", SpatialCommand(*second))
         watch.after(seq, reached(agent, pose), "baxter at the second pose")
         op.close()
     vel = np.array(trace.vel)
@@ -127,7 +114,7 @@ def test_wildcard_command_moves_every_robot_to_its_own_pose(
     with ExitStack() as stack:
         running = {r: stack.enter_context(running_agent(endpoint, r, speed=2.0)) for r in robots}
         op = CommandSender(session, "*")
-        seq = op.send(as_tuple(part))
+        seq = op.send(part)
         for r, (agent, watch) in running.items():
             watch.after(seq, reached(agent, poses[r]), f"{r} at its own pose")
         op.close()

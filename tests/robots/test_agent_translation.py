@@ -10,7 +10,7 @@ from support.agents import (
     CommandSender,
     DatabankProcess,
     Trace,
-    horizontal_pulls,
+    far,
     joints_close,
     overlap,
     running_agent,
@@ -24,17 +24,15 @@ def test_translation_and_articulation_overlap_in_time(
     session, endpoint = hub
     cat = databank.catalogue("youbot")
     assert cat.can_translate and cat.translation_step
-    entry = cat.limbs[0]
-    horizontal = horizontal_pulls(entry)
-    part = SpatialCommand(entry.limb, entry.origin, horizontal[0], max(entry.sizes) + 2.0)
-    pose = databank.query("youbot", part)
+    part = far(cat, horizontal=True, past=2.0)
+    pose = databank.query("youbot", SpatialCommand(*part))
     goal = pose.translation
     assert goal is not None and pose.joints
     trace = Trace()
     with running_agent(endpoint, "youbot", speed=4.0, trace=trace) as (agent, watch):
         target, _ = agent.controller.joints.clamp(pose.joints)
         op = CommandSender(session, agent.robot_id)
-        seq = op.send((part.limb, part.origin, part.direction, part.size))
+        seq = op.send(part)
         done = watch.after(
             seq,
             lambda s: s.status == "idle" and joints_close(s, target, 5e-3)
@@ -88,7 +86,7 @@ def test_limbless_robot_follows_a_core_command(
     assert goal is not None
     with running_agent(endpoint, "khepera", speed=4.0) as (agent, watch):
         op = CommandSender(session, agent.robot_id)
-        seq = op.send((part.limb, part.origin, part.direction, part.size))
+        seq = op.send(part)
         done = watch.after(
             seq, lambda s: s.status == "idle"
             and math.dist(s.base_pose[:2], goal[:2]) < 5e-3,

@@ -254,7 +254,7 @@ class CommandSender:
         self.seq = 0
         zconfig.wait_matching(self.pub)
 
-    def send(self, *parts: tuple[str, str, str, float],
+    def send(self, *parts: Part | SpatialCommand,
              drive: tuple[str, float] | Drive | None = None,
              deadman: bool = True, ttl_ms: int = 0, estop: bool = False,
              stop: bool = False, release: bool = False, lease: str = "",
@@ -264,9 +264,10 @@ class CommandSender:
             drive = Drive(*drive)
         (self.urgent if estop else self.pub).put(encode(Command(
             seq=self.seq, sent_ns=time.time_ns() if sent_ns is None else sent_ns,
-            parts=[SpatialCommand(*p) for p in parts], drive=drive, deadman=deadman,
-            ttl_ms=ttl_ms, estop=estop, stop=stop, release=release, sender=self.sender,
-            session=self.session, lease=LeaseAction(lease))))
+            parts=[p if isinstance(p, SpatialCommand) else SpatialCommand(*p) for p in parts],
+            drive=drive, deadman=deadman, ttl_ms=ttl_ms, estop=estop, stop=stop,
+            release=release, sender=self.sender, session=self.session,
+            lease=LeaseAction(lease))))
         return self.seq
 
     def raw(self, payload: bytes) -> None:
@@ -309,10 +310,13 @@ def horizontal_pulls(entry: LimbEntry) -> list[str]:
     return [d for d in entry.directions if Direction.parse(d).horizontal.name != "PLACE"]
 
 
-def far(cat: Catalogue, k: int = 0) -> tuple[str, str, str, float]:
-    """The far reach of the first limb in its ``k``-th real pull (place-middle left out)."""
+def far(cat: Catalogue, k: int = 0, *, horizontal: bool = False, past: float = 0.0) -> Part:
+    """The far reach of the first limb in its ``k``-th real pull (place-middle left out), or
+    with ``horizontal`` its ``k``-th pull with a horizontal part (every place-* left out);
+    ``past`` sizes beyond far, where a mobile base translates the excess."""
     entry = cat.limbs[0]
-    return (entry.limb, entry.origin, real_pulls(entry)[k], float(max(entry.sizes)))
+    pulls = horizontal_pulls(entry) if horizontal else real_pulls(entry)
+    return (entry.limb, entry.origin, pulls[k], float(max(entry.sizes)) + past)
 
 
 def joints_close(state: RobotState, joints: Mapping[str, float], tol: float) -> bool:
