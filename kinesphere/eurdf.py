@@ -11,17 +11,15 @@ the middle of a motion.
 from __future__ import annotations
 
 import hashlib
-import io
 import math
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Final
 
-import yourdfpy
-
 from kinesphere.errors import KinesphereError
 from kinesphere.labels import BodyPart, invalid, label_order, parse_part, subtree, validate
+from kinesphere.urdf_tree import UrdfTree, read_urdf
 
 ACTUATED_TYPES = ("revolute", "prismatic", "continuous")
 
@@ -86,7 +84,8 @@ class Eurdf:
     """A loaded, validated eURDF: the platform's (C, J, L, P) plus the URDF it annotates."""
 
     name: str
-    urdf: yourdfpy.URDF
+    urdf: UrdfTree
+    """The URDF part as yourdfpy reads it (:mod:`kinesphere.urdf_tree`)."""
     core: tuple[BodyPart, ...]
     distals: tuple[BodyPart, ...]
     limbs: tuple[BodyPart, ...]
@@ -209,12 +208,7 @@ def load_eurdf(source: str | Path) -> Eurdf:
         raise invalid("<robot> has no name attribute")
     _check_urdf_elements(root)
     try:
-        urdf = yourdfpy.URDF.load(
-            io.BytesIO(text.encode("utf-8")),  # bytes: lxml refuses str with an encoding decl
-            load_meshes=False,
-            build_scene_graph=False,
-            build_collision_scene_graph=False,
-        )
+        urdf = read_urdf(text)
     except Exception as exc:  # yourdfpy raises assorted types for broken URDF
         raise invalid(f"URDF part is invalid: {exc}") from None
     children = _children(urdf)
@@ -383,7 +377,7 @@ def _check_numbers(root: ET.Element) -> None:
         _floats(color, "rgba", "a <material>", (4,), 0.0, 1.0)
 
 
-def _check_tree(urdf: yourdfpy.URDF) -> None:
+def _check_tree(urdf: UrdfTree) -> None:
     parent_of: dict[str, str] = {}
     for j in urdf.robot.joints:
         if j.child in parent_of:
@@ -394,14 +388,14 @@ def _check_tree(urdf: yourdfpy.URDF) -> None:
         raise invalid(f"a URDF has exactly one root link; found {roots or 'none (a cycle)'}")
 
 
-def _children(urdf: yourdfpy.URDF) -> dict[str, list[tuple[str, str]]]:
+def _children(urdf: UrdfTree) -> dict[str, list[tuple[str, str]]]:
     out: dict[str, list[tuple[str, str]]] = {}
     for j in urdf.robot.joints:
         out.setdefault(j.parent, []).append((j.name, j.child))
     return out
 
 
-def _limits(urdf: yourdfpy.URDF) -> dict[str, JointLimit]:
+def _limits(urdf: UrdfTree) -> dict[str, JointLimit]:
     out: dict[str, JointLimit] = {}
     for j in urdf.robot.joints:
         if j.type not in ACTUATED_TYPES or j.mimic is not None:
@@ -410,13 +404,15 @@ def _limits(urdf: yourdfpy.URDF) -> dict[str, JointLimit]:
         velocity = float(lim.velocity) if lim is not None and lim.velocity else math.inf
         if j.type == "continuous":
             lower, upper = -math.inf, math.inf
+        elif lim is None or lim.lower is None or lim.upper is None:  # the XML check says why
+            raise invalid(f"<joint name={j.name!r}> ({j.type}) needs <limit lower upper>")
         else:
-            lower, upper = float(lim.lower), float(lim.upper)
+            lower, upper = lim.lower, lim.upper
         out[j.name] = JointLimit(j.name, j.type, lower, upper, velocity)
     return out
 
 
-def _mimics(urdf: yourdfpy.URDF, limits: dict[str, JointLimit]) -> dict[str, Mimic]:
+def _mimics(urdf: UrdfTree, limits: dict[str, JointLimit]) -> dict[str, Mimic]:
     out: dict[str, Mimic] = {}
     for j in urdf.robot.joints:
         if j.mimic is None or j.type not in ACTUATED_TYPES:

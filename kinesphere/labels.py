@@ -14,9 +14,8 @@ from collections.abc import Collection
 from dataclasses import dataclass
 from typing import Any, Literal, cast
 
-import yourdfpy
-
 from kinesphere.errors import KinesphereError
+from kinesphere.urdf_tree import UrdfTree
 
 PartSet = Literal["C", "L", "J"]
 _NAME_RULES: dict[str, re.Pattern[str]] = {
@@ -83,7 +82,7 @@ def label_order(p: BodyPart) -> tuple[int, ...]:
 
 
 def validate(
-    urdf: yourdfpy.URDF,
+    urdf: UrdfTree,
     children: dict[str, list[tuple[str, str]]],
     actuated: Collection[str],
     parts: list[BodyPart],

@@ -122,7 +122,8 @@ def test_a_missing_mesh_is_said_and_stood_in_for_by_a_box_of_its_inertia(
     lines = [m for m in made.mends if "not found; stand-in box" in m]
     assert len(lines) == 13 and any("gone/calf.obj" in m for m in lines)
     calf = made.eurdf.urdf.link_map["FR_lower"]
-    assert calf.visuals[0].geometry.box is not None
+    geometry = calf.visuals[0].geometry
+    assert geometry is not None and geometry.box is not None
 
 
 def test_meshes_compile_without_third_party_warnings(tmp_path: Path) -> None:

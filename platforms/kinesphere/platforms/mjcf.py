@@ -19,10 +19,10 @@ from pathlib import Path
 
 import mujoco
 import numpy as np
-import yourdfpy
 
 from kinesphere.platforms.meshes import MUJOCO_READS
 from kinesphere.platforms.platform import Platform, load_platform
+from kinesphere.urdf_tree import UrdfJoint, UrdfLink, UrdfMimic, UrdfTree
 
 BASE_JOINTS = ("base_x", "base_y", "base_yaw")
 TIMESTEP = 0.002
@@ -71,11 +71,13 @@ def _quat(rpy_matrix: np.ndarray) -> np.ndarray:
 
 
 def _add_geoms(
-    spec: mujoco.MjSpec, body: mujoco.MjsBody, link: yourdfpy.Link, visual: bool, folder: Path
+    spec: mujoco.MjSpec, body: mujoco.MjsBody, link: UrdfLink, visual: bool, folder: Path
 ) -> None:
     items = link.visuals if visual else link.collisions
     for k, item in enumerate(items):
         g = item.geometry
+        if g is None:
+            continue
         origin = item.origin if item.origin is not None else np.eye(4)
         kw: dict[str, object] = {"pos": origin[:3, 3], "quat": _quat(origin)}
         if g.box is not None:
@@ -107,15 +109,15 @@ def _add_geoms(
             geom.contype = geom.conaffinity = 0
             geom.group = 1
             mat = item.material
-            if mat is not None and mat.color is not None:
-                geom.rgba = np.asarray(mat.color.rgba, dtype=float)
+            if mat is not None and mat.rgba is not None:
+                geom.rgba = mat.rgba
         else:
             geom.contype = geom.conaffinity = ROBOT_CONTYPE
             geom.group = 3
             geom.rgba = [0.5, 0.5, 0.5, 0.0 if link.visuals else 1.0]
 
 
-def _principal(link: yourdfpy.Link) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+def _principal(link: UrdfLink) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """A link's inertia as MuJoCo takes it: position, orientation of the principal axes and
     the principal moments (at least 1e-6); None without a tensor worth the name."""
     inertial = link.inertial
@@ -131,7 +133,7 @@ def _principal(link: yourdfpy.Link) -> tuple[np.ndarray, np.ndarray, np.ndarray]
     return origin[:3, 3], _quat(evecs), np.maximum(evals, 1e-6)
 
 
-def _add_inertial(body: mujoco.MjsBody, link: yourdfpy.Link, has_joint: bool) -> None:
+def _add_inertial(body: mujoco.MjsBody, link: UrdfLink, has_joint: bool) -> None:
     inertial = link.inertial
     mass = float(inertial.mass) if inertial is not None and inertial.mass else 0.0
     if mass <= 0.0:
@@ -147,7 +149,7 @@ def _add_inertial(body: mujoco.MjsBody, link: yourdfpy.Link, has_joint: bool) ->
         body.inertia = [1e-6, 1e-6, 1e-6]
 
 
-def unbalanced(urdf: yourdfpy.URDF) -> list[str]:
+def unbalanced(urdf: UrdfTree) -> list[str]:
     """Links whose principal moments break A + B >= C: MuJoCo's balanceinertia evens them."""
     out = []
     for link in urdf.robot.links:
@@ -200,7 +202,7 @@ def build_spec(platform: Platform) -> mujoco.MjSpec:
     for visual in (False, True):
         _add_geoms(spec, root, urdf.link_map[root_name], visual, folder)
     bodies = {root_name: root}
-    mimics: list[yourdfpy.Joint] = []
+    mimics: list[tuple[str, UrdfMimic]] = []
     for joint in _joints_in_tree_order(urdf, root_name):
         parent = bodies[joint.parent]
         origin = joint.origin if joint.origin is not None else np.eye(4)
@@ -211,15 +213,15 @@ def build_spec(platform: Platform) -> mujoco.MjSpec:
             # a mimic moves with its leader; one that follows no degree of freedom is rigid
             moving = joint.mimic.joint in platform.eurdf.limits
             if moving:
-                mimics.append(joint)
+                mimics.append((joint.name, joint.mimic))
         if moving:
-            axis = joint.axis if joint.axis is not None else [1, 0, 0]
+            joint_axis = joint.axis if joint.axis is not None else np.array([1.0, 0.0, 0.0])
             mj = body.add_joint(
                 name=joint.name,
                 type=mujoco.mjtJoint.mjJNT_SLIDE
                 if joint.type == "prismatic"
                 else mujoco.mjtJoint.mjJNT_HINGE,
-                axis=axis,
+                axis=joint_axis,
             )
             mj.armature = 0.01
             mj.damping = [0.05, 0.0, 0.0]
@@ -236,10 +238,10 @@ def build_spec(platform: Platform) -> mujoco.MjSpec:
         _add_inertial(body, link, moving)
         for visual in (False, True):
             _add_geoms(spec, body, link, visual, folder)
-    for joint in mimics:
+    for name, mimic in mimics:
         eq = spec.add_equality(type=mujoco.mjtEq.mjEQ_JOINT, objtype=mujoco.mjtObj.mjOBJ_JOINT,
-                               name1=joint.name, name2=joint.mimic.joint)
-        eq.data[:5] = [joint.mimic.offset or 0.0, joint.mimic.multiplier or 1.0, 0.0, 0.0, 0.0]
+                               name1=name, name2=mimic.joint)
+        eq.data[:5] = [mimic.offset or 0.0, mimic.multiplier or 1.0, 0.0, 0.0, 0.0]
         eq.solref = [LIMIT_TIMECONST, 1.0]  # as stiff as the joint limits: one motor, one angle
     for name in (*BASE_JOINTS[: 3 if platform.base.mobile else 0], *platform.joint_names):
         act = spec.add_actuator(name=name, target=name, trntype=mujoco.mjtTrn.mjTRN_JOINT)
@@ -253,11 +255,11 @@ def build_spec(platform: Platform) -> mujoco.MjSpec:
     return spec
 
 
-def _joints_in_tree_order(urdf: yourdfpy.URDF, root: str) -> list[yourdfpy.Joint]:
-    by_parent: dict[str, list[yourdfpy.Joint]] = {}
+def _joints_in_tree_order(urdf: UrdfTree, root: str) -> list[UrdfJoint]:
+    by_parent: dict[str, list[UrdfJoint]] = {}
     for j in urdf.robot.joints:
         by_parent.setdefault(j.parent, []).append(j)
-    out: list[yourdfpy.Joint] = []
+    out: list[UrdfJoint] = []
     todo = [root]
     while todo:
         link = todo.pop(0)

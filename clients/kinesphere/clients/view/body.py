@@ -19,16 +19,16 @@ import io
 import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, Final
+from typing import Final
 
 import numpy as np
 import numpy.typing as npt
 import trimesh
-from yourdfpy.urdf import apply_visual_color
 
 from kinesphere.eurdf import load_eurdf
 from kinesphere.joint_frames import JointFrames
 from kinesphere.protocol import BodyModel
+from kinesphere.urdf_tree import UrdfGeometry, UrdfMaterial, UrdfRobot, UrdfShape
 
 Array = npt.NDArray[np.float64]
 MAX_FACES: Final = 1_000_000
@@ -98,7 +98,7 @@ class BodyGeometry:
             path = self._paths[member] = f"{path}/{scene_name(member)}"
         return path
 
-    def _shapes(self, robot: Any, meshes: Mapping[str, bytes]) -> list[Shape]:
+    def _shapes(self, robot: UrdfRobot, meshes: Mapping[str, bytes]) -> list[Shape]:
         materials = {m.name: m for m in robot.materials if m.name}
         out: list[Shape] = []
         faces = 0
@@ -113,13 +113,14 @@ class BodyGeometry:
                     self.missing.append(f"{link.name}: over {MAX_FACES} faces")
                     faces -= len(mesh.faces)
                     continue
-                apply_visual_color(mesh, visual, materials)
+                _paint(mesh, visual, materials)
                 if visual.origin is not None:
                     mesh.apply_transform(np.asarray(visual.origin, dtype=float))
                 out.append(Shape(path, f"visual{k}", mesh))
         return out
 
-    def _geometry(self, geometry: Any, meshes: Mapping[str, bytes]) -> trimesh.Trimesh | None:
+    def _geometry(self, geometry: UrdfGeometry | None, meshes: Mapping[str, bytes]
+                  ) -> trimesh.Trimesh | None:
         """One ``<geometry>`` as a mesh in its visual's frame; None when nothing to draw."""
         if geometry is None:
             return None
@@ -195,3 +196,17 @@ def _mesh_of(name: str, data: bytes | None) -> trimesh.Trimesh | None:
     if not np.isfinite(vertices).all() or np.abs(vertices).max() > 1e6:
         return None
     return loaded
+
+
+def _paint(mesh: trimesh.Trimesh, visual: UrdfShape, materials: Mapping[str, UrdfMaterial]
+           ) -> None:
+    """Colour a shape as its material says: its own colour, else the colour of the robot's
+    material of that name (yourdfpy's ``apply_visual_color``, on the plain records)."""
+    m = visual.material
+    if m is None:
+        return
+    rgba = m.rgba
+    if rgba is None and m.name is not None and m.name in materials:
+        rgba = materials[m.name].rgba
+    if rgba is not None and isinstance(mesh.visual, trimesh.visual.ColorVisuals):
+        mesh.visual.face_colors[:] = [int(255 * channel) for channel in rgba]

@@ -1,0 +1,103 @@
+"""A small content-addressed cache on disk, for what is slow to derive and cheap to keep.
+
+Entries are named by a hash of everything they were derived from (the caller's key), so a
+changed input is a different entry and nothing is ever invalidated by hand. Each entry is
+written to a temporary file and renamed into place (readers see a whole entry or none, and
+two processes writing the same entry both succeed); each kind keeps at most ``max_entries``
+of at most ``max_bytes`` each, the least recently used removed first. Any failure to read or
+write only costs the time the cache would have saved.
+
+The cache lives in ``$KINESPHERE_CACHE`` if set, else ``$XDG_CACHE_HOME/kinesphere``, else
+``~/.cache/kinesphere``; ``KINESPHERE_CACHE=off`` turns it off.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import re
+import tempfile
+import time
+from pathlib import Path
+from typing import Final
+
+CACHE_ENV: Final = "KINESPHERE_CACHE"
+OFF: Final = "off"
+STALE_S: Final = 3600.0
+"""A temporary file older than this was left by a writer that died."""
+_KEY = re.compile(r"[0-9a-f]{16,128}")
+
+
+def cache_root() -> Path | None:
+    """The cache folder, or None when the cache is off."""
+    chosen = os.environ.get(CACHE_ENV, "")
+    if chosen == OFF:
+        return None
+    if chosen:
+        return Path(chosen).expanduser()
+    xdg = os.environ.get("XDG_CACHE_HOME", "")
+    return (Path(xdg) if xdg else Path.home() / ".cache") / "kinesphere"
+
+
+class FileCache:
+    """One kind of entry (a subfolder of the cache), bounded in count and in size."""
+
+    def __init__(self, kind: str, max_entries: int, max_bytes: int = 16 << 20) -> None:
+        self.kind = kind
+        self.max_entries = max_entries
+        self.max_bytes = max_bytes
+
+    def folder(self) -> Path | None:
+        root = cache_root()
+        return None if root is None else root / self.kind
+
+    def get(self, key: str) -> bytes | None:
+        """The entry of ``key`` (a hex digest), or None when absent, too large or unreadable."""
+        folder = self.folder()
+        if folder is None or not _KEY.fullmatch(key):
+            return None
+        try:
+            with open(folder / key, "rb") as f:
+                data = f.read(self.max_bytes + 1)
+        except OSError:
+            return None
+        if len(data) > self.max_bytes:
+            return None
+        with contextlib.suppress(OSError):
+            os.utime(folder / key)  # recently used: trimmed last
+        return data
+
+    def put(self, key: str, data: bytes) -> None:
+        """Keep ``data`` as the entry of ``key``; then drop the oldest past ``max_entries``."""
+        folder = self.folder()
+        if folder is None or not _KEY.fullmatch(key) or len(data) > self.max_bytes:
+            return
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+            fd, tmp = tempfile.mkstemp(dir=folder, prefix=".tmp-")
+            try:
+                with os.fdopen(fd, "wb") as f:
+                    f.write(data)
+                os.replace(tmp, folder / key)
+            except BaseException:
+                os.unlink(tmp)
+                raise
+            self._trim(folder)
+        except OSError:
+            return
+
+    def _trim(self, folder: Path) -> None:
+        entries = []
+        now = time.time()
+        for p in folder.iterdir():
+            if p.name.startswith(".tmp-"):  # left by a process killed while writing
+                with contextlib.suppress(OSError):
+                    if now - p.stat().st_mtime > STALE_S:
+                        p.unlink()
+            elif _KEY.fullmatch(p.name):
+                try:
+                    entries.append((p.stat().st_mtime, p))
+                except OSError:
+                    continue  # removed by another process meanwhile
+        for _, p in sorted(entries)[: max(0, len(entries) - self.max_entries)]:
+            p.unlink(missing_ok=True)
