@@ -154,9 +154,10 @@ def payload(seq: int, parts: list[tuple[str, str, str, float]] | None = None,
 def test_a_fleet_robot_steps_exactly_like_a_lone_agent(
     hub: Hub, databank: DatabankProcess
 ) -> None:
-    """The same commands at the same steps to robots of a fleet host (lean steps, followers,
-    batched stops) and to lone agents (their whole cycle every step) from the same state:
-    the same bodies, statuses and acks, step by step."""
+    """The same commands at the same steps to robots of a fleet host (lean steps, glides with
+    and without a moving base, robot time kept for all at once, followers, batched stops) and
+    to lone agents (their whole cycle every step) from the same state: the same bodies,
+    statuses and acks, step by step, and every joint within its limits at every step."""
     _session, endpoint = hub
     poses = {p: moves(databank.catalogue(p)) for p in PLATFORMS}
     with zconfig.session(config=zconfig.loopback_config(endpoint)) as s:
@@ -220,6 +221,8 @@ def test_a_fleet_robot_steps_exactly_like_a_lone_agent(
                 for i, f in enumerate(fleet.agents):
                     kind = f"{f.platform} {fleet.step_kind(i)}"
                     kinds[kind] = kinds.get(kind, 0) + 1
+                    if fleet.ledgered(i):
+                        kinds[f"{f.platform} ledgered"] = kinds.get(f"{f.platform} ledgered", 0) + 1
                 for f in fleet.agents:
                     for name, gen in zip(("joints", "base"), f.controller.generators,
                                          strict=False):
@@ -239,6 +242,9 @@ def test_a_fleet_robot_steps_exactly_like_a_lone_agent(
                     assert named(f.status(), f.robot_id) == named(a.status(), a.robot_id), \
                         (f.platform, step)  # a detail may name the robot (a release's --target)
                     assert said[f.robot_id] == said[a.robot_id], (f.platform, step)
+                    for name, q in zip(f.controller.joint_names, f.controller.q(), strict=True):
+                        lim = f.controller.platform.eurdf.limits[name]
+                        assert lim.lower <= q <= lim.upper, (f.robot_id, name, q, step)
                 # every way checked before the next step on both sides alike: unpaced, a check
                 # late by the guard's UNCHECKED_S of robot time would brake one side only
                 for agent in (*fleet.agents, *lone):
@@ -249,7 +255,9 @@ def test_a_fleet_robot_steps_exactly_like_a_lone_agent(
             assert min(followed.values()) > 200, followed  # the bases' steps too
             for p in ("baxter", "nao", "youbot"):  # the fleet handed their setpoints over itself
                 assert kinds.get(f"{p} glide", 0) > 200, kinds
-            assert kinds.get("khepera lean", 0) > 200, kinds  # its base steps: lean
+            assert kinds.get("khepera glide", 0) > 200, kinds  # its base's steps: rolling
+            for p in PLATFORMS:  # their robot time and motion noted for all at once
+                assert kinds.get(f"{p} ledgered", 0) > 200, kinds
             for p in PLATFORMS:
                 stages = {stage for _, stage, _ in said[f"lean-f-{p}"]}
                 assert {"accepted", "moving", "reached", "superseded", "stopped", "estopped",

@@ -353,10 +353,9 @@ class DiffBase(BaseController):
         self._last = (s1, yaw1)
         mid = 0.5 * (yaw0 + yaw1)
         ds = s1 - s0
-        self.pose[0] += ds * math.cos(mid)
-        self.pose[1] += ds * math.sin(mid)
-        self.pose[2] = yaw1
-        v, w = self._otg.velocity
+        x, y, _ = self.pose.tolist()  # plain floats: the same arithmetic, fewer numpy calls
+        self.pose[:] = (x + ds * math.cos(mid), y + ds * math.sin(mid), yaw1)
+        v, w = otg.velocity.tolist()
         self.twist[:] = (v * math.cos(yaw1), v * math.sin(yaw1), w)
         self.body_twist[:] = (ds / self.dt, 0.0, (yaw1 - yaw0) / self.dt)
         if done and self._queue and not self._otg.active and not self._otg.fault:

@@ -11,7 +11,7 @@ Bodies are chosen by name (``kinesphere agent --body mujoco``, the default) from
 from __future__ import annotations
 
 import abc
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, NamedTuple
 
 if TYPE_CHECKING:  # the CLI reads BODIES for --help: no numpy, no URDF parser at import
@@ -69,6 +69,12 @@ class Body(abc.ABC):
         and while the loop waits for its next tick, so it may touch nothing but this body
         (and gains most when it releases the GIL, as MuJoCo does). By default :meth:`step`."""
         self.step()
+
+    def simulator(self) -> Callable[[], None]:
+        """What does :meth:`simulate` with the least Python in between (a fleet host calls it
+        for every body every tick); valid while the body keeps its model and data. By
+        default :meth:`simulate` itself."""
+        return self.simulate
 
     @abc.abstractmethod
     def halt(self) -> None:

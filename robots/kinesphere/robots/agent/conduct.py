@@ -91,9 +91,6 @@ class Conduct:
         self._failed_at = -1e9
         self._body_fault = False
         self._ratelog = RateLog(log)
-        self._moved_at = 0.0
-        self._moved_wall = 0.0
-        """When the joints or base last moved, by :attr:`wall`."""
         self.wall: Callable[[], float] = time.monotonic
         """The host's clock the senders' seconds go by (a test sets its own)."""
         self._aims: Lru[int, tuple[Pose, Aim]] = Lru(AIMS_KEPT)
@@ -120,6 +117,13 @@ class Conduct:
                     or (motion is not None and not motion.moved))
 
     @property
+    def untimed(self) -> bool:
+        """No motion with a due time to track (``arrive_ms``) and the host's own clock: all
+        :meth:`followed` does is note that the robot moved (``Ledger.glided``)."""
+        motion = self.acks.motion
+        return (motion is None or motion.due is None) and self.wall is time.monotonic
+
+    @property
     def settled(self) -> bool:
         """No motion whose end is still to say (:meth:`after_step`; a drive ends only when
         replaced)."""
@@ -136,11 +140,31 @@ class Conduct:
     def followed(self) -> None:
         """A step along a followed trajectory went as planned: all :meth:`after_step` would
         have done (a fleet host's lean step, ``Agent.followed``)."""
-        self._moved_at = self.controller.time
-        self._moved_wall = self.wall()
+        self._moved()
         motion = self.acks.motion
         if motion is not None and motion.due is not None:  # else nothing to track: no call
             self._track(True)
+
+    def _moved(self) -> None:
+        """The joints or base moved in the step just taken: it is when they last moved (the
+        controller's ledger keeps it, so a fleet host notes it for all gliding robots at
+        once: ``Ledger.glided``)."""
+        ctrl = self.controller
+        ledger, slot = ctrl.ledger, ctrl.slot
+        ledger.moved[slot] = ledger.steps[slot]
+        ledger.moved_wall[slot] = self.wall()
+
+    @property
+    def _moved_at(self) -> float:
+        """Robot time when the joints or base last moved."""
+        ctrl = self.controller
+        return float(ctrl.ledger.moved[ctrl.slot]) * ctrl.dt
+
+    @property
+    def _moved_wall(self) -> float:
+        """:attr:`wall` when the joints or base last moved."""
+        ctrl = self.controller
+        return float(ctrl.ledger.moved_wall[ctrl.slot])
 
     def _track(self, under_way: bool) -> None:
         """A timed motion under way (or braked while the guard finds a way): when it would
@@ -168,11 +192,9 @@ class Conduct:
         ctrl = self.controller
         moving = ctrl.moving
         if moving:
-            self._moved_at = ctrl.time
+            self._moved()
         changed = False
         self._track(moving)
-        if moving:
-            self._moved_wall = self.wall()
         fault = ctrl.fault()
         if fault != self._fault:
             self._fault, changed = fault, True

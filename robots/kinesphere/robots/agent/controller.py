@@ -15,6 +15,7 @@ import numpy as np
 from kinesphere.robots.agent.base import BaseController, make_base
 from kinesphere.robots.agent.body import AT_REST, Body, Reading
 from kinesphere.robots.agent.guard import Guard
+from kinesphere.robots.agent.ledger import Ledger
 from kinesphere.robots.agent.options import DEFAULT_MARGIN
 from kinesphere.robots.agent.otg import Otg
 from kinesphere.robots.agent.trajectory import Aim, Clamp, JointTrajectory
@@ -24,16 +25,23 @@ BLOCKED_TOL = 0.05
 
 
 class Controller:
-    """Joint and base trajectories for one body, stepped every ``body.dt`` seconds."""
+    """Joint and base trajectories for one body, stepped every ``body.dt`` seconds; its robot
+    time is row ``slot`` of ``ledger`` (a fleet host's, shared by its robots; else its own)."""
 
-    def __init__(self, body: Body, margin: float = DEFAULT_MARGIN, guard: Guard | None = None):
+    def __init__(self, body: Body, margin: float = DEFAULT_MARGIN, guard: Guard | None = None,
+                 ledger: Ledger | None = None, slot: int = 0):
         self.body = body
+        self.ledger = Ledger(1, body.dt) if ledger is None else ledger
+        self.slot = slot
+        self._steps = self.ledger.steps
         self.guard = guard
         """Checks each move against the robot's geometry (``guard.py``); None: unchecked."""
         self.platform = body.platform
         self.dt = body.dt
         self.joint_names = body.joint_names
         self._reading: Reading | None = None
+        self._read_at = -1
+        """The step count when :attr:`_reading` was read."""
         start = self.reading()
         self.joints = JointTrajectory(
             body.limits,
@@ -48,10 +56,18 @@ class Controller:
         self.base: BaseController | None = make_base(self.platform.base, self.dt)
         if self.base is not None:
             self.base.reset(start.base_pose)
-        self.time = 0.0
-        self.steps = 0
         self.on_step: Callable[[Controller], None] | None = None
         """Called after every step (tests record the Ruckig outputs here)."""
+
+    @property
+    def steps(self) -> int:
+        """Control steps taken."""
+        return int(self._steps[self.slot])
+
+    @property
+    def time(self) -> float:
+        """Robot time (s): the steps taken times the period."""
+        return float(self._steps[self.slot]) * self.dt
 
     @property
     def moving(self) -> bool:
@@ -118,9 +134,7 @@ class Controller:
     def elapse(self) -> None:
         """One period of robot time has passed (the end of :meth:`finish`: all a fleet host
         does for a robot whose guard has nothing to do, ``Agent.needs_cycle``)."""
-        self._reading = None
-        self.time += self.dt
-        self.steps += 1
+        self._steps[self.slot] += 1
         if self.on_step is not None:
             self.on_step(self)
 
@@ -134,11 +148,17 @@ class Controller:
 
     @property
     def glides(self) -> bool:
-        """Whether the next step, unless something arrives, is the joints' followed step and
-        nothing else: the followers take it, the base (if any) rests, so :meth:`command` would
-        only hand the joints' followed output to the body. A fleet host hands it over itself
-        for all such robots (``fleet.py``); it stays so while the followers take the steps."""
-        return self._joints_otg.following and (self.base is None or not self.base.stepping)
+        """Whether the next step, unless something arrives, is the followers' step and
+        nothing else: they take the joints' step (or the joints rest) and the base either
+        rests or its step too (:meth:`command` would only hand the joints' followed output to
+        the body, and the base's step integrate what the followers did). A fleet host does
+        that itself for all such robots (``fleet.py``); it stays so while the followers take
+        the steps."""
+        joints, base = self._joints_otg, self.base
+        if base is None or not base.stepping:
+            return joints.following
+        return base.generator.following and (
+            joints.following or not (joints.active or joints.came_to_rest))
 
     @property
     def generators(self) -> list[Otg]:
@@ -187,8 +207,9 @@ class Controller:
 
     def reading(self) -> Reading:
         """The body's measurement after the last step (read once, when first asked for)."""
-        if self._reading is None:
-            self._reading = self.body.read()
+        steps = int(self._steps[self.slot])
+        if self._reading is None or self._read_at != steps:
+            self._reading, self._read_at = self.body.read(), steps
         return self._reading
 
     def q(self) -> list[float]:

@@ -15,10 +15,14 @@ commands, timers, the guard's verdicts, what it says) only when something is the
 something arrived (its inbox and guard ``notify`` the host), a timer runs out
 (``Conduct.deadline``), a motion's ``moving`` is to say. Otherwise it only moves
 (``Agent.follow``: the followed setpoint to its body, its base's step) or, at rest, nothing at
-all but its physics. A robot whose motion is the followers' alone and whose base rests glides
-(``Controller.glides``): the loop hands the followers' output to its body itself, with no call
-into the robot before the physics, and after it the robot only watches for contacts and counts
-robot time (``Agent.glided``). A robot whose step fails is held and reported alone.
+all but its physics. A robot whose motion is the followers' alone glides
+(``Controller.glides``): the loop copies the followers' output to its body's servo targets
+itself, with no call into the robot before the physics (a moving base's step is one call, its
+integration of what the followers did: the glide rolls). After the physics, the glides of all
+robots with nothing else to watch (``Agent.ledgered``) end at once: one array operation counts
+their robot time and notes that they moved (``ledger.py``); only a body that touches something
+is looked at by its guard (``Agent.glided``). A robot whose step fails is held and reported
+alone.
 
 The physics of the bodies is split between the loop's thread and helper threads (``stepper.py``:
 MuJoCo releases the GIL); the loop returns once its own share is done, and the helpers' shares
@@ -33,6 +37,7 @@ from __future__ import annotations
 
 import logging
 import threading
+import time
 from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
@@ -50,6 +55,7 @@ from kinesphere.robots.agent.body import AT_REST, Body
 from kinesphere.robots.agent.estops import FleetBoard
 from kinesphere.robots.agent.follow import Followers
 from kinesphere.robots.agent.inbox import clocks
+from kinesphere.robots.agent.ledger import Ledger
 from kinesphere.robots.agent.mujoco_body import HardStops, MujocoBody
 from kinesphere.robots.agent.options import AgentOptions
 from kinesphere.robots.agent.pacing import LoopStats, Wake, run_paced
@@ -58,11 +64,11 @@ from kinesphere.robots.agent.stepper import Stepper
 
 log = logging.getLogger(__name__)
 
-_CYCLE, _LEAN, _GLIDE, _REST = object(), object(), object(), object()
+_CYCLE, _LEAN, _GLIDE, _ROLL, _REST = object(), object(), object(), object(), object()
 """What a robot does in a tick: the whole cycle, only its motion (``Agent.follow``), only the
-followers' setpoint to its body (``Controller.glides``, ``Agent.glided``), or nothing but robot
-time (``Fleet.tick``)."""
-_KINDS = {_CYCLE: "cycle", _LEAN: "lean", _GLIDE: "glide", _REST: "rest"}
+followers' setpoint to its body (``Controller.glides``, ``Agent.glided``), that and its moving
+base's step (a glide that rolls), or nothing but robot time (``Fleet.tick``)."""
+_KINDS = {_CYCLE: "cycle", _LEAN: "lean", _GLIDE: "glide", _ROLL: "glide", _REST: "rest"}
 
 MAX_ROBOTS = 1024
 """Robots one fleet host runs (each holds a MuJoCo model instance and a resolver thread)."""
@@ -148,13 +154,16 @@ class FleetHost:
         """Robots something arrived for (any thread): the whole cycle next step."""
         self.board = FleetBoard(session, Keys(self.options.prefix))
         """The fleet e-stops in force, one board for every robot of the process."""
+        self.ledger = Ledger(len(robots), 1.0 / self.options.control_rate)
+        """Every robot's robot time and when it last moved (``ledger.py``)."""
         self.agents: list[Agent] = []
         try:
             for i, r in enumerate(robots):
                 self.agents.append(Agent(r.platform, r.robot_id, session,
                                          replace(self.options, groups=r.groups),
                                          wake=self.wake, phase=i, stats=self.stats,
-                                         notify=self._notify(i), board=self.board))
+                                         notify=self._notify(i), board=self.board,
+                                         ledger=self.ledger, slot=i))
         except BaseException:
             self._close_agents()
             raise
@@ -165,7 +174,12 @@ class FleetHost:
         self.followers = Followers([g for a in self.agents for g in a.controller.generators]
                                    if batched else [], 1.0 / self.options.control_rate)
         self._bodies: list[Body] = []
-        self._commands: list[Callable[[np.ndarray, Sequence[float]], None]] = []
+        self._commands: list[Callable[[np.ndarray, Sequence[float] | np.ndarray], None]] = []
+        self._setpoints: list[np.ndarray | None] = []
+        """Each body's joint servo targets as a view (``MujocoBody.joint_setpoints``), or None:
+        a gliding robot's setpoint is copied there, else handed to ``command``."""
+        self._datas: list[object] = []
+        """Each body's MjData (None for a body that is not MuJoCo's): whether it touches."""
         self._stops = HardStops([])
         every = self.agents[0].publish_every
         self._due: list[list[Agent]] = [[] for _ in range(every)]
@@ -174,8 +188,13 @@ class FleetHost:
             self._due[(-agent.phase) % every].append(agent)
         self._joints = [a.controller.joints.generator for a in self.agents]
         """Each robot's joint generator (a gliding robot's setpoint is its followed output)."""
+        self._bases = [a.controller.base for a in self.agents]
+        """Each robot's base controller (None: a fixed base): a rolling glide steps it."""
         self._modes: list[object] = [_CYCLE] * len(self.agents)
         """What each robot does in the step in flight (:meth:`tick`), then in the next."""
+        self._ledgered = [False] * len(self.agents)
+        """Gliding robots whose end of step is the ledger's alone (``Agent.ledgered``): robot
+        time and "it moved" noted for all of them at once, unless a body touches."""
         self._deadlines = np.full(len(self.agents), np.inf)
         """When each robot's next timer runs out (``Conduct.deadline``; monotonic s)."""
         self._failures: list[Exception | None] | None = None
@@ -224,17 +243,20 @@ class FleetHost:
         only hands its followed setpoint to its body, or nothing at all when it is at rest."""
         self.complete()
         agents, modes, awake = self.agents, self._modes, self._awake
+        ledgered = self._ledgered
         while awake:
-            modes[awake.popleft()] = _CYCLE
+            i = awake.popleft()
+            modes[i], ledgered[i] = _CYCLE, False
         now_ns = clocks()[0]
         self.stats.begin(now_ns)
         deadlines = self._deadlines
         for i in (deadlines <= now_ns / 1e9).nonzero()[0].tolist():
-            modes[i] = _CYCLE
+            modes[i], ledgered[i] = _CYCLE, False
             deadlines[i] = np.inf
         bodies = [a.controller.body for a in agents]
         if bodies != self._bodies:
             self._regroup(bodies)
+        bodies = self._bodies  # the same list each tick: the stepper keeps what it made of it
         failures: list[Exception | None] = [None] * len(agents)
         cycling = [i for i, mode in enumerate(modes) if mode is _CYCLE]
         for i in cycling:
@@ -243,17 +265,36 @@ class FleetHost:
         for i in cycling:
             if failures[i] is None:
                 failures[i] = _guarded(agents[i].actuate)
-        joints, commands = self._joints, self._commands
+        joints, commands, setpoints = self._joints, self._commands, self._setpoints
+        bases = self._bases
         for i, mode in enumerate(modes):
             if mode is _GLIDE:
                 otg = joints[i]
                 if otg.following:  # the followers took the step: their output is the setpoint
+                    servo = setpoints[i]
+                    if servo is not None:
+                        servo[:] = otg.position
+                        continue
                     try:
                         commands[i](otg.position, AT_REST)
                     except Exception as exc:  # reported for this robot; the others step on
                         failures[i] = exc
                     continue
                 mode = modes[i] = _LEAN  # the followers' step ended the motion: a lean step
+                ledgered[i] = False
+            elif mode is _ROLL:  # a glide whose base moves too: the base integrates its step
+                otg, base = joints[i], bases[i]
+                assert base is not None
+                if base.generator.following and (
+                        otg.following or not (otg.active or otg.came_to_rest)):
+                    try:
+                        base.step()
+                        commands[i](otg.position, base.body_twist)
+                    except Exception as exc:  # reported for this robot; the others step on
+                        failures[i] = exc
+                    continue
+                mode = modes[i] = _LEAN
+                ledgered[i] = False
             if mode is _LEAN:
                 failures[i] = agents[i].follow()
         self._failures = failures
@@ -276,26 +317,36 @@ class FleetHost:
         else:
             failures = errors
         self._stops.apply()
-        modes = self._modes
+        modes, ledgered = self._modes, self._ledgered
+        if any(ledgered):  # their glides end at once, unless a body touches (the guard looks)
+            datas = self._datas
+            for i, flag in enumerate(ledgered):
+                if flag and (failures[i] is not None or datas[i].ncon):  # type: ignore[attr-defined]
+                    ledgered[i] = False
+            self.ledger.glided(np.array(ledgered), time.monotonic())
         for i, (agent, failure) in enumerate(zip(self.agents, failures, strict=True)):
+            if ledgered[i]:
+                continue  # still gliding: the followers' next step says otherwise (tick)
             mode = modes[i]
             try:
                 if failure is not None or mode is _CYCLE:
                     agent.end_step(failure)
-                    modes[i] = self._next(i, agent)
-                elif mode is _GLIDE:
+                    mode = modes[i] = self._next(i, agent)
+                elif mode is _GLIDE or mode is _ROLL:
                     if not agent.glided():
-                        modes[i] = self._next(i, agent)
+                        mode = modes[i] = self._next(i, agent)
                 elif mode is _LEAN:
                     if not agent.followed():
-                        modes[i] = self._next(i, agent)
+                        mode = modes[i] = self._next(i, agent)
                     elif agent.controller.glides:
-                        modes[i] = _GLIDE
+                        mode = modes[i] = self._glide(i)
                 else:
                     agent.controller.elapse()
+                ledgered[i] = ((mode is _GLIDE or mode is _ROLL) and self._datas[i] is not None
+                               and agent.ledgered)
             except Exception:  # one robot's bug must not hold up the others
                 log.exception("fleet host: robot %s: end of step failed", agent.robot_id)
-                modes[i] = _CYCLE
+                modes[i], ledgered[i] = _CYCLE, False
         for agent in self._due[self.stats.begun % len(self._due)]:
             agent.publish()
 
@@ -307,12 +358,22 @@ class FleetHost:
             return _CYCLE
         if agent.at_rest:
             return _REST
-        return _GLIDE if agent.controller.glides else _LEAN
+        return self._glide(i) if agent.controller.glides else _LEAN
+
+    def _glide(self, i: int) -> object:
+        """A glide of robot ``i`` (``Controller.glides``): rolling when its base moves."""
+        base = self._bases[i]
+        return _ROLL if base is not None and base.stepping else _GLIDE
 
     def step_kind(self, i: int) -> str:
         """What robot ``i`` does in the step in flight (tests and tools): ``cycle``, ``lean``
         (``Agent.follow``), ``glide`` (the followers' setpoint only) or ``rest``."""
         return _KINDS[self._modes[i]]
+
+    def ledgered(self, i: int) -> bool:
+        """Whether robot ``i``'s glide in the step in flight ends by the ledger alone, with
+        the other such robots' (tests and tools)."""
+        return self._ledgered[i]
 
     def _notify(self, i: int) -> Callable[[], None]:
         """What robot ``i``'s inbox and guard call when something arrives for it (any
@@ -330,6 +391,9 @@ class FleetHost:
         ``command`` (a gliding robot's setpoint goes straight to its body)."""
         self._bodies = bodies
         self._commands = [b.command for b in bodies]
+        self._setpoints = [b.joint_setpoints() if isinstance(b, MujocoBody) else None
+                           for b in bodies]
+        self._datas = [b.data if isinstance(b, MujocoBody) else None for b in bodies]
         self._stops = HardStops([b for b in bodies if isinstance(b, MujocoBody)])
 
     def close(self) -> None:

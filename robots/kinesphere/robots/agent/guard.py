@@ -136,6 +136,12 @@ class Guard:
         finding posted while this reads is applied at the next step)."""
         return not (self._ask is not None or self._findings or self.legs or self._replan)
 
+    @property
+    def unchecked(self) -> bool:
+        """The joints run along a way whose finding has not come: :meth:`after_step` counts
+        the steps they may still take (a fleet host's glide then ends per robot)."""
+        return self._unchecked > 0
+
     def settle(self, timeout: float) -> bool:
         """Wait until the way to the newest target is checked (and a route planned when it
         touches); False on timeout. For tests and tools that step faster than real time, where

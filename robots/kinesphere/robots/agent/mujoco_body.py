@@ -16,7 +16,8 @@ from __future__ import annotations
 
 import copy
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from functools import partial
 
 import mujoco
 import numpy as np
@@ -98,6 +99,12 @@ class MujocoBody(Body):
                 target[2] += dyaw
                 self.data.ctrl[self._base_slice] = target
 
+    def joint_setpoints(self) -> np.ndarray | None:
+        """The joints' servo targets as a writable view of ``ctrl`` (what :meth:`command`
+        writes for the joints: a fleet host copies a gliding robot's setpoint there itself),
+        None when the actuators are not contiguous."""
+        return self._setpoints
+
     def step(self) -> None:
         """The physics, then the hard stops."""
         self.simulate()
@@ -117,6 +124,14 @@ class MujocoBody(Body):
         model, data = self.model, self.data
         for _ in range(self.substeps):
             mujoco.mj_step(model, data)
+
+    def simulator(self) -> Callable[[], None]:
+        """``mj_step`` itself bound to this body's model and data when one substep is the
+        whole period (called from C: no Python frame per body and tick), else
+        :meth:`simulate`."""
+        if self.substeps == 1 and type(self).simulate is MujocoBody.simulate:
+            return partial(mujoco.mj_step, self.model, self.data)
+        return self.simulate
 
     def stop_at_limits(self) -> None:
         """The hard stops (module text): joints past a limit back on it, stopped there."""

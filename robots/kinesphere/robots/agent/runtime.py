@@ -53,6 +53,7 @@ from kinesphere.robots.agent.controller import Controller
 from kinesphere.robots.agent.estops import FleetBoard, latch_command
 from kinesphere.robots.agent.guard import make_guard
 from kinesphere.robots.agent.inbox import Inbox, clocks, received
+from kinesphere.robots.agent.ledger import Ledger
 from kinesphere.robots.agent.options import AgentOptions as AgentOptions
 from kinesphere.robots.agent.pacing import LoopStats, Wake, run_paced
 from kinesphere.robots.agent.presence import Claim
@@ -71,7 +72,8 @@ class Agent:
     robots); ``phase`` shifts the steps that publish state (a fleet host spreads them);
     ``stats`` are the loop's (a fleet host's, shared by its robots; else this agent's own);
     ``notify`` is called whenever something arrives for this robot (default: ``wake.set``; a
-    fleet host also notes the robot, ``needs_cycle``).
+    fleet host also notes the robot, ``needs_cycle``); ``ledger``: where its robot time is
+    kept, row ``slot`` (a fleet host's, shared by its robots; default its own).
     """
 
     def __init__(
@@ -79,6 +81,7 @@ class Agent:
         options: AgentOptions | None = None, body: Body | None = None,
         wake: Wake | None = None, phase: int = 0, stats: LoopStats | None = None,
         notify: Callable[[], None] | None = None, board: FleetBoard | None = None,
+        ledger: Ledger | None = None, slot: int = 0,
     ) -> None:
         self.options = options or AgentOptions()
         self.keys = Keys(self.options.prefix)
@@ -88,7 +91,8 @@ class Agent:
         if body is None:
             body = make_body(self.options.body, platform, 1.0 / self.options.control_rate,
                              session=session, options=self.options, robot_id=robot_id)
-        self.controller = Controller(body, self.options.margin, make_guard(body, platform))
+        self.controller = Controller(body, self.options.margin, make_guard(body, platform),
+                                     ledger, slot)
         self.platform = self.controller.platform.name
         self.resolver = Resolver(session, self.platform, self.keys, self.options.query_timeout_s)
         self.inbox = Inbox(wake, notify)
@@ -298,6 +302,15 @@ class Agent:
         step is robot time and physics alone."""
         return not self.controller.moving and self.conduct.settled
 
+    @property
+    def ledgered(self) -> bool:
+        """Whether the end of a glide (:meth:`glided`) is only robot time and a note that the
+        robot moved, unless something touches: no way still being checked, no timed motion
+        to track. A fleet host then ends the glides of all such robots at once
+        (``Ledger.glided``)."""
+        guard = self.controller.guard
+        return (guard is None or not guard.unchecked) and self.conduct.untimed
+
     def follow(self) -> Exception | None:
         """A step with nothing to react to (:meth:`needs_cycle`), up to the body's step: the
         trajectories forward (a fleet host's followers took their steps already, unless one
@@ -325,11 +338,11 @@ class Agent:
 
     def glided(self) -> bool:
         """:meth:`followed` for a step in which a fleet host handed the followers' setpoint to
-        the body itself (``Controller.glides``): the base rests, so while the joints are still
-        the followers' (the guard halted nothing) the step went as planned."""
+        the body itself (``Controller.glides``; a moving base's step too): while the motion is
+        still the followers' alone (the guard halted nothing) the step went as planned."""
         ctrl = self.controller
         ctrl.finish()  # the guard watches for contacts
-        if ctrl.joints.generator.following:
+        if ctrl.glides:
             self.conduct.followed()
             return True
         return self._went_on()

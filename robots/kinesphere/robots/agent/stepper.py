@@ -16,7 +16,7 @@ from __future__ import annotations
 import os
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 from kinesphere.robots.agent.body import Body
@@ -50,6 +50,8 @@ class Stepper:
             raise ValueError(f"helper threads must be >= 0, got {n}")
         self._helpers = [_Helper() for _ in range(n)]
         self._bodies: Sequence[Body] = ()
+        self._calls: list[Callable[[], None]] = []
+        """Each body's :meth:`Body.simulator`, made again when the list of bodies changes."""
         self._errors: list[Exception | None] = []
         self._cost: dict[int, float] = {}  # id(body) -> running mean seconds
         self._own: list[int] = []
@@ -76,8 +78,11 @@ class Stepper:
     def launch(self, bodies: Sequence[Body], share: bool = False) -> None:
         """Start every body's ``simulate()`` on the helpers and return at once (``share``:
         this thread takes its share first); :meth:`wait` for them before touching a body.
-        Without helpers the bodies are simulated here and now."""
-        self._bodies = bodies
+        Without helpers the bodies are simulated here and now. (A caller that passes the
+        same list object again, unchanged, saves asking every body for its simulator.)"""
+        if bodies is not self._bodies:
+            self._bodies = bodies
+            self._calls = [b.simulator() for b in bodies]
         self._errors = [None] * len(bodies)
         self._running = []
         if not self._helpers:
@@ -128,23 +133,18 @@ class Stepper:
             h.share = part
 
     def _run(self, indices: Sequence[int]) -> None:
-        bodies, errors, cost = self._bodies, self._errors, self._cost
+        bodies, calls, errors, cost = self._bodies, self._calls, self._errors, self._cost
         if not self._helpers:  # nothing to balance: no clock either
-            for i in indices:
-                try:
-                    bodies[i].simulate()
-                except Exception as exc:  # reported for this body; the others step on
-                    errors[i] = exc
+            _run_all(calls, errors)
             return
         clock = time.perf_counter
         for i in indices:
-            body = bodies[i]
             t0 = clock()
             try:
-                body.simulate()
+                calls[i]()
             except Exception as exc:  # reported for this body; the others step on
                 errors[i] = exc
-            k = id(body)
+            k = id(bodies[i])
             cost[k] = cost.get(k, 0.0) * (1.0 - SMOOTH) + (clock() - t0) * SMOOTH
 
     def _work(self, h: _Helper) -> None:
@@ -155,3 +155,18 @@ class Stepper:
                 return
             self._run(h.share)
             h.done.set()
+
+
+def _run_all(calls: Sequence[Callable[[], None]], errors: list[Exception | None]) -> None:
+    """Every call in turn, one ``try`` around them all (entered once per tick, not per body);
+    a call that raises is reported at its index and the rest run on."""
+    start = 0
+    while start < len(calls):
+        i = start
+        try:
+            for i in range(start, len(calls)):
+                calls[i]()
+            return
+        except Exception as exc:  # reported for this body; the others step on
+            errors[i] = exc
+            start = i + 1
