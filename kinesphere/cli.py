@@ -129,8 +129,12 @@ def _command_word(parser: argparse.ArgumentParser, words: Sequence[str]) -> str 
     return None
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    parser = build_parser()
+def main(argv: Sequence[str] | None = None,
+         parser: argparse.ArgumentParser | None = None) -> int:
+    """Run one ``kinesphere`` command line (``sys.argv`` when ``argv`` is None). ``parser``: one
+    :func:`build_parser` made, for a program that runs many commands in one process (building
+    it costs ~25 ms, as much as refusing a small URDF); parsing leaves it as it was."""
+    parser = parser or build_parser()
     words = list(sys.argv[1:] if argv is None else argv)
     command = _command_word(parser, words)
     message = None if command is None else missing_role(command, commands(parser))

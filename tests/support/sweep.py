@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import functools
 import io
 import multiprocessing
 import re
@@ -49,14 +50,22 @@ def urdfs(objects: bool = True) -> list[tuple[str, str, Path]]:
     return out
 
 
+@functools.cache
+def _parser() -> argparse.ArgumentParser:
+    from kinesphere.cli import build_parser
+
+    return build_parser()
+
+
 def run(args: list[str]) -> tuple[int, str, str, str | None]:
-    """A CLI command in this process: exit code, stdout, stderr, and a traceback if any."""
+    """A CLI command in this process: exit code, stdout, stderr, and a traceback if any (the
+    command line's parser is built once per process: thousands of commands run here)."""
     from kinesphere.cli import main
 
     out, err = io.StringIO(), io.StringIO()
     try:
         with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-            code = main(args)
+            code = main(args, _parser())
     except BaseException:  # a traceback is what the sweep exists to catch
         return -1, out.getvalue(), err.getvalue(), traceback.format_exc()
     return code, out.getvalue(), err.getvalue(), None
