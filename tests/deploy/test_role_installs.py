@@ -214,8 +214,8 @@ def test_a_missing_role_is_named_whatever_options_come_first() -> None:
 
 
 def test_the_parser_of_every_role_imports_no_numerics() -> None:
-    """Every ``kinesphere`` process builds the parser of every installed role before it runs
-    one command; that costs no NumPy, Ruckig, MuJoCo, yourdfpy nor SciPy, which a client's
+    """``kinesphere --help`` builds the parser of every installed role (a command, its own
+    role's); that costs no NumPy, Ruckig, MuJoCo, yourdfpy nor SciPy, which a client's
     command never needs (here, where every role is installed)."""
     code = ("import sys\nfrom kinesphere.cli import build_parser\nbuild_parser()\n"
             "print(sorted(m for m in ('numpy', 'ruckig', 'mujoco', 'yourdfpy', 'scipy')"
@@ -223,3 +223,18 @@ def test_the_parser_of_every_role_imports_no_numerics() -> None:
     done = _run([sys.executable, "-c", code], ROOT)
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == "[]", done.stdout
+
+
+def test_a_command_line_holds_its_role_alone_and_parses_as_the_whole_one() -> None:
+    """A process builds only the role that brings its command (the others' modules unread);
+    each command's help, hence its options, is the same as in the whole command line. An
+    unknown word gets the whole line, for argparse to list every command."""
+    whole = commands(build_parser())
+    for names in ROLE_COMMANDS.values():
+        for name in names:
+            alone = commands(build_parser(name))
+            assert set(alone) == {"label", *names}, name
+            assert alone[name].format_help() == whole[name].format_help(), name
+    assert set(commands(build_parser("label"))) == {"label"}
+    assert set(commands(build_parser("agnet"))) == set(whole)
+    assert set(commands(build_parser(None))) == set(whole)
