@@ -128,6 +128,14 @@ class UrdfTree:
         self.link_map: dict[str, UrdfLink] = {link.name: link for link in robot.links}
         self.joint_map: dict[str, UrdfJoint] = {j.name: j for j in robot.joints}
 
+    def __eq__(self, other: object) -> bool:
+        """The same elements and numbers (as yourdfpy's URDF compares; unhashable like it)."""
+        if not isinstance(other, UrdfTree):
+            return NotImplemented
+        return _encoded(self.robot) == _encoded(other.robot)
+
+    __hash__ = None  # type: ignore[assignment]
+
 
 def read_urdf(text: str) -> UrdfTree:
     """The URDF in ``text`` as yourdfpy reads it (no meshes loaded), from the cache when this
@@ -140,7 +148,7 @@ def read_urdf(text: str) -> UrdfTree:
         except (msgspec.DecodeError, ValueError, TypeError):
             pass  # written by a broken run or damaged on disk: read the text again
     robot = _parse(text)
-    CACHE.put(key, msgspec.msgpack.encode(robot, enc_hook=_encode))
+    CACHE.put(key, _encoded(robot))
     return UrdfTree(robot)
 
 
@@ -158,6 +166,10 @@ def _reader() -> tuple[bytes, ...]:
     versions of kinesphere and yourdfpy (read without importing yourdfpy)."""
     return (Path(__file__).read_bytes(), version("kinesphere").encode(),
             version("yourdfpy").encode())
+
+
+def _encoded(robot: UrdfRobot) -> bytes:
+    return msgspec.msgpack.encode(robot, enc_hook=_encode)
 
 
 def _encode(obj: Any) -> Any:

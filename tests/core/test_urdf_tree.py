@@ -118,6 +118,7 @@ def test_records_equal_yourdfpy_read_and_cached(source: str, cache: Path) -> Non
     _assert_as_yourdfpy(text)  # a fresh read
     assert len(list(cache.iterdir())) == 1
     _assert_as_yourdfpy(text)  # the same, decoded from the cache
+    assert read_urdf(text) == read_urdf(text)
 
 
 def test_mimics_materials_and_scales_survive_the_cache(cache: Path) -> None:
@@ -142,6 +143,7 @@ def test_a_changed_text_is_read_again(cache: Path, tmp_path: Path) -> None:
     start = text.index(elbow)
     path.write_text(text[:start] + text[start:].replace('lower="-2"', 'lower="-1.25"', 1))
     assert load_eurdf(path).limits["elbow"].lower == -1.25
+    assert load_eurdf(path).urdf != load_eurdf(TOY_EURDF).urdf
     assert len(list(cache.iterdir())) == 2
 
 
