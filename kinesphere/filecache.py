@@ -3,9 +3,9 @@
 Entries are named by a hash of everything they were derived from (the caller's key), so a
 changed input is a different entry and nothing is ever invalidated by hand. Each entry is
 written to a temporary file and renamed into place (readers see a whole entry or none, and
-two processes writing the same entry both succeed); each kind keeps at most ``max_entries``
-of at most ``max_bytes`` each, the least recently used removed first. Any failure to read or
-write only costs the time the cache would have saved.
+two processes writing the same entry both succeed); each kind keeps a bounded number of
+entries and bytes, the least recently used removed first. Any failure to read or write only
+costs the time the cache would have saved.
 
 The cache lives in ``$KINESPHERE_CACHE`` if set, else ``$XDG_CACHE_HOME/kinesphere``, else
 ``~/.cache/kinesphere``; ``KINESPHERE_CACHE=off`` turns it off.
@@ -40,12 +40,14 @@ def cache_root() -> Path | None:
 
 
 class FileCache:
-    """One kind of entry (a subfolder of the cache), bounded in count and in size."""
+    """One kind of entry (a subfolder of the cache): at most ``max_entries`` of at most
+    ``max_bytes`` each, ``max_total`` bytes in all."""
 
-    def __init__(self, kind: str, max_entries: int, max_bytes: int = 16 << 20) -> None:
+    def __init__(self, kind: str, max_entries: int, max_bytes: int, max_total: int) -> None:
         self.kind = kind
         self.max_entries = max_entries
         self.max_bytes = max_bytes
+        self.max_total = max_total
 
     def folder(self) -> Path | None:
         root = cache_root()
@@ -96,8 +98,13 @@ class FileCache:
                         p.unlink()
             elif _KEY.fullmatch(p.name):
                 try:
-                    entries.append((p.stat().st_mtime, p))
+                    st = p.stat()
                 except OSError:
                     continue  # removed by another process meanwhile
-        for _, p in sorted(entries)[: max(0, len(entries) - self.max_entries)]:
+                entries.append((st.st_mtime, st.st_size, p))
+        count, total = len(entries), sum(size for _, size, _ in entries)
+        for _, size, p in sorted(entries):  # the least recently used first
+            if count <= self.max_entries and total <= self.max_total:
+                break
             p.unlink(missing_ok=True)
+            count, total = count - 1, total - size

@@ -25,8 +25,9 @@ import numpy.typing as npt
 from kinesphere.filecache import FileCache
 
 Array = npt.NDArray[np.float64]
-CACHE: Final = FileCache("urdf", max_entries=256)
-"""Trees of descriptions read before, by the hash of their text and of the reader."""
+CACHE: Final = FileCache("urdf", max_entries=1024, max_bytes=4 << 20, max_total=64 << 20)
+"""Trees of descriptions read before, by the hash of their text and of the reader (a shipped
+robot's is 10-40 kB; bodies from the network are kept too, so room for many)."""
 
 
 class UrdfBox(msgspec.Struct, frozen=True):

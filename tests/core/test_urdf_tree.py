@@ -172,8 +172,8 @@ def test_off_writes_nothing(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> 
     assert list(tmp_path.iterdir()) == []
 
 
-def test_the_least_recently_used_go_past_the_bound(cache: Path) -> None:
-    small = FileCache("urdf", max_entries=3)
+def test_the_least_recently_used_go_past_the_bounds(cache: Path) -> None:
+    small = FileCache("urdf", max_entries=3, max_bytes=10, max_total=25)
     keys = [f"{i:064x}" for i in range(5)]
     for i, key in enumerate(keys):
         small.put(key, b"x")
@@ -181,6 +181,12 @@ def test_the_least_recently_used_go_past_the_bound(cache: Path) -> None:
         if i == 2:
             assert small.get(keys[0]) == b"x"  # used: now the newest
     assert sorted(p.name for p in cache.iterdir()) == sorted([keys[0], keys[3], keys[4]])
+    for key in keys[1:4]:
+        small.put(key, b"y" * 10)
+    # three entries of 10 bytes are more than 25 in all: the oldest of them went too
+    assert sorted(p.name for p in cache.iterdir()) == sorted(keys[2:4])
+    small.put(keys[4], b"v" * 11)  # larger than an entry may be
+    assert small.get(keys[4]) is None and not (cache / keys[4]).exists()
     assert small.get("../escape") is None
 
 
