@@ -427,12 +427,14 @@ class Agent:
         ctrl, conduct = self.controller, self.conduct
         status, detail = self.status()
         self._state_seq += 1
+        now = ctrl.reading()  # read once for all three (as ``q``, ``qd``, ``base_pose``)
+        clamped = ctrl.joints.clamped
         state = RobotState(
             robot_id=self.robot_id, platform=self.platform, seq=self._state_seq,
-            stamp_ns=time.time_ns(), joint_names=self._joint_names, q=ctrl.q(),
-            qd=ctrl.qd(), base_pose=ctrl.base_pose(), status=status,
+            stamp_ns=time.time_ns(), joint_names=self._joint_names, q=now.q.tolist(),
+            qd=now.qd.tolist(), base_pose=list(now.base_pose), status=status,
             last_command_seq=conduct.ordering.last_seq, detail=detail[:MAX_TEXT],
-            clamped=sorted(ctrl.joints.clamped), groups=self._groups,
+            clamped=sorted(clamped) if clamped else [], groups=self._groups,
             lease_holder=conduct.lease.holder, estop_by=conduct.safety.estop_by,
             substitutions=conduct.acks.substitutions, dropped=conduct.ordering.dropped,
         )
