@@ -11,7 +11,7 @@ goes through ``update`` as before, and its output is Ruckig's own (``otg.py``). 
 computed is then copied here, and the following steps evaluate it with Ruckig's formulas in
 Ruckig's order of operations (``Trajectory::at_time`` and ``integrate`` in its headers,
 ``Ruckig::update``'s clock and its ``Finished``), so they give the numbers its ``update`` would
-have given, bit for bit (``tests/test_agent_follow.py`` compares them).
+have given, bit for bit (``tests/robots/test_agent_batch.py`` compares them).
 """
 
 from __future__ import annotations
@@ -35,10 +35,18 @@ class _Rows(NamedTuple):
     """The followed rows' share of the arrays, as :meth:`Followers.advance` reads them."""
 
     owner: np.ndarray
+    duration: np.ndarray
+    """Each row's generator's trajectory duration."""
     brake: np.ndarray
     brake_t0: np.ndarray
     t_sum: np.ndarray
     """Per phase end (0 first), the rows: columns, so that a step compares whole rows."""
+    ends: np.ndarray
+    """``t_sum[1:]``, contiguous: what a step's time is compared with."""
+    passed: np.ndarray
+    """Room for that comparison (booleans, one per phase end and row)."""
+    picked: np.ndarray
+    """Room for the five coefficient vectors a step picks."""
     end: np.ndarray
     coef: np.ndarray
     """p0, v0, a0, a0 / 2, jerk, each over every row and segment (flattened): one gather
@@ -77,8 +85,9 @@ class Followers:
         """``brake + t_sum[-1]``: where the hold after the end starts (``at_time``'s ``t_pre``)."""
         self._coef = np.zeros((rows, SEGMENTS, 4))
         """Per DoF and segment: position, velocity, acceleration at its start and its jerk."""
-        self._time = np.zeros(len(sizes))
-        """Per generator: the time along its trajectory (Ruckig's ``output.time``)."""
+        self._clock = np.zeros(rows)
+        """Per row: its generator's time along its trajectory (Ruckig's ``output.time``), the
+        same in every row of a generator (each adds the same ``dt``): stepped in place."""
         self._duration = np.zeros(len(sizes))
         self._following = np.zeros(len(sizes), dtype=bool)
         self._slots = np.zeros(0, dtype=np.intp)
@@ -120,14 +129,14 @@ class Followers:
         self._t_sum[rows] = t_sum
         self._end[rows] = end
         self._coef[rows] = coef
-        self._time[slot] = time
+        self._clock[rows] = time
         self._duration[slot] = trajectory.duration
         self._following[slot] = True
         self._dirty = True
 
     def left(self, slot: int) -> float:
         """Seconds the trajectory of generator ``slot`` still takes (``Otg.remaining``)."""
-        return max(0.0, float(self._duration[slot] - self._time[slot]))
+        return max(0.0, float(self._duration[slot] - self._clock[self._start[slot]]))
 
     def drop(self, slot: int) -> None:
         """Generator ``slot`` is no longer followed here (it plans again, or rests)."""
@@ -144,12 +153,15 @@ class Followers:
         if not slots.size:
             return
         assert self._cache is not None
-        owner, brake, brake_t0, t_sum, end, coef, first, order, braking = self._cache
-        time = self._time
-        time[slots] += self.dt
-        t = time[owner]
+        (owner, duration, brake, brake_t0, t_sum, ends, passed, picked, end, coef, first, order,
+         braking) = self._cache
+        rows = self._rows
+        clock = self._clock
+        clock[rows] += self.dt
+        t = clock[rows]  # a view when the rows are contiguous
         shifted = t - brake  # at_time's ``t_diff_dof -= p.brake.duration`` (t itself when 0)
-        phase = (t_sum[1:] <= shifted).sum(axis=0)  # upper_bound over each row's t_sum
+        np.less_equal(ends, shifted, out=passed)  # upper_bound over each row's t_sum:
+        phase = passed.view(np.uint8).sum(axis=0, dtype=np.uint8)  # phase ends passed
         tau = shifted - t_sum[phase, order]
         segment = phase + first
         if braking:  # the brake phases before the profile (after a retarget mid-motion)
@@ -157,20 +169,24 @@ class Followers:
             second = t >= brake_t0
             segment = np.where(in_brake, second.astype(np.intp) + first - 2, segment)
             tau = np.where(in_brake, t - brake_t0 * second, tau)
-        duration = self._duration
-        if (time[slots] >= duration[slots]).any():  # Ruckig's ``time >= duration`` branch
-            after = t >= duration[owner]
+        after = t >= duration
+        over = after.any()
+        if over:  # Ruckig's ``time >= duration`` branch
             segment = np.where(after, first + _HOLD - 2, segment)
             tau = np.where(after, t - end, tau)
-        p0, v0, a0, half, jerk = coef[:, segment]
+        p0, v0, a0, half, jerk = np.take(coef, segment, axis=1, out=picked)
         tj = tau * jerk
-        rows = self._rows
-        self.position[rows] = p0 + tau * (v0 + tau * (half + tj / 6))
-        self.velocity[rows] = v0 + tau * (a0 + tj / 2)
-        self.acceleration[rows] = a0 + tj
-        ended = slots[time[slots] > duration[slots]]
-        for slot in ended.tolist():
-            self._otgs[slot].arrived()
+        if isinstance(rows, slice):  # written in place
+            np.add(p0, tau * (v0 + tau * (half + tj / 6)), out=self.position[rows])
+            np.add(v0, tau * (a0 + tj / 2), out=self.velocity[rows])
+            np.add(a0, tj, out=self.acceleration[rows])
+        else:
+            self.position[rows] = p0 + tau * (v0 + tau * (half + tj / 6))
+            self.velocity[rows] = v0 + tau * (a0 + tj / 2)
+            self.acceleration[rows] = a0 + tj
+        if over:
+            for slot in np.unique(owner[t > duration]).tolist():
+                self._otgs[slot].arrived()
 
     def _gather(self) -> None:
         """The followed generators, their rows and what :meth:`advance` reads of them."""
@@ -182,9 +198,11 @@ class Followers:
         owner = self._owner[rows]
         coef = self._coef[rows]
         index = np.arange(rows.size, dtype=np.intp)
+        t_sum = np.ascontiguousarray(self._t_sum[rows].T)
         self._cache = _Rows(
-            owner, self._brake[rows], self._brake_t0[rows],
-            np.ascontiguousarray(self._t_sum[rows].T), self._end[rows],
+            owner, self._duration[owner], self._brake[rows], self._brake_t0[rows], t_sum,
+            np.ascontiguousarray(t_sum[1:]), np.zeros((t_sum.shape[0] - 1, rows.size), bool),
+            np.zeros((5, rows.size)), self._end[rows],
             # a0 / 2 (exact in binary) beside a0: one division less per step
             np.ascontiguousarray(np.concatenate(
                 (coef[:, :, :3], coef[:, :, 2:3] / 2, coef[:, :, 3:]), axis=2).reshape(-1, 5).T),
