@@ -20,7 +20,9 @@ keep real time per number of worker processes.
 
 Part 1 ends with the Python function calls per robot per tick at N = 48 (cProfile over
 :data:`RETARGET` ticks, robots moving): a count the machine's load does not change, so a change
-to the per-robot work shows in it even when the timings are noisy. Then the physics inside the
+to the per-robot work shows in it even when the timings are noisy. (``mj_step`` itself is not
+among them since the stepper calls it from C, bound to each body: one call per robot and tick
+that counts before 2026-12-06 included.) Then the physics inside the
 tick at N = 48 against two bare baselines: the table's (copies taken at the start of each chunk,
 which hold their setpoints and settle) and copies taken from the bodies after every tick (the
 states the fleet stepped): how much of the ratio is physics of moving bodies, not Python.
