@@ -31,6 +31,14 @@ PROCESS_FIXTURES = frozenset({"databank", "sup", "fleet", "secured"})
 """Fixtures that start processes: a test using one is marked ``processes``."""
 
 
+def pytest_configure(config: pytest.Config) -> None:
+    """Drop ``COLUMNS`` and ``LINES``: pytest-xdist's workers get an 80x24 terminal's, and the
+    commands the tests start would lay out their tables for it instead of for the file their
+    output goes to (the docs show that output, and the tests compare it)."""
+    for name in ("COLUMNS", "LINES"):
+        os.environ.pop(name, None)
+
+
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     for item in items:
         if PROCESS_FIXTURES & set(getattr(item, "fixturenames", ())):

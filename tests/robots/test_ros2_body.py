@@ -304,8 +304,16 @@ def test_ros2_body_faults_and_stops(hub: Hub, databank: DatabankProcess) -> None
         assert isinstance(last, Float64MultiArray), "the forward interface streams these"
         sent = dict(zip(order, last.data.tolist(), strict=True))
         assert sent == {lim.name: lim.upper for lim in limits}, "clamped to the hard limits"
-        body.halt()  # and back to where the robot is
-        robot.wait(lambda r: r.q == neutral(), "back at neutral")
+        # halt streams where the robot is as the body last heard it: neutral, or the clamped
+        # pose when the robot's joint state of it came in first (a race the load decides)
+        n = len(robot.received)
+        body.halt()
+        robot.wait(lambda r: len(r.received) > n, "got the halt")
+        halt = robot.received[-1][1]
+        assert isinstance(halt, Float64MultiArray)
+        held = dict(zip(order, halt.data.tolist(), strict=True))
+        assert held in (neutral(), sent), "halted where the robot was, within its limits"
+        robot.wait(lambda r: r.q == held, "holding where it was halted")
         body.close()
 
         with running_agent(endpoint, PLATFORM, "baxter-f", speed=1.0, control_rate=200.0,

@@ -25,6 +25,7 @@ from kinesphere.services.databank.process import open_ecls
 from support.databank import Tokens, build_toy, cli, pose_of, raw_get, serve_process
 from support.network import OWN_KEYS, peer
 from support.paths import ROOT, TOY
+from support.wait import WAIT_S
 
 pytestmark = pytest.mark.processes
 
@@ -117,7 +118,7 @@ def test_query_cli_and_clean_sigterm(
         assert main(["query", "packbto", "limb_11", "distal_11", "left-high", "2", *zargs]) == 2
         assert "no platform 'packbto' (did you mean 'packbot'?)" in capsys.readouterr().err
         proc.send_signal(signal.SIGTERM)
-        _, err = proc.communicate(timeout=20)
+        _, err = proc.communicate(timeout=WAIT_S)
         assert proc.returncode == 0, err
         assert re.search(r"databank cli1 serving toyarm \[\w+\] under kstest/", err)
         assert re.search(r"databank cli1 stopped on SIGTERM after [\d.]+ s", err)

@@ -26,6 +26,7 @@ from kinesphere.zconfig import LOOPBACK_ANY_PORT, close_session, loopback_hub
 from support.databank import Tokens, serve_process
 from support.network import OWN_KEYS, peer
 from support.soak import MIB, SCALE, FloodTally, mib, rss
+from support.wait import WAIT_S
 
 pytestmark = pytest.mark.processes
 
@@ -104,7 +105,7 @@ def served(tmp_path: Path) -> Iterator[tuple[zenoh.Session, int]]:
                 yield client, proc.pid
                 assert proc.poll() is None, "the databank died during the flood"
                 proc.terminate()
-                _, err = proc.communicate(timeout=20)
+                _, err = proc.communicate(timeout=WAIT_S)
                 assert proc.returncode == 0, err
                 assert "Traceback" not in err, err
                 # refusals are rate-limited: a few lines, not one per request

@@ -27,6 +27,7 @@ from support.agents import DatabankProcess, StateWatch, joints_close
 from support.byor import PANDA, TALOS, TIAGO, UR5, robot_data
 from support.network import Hub
 from support.paths import ROOT
+from support.wait import WAIT_S
 
 pytestmark = pytest.mark.processes
 
@@ -131,7 +132,7 @@ def test_send_up_left_far_moves_the_tip_up_left_of_the_shoulder(
     finally:
         watch.close()
         agent.send_signal(signal.SIGTERM)
-        agent.wait(timeout=30)
+        agent.wait(timeout=WAIT_S)
         log.close()
     before = _tip_offset(brought / name, limb, origin, dict(zip(first.joint_names, first.q,
                                                               strict=True)))

@@ -119,7 +119,7 @@ def test_ctrl_c_mid_phrase_stops_everything(tmp_path: Path) -> None:
         assert endpoint
         until(lambda: len(_processes_using(endpoint)) >= 3, WAIT_S, "databank, agent and play")
         proc.send_signal(signal.SIGINT)
-        assert proc.wait(timeout=30) == 130, log.read_text(errors="replace")
+        assert proc.wait(timeout=WAIT_S) == 130, log.read_text(errors="replace")
     finally:
         if proc.poll() is None:
             proc.kill()
