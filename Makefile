@@ -27,13 +27,13 @@ install: $(STAMP)
 demo: $(STAMP)
 	$(BIN)/kinesphere up --headless
 
-# The tests that start no processes run on every core (pytest-xdist); those that do (marked
-# `processes`: the databank, agents, routers, kinesphere commands, pip) then run one at a time, as
-# today. Each run ends with its ten slowest tests.
+# The tests run on every core (pytest-xdist, a file's tests on one worker, so its fixtures are
+# made once); those marked `realtime` (they judge robots against the clock, and a neighbour
+# taking the other core makes them late) then run alone. Each run ends with its ten slowest tests.
 PYTEST := $(BIN)/python -m pytest -q --durations=10
 test: lint typecheck layers browser xserver
-	$(PYTEST) -m "not processes" -n auto
-	$(PYTEST) -m processes
+	$(PYTEST) -m "not realtime" -n auto --dist loadfile
+	$(PYTEST) -m realtime
 
 # Debian programs some tests drive: installed when missing and make runs as root, otherwise
 # make stops with the install command. $(1): the command, $(2): the package, $(3): who needs it.

@@ -1,14 +1,16 @@
-"""The fixtures every test folder shares, and the ``processes`` marker.
+"""The fixtures every test folder shares, and the ``processes`` and ``realtime`` markers.
 
-``hub`` and ``databank`` are one per test session: the agent tests of every folder join one
-loopback hub and ask one real databank process (serving every shipped platform under the
-default prefix), started once. A test that must not meet them (it stops its databank, or serves
-other robots under the same prefix) opens a hub of its own with ``zconfig.loopback_hub``.
+``hub`` and ``databank`` are one per test session (per pytest-xdist worker): the agent tests of
+every folder join one loopback hub and ask one real databank process (serving every shipped
+platform under the default prefix), started once. A test that must not meet them (it stops its
+databank, or serves other robots under the same prefix) opens a hub of its own with
+``zconfig.loopback_hub``.
 
 A test that starts processes (the databank, agents, routers, ``kinesphere`` commands, pip) is
-marked ``processes``: ``make test`` runs the others on both cores and these one at a time.
-Using a fixture that starts one marks a test; a test that starts one itself is marked in its
-module.
+marked ``processes`` (``pytest -m "not processes"`` runs the quick rest). Using a fixture that
+starts one marks a test; a test that starts one itself is marked in its module. A test that
+judges robots against the clock (keyframes on time, a gamepad's ticks) is marked ``realtime``:
+``make test`` runs every other test on all cores, then these alone.
 """
 
 from __future__ import annotations

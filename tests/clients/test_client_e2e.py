@@ -42,7 +42,7 @@ from support.client_fleet import (
 from support.clients import Pad, Script, VirtualPad
 from support.paths import ROOT
 
-pytestmark = pytest.mark.processes
+pytestmark = [pytest.mark.processes, pytest.mark.realtime]
 
 LEFT, RIGHT = 90, 100
 """Ticks at 30 Hz of the sweep's strokes. The first one unfolds the arm from its stowed neutral
