@@ -20,6 +20,10 @@ How, deterministically (no randomness, no clock, fixed caps):
    toward neutral, the limits and contact constraints of
    :class:`~kinesphere.services.ecl.ik.LimbSolver`): a few steps from each of the best seeds,
    then the best of them until the segments stop turning.
+3. Rest. A second solve from neutral, with a heavier posture pull, may offer another way of
+   pointing that keeps the joints nearer neutral: it is taken when it points as well within a
+   few degrees (:meth:`ChainSolver._restful`), so a part that points alike in many ways is not
+   left turned far round, with every way to and from it sweeping through the body.
 
 Sizes follow the rule of a part whose length cannot change, the one the generator's swinging
 limbs follow too (:func:`kinesphere.services.ecl.arcs.swing`): the segment turns from its
@@ -78,6 +82,11 @@ SETTLED_DEG = 0.05
 """The refinement stops when no segment turned more than this in a step."""
 POSTURE = 0.01
 """Posture weight per radian, against 1 per unit of direction error (about a radian)."""
+RESTFUL = 20.0
+"""How many times heavier the posture weighs in the second solve, from neutral
+(:meth:`ChainSolver._restful`)."""
+NEAR_DEG = 4.0
+"""Degrees a pose nearer neutral may point worse than the best found and still be chosen."""
 SOLUTIONS = 4096
 """Solutions remembered per platform at most."""
 SOLUTION_BYTES = 16 << 20
@@ -207,8 +216,11 @@ class ChainSolver:
     """The nested parts of one outermost limb: its joints, limits and contacts (from a
     :class:`LimbSolver`), one table per segment shape, reused for every query."""
 
-    def __init__(self, pm: PlatformModel, limb: str, origin: str) -> None:
+    def __init__(self, pm: PlatformModel, limb: str, origin: str,
+                 max_angle: float = MAX_ANGLE_DEG) -> None:
         self.pm = pm
+        self.max_angle = max_angle
+        """Degrees past which a segment is refused: a pose nearer neutral never crosses it."""
         self.limb = LimbSolver(pm, limb, origin)
         ls = self.limb
         self.model = pm.model
@@ -411,7 +423,7 @@ class ChainSolver:
             if tried[-1][0][0] <= GOOD_DEG:
                 break
         _, best = min(tried, key=lambda t: t[0])
-        values = self._stood(self._refine(tasks, targets, best, ITERATIONS))
+        values = self._restful(tasks, targets, self._refine(tasks, targets, best, ITERATIONS))
         data = self._scratch
         data.qpos[:] = ls.full_q(values)
         mujoco.mj_kinematics(self.model, data)
@@ -421,6 +433,33 @@ class ChainSolver:
                                                                             strict=True))
         joints = {j: round(float(v), 6) for j, v in zip(ls.joints, values, strict=True)}
         return Solution(joints, angles, self.balance.check(ls.full_q(values)), measured)
+
+    def _restful(self, tasks: list[SegmentTask], targets: list[np.ndarray],
+                 values: np.ndarray) -> np.ndarray:
+        """``values`` as they stand, or another way of pointing nearer neutral: solved from
+        neutral with the posture RESTFUL times heavier, it is chosen when it differs by more
+        than DISTINCT somewhere (not the same pose pulled toward neutral), moves no joint as far
+        from neutral, points within NEAR_DEG as well (never past the refusal bound where
+        ``values`` is within it) and stands wherever ``values`` stands.
+
+        Where a part points alike in many ways (a straight forearm turning about the upper
+        arm, a wrist about itself) the seeds may find it turned far round: NAO's hanging arms
+        came out with the elbow and wrist yawed ~3 rad from neutral, so every straight way to
+        and from them swept the hand through the thigh."""
+        ls = self.limb
+        home = ls.neutral[ls.qadr]
+        best = self._stood(values)
+        calm = self._stood(self._refine(tasks, targets, home.copy(), ITERATIONS, RESTFUL))
+        worst, worst_calm = self._score(tasks, targets, best)[0], self._score(tasks, targets,
+                                                                             calm)[0]
+        if (np.max(np.abs(calm - best)) > DISTINCT
+                and np.max(np.abs(calm - home)) < np.max(np.abs(best - home))
+                and worst_calm <= worst + NEAR_DEG
+                and (worst_calm <= self.max_angle or worst > self.max_angle)
+                and (self.balance.check(ls.full_q(calm)) is None
+                     or self.balance.check(ls.full_q(best)) is not None)):
+            return calm
+        return best
 
     def _stood(self, values: np.ndarray) -> np.ndarray:
         """``values`` as they stand: a leg lifted so far that the body would topple on the
@@ -434,11 +473,11 @@ class ChainSolver:
         return ls.balanced(values)
 
     def _refine(self, tasks: list[SegmentTask], targets: list[np.ndarray], start: np.ndarray,
-                iterations: int) -> np.ndarray:
+                iterations: int, posture: float = 1.0) -> np.ndarray:
         ls = self.limb
         for t, g in zip(tasks, targets, strict=True):
             t.target = g
-        ls.posture.set_cost(self._posture)
+        ls.posture.set_cost(self._posture * posture)
         ls.posture.set_target(ls.neutral)
         q = ls.full_q(start)
         ls.config.update(q)
@@ -504,7 +543,7 @@ class Nested:
                 chain = self._chains.get((outer.limb, outer.origin))
                 if chain is None:
                     chain = self._chains[(outer.limb, outer.origin)] = ChainSolver(
-                        self.pm, outer.limb, outer.origin)
+                        self.pm, outer.limb, outer.origin, self.max_angle)
                 with chain.limb.placing(dict(key[1])):
                     hit = chain.solve(segments, self.sizes)
                 self.solves += 1
