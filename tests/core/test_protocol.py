@@ -38,6 +38,14 @@ def test_round_trip(msg: pr.Message) -> None:
 
 
 @pytest.mark.parametrize("msg", SAMPLES, ids=lambda m: type(m).__name__)
+def test_encode_into_a_reused_buffer_makes_the_bytes_of_encode(msg: pr.Message) -> None:
+    data = pr.encode(msg)
+    buffer = bytearray(b"\xff" * (len(data) + 100))  # a longer message was there before
+    assert pr.encode_into(msg, buffer) is buffer
+    assert bytes(buffer) == data
+
+
+@pytest.mark.parametrize("msg", SAMPLES, ids=lambda m: type(m).__name__)
 def test_wire_is_a_map_with_version_and_type(msg: pr.Message) -> None:
     assert type(msg).__struct_fields__[0] == "v"
     m = as_map(msg)

@@ -9,6 +9,7 @@ publishing with ``error`` and a reason.
 from __future__ import annotations
 
 import math
+import queue
 import time
 from collections.abc import Sequence
 
@@ -18,7 +19,7 @@ import pytest
 from kinesphere import zconfig
 from kinesphere.errors import KinesphereError
 from kinesphere.platforms.platform import load_platform
-from kinesphere.protocol import Drive, SpatialCommand
+from kinesphere.protocol import Drive, SpatialCommand, encode
 from kinesphere.robots.agent.base import rotate
 from kinesphere.robots.agent.bodies import BODIES, make_body
 from kinesphere.robots.agent.body import Body, Reading
@@ -189,6 +190,29 @@ def test_the_agent_reports_an_unplannable_target_and_keeps_publishing(
             watch.close()
     assert "ruckig cannot plan" in state.detail and "holding" in state.detail
     assert not agent.controller.moving and abs(state.base_pose[0]) < 1e-3
+
+
+def test_the_published_bytes_are_those_of_the_state_the_agent_built(hub: Hub) -> None:
+    """States are encoded into one buffer the agent keeps: each put carries exactly the
+    encoding of its own state, a short one after a long one included."""
+    _, endpoint = hub
+    heard: queue.Queue[bytes] = queue.Queue()
+    with zconfig.session(config=zconfig.loopback_config(endpoint)) as s:
+        agent = Agent("baxter", "encoded", s, AgentOptions(speed=0.0))
+        sub = s.declare_subscriber(agent.keys.state("encoded"),
+                                   lambda sample: heard.put(bytes(sample.payload)))
+        agent.declare()
+        try:
+            built = []
+            for detail in ("x" * 900, "short", "", "y" * 300):
+                agent.conduct.set("holding", detail)
+                built.append(agent.publish())
+            got = [heard.get(timeout=10.0) for _ in built]  # the loop runs in no thread here
+        finally:
+            agent.close()
+            zconfig.undeclare(sub)
+    assert [st.detail for st in built] == ["x" * 900, "short", "", "y" * 300]
+    assert got == [encode(st) for st in built]
 
 
 def test_unknown_bodies_are_named() -> None:

@@ -545,7 +545,7 @@ class Conduct:
             reachable=self.resolver.reachable, last_error=self.resolver.last_error,
             moving=ctrl.moving, clamped=bool(ctrl.joints.clamped),
             settled=ctrl.time - self._moved_at >= SETTLE_S,
-            blocked=lambda: ctrl.blocked(BLOCKED_TOL),
+            blocked=ctrl.blocked,  # its tolerance is BLOCKED_TOL
         )
         return reported
 

@@ -243,9 +243,12 @@ class Controller:
         other one on the way and stay there. Saying "at target" then would be a lie.
         """
         error = np.abs(self.reading().q - self.joints.target)
-        worst = int(np.argmax(error)) if error.size else 0
-        if not error.size or not error[worst] > tol:
+        if not error.size:
             return ""
+        at = error.argmax()  # an idle robot asks at every state it publishes: methods, no int()
+        if not error[at] > tol:
+            return ""
+        worst = int(at)
         contacts = sorted({f"{a}/{b}" for a, b in self.body.contacts()})
         touching = f"; self-contact {', '.join(contacts[:3])}" if contacts else ""
         return (f"blocked: {self.joint_names[worst]} is {error[worst]:.3f} from its target"

@@ -48,6 +48,9 @@ class MujocoBody(Body):
         self.data.qpos[:] = template.qpos
         self.data.ctrl[:] = template.ctrl
         mujoco.mj_forward(model, self.data)
+        self._qpos, self._qvel = self.data.qpos, self.data.qvel
+        """Kept views (an MjData never moves its buffers): each ``data.qpos`` makes a new one,
+        and :meth:`read` is at every state published."""
         names = self.platform.joint_names
         self._qadr = np.array([pm.qpos_index[j] for j in names], dtype=int)
         self._dadr = np.array([pm.dof_index[j] for j in names], dtype=int)
@@ -75,12 +78,12 @@ class MujocoBody(Body):
             self.data.ctrl[self._base_slice] = self._base_target
 
     def read(self) -> Reading:
-        data = self.data
+        qpos, qvel = self._qpos, self._qvel
         pose = (0.0, 0.0, 0.0)
         if self._mobile:
-            x, y, yaw = data.qpos[self._base_q].tolist()
+            x, y, yaw = qpos[self._base_q].tolist()
             pose = (x, y, wrap_angle(yaw))
-        return Reading(data.qpos[self._q_slice].copy(), data.qvel[self._d_slice].copy(), pose)
+        return Reading(qpos[self._q_slice].copy(), qvel[self._d_slice].copy(), pose)
 
     def command(self, q: np.ndarray, base_twist: Sequence[float] | np.ndarray) -> None:
         if self._setpoints is not None:

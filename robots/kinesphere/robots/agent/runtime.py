@@ -40,7 +40,7 @@ from kinesphere.protocol import (
     RobotState,
     Status,
     decode,
-    encode,
+    encode_into,
 )
 from kinesphere.ratelog import RateLog
 from kinesphere.robots.agent.acks import UrgentOut
@@ -117,6 +117,8 @@ class Agent:
         """The step in flight was taken by a fleet host's followers alone (:meth:`follow`)."""
         self._entities: list[Any] = []
         self._publisher: Any = None
+        self._payload = bytearray()
+        """The encoded state, rewritten in place for each one (Zenoh copies it on ``put``)."""
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
         self.board = board
@@ -425,7 +427,7 @@ class Agent:
 
     def publish(self) -> RobotState:
         ctrl, conduct = self.controller, self.conduct
-        status, detail = self.status()
+        status, detail = conduct.status()
         self._state_seq += 1
         now = ctrl.reading()  # read once for all three (as ``q``, ``qd``, ``base_pose``)
         clamped = ctrl.joints.clamped
@@ -441,7 +443,7 @@ class Agent:
         self.last_state = state
         if self._publisher is not None:
             try:
-                self._publisher.put(encode(state))
+                self._publisher.put(encode_into(state, self._payload))
             except zenoh.ZError as exc:  # session closing or congested: the loop goes on
                 log.debug("state not published: %s", exc)
         return state
