@@ -27,7 +27,7 @@ from kinesphere.deploy.film import (
 )
 from kinesphere.errors import KinesphereError
 from support.paths import ROOT
-from support.wait import WAIT_S, until
+from support.wait import WAIT_S
 
 PHRASE = ROOT / "clients" / "phrases" / "left_high.toml"
 W, H, FPS = 96, 80, 6.0
@@ -86,19 +86,27 @@ def test_a_score_film_shows_every_body_performing_it(tmp_path: Path) -> None:
 @pytest.mark.processes
 def test_an_interrupted_film_leaves_no_partial_file(tmp_path: Path) -> None:
     """Ctrl-C while the frames are being encoded: exit 130, a message, and no file at all
-    (the film is written aside and renamed only when whole)."""
+    (the film is written aside and renamed only when whole). The Ctrl-C comes when the film
+    says its second step starts: the first step's 30 frames are in the encoder, the second's
+    and the rest's (at least 35) not yet rendered."""
     out = tmp_path / "film.mp4"
     proc = subprocess.Popen(
         [sys.executable, "-m", "kinesphere.cli", "film", str(PHRASE), "-o", str(out),
-         "--width", "96", "--height", "80", "--fps", "60", "--bodies", "youbot"],
+         "--width", "96", "--height", "80", "--fps", "10", "--bodies", "youbot"],
         cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    said: list[str] = []
     try:
-        until(lambda: proc.poll() is not None or any(
-            p.stat().st_size > 0 for p in tmp_path.glob(".*partial*")), WAIT_S,
-            "frames being written")
+        assert proc.stderr is not None
+        for row in proc.stderr:  # ends when the film does: then the assertions below say so
+            said.append(row)
+            if "step 2/2" in row:
+                assert list(tmp_path.glob(".film.*.partial.mp4")), "the film is being written"
+                break
     finally:
         proc.send_signal(signal.SIGINT)
-        _, err = proc.communicate(timeout=WAIT_S)
+        _, rest = proc.communicate(timeout=WAIT_S)
+    err = "".join(said) + rest
+    assert any("step 2/2" in row for row in said), err
     assert proc.returncode == 130, err
     assert f"film interrupted: nothing written to {out}" in err
     assert list(tmp_path.iterdir()) == [], "no partial MP4 or GIF left behind"

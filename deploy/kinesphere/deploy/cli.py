@@ -169,7 +169,7 @@ def _film(args: argparse.Namespace) -> int:
     gif = None if args.no_gif else Path(args.gif or out.with_suffix(".gif"))
     try:
         n = render(args.phrase, out, gif, args.bodies, args.width, args.height, args.fps,
-                   args.gesture, 1.0 if args.speed is None else args.speed)
+                   args.gesture, 1.0 if args.speed is None else args.speed, _film_progress)
     except KeyboardInterrupt:
         print(f"film interrupted: nothing written to {out}" + (f" nor {gif}" if gif else ""),
               file=sys.stderr)
@@ -177,3 +177,9 @@ def _film(args: argparse.Namespace) -> int:
     print(f"wrote {n} frames to {out}" + (f" and {gif}" if gif else "") + " (the phrase, "
           "then every body coming to rest)", file=sys.stderr)
     return 0
+
+
+def _film_progress(t: float, heading: str) -> None:
+    """A film's progress on stderr: each cue as the bodies start it (a score's notation, the
+    heading's second line, left out)."""
+    print(f"filming t = {t:.1f} s: {heading.splitlines()[0]}", file=sys.stderr, flush=True)

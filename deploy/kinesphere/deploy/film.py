@@ -256,12 +256,14 @@ def aside(path: Path) -> Path:
 
 def render(phrase_ref: str | Path, out: Path, gif: Path | None, platforms: Sequence[str],
            width: int = 320, height: int = 240, fps: float = 15.0, gesture: str | None = None,
-           speed: float = 1.0) -> int:
+           speed: float = 1.0, on_cue: Callable[[float, str], None] | None = None) -> int:
     """Render the phrase, or one gesture of a score (``gesture``, default its first, its
     times divided by ``speed``), then every body until it is at rest (at most
     :data:`SETTLE_MAX_S`) and :data:`REST_S` more, so the film ends where the robots are left,
     still; returns the number of frames written to each file. The files are written aside and
-    renamed when whole: an interrupted film leaves nothing behind."""
+    renamed when whole: an interrupted film leaves nothing behind. ``on_cue(t, heading)`` hears
+    each cue as the bodies start it, every frame before ``t`` already sent to the encoder, and
+    the phrase's end (heading "coming to rest"): the progress of a render that takes a while."""
     import imageio_ffmpeg
 
     from kinesphere.casting import cast
@@ -320,7 +322,11 @@ def render(phrase_ref: str | Path, out: Path, gif: Path | None, platforms: Seque
                     cue_i = i
                     for p in performers:
                         cues[i].start(p)
+                    if on_cue is not None:
+                        on_cue(t, cues[i].heading)
             elif k == frames:
+                if on_cue is not None:
+                    on_cue(t, "coming to rest")
                 for p in performers:  # the operator lets go: a drive stops, poses go on
                     if p.controller.base is not None and p.controller.base.driving:
                         p.controller.base.stop()
