@@ -160,6 +160,11 @@ class Conduct:
         ctrl = self.controller
         return float(ctrl.ledger.moved[ctrl.slot]) * ctrl.dt
 
+    def servos_settled(self) -> bool:
+        """Whether the servos had their time (:data:`SETTLE_S` of robot time) since the
+        joints or base last moved."""
+        return self.controller.time - self._moved_at >= SETTLE_S
+
     @property
     def _moved_wall(self) -> float:
         """:attr:`wall` when the joints or base last moved."""
@@ -203,7 +208,7 @@ class Conduct:
                 self.set(Status.ERROR, f"{fault} and holding")
         motion = self.acks.motion
         if (motion is not None and motion.moved and motion.target != _DRIVE
-                and not moving and ctrl.time - self._moved_at >= SETTLE_S):
+                and not moving and self.servos_settled()):
             changed = True
             why = ctrl.blocked(BLOCKED_TOL)
             if why:
@@ -544,7 +549,7 @@ class Conduct:
             self._status, self._detail, estopped=self.safety.estopped,
             reachable=self.resolver.reachable, last_error=self.resolver.last_error,
             moving=ctrl.moving, clamped=bool(ctrl.joints.clamped),
-            settled=ctrl.time - self._moved_at >= SETTLE_S,
+            settled=self.servos_settled,
             blocked=ctrl.blocked,  # its tolerance is BLOCKED_TOL
         )
         return reported

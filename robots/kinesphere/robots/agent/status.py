@@ -20,15 +20,16 @@ def reported_status(
     last_error: str,
     moving: bool,
     clamped: bool,
-    settled: bool,
+    settled: Callable[[], bool],
     blocked: Callable[[], str],
 ) -> tuple[str, str]:
     """The status and detail to publish, from the last ``status``/``detail`` the agent set.
 
     Precedence: e-stop, then what the operator caused (stopped, holding, error), then the
     databank's reachability (``last_error`` says why it is unreachable), then motion (moving,
-    idle, clamped). Once ``settled`` (the servos had their time after a trajectory ended), an
-    idle or clamped body that ``blocked()`` explains (a non-empty reason) is an error.
+    idle, clamped). Once ``settled()`` (the servos had their time after a trajectory ended), an
+    idle or clamped body that ``blocked()`` explains (a non-empty reason) is an error. (Both
+    are asked only then: a robot asks at every state it publishes.)
     """
     if estopped:
         return Status.ESTOP, detail
@@ -42,7 +43,7 @@ def reported_status(
         status, detail = Status.MOVING, "databank reachable again"
     if status == Status.MOVING and not moving:
         status, detail = (Status.CLAMPED, detail) if clamped else (Status.IDLE, "at target")
-    if status in (Status.IDLE, Status.CLAMPED) and settled:
+    if status in (Status.IDLE, Status.CLAMPED) and settled():
         why = blocked()
         if why:
             return Status.ERROR, why
