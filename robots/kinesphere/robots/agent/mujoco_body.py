@@ -48,8 +48,8 @@ class MujocoBody(Body):
         self.data.qpos[:] = template.qpos
         self.data.ctrl[:] = template.ctrl
         mujoco.mj_forward(model, self.data)
-        self._qpos, self._qvel = self.data.qpos, self.data.qvel
-        """Kept views (an MjData never moves its buffers): each ``data.qpos`` makes a new one,
+        self._qpos = self.data.qpos
+        """A kept view (an MjData never moves its buffers): each ``data.qpos`` makes a new one,
         and :meth:`read` is at every state published."""
         names = self.platform.joint_names
         self._qadr = np.array([pm.qpos_index[j] for j in names], dtype=int)
@@ -58,6 +58,8 @@ class MujocoBody(Body):
         self._act_slice = _as_slice(self._act)
         self._q_slice = _as_slice(self._qadr)  # a view when contiguous: no copy per step
         self._d_slice = _as_slice(self._dadr)
+        self._read_q = _copier(self._qpos, self._q_slice)
+        self._read_qd = _copier(self.data.qvel, self._d_slice)
         self._setpoints = (self.data.ctrl[self._act_slice]
                            if isinstance(self._act_slice, slice) else None)
         """The joints' servo targets as a view, kept (an MjData never moves its buffers), when
@@ -78,12 +80,11 @@ class MujocoBody(Body):
             self.data.ctrl[self._base_slice] = self._base_target
 
     def read(self) -> Reading:
-        qpos, qvel = self._qpos, self._qvel
         pose = (0.0, 0.0, 0.0)
         if self._mobile:
-            x, y, yaw = qpos[self._base_q].tolist()
+            x, y, yaw = self._qpos[self._base_q].tolist()
             pose = (x, y, wrap_angle(yaw))
-        return Reading(qpos[self._q_slice].copy(), qvel[self._d_slice].copy(), pose)
+        return Reading(self._read_q(), self._read_qd(), pose)
 
     def command(self, q: np.ndarray, base_twist: Sequence[float] | np.ndarray) -> None:
         if self._setpoints is not None:
@@ -188,6 +189,14 @@ class HardStops:
         if past.any():
             for i in np.unique(np.searchsorted(self._ends, past.nonzero()[0], side="right")):
                 self.bodies[int(i)].stop_at_limits()
+
+
+def _copier(values: np.ndarray, index: slice | np.ndarray) -> Callable[[], np.ndarray]:
+    """A new copy of ``values[index]`` at each call, without a Python frame: a kept view's
+    ``copy`` for a slice (``values`` is an MjData's, whose buffers never move), else ``take``."""
+    if isinstance(index, slice):
+        return values[index].copy
+    return partial(values.take, index)
 
 
 def _as_slice(index: np.ndarray) -> slice | np.ndarray:
