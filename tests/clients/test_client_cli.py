@@ -206,6 +206,37 @@ def test_play_a_phrase_file(
     assert let_go.at >= moves[-1].at
 
 
+def test_play_goes_on_until_the_robot_reached_the_last_step_not_while_copies_are_replaced(
+    hub: Hub, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """An agent whose databank answers slowly supersedes the step's first command with the
+    next copy (``superseded``), and one whose client stalled holds (the watchdog's
+    ``holding``) until the next copy moves it on: neither ends the motion. Play streams on
+    until the robot says ``reached``, here on the 12th copy, then lets go."""
+    f = tmp_path / "p.toml"
+    f.write_text("[[step]]\nduration = 0.1\nparts = ['limb_11 distal_11 left-high 2']\n")
+    copies: list[Command] = []
+
+    def slow(c: Command) -> list[Reply]:
+        if not c.deadman or not c.parts:
+            return usual(c)
+        copies.append(c)
+        if len(copies) == 1:
+            return [(AckStage.SUPERSEDED, "", "a newer command arrived first", [])]
+        if len(copies) == 5:
+            return [(AckStage.ACCEPTED, "", "", []),
+                    (AckStage.HOLDING, "", "no new command within ttl_ms: holding", [])]
+        return [(AckStage.ACCEPTED, "", "", []),
+                *([(AckStage.REACHED, "", "", [])] if len(copies) == 12 else [])]
+
+    with robot(hub, "yb", slow) as yb:
+        assert cli(hub[1], "play", str(f), "--target", "yb") == 0
+        yb.wait(lambda g: not g.cmd.deadman, "the final let-go")
+        moves = [c for c in yb.commands() if c.deadman]
+    assert len(moves) >= 12, "streamed until the robot reached"
+    assert capsys.readouterr().out.splitlines() == ["yb: reached"]
+
+
 def test_play_reports_a_refusal_once_per_robot_and_code(
     hub: Hub, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

@@ -29,6 +29,10 @@ FINAL = frozenset({
     AckStage.STOPPED, AckStage.ESTOPPED, AckStage.RELEASED, AckStage.LEASED, AckStage.REJECTED,
 })
 """Stages after which a robot says nothing more about a command."""
+ENDED = frozenset({AckStage.REACHED, AckStage.CLAMPED, AckStage.BLOCKED, AckStage.REJECTED})
+"""The stages that end a motion where it will stay. A copy of a stream superseded by the next
+(a pose still waiting for the databank), or a motion the watchdog held while the stream went
+on, is final for that command but not for the motion: the next copy moves the robot on."""
 FAILED = frozenset({AckStage.REJECTED, AckStage.BLOCKED})
 """Stages that make a command-line client exit non-zero."""
 DISCOVERY_S = 1.0
@@ -153,6 +157,13 @@ def outcomes(answers: dict[str, list[AckAnswer]], robots: Iterable[str]) -> dict
     for rid, found in answers.items():
         out.setdefault(rid, Outcome(rid)).acks.extend(a.ack for a in found)
     return dict(sorted(out.items()))
+
+
+def ended(link: RobotLink, first_seq: int, robots: Iterable[str]) -> bool:
+    """Whether every robot's motion toward a command numbered ``first_seq`` or later has
+    ended (:data:`ENDED`: reached, clamped, blocked, or the command was refused)."""
+    found = link.answers(first_seq)
+    return all(any(a.ack.stage in ENDED for a in found.get(rid, [])) for rid in robots)
 
 
 def wait(

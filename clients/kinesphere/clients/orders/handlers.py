@@ -138,14 +138,10 @@ def play(args: argparse.Namespace) -> int:
         first = seq.seq
         print(f"playing {phrase.name} ({phrase.duration:g} s) on {target.label}", file=sys.stderr)
 
-        def arrived(since: int) -> bool:
-            now = answers.outcomes(link.answers(since), robots)
-            return bool(now) and all(any(a.stage in answers.FINAL for a in o.acks)
-                                     for o in now.values())
-
         with signals(stop):
             phrases.play(link, phrase, keys, seq, rate_hz=args.rate, on_step=on_step,
-                         should_stop=lambda: stop.set, arrived=arrived)
+                         should_stop=lambda: stop.set,
+                         arrived=lambda since: answers.ended(link, since, robots))
         let_go = seq.seq - 1
         found = answers.wait(link, first, robots, args.timeout, lambda o: o.final_for(let_go))
     if not stop.set:  # the let-go only ends the stream: what the phrase did is said before it

@@ -46,7 +46,6 @@ from kinesphere.pointing import Pointing
 from kinesphere.protocol import (
     MAX_TTL_MS,
     Ack,
-    AckStage,
     BodyModel,
     CompoundRequest,
     Pose,
@@ -374,15 +373,9 @@ def _caught_up(link: RobotLink, active: Sequence[Performer], last: int) -> bool:
                for p in active)
 
 
-ENDED = frozenset({AckStage.REACHED, AckStage.CLAMPED, AckStage.BLOCKED, AckStage.REJECTED})
-"""The stages that end a motion where it will stay (a superseded copy of a stream does not)."""
-
-
 def _arrived(link: RobotLink, active: Sequence[Performer], first: int) -> bool:
-    """Whether every robot's motion toward a command sent since ``first`` has ended (reached,
-    clamped, blocked, or the command was refused)."""
-    found = link.answers(first)
-    return all(any(a.ack.stage in ENDED for a in found.get(p.robot, [])) for p in active)
+    """Whether every robot's motion toward a command sent since ``first`` has ended."""
+    return answers.ended(link, first, [p.robot for p in active])
 
 
 def _notate(active: Sequence[Performer], g: Gesture, kf: Keyframe, held: Held) -> None:
