@@ -7,6 +7,7 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -16,7 +17,7 @@ import pytest
 from kinesphere.cli import main
 from kinesphere.clients.gamepad.inputs import ticks
 from kinesphere.clients.gamepad.state import Action, ControllerState
-from kinesphere.protocol import AckStage, Command, Substitution
+from kinesphere.protocol import Ack, AckStage, Command, Substitution, encode
 from support.clients import CommandInbox, Reply, StandIn, usual
 from support.network import OWN_KEYS, Hub
 
@@ -212,13 +213,22 @@ def test_play_goes_on_until_the_robot_reached_the_last_step_not_while_copies_are
     """An agent whose databank answers slowly supersedes the step's first command with the
     next copy (``superseded``), and one whose client stalled holds (the watchdog's
     ``holding``) until the next copy moves it on: neither ends the motion. Play streams on
-    until the robot says ``reached``, here on the 12th copy, then lets go."""
+    until the robot says ``reached`` (here for the 11th copy, heard after the 12th was sent),
+    then lets go; the let-go holding the 12th copy's motion at the pose reached is not what
+    the phrase did."""
     f = tmp_path / "p.toml"
     f.write_text("[[step]]\nduration = 0.1\nparts = ['limb_11 distal_11 left-high 2']\n")
     copies: list[Command] = []
+    robots: list[StandIn] = []
+
+    def ack(c: Command, stage: AckStage, detail: str = "") -> None:
+        robots[0]._acks.put(encode(Ack(robot_id="yb", sender=c.sender, session=c.session,
+                                       seq=c.seq, stage=stage, detail=detail,
+                                       stamp_ns=time.time_ns())))
 
     def slow(c: Command) -> list[Reply]:
-        if not c.deadman or not c.parts:
+        if not c.deadman:  # as the agent: the let-go ends the motion it follows, and holds
+            ack(copies[-1], AckStage.HOLDING, "deadman released: holding")
             return usual(c)
         copies.append(c)
         if len(copies) == 1:
@@ -226,10 +236,12 @@ def test_play_goes_on_until_the_robot_reached_the_last_step_not_while_copies_are
         if len(copies) == 5:
             return [(AckStage.ACCEPTED, "", "", []),
                     (AckStage.HOLDING, "", "no new command within ttl_ms: holding", [])]
-        return [(AckStage.ACCEPTED, "", "", []),
-                *([(AckStage.REACHED, "", "", [])] if len(copies) == 12 else [])]
+        if len(copies) == 12:
+            ack(copies[-2], AckStage.REACHED)
+        return [(AckStage.ACCEPTED, "", "", [])]
 
     with robot(hub, "yb", slow) as yb:
+        robots.append(yb)
         assert cli(hub[1], "play", str(f), "--target", "yb") == 0
         yb.wait(lambda g: not g.cmd.deadman, "the final let-go")
         moves = [c for c in yb.commands() if c.deadman]

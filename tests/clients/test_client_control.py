@@ -174,6 +174,7 @@ def test_two_operators_only_the_lease_holder_moves_the_robot(
     assert min(map(turret, hs)) > -0.05, "bob's right-forward-low never did"
 
 
+@pytest.mark.realtime  # the lease lapses LEASE_TIMEOUT_S after its holder died, by the clock
 def test_a_killed_holders_lease_lapses_on_time_and_the_other_operator_gets_it(
     free: ClientFleet, pygame_up: None, tmp_path: Path
 ) -> None:
@@ -214,6 +215,7 @@ def test_a_killed_holders_lease_lapses_on_time_and_the_other_operator_gets_it(
                            after=killed)
 
 
+@pytest.mark.realtime  # "at once": the robot reports the e-stop within 0.3 s of the press
 def test_an_estop_from_the_operator_without_the_lease_stops_the_robot_at_once(
     free: ClientFleet, pygame_up: None
 ) -> None:

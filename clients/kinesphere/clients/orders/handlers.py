@@ -101,6 +101,16 @@ def send(args: argparse.Namespace) -> int:
     return _finish(found, args.timeout, f"the command ({seq.seq - first} sent)", seq.seq - first)
 
 
+def _before_let_go(o: answers.Outcome, let_go: int, last_step: list[int]) -> answers.Outcome:
+    """What a phrase did to one robot: its answers but the let-go's and, once the robot said
+    its last step's motion ended, but those of the copies still on the way then (the let-go
+    ended their motions at the pose the robot had reached)."""
+    end = max((a.seq for a in o.acks if a.stage in answers.ENDED and last_step
+               and a.seq >= last_step[0]), default=let_go)
+    return answers.Outcome(o.robot, [a for a in o.acks if a.seq != let_go and a.seq <= end]
+                           or o.acks)
+
+
 SCORE_ONLY = (("gesture", None), ("speed", None), ("check", False), ("report", None))
 """``play`` options that only a score takes, with their unset values."""
 
@@ -138,15 +148,19 @@ def play(args: argparse.Namespace) -> int:
         first = seq.seq
         print(f"playing {phrase.name} ({phrase.duration:g} s) on {target.label}", file=sys.stderr)
 
+        last_step: list[int] = []  # the first command of the last step, once streamed on
+
+        def arrived(since: int) -> bool:
+            last_step[:] = [since]
+            return answers.ended(link, since, robots)
+
         with signals(stop):
             phrases.play(link, phrase, keys, seq, rate_hz=args.rate, on_step=on_step,
-                         should_stop=lambda: stop.set,
-                         arrived=lambda since: answers.ended(link, since, robots))
+                         should_stop=lambda: stop.set, arrived=arrived)
         let_go = seq.seq - 1
         found = answers.wait(link, first, robots, args.timeout, lambda o: o.final_for(let_go))
     if not stop.set:  # the let-go only ends the stream: what the phrase did is said before it
-        found = {rid: answers.Outcome(rid, [a for a in o.acks if a.seq != let_go] or o.acks)
-                 for rid, o in found.items()}
+        found = {rid: _before_let_go(o, let_go, last_step) for rid, o in found.items()}
     code = _finish(found, args.timeout, f"the phrase ({seq.seq - first} commands)",
                    seq.seq - first)
     return 130 if stop.set else code
