@@ -66,6 +66,7 @@ def settle(link: RobotLink, boxes: dict[str, CommandInbox]) -> None:
     sentinel(link, [OWN_KEYS.command(r) for r in boxes], list(boxes.values()))
 
 
+@pytest.mark.realtime  # the gamepad's ticks at 30 Hz, no gap past the TTL, by the clock
 def test_stream_content_rate_ttl_and_final_stop(
     link: RobotLink, inboxes: dict[str, CommandInbox], inp: pad.PygameInput
 ) -> None:

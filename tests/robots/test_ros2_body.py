@@ -111,6 +111,7 @@ class Phases:
         return self.inp.poll()
 
 
+@pytest.mark.realtime  # the released robot is at rest within 1.5 s, by the clock
 def test_gamepad_moves_the_ros2_robot_to_an_ecl_pose_and_release_stops_it(
     hub: Hub, databank: DatabankProcess, pygame_up: None
 ) -> None:
@@ -273,6 +274,7 @@ def test_joy_stream_drives_the_ros2_robot(hub: Hub,
         assert proc.returncode == 0, err
 
 
+@pytest.mark.realtime  # after the TTL or an e-stop the robot rests within 1 s, by the clock
 def test_ros2_body_faults_and_stops(hub: Hub, databank: DatabankProcess) -> None:
     """Wrong robot, no robot, targets past the limits, the forward-controller order, TTL and
     e-stop mid-motion, a robot that goes quiet and comes back."""
