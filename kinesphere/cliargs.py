@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 import inspect
 import os
+import textwrap
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -89,6 +90,19 @@ everyone at once, where a peer would first have to discover the others."""
 
 Subcommands: TypeAlias = "argparse._SubParsersAction[argparse.ArgumentParser]"
 """Where a role registers its commands (``kinesphere.commands`` entry points get one)."""
+
+
+class LaidOutHelpFormatter(argparse.RawDescriptionHelpFormatter):
+    """Descriptions and epilogs kept line by line as written, each line wrapped to the
+    terminal unless it starts with a space: an example command or a row of a table is laid
+    out by hand, a sentence is not (argparse's raw formatter left sentences hundreds of
+    characters wide; its default one runs the examples and tables together)."""
+
+    def _fill_text(self, text: str, width: int, indent: str) -> str:
+        lines = [indent + line if not line.strip() or line[0].isspace()
+                 else textwrap.fill(line, width, initial_indent=indent, subsequent_indent=indent)
+                 for line in text.splitlines()]
+        return "\n".join(lines) + ("\n" if text.endswith("\n") else "")
 
 
 def command(sub: Subcommands, name: str, run: Callable[[argparse.Namespace], int],

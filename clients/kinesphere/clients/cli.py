@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 
 from kinesphere.cliargs import (
+    LaidOutHelpFormatter,
     Subcommands,
     add_ros_distro,
     add_ros_domain,
@@ -102,7 +103,7 @@ def _sends(p: argparse.ArgumentParser, ttl: str = f"{STREAM.ttl_ms}",
 
 
 def register(sub: Subcommands) -> None:
-    fmt = argparse.RawDescriptionHelpFormatter
+    fmt = LaidOutHelpFormatter
     g = command(
         sub, "gamepad", _gamepad,
         formatter_class=fmt,

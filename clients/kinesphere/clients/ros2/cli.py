@@ -12,6 +12,7 @@ import threading
 from types import FrameType
 
 from kinesphere.cliargs import (
+    LaidOutHelpFormatter,
     Subcommands,
     ZenohDefaults,
     add_ros_distro,
@@ -52,7 +53,7 @@ def register(sub: Subcommands) -> None:
     d = BridgeOptions()
     b = command(
         rsub, "bridge", bridge,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
+        formatter_class=LaidOutHelpFormatter,
         help="publish every live robot's joint states, URDF, frames and odometry to ROS 2",
         description="Run one ROS node that republishes every live kinesphere robot for ROS 2 "
         "tools (ros2 topic, RViz, Foxglove, ros2 bag) until SIGINT/SIGTERM.",
