@@ -8,7 +8,8 @@ entries and bytes, the least recently used removed first. Any failure to read or
 costs the time the cache would have saved.
 
 The cache lives in ``$KINESPHERE_CACHE`` if set, else ``$XDG_CACHE_HOME/kinesphere``, else
-``~/.cache/kinesphere``; ``KINESPHERE_CACHE=off`` turns it off.
+``~/.cache/kinesphere``; ``KINESPHERE_CACHE=off`` turns it off. A folder another user owns or
+may write to is not used (its entries could be anyone's): the cache is then off.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ from __future__ import annotations
 import contextlib
 import os
 import re
+import stat
 import tempfile
 import time
 from pathlib import Path
@@ -50,8 +52,12 @@ class FileCache:
         self.max_total = max_total
 
     def folder(self) -> Path | None:
+        """This kind's folder, or None when the cache is off or its folders are not ours
+        alone."""
         root = cache_root()
-        return None if root is None else root / self.kind
+        if root is None or not (_ours(root) and _ours(root / self.kind)):
+            return None
+        return root / self.kind
 
     def get(self, key: str) -> bytes | None:
         """The entry of ``key`` (a hex digest), or None when absent, too large or unreadable."""
@@ -108,3 +114,15 @@ class FileCache:
                 break
             p.unlink(missing_ok=True)
             count, total = count - 1, total - size
+
+
+def _ours(folder: Path) -> bool:
+    """Whether only this user can have written in ``folder`` (or it does not exist yet, and
+    will be made by this user)."""
+    try:
+        st = folder.stat()
+    except FileNotFoundError:
+        return True
+    except OSError:
+        return False
+    return st.st_uid == os.getuid() and not st.st_mode & (stat.S_IWGRP | stat.S_IWOTH)

@@ -14,6 +14,7 @@ from __future__ import annotations
 import functools
 import hashlib
 import io
+import math
 from importlib.metadata import version
 from pathlib import Path
 from typing import Any, Final
@@ -143,14 +144,70 @@ def read_urdf(text: str) -> UrdfTree:
     text was read before by this reader. yourdfpy's errors pass through unchanged."""
     key = _key(text)
     cached = CACHE.get(key)
-    if cached is not None:
-        try:
-            return UrdfTree(_DECODER.decode(cached))
-        except (msgspec.DecodeError, ValueError, TypeError):
-            pass  # written by a broken run or damaged on disk: read the text again
-    robot = _parse(text)
-    CACHE.put(key, _encoded(robot))
+    robot = None if cached is None else _unsealed(cached)
+    if robot is None:
+        robot = _parse(text)
+        CACHE.put(key, _sealed(robot))
     return UrdfTree(robot)
+
+
+def _sealed(robot: UrdfRobot) -> bytes:
+    """A cache entry: the records, after the SHA-256 of their bytes."""
+    payload = _encoded(robot)
+    return hashlib.sha256(payload).digest() + payload
+
+
+def _unsealed(entry: bytes) -> UrdfRobot | None:
+    """The records of a cache entry, or None (the text is then read again) when the entry is
+    not whole (damaged on disk, cut short, written by a run that broke) or not well formed.
+    The joint limits an agent keeps to come from here: a wrong entry must never be used."""
+    digest, payload = entry[:32], entry[32:]
+    if hashlib.sha256(payload).digest() != digest:
+        return None
+    try:
+        robot = _DECODER.decode(payload)
+    except (msgspec.DecodeError, ValueError, TypeError):
+        return None
+    return robot if _well_formed(robot) else None
+
+
+def _shaped(a: Array | None, *shapes: tuple[int, ...]) -> bool:
+    return a is None or (a.shape in shapes and bool(np.isfinite(a).all()))
+
+
+def _finite(*values: float | None) -> bool:
+    return all(v is None or math.isfinite(v) for v in values)
+
+
+def _well_formed(robot: UrdfRobot) -> bool:
+    """Every array of the shape yourdfpy gives it, every number finite, no limit upside
+    down: what the roles index and trust without checking again."""
+    for link in robot.links:
+        i = link.inertial
+        if i is not None and not (_shaped(i.origin, (4, 4)) and _shaped(i.inertia, (3, 3))
+                                  and _finite(i.mass)):
+            return False
+        for shape in (*link.visuals, *link.collisions):
+            g, m = shape.geometry, shape.material
+            if not (_shaped(shape.origin, (4, 4))
+                    and (m is None or _shaped(m.rgba, (4,)))
+                    and (g is None or (
+                        (g.box is None or _shaped(g.box.size, (3,)))
+                        and (g.cylinder is None or _finite(g.cylinder.radius, g.cylinder.length))
+                        and (g.sphere is None or _finite(g.sphere.radius))
+                        and (g.mesh is None or _shaped(g.mesh.scale, (1,), (3,)))))):
+                return False
+    if not all(_shaped(m.rgba, (4,)) for m in robot.materials):
+        return False
+    for j in robot.joints:
+        lim, mim = j.limit, j.mimic
+        if not (_shaped(j.origin, (4, 4)) and _shaped(j.axis, (3,))
+                and (lim is None or (_finite(lim.effort, lim.velocity, lim.lower, lim.upper)
+                                     and (lim.lower is None or lim.upper is None
+                                          or lim.lower <= lim.upper)))
+                and (mim is None or _finite(mim.multiplier, mim.offset))):
+            return False
+    return True
 
 
 def _key(text: str) -> str:
@@ -164,9 +221,10 @@ def _key(text: str) -> str:
 @functools.cache
 def _reader() -> tuple[bytes, ...]:
     """What the cached records depend on besides the text: this module's code and the
-    versions of kinesphere and yourdfpy (read without importing yourdfpy)."""
-    return (Path(__file__).read_bytes(), version("kinesphere").encode(),
-            version("yourdfpy").encode())
+    versions of kinesphere, yourdfpy and what yourdfpy parses with (lxml, NumPy), read
+    without importing them."""
+    return (Path(__file__).read_bytes(),
+            *(version(d).encode() for d in ("kinesphere", "yourdfpy", "lxml", "numpy")))
 
 
 def _encoded(robot: UrdfRobot) -> bytes:

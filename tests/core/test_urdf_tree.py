@@ -15,6 +15,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import msgspec
 import numpy as np
 import pytest
 import yourdfpy
@@ -116,7 +117,8 @@ def test_records_equal_yourdfpy_read_and_cached(source: str, cache: Path) -> Non
     assert path is not None
     text = path.read_text(encoding="utf-8")
     _assert_as_yourdfpy(text)  # a fresh read
-    assert len(list(cache.iterdir())) == 1
+    (entry,) = cache.iterdir()
+    assert urdf_tree._unsealed(entry.read_bytes()) is not None, "whole and well formed"
     _assert_as_yourdfpy(text)  # the same, decoded from the cache
     assert read_urdf(text) == read_urdf(text)
 
@@ -201,3 +203,53 @@ def test_a_warm_load_imports_no_yourdfpy(cache: Path) -> None:
                            check=True, env=env, cwd=ROOT) for _ in range(2)]
     assert json.loads(runs[0].stdout) == ["yourdfpy", "trimesh", "scipy", "networkx"]  # cold
     assert json.loads(runs[1].stdout) == []
+
+
+def _with_joints(robot: urdf_tree.UrdfRobot, **changes: Any) -> urdf_tree.UrdfRobot:
+    """``robot`` with every limited joint's limit (or, given ``origin``, every joint's origin)
+    changed."""
+    def changed(j: urdf_tree.UrdfJoint) -> urdf_tree.UrdfJoint:
+        if "origin" in changes:
+            return msgspec.structs.replace(j, origin=changes["origin"])
+        if j.limit is None:
+            return j
+        return msgspec.structs.replace(j, limit=msgspec.structs.replace(j.limit, **changes))
+    return msgspec.structs.replace(robot, joints=tuple(map(changed, robot.joints)))
+
+
+def test_an_entry_is_used_only_whole_and_well_formed(cache: Path) -> None:
+    """The joint limits an agent keeps to come through here: an entry changed on disk, or
+    one sealed right but not of yourdfpy's shapes (a run that broke), is never used — the
+    text is read again and the entry written anew, never a wrong limit nor a crash later."""
+    text = TOY_EURDF.read_text()
+    truth = read_urdf(text)
+    (entry,) = cache.iterdir()
+    sealed = entry.read_bytes()
+    robot = truth.robot
+    wide = urdf_tree._encoded(_with_joints(robot, lower=-100.0, upper=100.0))
+    bad = {
+        "a limit changed on disk": sealed[:32] + wide,
+        "cut short": sealed[:-7],
+        "an origin of two numbers": urdf_tree._sealed(
+            _with_joints(robot, origin=np.array([1.0, 2.0]))),
+        "a limit upside down": urdf_tree._sealed(_with_joints(robot, lower=1.0, upper=-1.0)),
+        "a limit not finite": urdf_tree._sealed(_with_joints(robot, upper=float("inf"))),
+    }
+    for what, data in bad.items():
+        entry.write_bytes(data)
+        assert read_urdf(text) == truth, what
+        assert entry.read_bytes() == sealed, f"{what}: written anew"
+    assert load_eurdf(TOY_EURDF).limits == load_eurdf(TOY_EURDF).limits
+
+
+def test_a_cache_others_may_write_to_is_not_used(cache: Path) -> None:
+    """Entries in a folder another user may write to could be anyone's: none is read or
+    written there."""
+    cache.mkdir(parents=True)
+    cache.chmod(0o777)
+    text = TOY_EURDF.read_text()
+    read_urdf(text)
+    assert list(cache.iterdir()) == []
+    cache.chmod(0o755)
+    read_urdf(text)
+    assert len(list(cache.iterdir())) == 1
