@@ -272,11 +272,11 @@ class FleetHost:
                 otg = joints[i]
                 if otg.following:  # the followers took the step: their output is the setpoint
                     servo = setpoints[i]
-                    if servo is not None:
-                        servo[:] = otg.position
-                        continue
                     try:
-                        commands[i](otg.position, AT_REST)
+                        if servo is not None:
+                            servo[:] = otg.position
+                        else:
+                            commands[i](otg.position, AT_REST)
                     except Exception as exc:  # reported for this robot; the others step on
                         failures[i] = exc
                     continue
@@ -321,7 +321,9 @@ class FleetHost:
         if any(ledgered):  # their glides end at once, unless a body touches (the guard looks)
             datas = self._datas
             for i, flag in enumerate(ledgered):
-                if flag and (failures[i] is not None or datas[i].ncon):  # type: ignore[attr-defined]
+                data = datas[i]  # a body that is not MuJoCo's is watched by its guard
+                if flag and (failures[i] is not None or data is None
+                             or data.ncon):  # type: ignore[attr-defined]
                     ledgered[i] = False
             self.ledger.glided(np.array(ledgered), time.monotonic())
         for i, (agent, failure) in enumerate(zip(self.agents, failures, strict=True)):
@@ -395,6 +397,8 @@ class FleetHost:
                            for b in bodies]
         self._datas = [b.data if isinstance(b, MujocoBody) else None for b in bodies]
         self._stops = HardStops([b for b in bodies if isinstance(b, MujocoBody)])
+        self._ledgered[:] = [False] * len(bodies)  # each robot's own end of step, until
+        # its next glide on the new bodies
 
     def close(self) -> None:
         """Stop the loop and every robot (the session stays open: the caller owns it)."""
