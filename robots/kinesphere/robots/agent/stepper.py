@@ -85,8 +85,8 @@ class Stepper:
             self._calls = [b.simulator() for b in bodies]
         self._errors = [None] * len(bodies)
         self._running = []
-        if not self._helpers:
-            self._run(range(len(bodies)))
+        if not self._helpers:  # nothing to balance: no clock either
+            _run_all(self._calls, self._errors)
             return
         key = (share, *(id(b) for b in bodies))
         self._ticks += 1
@@ -134,9 +134,6 @@ class Stepper:
 
     def _run(self, indices: Sequence[int]) -> None:
         bodies, calls, errors, cost = self._bodies, self._calls, self._errors, self._cost
-        if not self._helpers:  # nothing to balance: no clock either
-            _run_all(calls, errors)
-            return
         clock = time.perf_counter
         for i in indices:
             t0 = clock()
