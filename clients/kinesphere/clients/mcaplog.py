@@ -34,6 +34,7 @@ from mcap.records import Message as McapMessage
 from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 
+from kinesphere.closing import Closable
 from kinesphere.errors import KinesphereError
 from kinesphere.protocol import MESSAGE_TYPES, PROTOCOL_VERSION, AnyMessage, Message
 
@@ -78,7 +79,7 @@ def stamp_of(msg: Message) -> int | None:
     return None
 
 
-class McapWriter:
+class McapWriter(Closable):
     """Writes messages to an MCAP file; :meth:`close` finishes it (summary, index, CRCs)."""
 
     def __init__(self, path: str | Path, metadata: dict[str, str] | None = None) -> None:
@@ -126,12 +127,6 @@ class McapWriter:
     def close(self) -> None:
         self._w.finish()  # type: ignore[no-untyped-call]
         self._f.close()
-
-    def __enter__(self) -> McapWriter:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
 
 
 @dataclass(frozen=True)

@@ -47,6 +47,7 @@ import msgspec
 import numpy as np
 import zenoh
 
+from kinesphere.closing import Startable
 from kinesphere.configfile import load_toml
 from kinesphere.errors import KinesphereError
 from kinesphere.keyexpr import Keys, check_segment
@@ -134,7 +135,7 @@ def check_fleet(robots: Sequence[RobotSpec]) -> None:
         seen.add(r.robot_id)
 
 
-class FleetHost:
+class FleetHost(Startable):
     """Robots stepped together by one loop (module text); ``options`` apply to every robot
     (each robot's groups come from its :class:`RobotSpec`). ``helpers``: physics threads
     beside the loop's own (None: one per further core)."""
@@ -422,12 +423,6 @@ class FleetHost:
                 agent.close()
             except Exception:
                 log.exception("fleet host: closing robot %s failed", agent.robot_id)
-
-    def __enter__(self) -> FleetHost:
-        return self.start()
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
 
 
 def _guarded(call: Callable[[], Exception | None]) -> Exception | None:

@@ -29,6 +29,7 @@ import msgspec
 import numpy as np
 import zenoh
 
+from kinesphere.closing import Startable
 from kinesphere.errors import KinesphereError
 from kinesphere.keyexpr import Keys
 from kinesphere.protocol import (
@@ -64,7 +65,7 @@ log = logging.getLogger(__name__)
 
 
 
-class Agent:
+class Agent(Startable):
     """One robot: a body and its Controller, safety rules, lease, databank resolver, Zenoh face.
 
     ``body`` defaults to ``options.body`` made for ``platform`` (``body.py``'s registry).
@@ -195,12 +196,6 @@ class Agent:
         self.controller.body.close()
         log.info("agent %s down after %d steps (%d slips)", self.robot_id, self.stats.steps,
                  self.stats.slips)
-
-    def __enter__(self) -> Agent:
-        return self.start()
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
 
     # --- network callbacks (Zenoh threads) -----------------------------------------------------
 

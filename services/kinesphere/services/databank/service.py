@@ -32,6 +32,7 @@ from typing import Any
 
 import zenoh
 
+from kinesphere.closing import Startable
 from kinesphere.errors import KinesphereError, choices, did_you_mean
 from kinesphere.keyexpr import EXACT, KEYS, Keys, check_segment
 from kinesphere.platforms.platform import platform_names
@@ -74,7 +75,7 @@ def changed_key(keys: Keys, platform: str) -> str:
     return keys.changed(platform)
 
 
-class DatabankService:
+class DatabankService(Startable):
     """Serve ``ecls`` (platform name -> Ecl) on ``session`` between :meth:`start` and :meth:`close`.
 
     The caller owns the session and closes it after this service. ``writes_enabled`` lets
@@ -176,12 +177,6 @@ class DatabankService:
             except zenoh.ZError as exc:  # the session may already be closed
                 log.debug("undeclare failed: %s", exc)
         self._entities.clear()
-
-    def __enter__(self) -> DatabankService:
-        return self.start()
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
 
     def ecl(self, platform: str) -> Ecl:
         """The ECL serving ``platform`` right now (replaced after each record)."""

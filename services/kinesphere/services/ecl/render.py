@@ -25,6 +25,7 @@ import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 from PIL import Image, ImageDraw, ImageFont  # noqa: E402
 
+from kinesphere.closing import Closable
 from kinesphere.errors import KinesphereError
 from kinesphere.laban import Direction, Horizontal, Level
 from kinesphere.platforms.mjcf import PlatformModel, model_of, platform_model  # noqa: E402
@@ -120,7 +121,7 @@ def _headless_gl() -> None:
         gl_context._MUJOCO_GL = "egl"
 
 
-class Camera:
+class Camera(Closable):
     """An off-screen renderer for one platform, reused for every frame of a picture."""
 
     def __init__(self, pm: PlatformModel, width: int, height: int, view: CameraView) -> None:
@@ -160,12 +161,6 @@ class Camera:
 
     def close(self) -> None:
         self.renderer.close()
-
-    def __enter__(self) -> Camera:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
 
 
 def _sky(far: np.ndarray) -> np.ndarray:

@@ -26,6 +26,7 @@ from typing import Any, Final
 from kinesphere import hints
 from kinesphere.clients import mcaplog
 from kinesphere.clients.gamepad.state import NEUTRAL, ControllerState
+from kinesphere.closing import Closable
 from kinesphere.errors import KinesphereError
 
 MAGIC: Final = mcaplog.GAMEPAD_RECORDING
@@ -35,7 +36,7 @@ TOPIC: Final = "gamepad/state"
 SCHEMA: Final = f"{mcaplog.SCHEMA_PREFIX}{ControllerState.__name__}"
 
 
-class TickRecorder:
+class TickRecorder(Closable):
     """Appends ticks to an MCAP file; use as a context manager or call :meth:`close`."""
 
     def __init__(self, path: str | Path, **header: Any) -> None:
@@ -50,12 +51,6 @@ class TickRecorder:
 
     def close(self) -> None:
         self._w.close()
-
-    def __enter__(self) -> TickRecorder:
-        return self
-
-    def __exit__(self, *_: object) -> None:
-        self.close()
 
 
 def save(path: str | Path, ticks: list[tuple[float, ControllerState]], **header: Any) -> None:
