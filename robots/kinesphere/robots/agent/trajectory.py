@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Generic, NoReturn, TypeVar
 
 import numpy as np
 from ruckig import Synchronization
@@ -33,6 +33,8 @@ LIMIT_SLACK = 1e-6
 """A request this close outside a limit is rounding, not a bad target."""
 DEFAULT_VELOCITY = 1.0
 """Velocity limit for a joint whose eURDF gives none (rad/s or m/s)."""
+
+T = TypeVar("T")
 
 
 @dataclass(frozen=True)
@@ -70,6 +72,21 @@ def clamp_margin(limit: JointLimit, margin: float = DEFAULT_MARGIN) -> float:
     """The margin used for ``limit``: at most 5 % of the range, so small joints keep a range."""
     span = limit.upper - limit.lower
     return min(margin, 0.05 * span) if math.isfinite(span) else 0.0
+
+
+class _Generated(Generic[T]):
+    """The Ruckig generator's attribute of the same name, read through the trajectory: its
+    commanded state is the generator's, delegated here once rather than by a property each."""
+
+    def __set_name__(self, owner: type, name: str) -> None:
+        self._name = name
+
+    def __get__(self, trajectory: JointTrajectory, owner: type | None = None) -> T:
+        value: T = getattr(trajectory.generator, self._name)
+        return value
+
+    def __set__(self, trajectory: JointTrajectory, value: NoReturn) -> NoReturn:
+        raise AttributeError(f"{self._name} is read-only: the generator's state")
 
 
 class JointTrajectory:
@@ -120,27 +137,13 @@ class JointTrajectory:
         """True while a trajectory (or a stop) is still being followed."""
         return self.generator.active
 
-    @property
-    def position(self) -> np.ndarray:
-        return self.generator.position
-
-    @property
-    def velocity(self) -> np.ndarray:
-        return self.generator.velocity
-
-    @property
-    def acceleration(self) -> np.ndarray:
-        return self.generator.acceleration
-
-    @property
-    def target(self) -> np.ndarray:
-        """Where the joints are going, or are held (after a stop: where they came to rest)."""
-        return self.generator.target
-
-    @property
-    def fault(self) -> str:
-        """Why the last motion was braked instead of followed ("" when it was not)."""
-        return self.generator.fault
+    position = _Generated[np.ndarray]()
+    velocity = _Generated[np.ndarray]()
+    acceleration = _Generated[np.ndarray]()
+    target = _Generated[np.ndarray]()
+    """Where the joints are going, or are held (after a stop: where they came to rest)."""
+    fault = _Generated[str]()
+    """Why the last motion was braked instead of followed ("" when it was not)."""
 
     @property
     def remaining(self) -> float:
