@@ -43,6 +43,20 @@ class Horizontal(Enum):
         return x, y
 
 
+RING: tuple[Horizontal, ...] = (
+    Horizontal.FORWARD,
+    Horizontal.LEFT_FORWARD,
+    Horizontal.LEFT,
+    Horizontal.LEFT_BACK,
+    Horizontal.BACK,
+    Horizontal.RIGHT_BACK,
+    Horizontal.RIGHT,
+    Horizontal.RIGHT_FORWARD,
+)
+"""The 8 horizontals counter-clockwise seen from above, from forward: the k-th is k*45 deg
+to the left (a stick's sectors, a contact sheet's columns)."""
+
+
 def _slug(h: Horizontal, lvl: Level) -> str:
     return f"{h.value}-{lvl.value}"
 

@@ -22,9 +22,9 @@ from kinesphere.clients.gamepad.limbs import (
 )
 from kinesphere.clients.gamepad.mapping import MapperState, map_controls
 from kinesphere.clients.gamepad.state import ControllerState
-from kinesphere.clients.gamepad.sticks import RING, Tuning
+from kinesphere.clients.gamepad.sticks import Tuning
 from kinesphere.errors import KinesphereError
-from kinesphere.laban import Direction, Level
+from kinesphere.laban import RING, Direction, Level
 from kinesphere.platforms.platform import platform_names
 from kinesphere.protocol import Catalogue
 from kinesphere.services.ecl.ecl import Ecl

@@ -32,8 +32,8 @@ from collections.abc import Iterable
 from enum import StrEnum
 
 from kinesphere.clients.gamepad.state import Action, ControllerState
-from kinesphere.clients.gamepad.sticks import RING, Tuning, body_xy, deflection, scaled, sector
-from kinesphere.laban import Direction, Level
+from kinesphere.clients.gamepad.sticks import Tuning, body_xy, deflection, scaled, sector
+from kinesphere.laban import RING, Direction, Level
 from kinesphere.protocol import Catalogue, Drive
 
 

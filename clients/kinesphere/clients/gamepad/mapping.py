@@ -19,8 +19,8 @@ from dataclasses import dataclass
 
 from kinesphere.clients.gamepad.drive import Steering, drive_of
 from kinesphere.clients.gamepad.state import Action, ControllerState
-from kinesphere.clients.gamepad.sticks import RING, Tuning, body_xy, deflection, scaled, sector
-from kinesphere.laban import Direction, Horizontal, Level
+from kinesphere.clients.gamepad.sticks import Tuning, body_xy, deflection, scaled, sector
+from kinesphere.laban import RING, Direction, Horizontal, Level
 from kinesphere.protocol import Drive
 
 

@@ -16,20 +16,10 @@ import math
 import msgspec
 
 from kinesphere.errors import KinesphereError
-from kinesphere.laban import Horizontal
+from kinesphere.laban import RING
 
 SECTOR_DEG = 45.0
-RING: tuple[Horizontal, ...] = (
-    Horizontal.FORWARD,
-    Horizontal.LEFT_FORWARD,
-    Horizontal.LEFT,
-    Horizontal.LEFT_BACK,
-    Horizontal.BACK,
-    Horizontal.RIGHT_BACK,
-    Horizontal.RIGHT,
-    Horizontal.RIGHT_FORWARD,
-)
-"""The 8 horizontals counter-clockwise seen from above, from forward; sector k is at k*45 deg."""
+"""Sector k of a stick is :data:`~kinesphere.laban.RING`'s k-th horizontal, at k*45 deg."""
 
 
 class Tuning(msgspec.Struct, frozen=True, forbid_unknown_fields=True):

@@ -27,7 +27,7 @@ from PIL import Image, ImageDraw, ImageFont  # noqa: E402
 
 from kinesphere.closing import Closable
 from kinesphere.errors import KinesphereError
-from kinesphere.laban import Direction, Horizontal, Level
+from kinesphere.laban import RING, Direction, Horizontal, Level
 from kinesphere.platforms.mjcf import PlatformModel, model_of, platform_model  # noqa: E402
 from kinesphere.protocol import Pose
 from kinesphere.services.ecl.ecl import Ecl
@@ -35,11 +35,7 @@ from kinesphere.services.options import SHEET_SIZE
 from kinesphere.sizes import size_name
 
 LEVELS = (Level.HIGH, Level.MIDDLE, Level.LOW)
-COLUMNS = (
-    Horizontal.PLACE, Horizontal.FORWARD, Horizontal.LEFT_FORWARD, Horizontal.LEFT,
-    Horizontal.LEFT_BACK, Horizontal.BACK, Horizontal.RIGHT_BACK, Horizontal.RIGHT,
-    Horizontal.RIGHT_FORWARD,
-)  # place, then counter-clockwise seen from above, starting forward
+COLUMNS = (Horizontal.PLACE, *RING)  # place, then counter-clockwise seen from above
 CONVENTION = "seen from the front-left: the robot's left is on the viewer's right"
 AZIMUTH = 205.0  # degrees: camera in front (+x) and a little to the robot's left (+y)
 ELEVATION = -12.0
