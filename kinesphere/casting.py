@@ -25,6 +25,7 @@ from typing import Final
 from kinesphere.notation import Cell
 from kinesphere.protocol import BodyWord, SpatialCommand
 from kinesphere.scores import COLUMNS, Keyframe
+from kinesphere.sizes import FAR
 
 PARTS: Final = {
     "head": ("head", "neck"),
@@ -35,7 +36,6 @@ PARTS: Final = {
 }
 """Score column -> the body-vocabulary words (limb, origin) that perform it."""
 ARM_COLUMNS: Final = ("right elbow", "right wrist", "left elbow", "left wrist")
-FAR: Final = 3.0
 
 
 @dataclass(frozen=True)
@@ -61,7 +61,7 @@ class Casting:
     roles: tuple[Role, ...]
     skipped: Mapping[str, str] = field(default_factory=dict)
     turns: bool = False
-    far: float = FAR
+    far: float = float(FAR)
 
     def chains(self) -> list[list[Role]]:
         """The roles grouped as a databank answers them together: the head, each arm's parts
@@ -108,5 +108,5 @@ def cast(platform: str, vocabulary: Sequence[BodyWord], base_kind: str,
         taken[segment] = column
         note = "; ".join(n for n in (limb.note, origin.note) if n)
         roles.append(Role(column, limb_word, origin_word, segment[0], segment[1], note))
-    far = float(max(sizes)) if sizes else FAR
+    far = float(max(sizes) if sizes else FAR)
     return Casting(platform, tuple(roles), skipped, base_kind not in ("", "fixed"), far)

@@ -8,11 +8,16 @@ base by the excess (``(s - k_smax) * step`` metres) when the platform can move.
 from __future__ import annotations
 
 import math
+from typing import Final
 
 from kinesphere.errors import KinesphereError
 
-NAMED_SIZES: dict[str, int] = {"near": 1, "mid": 2, "middle": 2, "far": 3}
-DEFAULT_SIZES: tuple[int, ...] = (1, 2, 3)
+NEAR: Final = 1
+MID: Final = 2
+FAR: Final = 3
+"""The stored sizes by name: near, mid and far reach (far is ``k_smax`` of a default VSAM)."""
+NAMED_SIZES: dict[str, int] = {"near": NEAR, "mid": MID, "middle": MID, "far": FAR}
+DEFAULT_SIZES: tuple[int, ...] = (NEAR, MID, FAR)
 MAX_TRANSLATION = 10.0
 """Metres: the largest base translation one answer (or compound) may carry, whatever the size."""
 DEFAULT_BEYOND = 20
@@ -47,9 +52,9 @@ def parse_size(value: object) -> float:
 
 def size_name(size: float) -> str:
     """Human name of a size: near, mid, far, beyond(+x) or the number itself."""
-    names = {1.0: "near", 2.0: "mid", 3.0: "far"}
+    names: dict[float, str] = {NEAR: "near", MID: "mid", FAR: "far"}
     if size in names:
         return names[size]
-    if size > 3.0:
-        return f"beyond (+{size - 3.0:g})"
+    if size > FAR:
+        return f"beyond (+{size - FAR:g})"
     return f"{size:g}"

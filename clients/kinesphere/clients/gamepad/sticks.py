@@ -17,6 +17,7 @@ import msgspec
 
 from kinesphere.errors import KinesphereError
 from kinesphere.laban import RING
+from kinesphere.sizes import FAR
 
 SECTOR_DEG = 45.0
 """Sector k of a stick is :data:`~kinesphere.laban.RING`'s k-th horizontal, at k*45 deg."""
@@ -34,7 +35,7 @@ class Tuning(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     """Deflection that counts as the rim: size far (full drive for the base)."""
     trigger_threshold: float = 0.25
     """A trigger pulled past this chooses its level."""
-    far_size: float = 3.0
+    far_size: float = float(FAR)
     """Size at the rim (the VSAM's largest stored size, far)."""
     beyond_rate: float = 1.0
     """Size units per second added past far while "beyond" is held at the rim."""
