@@ -9,6 +9,7 @@ from typing import Final
 from kinesphere.errors import KinesphereError
 from kinesphere.keyexpr import DEFAULT_PREFIX
 from kinesphere.rmw_zenoh import check_distro
+from kinesphere.sizes import MAX_TRANSLATION
 
 DEFAULT_MARGIN = 0.01
 """Target clamp margin inside each limit, rad (or m); shrunk for joints with a tiny range
@@ -59,11 +60,6 @@ class Ros2BodyOptions:
                 raise KinesphereError("malformed", f"ROS 2 {what} must be > 0, got {v}")
 
 
-MAX_TRANSLATION_M = 10.0
-"""Metres of base translation one command may ask for: as far as the ECL answers in one
-pose, so the robot and its databank agree (``docs/protocol.md``, "Bounds")."""
-
-
 @dataclass(frozen=True)
 class AgentOptions:
     """How an agent runs; the single source of its defaults (``kinesphere agent`` reads them).
@@ -85,7 +81,9 @@ class AgentOptions:
     margin: float = DEFAULT_MARGIN
     body: str = BODY_KINDS[0]
     ros2: Ros2BodyOptions = Ros2BodyOptions()
-    max_translation_m: float = MAX_TRANSLATION_M
+    max_translation_m: float = MAX_TRANSLATION
+    """By default as far as the ECL answers in one pose, so the robot and its databank agree
+    (``docs/protocol.md``, "Bounds")."""
     strict_period: bool = False
     """Step only on the fixed schedule, so a command waits for the next tick (by default the
     loop runs the step that is due next as soon as a command arrives: ``pacing.py``)."""
