@@ -33,11 +33,10 @@ import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from kinesphere.eurdf import robot_root
+from kinesphere.eurdf import MAX_LINKS, robot_root
 from kinesphere.labels import invalid
 
 MAX_BYTES = 16 * 2**20  # a URDF file; the largest real ones are a few hundred KB
-MAX_LINKS = 256  # links (and joints) of one robot; the largest real ones have ~130
 NUMERIC = frozenset({
     "xyz", "rpy", "value", "ixx", "ixy", "ixz", "iyy", "iyz", "izz", "lower", "upper",
     "effort", "velocity", "size", "radius", "length", "scale", "multiplier", "offset",

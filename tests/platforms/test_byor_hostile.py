@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 from kinesphere.cli import main
-from kinesphere.eurdf import load_eurdf
+from kinesphere.eurdf import MAX_LINKS, load_eurdf
 from kinesphere.platforms.platform import load_platform
 from kinesphere.platforms.scaffold import new_platform
 
@@ -142,7 +142,7 @@ def _new_in_a_process(urdf: Path, out: Path) -> tuple[subprocess.CompletedProces
 
 
 def test_links_and_joints_are_bounded_with_a_clear_error_at_once(tmp_path: Path) -> None:
-    chain = package(tmp_path, arm(300, xyz="0 0 0.01"), "chain.urdf")
+    chain = package(tmp_path, arm(MAX_LINKS + 1, xyz="0 0 0.01"), "chain.urdf")
     root = LINK.format(name="hub", geometry="")
     spokes = "".join(
         LINK.format(name=f"s{i}", geometry="")
@@ -152,7 +152,7 @@ def test_links_and_joints_are_bounded_with_a_clear_error_at_once(tmp_path: Path)
     for urdf in (chain, star):
         done, seconds = _new_in_a_process(urdf, tmp_path / "out")
         assert done.returncode == 2, done.stderr[-500:]
-        assert "at most 256" in done.stderr and "Traceback" not in done.stderr
+        assert f"at most {MAX_LINKS}" in done.stderr and "Traceback" not in done.stderr
         assert seconds < 60, seconds
     nothing_in(tmp_path / "out")
 
