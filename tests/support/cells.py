@@ -159,10 +159,11 @@ class Tally:
 
 
 def measured(reports: list[dict[str, Any]], written: dict[str, dict[str, dict[str, list[str]]]],
-             laban_editor: ModuleType) -> dict[str, Tally]:
+             laban_editor: ModuleType, by: str = "robot") -> dict[str, Tally]:
     """Every robot's :class:`Tally` from ``--report`` files (the joint states it reported),
     by yourdfpy and LabanEditor, against the scores as ``json`` read them; a keyframe with no
-    state reported counts its cells as not written."""
+    state reported counts its cells as not written. ``by="platform"`` adds up the robots of
+    one platform (each played a different score)."""
     out: dict[str, Tally] = {}
     bodies: dict[str, tuple[MeasuredBody, dict[str, SegmentEnds]]] = {}
     for report in reports:
@@ -171,7 +172,7 @@ def measured(reports: list[dict[str, Any]], written: dict[str, dict[str, dict[st
                 body = MeasuredBody(robot["platform"])
                 bodies[robot["platform"]] = (body, segments(body))
             body, parts = bodies[robot["platform"]]
-            t = out.setdefault(robot["robot"], Tally())
+            t = out.setdefault(robot[by], Tally())
             t.performs = [c for c in robot["performs"] if c in parts and c != "head"]
             for kf in robot["keyframes"]:
                 raw = written[kf["gesture"]][kf["keyframe"]]

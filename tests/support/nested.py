@@ -24,7 +24,7 @@ import numpy as np
 import yourdfpy
 
 from kinesphere.laban import Direction
-from kinesphere.platforms.mjcf import platform_model
+from kinesphere.platforms.mjcf import PlatformModel, platform_model
 from kinesphere.platforms.platform import Platform, load_platform
 
 PIVOT_REACH = 0.05
@@ -206,11 +206,26 @@ def _clean(name: str, limb: str, values: Mapping[str, np.ndarray]) -> np.ndarray
     m, data = pm.model, mujoco.MjData(pm.model)
     of_limb = np.zeros(m.nbody, dtype=bool)  # body id -> part of the limb (a lookup, not isin)
     of_limb[[m.body(link).id for link in pm.platform.eurdf.limb(limb).links]] = True
-    n = len(next(iter(values.values())))
-    out = np.zeros(n, dtype=bool)
-    for i in range(n):
-        data.qpos[:] = pm.qpos({j: float(v[i]) for j, v in values.items()})
+    configurations = _qpos_rows(pm, values)
+    out = np.zeros(len(configurations), dtype=bool)
+    for i, qpos in enumerate(configurations):
+        data.qpos[:] = qpos
         mujoco.mj_kinematics(m, data)
         mujoco.mj_collision(m, data)
         out[i] = not of_limb[m.geom_bodyid[data.contact.geom[: data.ncon]]].any()
     return out
+
+
+def _qpos_rows(pm: PlatformModel, values: Mapping[str, np.ndarray]) -> np.ndarray:
+    """``pm.qpos`` of every sampled configuration, (n, nq), built column by column: neutral,
+    the sampled joints, every mimic joint following its leader as ``Eurdf.with_mimics`` says."""
+    n = len(next(iter(values.values())))
+    rows = np.tile(pm.qpos({}), (n, 1))
+    given: dict[str, float | np.ndarray] = {**pm.platform.neutral, **values}
+    for joint, column in values.items():
+        rows[:, pm.qpos_index[joint]] = column
+    for mimic in pm.platform.eurdf.mimics.values():
+        if mimic.leader in given:
+            rows[:, pm.qpos_index[mimic.joint]] = mimic.multiplier * given[mimic.leader] \
+                + mimic.offset
+    return rows
