@@ -10,15 +10,27 @@ from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Callable
 
 import mujoco
 import numpy as np
+import pytest
 from ruckig import Synchronization
 
 from kinesphere import zconfig
-from kinesphere.protocol import Ack, Catalogue, Command, Drive, SpatialCommand, decode, encode
+from kinesphere.protocol import (
+    Ack,
+    Catalogue,
+    Command,
+    Drive,
+    RobotState,
+    SpatialCommand,
+    decode,
+    encode,
+)
+from kinesphere.robots.agent import fleet as fleet_module
 from kinesphere.robots.agent.bodies import make_body
-from kinesphere.robots.agent.fleet import FleetHost, RobotSpec
+from kinesphere.robots.agent.fleet import FleetHost, RobotSpec, state_steps
 from kinesphere.robots.agent.follow import Followers
 from kinesphere.robots.agent.mujoco_body import HardStops, MujocoBody
 from kinesphere.robots.agent.otg import Otg
@@ -26,8 +38,8 @@ from kinesphere.robots.agent.pacing import STALL_NS
 from kinesphere.robots.agent.resolver import parts_key
 from kinesphere.robots.agent.runtime import Agent, AgentOptions
 from support.agents import DatabankProcess, far
-from support.network import Hub
-from support.wait import WAIT_S
+from support.network import KEYS, Hub
+from support.wait import WAIT_S, until
 
 DT = 0.002
 
@@ -365,3 +377,71 @@ def test_a_resting_fleet_robot_sees_no_stall_but_a_stalled_loop_ages_new_clocks(
 def _stage(data: bytes) -> tuple[int, str, str]:
     ack = decode(data, Ack)
     return ack.seq, str(ack.stage), ack.code
+
+
+def test_state_steps_group_the_robots_and_spread_the_groups() -> None:
+    """Each robot publishes in one step of the period; robots share a step in groups of at
+    most the burst (more only when the period has too few steps), the groups in different
+    steps, spread over the period."""
+    for robots, every, burst in ((1, 10, 16), (16, 10, 16), (17, 10, 16), (32, 10, 8),
+                                 (48, 10, 16), (5, 10, 2), (1024, 10, 16), (7, 1, 16)):
+        steps = state_steps(robots, every, burst)
+        assert len(steps) == robots and all(0 <= s < every for s in steps)
+        groups = sorted(set(steps))
+        sizes = [steps.count(s) for s in groups]
+        assert len(groups) == min(every, -(-robots // burst)), (robots, every, burst, steps)
+        assert max(sizes) <= max(burst, -(-robots // every)), (robots, every, burst, steps)
+        assert max(sizes) - min(sizes) <= 1, (robots, every, burst, steps)
+        gaps = np.diff([*groups, groups[0] + every])
+        assert gaps.max() - gaps.min() <= 1, (robots, every, burst, steps)
+
+
+def test_a_fleet_puts_the_states_of_a_group_after_composing_them_all(
+    hub: Hub, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Five robots, groups of two: every robot's state once per period, in the step
+    ``state_steps`` gives it; in each step every state due is composed before the first is
+    put (so Zenoh sends them as one batch), and a subscriber hears each one."""
+    session, endpoint = hub
+    monkeypatch.setattr(fleet_module, "STATE_BURST", 2)
+    heard: list[tuple[str, int]] = []
+    sub = session.declare_subscriber(
+        KEYS.state("*"), lambda s: heard.append((decode(s.payload, RobotState).robot_id,
+                                                 decode(s.payload, RobotState).seq)))
+    with zconfig.session(config=zconfig.loopback_config(endpoint)) as s:
+        specs = [RobotSpec("khepera", f"burst-{i}") for i in range(5)]
+        fleet = FleetHost(specs, s, AgentOptions(speed=0.0), helpers=0)
+        every = fleet.agents[0].publish_every
+        calls: list[tuple[str, str]] = []
+
+        def spied(name: str, robot_id: str, real: Callable[[], object]) -> Callable[[], object]:
+            def spy() -> object:
+                calls.append((name, robot_id))
+                return real()
+            return spy
+
+        for a in fleet.agents:
+            for name in ("compose_state", "put_state"):
+                monkeypatch.setattr(a, name, spied(name, a.robot_id, getattr(a, name)))
+        try:
+            fleet.declare()
+            expected = state_steps(5, every, 2)
+            assert expected == [0, 0, 3, 3, 6]
+            for pub in [a._publisher for a in fleet.agents]:
+                assert zconfig.wait_matching(pub)
+            heard.clear()
+            periods = 3
+            for step in range(periods * every):
+                calls.clear()
+                fleet.tick()
+                fleet.complete()  # the step's end: its states
+                due = [a.robot_id for a, k in zip(fleet.agents, expected, strict=True)
+                       if k == fleet.stats.begun % every]
+                assert calls == [("compose_state", r) for r in due] + \
+                    [("put_state", r) for r in due], (step, calls)
+            until(lambda: len(heard) >= periods * 5, WAIT_S, "every state heard")
+            assert sorted(heard) == sorted((a.robot_id, seq) for a in fleet.agents
+                                           for seq in range(1, periods + 1)), heard
+        finally:
+            fleet.close()
+            zconfig.undeclare(sub)

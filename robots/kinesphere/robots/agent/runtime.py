@@ -70,7 +70,7 @@ class Agent(Startable):
 
     ``body`` defaults to ``options.body`` made for ``platform`` (``body.py``'s registry).
     ``wake`` is set whenever something arrives for the loop (a fleet host shares one among its
-    robots); ``phase`` shifts the steps that publish state (a fleet host spreads them);
+    robots); ``phase`` shifts the steps that publish state (a fleet host groups them);
     ``stats`` are the loop's (a fleet host's, shared by its robots; else this agent's own);
     ``notify`` is called whenever something arrives for this robot (default: ``wake.set``; a
     fleet host also notes the robot, ``needs_cycle``); ``ledger``: where its robot time is
@@ -112,8 +112,8 @@ class Agent(Startable):
         self.publish_every = max(1, round(self.options.control_rate / self.options.state_rate))
         """Steps between two published states."""
         self.phase = phase
-        """Offsets the steps that publish state: a fleet host spreads its robots' states
-        over the steps instead of encoding them all in one."""
+        """Offsets the steps that publish state: a fleet host publishes its robots' states in
+        groups spread over the steps (``fleet.state_steps``)."""
         self._followed_only = False
         """The step in flight was taken by a fleet host's followers alone (:meth:`follow`)."""
         self._entities: list[Any] = []
@@ -421,6 +421,15 @@ class Agent(Startable):
         return status
 
     def publish(self) -> RobotState:
+        """Say the robot's state now: :meth:`compose_state`, then :meth:`put_state`."""
+        state = self.compose_state()
+        self.put_state()
+        return state
+
+    def compose_state(self) -> RobotState:
+        """The robot's state now, kept as ``last_state`` and encoded for :meth:`put_state`
+        (a fleet host composes the states due in a step first, then puts them one after the
+        other: Zenoh sends them in one batch)."""
         ctrl, conduct = self.controller, self.conduct
         status, detail = conduct.status()
         self._state_seq += 1
@@ -437,11 +446,16 @@ class Agent(Startable):
         )
         self.last_state = state
         if self._publisher is not None:
+            encode_into(state, self._payload)
+        return state
+
+    def put_state(self) -> None:
+        """Put the state :meth:`compose_state` encoded last."""
+        if self._publisher is not None:
             try:
-                self._publisher.put(encode_into(state, self._payload))
+                self._publisher.put(self._payload)
             except zenoh.ZError as exc:  # session closing or congested: the loop goes on
                 log.debug("state not published: %s", exc)
-        return state
 
     def cost_percentiles(self) -> tuple[float, float]:
         """Median and p99 step cost in seconds over the recent steps."""
