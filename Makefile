@@ -12,7 +12,9 @@ SRC    := kinesphere platforms robots services clients deploy tests bench
 export MUJOCO_GL ?= egl
 export SDL_VIDEODRIVER ?= dummy
 export SDL_AUDIODRIVER ?= dummy
-export PYTHONDONTWRITEBYTECODE := 1
+# Bytecode is cached in __pycache__ (git ignores it; hatchling leaves it out of the wheels):
+# without it every process the tests start compiles the tree again (~0.2 CPU-s for an agent's
+# imports, measured 0.74 -> 0.56 CPU-s).
 
 .PHONY: install demo test lint typecheck layers browser xserver bench soak sweep lock clean
 

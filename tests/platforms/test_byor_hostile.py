@@ -116,6 +116,42 @@ def test_no_file_is_written_more_readable_than_its_source(tmp_path: Path) -> Non
     assert stat.S_IMODE(made.folder.stat().st_mode) & 0o077 == 0
 
 
+def ascii_stl(path: Path, side: float) -> None:
+    """An ASCII STL of a tetrahedron with sides ``side`` m (MuJoCo reads none: converted)."""
+    tetra = [(0.0, 0.0, 0.0), (side, 0.0, 0.0), (0.0, side, 0.0), (0.0, 0.0, side)]
+    lines = ["solid tetra"]
+    for face in ((0, 2, 1), (0, 1, 3), (0, 3, 2), (1, 2, 3)):
+        lines += ["facet normal 0 0 0", "outer loop",
+                  *(f"vertex {x} {y} {z}" for x, y, z in (tetra[i] for i in face)),
+                  "endloop", "endfacet"]
+    path.write_text("\n".join([*lines, "endsolid tetra"]) + "\n")
+
+
+def test_a_mesh_changed_between_two_imports_in_one_process_is_read_again(
+    tmp_path: Path
+) -> None:
+    """A process converts a mesh file once for the robots that share it, unless it changed."""
+    urdf = package(tmp_path, arm(geometry=mesh("meshes/link.stl")))
+    ascii_stl(urdf.parent / "meshes" / "link.stl", 0.1)
+
+    def written(name: str) -> bytes:
+        made = new_platform(name, urdf, tmp_path / "out")
+        assert made.meshes.converted == 1 and made.meshes.hulls == 0
+        (stl,) = (made.folder / "meshes").iterdir()
+        return stl.read_bytes()
+
+    def side(stl: bytes) -> float:
+        (faces,) = struct.unpack("<I", stl[80:84])
+        return max(float(c) for k in range(faces)
+                   for c in struct.unpack("<12fH", stl[84 + 50 * k: 134 + 50 * k])[3:12])
+
+    first = written("first")
+    assert side(first) == pytest.approx(0.1)
+    assert written("again") == first
+    ascii_stl(urdf.parent / "meshes" / "link.stl", 0.25)
+    assert side(written("changed")) == pytest.approx(0.25)
+
+
 def test_names_from_the_package_cannot_break_the_files_written(tmp_path: Path,
                                                                capsys: pytest.CaptureFixture[str]
                                                                ) -> None:

@@ -29,6 +29,7 @@ from urllib.parse import unquote, urlparse
 import numpy as np
 
 from kinesphere.errors import KinesphereError
+from kinesphere.lru import Lru
 from kinesphere.platforms import origins
 
 MUJOCO_READS = (".stl", ".obj")
@@ -38,6 +39,16 @@ MAX_TOTAL = 512 * 2**20  # every mesh of one robot
 MAX_FACES = 200_000  # MuJoCo's limit for an STL file
 MIN_VERTICES = 4  # MuJoCo's least for a mesh
 STAND_IN = (0.01, 0.5)  # metres: the sides of a stand-in box, clamped
+MADE_BYTES = 128 * 2**20  # the STL files remembered by one process (see _MADE)
+
+Made = tuple[str, bytes]
+"""What a mesh became: ``"converted"`` or ``"hull"``, and the binary STL written."""
+_MADE: Lru[tuple[str, int, int, int, int], Made] = Lru(
+    1024, MADE_BYTES, lambda _key, made: len(made[1]))
+"""A file's (real path, device, inode, size, modification time in ns) -> what it became: a
+process that brings many robots (``make sweep``, a package's variants of one robot) reads,
+converts and hulls a mesh they share once (trimesh's COLLADA reader and the hull take most of
+``platform new``). Written only by this process, for files it read itself."""
 
 
 def refused(message: str) -> KinesphereError:
@@ -156,25 +167,35 @@ def _write(real: Path, name: str, out_dir: Path, result: Imported) -> str:
     format trimesh reads no triangle of (a COLLADA file of an unsupported kind)."""
     stem = re.sub(r"[^A-Za-z0-9_.-]", "_", real.stem)[:40] or "mesh"
     digest = hashlib.sha1(str(real).encode()).hexdigest()[:8]
-    mode = real.stat().st_mode & 0o644 | 0o600
+    st = real.stat()
+    mode = st.st_mode & 0o644 | 0o600
     suffix = real.suffix.lower()
     if suffix == ".stl" and _binary_stl_faces(real, name) is not None:
         target = out_dir / f"{stem}_{digest}.stl"
         _copy(real, target, mode)
         result.copied += 1
-    elif suffix in MUJOCO_READS and _fits(mesh := _load(real, name), name, suffix):
-        target = out_dir / f"{stem}_{digest}.stl"
-        _save(mesh, target, mode, name)
-        result.converted += 1
     else:
-        points = (_load(real, name).vertices if suffix in MUJOCO_READS
-                  else _points(real, name))
-        if len(points) < MIN_VERTICES:
+        key = (str(real), st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns)
+        kind, data = _MADE.get(key) or _MADE.put(key, _convert(real, name, suffix))
+        if not data:
             return ""
-        target = out_dir / f"{stem}_{digest}_hull.stl"
-        _save(_hull(points, name), target, mode, name)
-        result.hulls += 1
+        target = out_dir / f"{stem}_{digest}{'_hull' if kind == 'hull' else ''}.stl"
+        _write_new(target, mode, data)
+        result.converted += kind == "converted"
+        result.hulls += kind == "hull"
     return target.name
+
+
+def _convert(real: Path, name: str, suffix: str) -> Made:
+    """A mesh MuJoCo cannot read as it is, as binary STL: an ASCII STL or an OBJ that fits
+    converted, anything else the convex hull of its vertices (no STL: fewer than
+    MIN_VERTICES of them)."""
+    if suffix in MUJOCO_READS and _fits(mesh := _load(real, name), name, suffix):
+        return "converted", _stl(mesh, name)
+    points = _load(real, name).vertices if suffix in MUJOCO_READS else _points(real, name)
+    if len(points) < MIN_VERTICES:
+        return "hull", b""
+    return "hull", _stl(_hull(points, name), name)
 
 
 def _binary_stl_faces(path: Path, name: str) -> int | None:
@@ -247,9 +268,13 @@ def _hull(points: np.ndarray, name: str) -> Any:
         raise refused(f"cannot make a convex hull of mesh {name}: {exc}") from None
 
 
-def _save(mesh: Any, target: Path, mode: int, name: str) -> None:
+def _stl(mesh: Any, name: str) -> bytes:
     _bounded(name, len(mesh.faces), len(mesh.vertices))
-    data = mesh.export(file_type="stl")
+    data: bytes = mesh.export(file_type="stl")
+    return data
+
+
+def _write_new(target: Path, mode: int, data: bytes) -> None:
     fd = os.open(target, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW, mode)
     with os.fdopen(fd, "wb") as fh:
         fh.write(data)
