@@ -61,6 +61,7 @@ def run(sup: Supervisor, name: str, block: Transcript, endpoint: str, code: int)
 
 
 @pytest.mark.processes
+@pytest.mark.realtime  # the PackBot's arm arrives within --timeout, after the lease lapsed
 def test_the_command_lines_answers_are_as_shown(sup: Supervisor, tmp_path: Path) -> None:
     send, estop = section("docs/commands.md", "What the command line tells you")
     endpoint = router_hub(sup)
