@@ -162,7 +162,7 @@ class FleetHost(Startable):
         self.ledger = Ledger(len(robots), 1.0 / self.options.control_rate)
         """Every robot's robot time and when it last moved (``ledger.py``)."""
         self.agents: list[Agent] = []
-        every = max(1, round(self.options.control_rate / self.options.state_rate))
+        every = self.options.publish_every
         steps = state_steps(len(robots), every, STATE_BURST)
         try:
             for i, r in enumerate(robots):
@@ -189,7 +189,6 @@ class FleetHost(Startable):
         self._datas: list[object] = []
         """Each body's MjData (None for a body that is not MuJoCo's): whether it touches."""
         self._stops = HardStops([])
-        assert every == self.agents[0].publish_every
         self._due: list[list[Agent]] = [[] for _ in range(every)]
         """Robots whose state is due, by tick modulo the state period (``Agent.due``)."""
         for agent in self.agents:

@@ -106,3 +106,9 @@ class AgentOptions:
         for ok, message in checks:
             if not ok:
                 raise KinesphereError("malformed", message)
+
+    @property
+    def publish_every(self) -> int:
+        """Control steps between two published states (an agent's, and a fleet host's for
+        all its robots)."""
+        return max(1, round(self.control_rate / self.state_rate))

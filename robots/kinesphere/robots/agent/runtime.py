@@ -109,7 +109,7 @@ class Agent(Startable):
         self._joint_names = list(self.controller.joint_names)
         self._groups = list(self.options.groups)
         """Lists every state carries as they are (never changed: made once)."""
-        self.publish_every = max(1, round(self.options.control_rate / self.options.state_rate))
+        self.publish_every = self.options.publish_every
         """Steps between two published states."""
         self.phase = phase
         """Offsets the steps that publish state: a fleet host publishes its robots' states in
