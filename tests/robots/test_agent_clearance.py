@@ -16,10 +16,16 @@ from kinesphere.platforms.clearance import PATH_STEP, Clearance, Touch
 from kinesphere.platforms.mjcf import platform_model, robot_contacts
 from kinesphere.protocol import SpatialCommand
 from kinesphere.robots.agent.controller import Controller
-from kinesphere.robots.agent.guard import CHECK_GAP_S, Guard, make_guard
+from kinesphere.robots.agent.guard import CHECK_GAP_S, CHECKING, Guard, make_guard
 from kinesphere.robots.agent.mujoco_body import MujocoBody
 from kinesphere.services.ecl.ecl import Ecl
-from support.agents import AckWatch, CommandSender, DatabankProcess, running_agent
+from support.agents import (
+    AckWatch,
+    CommandSender,
+    DatabankProcess,
+    joints_close,
+    running_agent,
+)
 from support.network import Hub
 from support.wait import WAIT_S
 
@@ -373,5 +379,33 @@ def test_a_halted_target_sent_again_is_blocked_again_and_nothing_moves(
         acks.of("op", op.send(deadman=False), "holding")
         retry = op.send(part)
         assert acks.of("op", retry, "reached")
+        op.close()
+    acks.close()
+
+
+def test_a_move_braked_for_a_late_check_is_not_reached_until_the_check_is_in(
+    hub: Hub, databank: DatabankProcess
+) -> None:
+    """On a loaded host the guard's finding can come after the joints ran their unchecked
+    stretch and braked to rest: resting there is not arriving. No final answer while the check
+    waits (two seconds of robot time), then ``reached`` with the body at the pose."""
+    session, endpoint = hub
+    part = ("right_arm", "right_shoulder", "forward-middle", 3.0)
+    pose = databank.query("baxter", SpatialCommand(*part))
+    acks = AckWatch(session, "late-check")
+    with running_agent(endpoint, "baxter", robot_id="late-check") as (_agent, watch):
+        op = CommandSender(session, "late-check", sender="op")
+        with CHECKING:  # the worker waits for it: the finding comes when this block ends
+            seq = op.send(part)
+            acks.of("op", seq, "moving")
+            first = watch.after(seq, lambda s: True, "a state after the command")
+            rested = watch.wait(lambda s: s.seq >= first.seq + 100 and max(map(abs, s.qd)) < 1e-3,
+                                "two seconds of robot time on, at rest")
+            assert not joints_close(rested, pose.joints, 0.02)  # braked on the way
+            assert not set(acks.stages("op", seq)) & {"reached", "clamped", "blocked"}, \
+                acks.stages("op", seq)
+        acks.of("op", seq, "reached")
+        there = watch.wait(lambda s: joints_close(s, pose.joints, 0.02), "at the pose", start=-1)
+        assert there.status == "idle", there.detail
         op.close()
     acks.close()

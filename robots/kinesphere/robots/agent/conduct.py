@@ -208,7 +208,7 @@ class Conduct:
                 self.set(Status.ERROR, f"{fault} and holding")
         motion = self.acks.motion
         if (motion is not None and motion.moved and motion.target != _DRIVE
-                and not moving and self.servos_settled()):
+                and not moving and self.servos_settled() and not ctrl.deciding):
             changed = True
             why = ctrl.blocked(BLOCKED_TOL)
             if why:
@@ -548,7 +548,7 @@ class Conduct:
         reported: tuple[str, str] = reported_status(
             self._status, self._detail, estopped=self.safety.estopped,
             reachable=self.resolver.reachable, last_error=self.resolver.last_error,
-            moving=ctrl.moving, clamped=bool(ctrl.joints.clamped),
+            moving=ctrl.moving or ctrl.deciding, clamped=bool(ctrl.joints.clamped),
             settled=self.servos_settled,
             blocked=ctrl.blocked,  # its tolerance is BLOCKED_TOL
         )

@@ -74,6 +74,14 @@ class Controller:
         """A trajectory, drive or stop is still being followed."""
         return self._joints_otg.active or (self.base is not None and self.base.moving)
 
+    @property
+    def deciding(self) -> bool:
+        """The guard has still to decide the way of the move under way (its check or route is
+        not in, or waypoints are ahead): the joints may rest meanwhile, braked for a late
+        finding, yet the motion is not over (``Conduct.after_step``)."""
+        guard = self.guard
+        return guard is not None and (bool(guard.legs) or guard.pending)
+
     def move(self, joints: Mapping[str, float] | Aim, duration: float | None = None
              ) -> list[Clamp]:
         """Retarget the named joints (or a compiled :class:`Aim`), arriving no sooner than
