@@ -71,6 +71,31 @@ def test_retarget_mid_motion_is_continuous_and_jerk_limited() -> None:
     assert (pos[:, 0] <= 1.0).all() and (pos[:, 0] >= -1.0).all()
 
 
+def off_the_line(points: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
+    """The farthest any of ``points`` lies from the straight line through ``a`` and ``b``."""
+    d = (b - a) / np.linalg.norm(b - a)
+    rel = points - a
+    return float(np.max(np.linalg.norm(rel - np.outer(rel @ d, d), axis=1)))
+
+
+def test_straight_moves_one_after_another_each_keep_to_their_line() -> None:
+    """The guard checks the straight joint-space way from where the joints rest to the goal:
+    a straight move that Ruckig can phase-synchronise (here one velocity limit for all joints)
+    travels that line, the second and third as the first (a move that ended left ~1e-16 rad/s
+    in Ruckig's input, so the next fell back to time synchronisation, off its line)."""
+    even = [JointLimit(lim.name, lim.kind, lim.lower, lim.upper, 2.0) for lim in LIMITS]
+    traj = JointTrajectory(even, ACC, JERK, DT, [0.0, 0.0, 0.0])
+    for goal in ({"a": 0.9, "b": -1.5, "c": 0.4}, {"a": -0.7, "b": 1.2, "c": -0.3},
+                 {"a": 0.2, "b": 1.9, "c": 2.0}):
+        start = traj.position.copy()
+        traj.retarget(goal, straight=True)
+        pos, _, _ = run(traj, 3000)
+        assert not traj.moving
+        end = np.array(list(goal.values()))
+        np.testing.assert_allclose(traj.position, end, atol=1e-9)
+        assert off_the_line(pos, start, end) < 1e-9, goal
+
+
 def test_targets_are_clamped_with_margin_and_reported() -> None:
     traj = JointTrajectory(LIMITS, ACC, JERK, DT, [0.0, 0.0, 0.0])
     clamps = traj.retarget({"a": 1.7, "b": 0.5})

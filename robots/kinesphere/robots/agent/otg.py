@@ -317,6 +317,11 @@ class Otg:
         inp.synchronization = Synchronization.Time
         inp.target_position = list(self.target)
         inp.target_velocity = [0.0] * self.n
+        # at rest, exactly: the last output leaves ~1e-16 rad/s, enough for Ruckig to find
+        # no phase synchronisation for the next move and fall back to time synchronisation,
+        # off the straight way the guard checked
+        inp.current_velocity = [0.0] * self.n
+        inp.current_acceleration = [0.0] * self.n
         self.velocity[:] = 0.0
         self.acceleration[:] = 0.0
         return True
