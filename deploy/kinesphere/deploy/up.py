@@ -65,13 +65,34 @@ class _Stop(Exception):
     """SIGTERM/SIGHUP turned into an exception so every ``finally`` runs."""
 
 
-@contextmanager
-def _signals_raise() -> Iterator[None]:
-    def handler(signum: int, _frame: object) -> None:
-        raise _Stop(f"signal {signum}")
+class _Signals:
+    """SIGINT, SIGTERM and SIGHUP noted by the handler and acted on where ``up`` looks
+    (:meth:`check`: every poll of a wait, 0.2 s apart, and the end of each phase).
 
-    with handle_signals(handler, (signal.SIGTERM, signal.SIGHUP)):
-        yield
+    A handler that raises (Python's own for Ctrl-C) raises wherever the main thread is: in
+    the fork hooks that run while a child starts, which print the exception and drop it (the
+    Ctrl-C was lost and ``up`` ran on), or between a lock's acquire and its ``try``, which
+    leaves the lock held. A file being written is finished, not left half-written.
+    """
+
+    def __init__(self) -> None:
+        self.signum: int | None = None
+
+    def note(self, signum: int, _frame: object) -> None:
+        if self.signum is None:  # the first one decides; the rest arrive while stopping
+            self.signum = signum
+
+    def check(self) -> None:
+        """Raise KeyboardInterrupt for a noted Ctrl-C (exit 130), _Stop for the others."""
+        if self.signum == signal.SIGINT:
+            raise KeyboardInterrupt
+        if self.signum is not None:
+            raise _Stop(f"signal {self.signum}")
+
+    @contextmanager
+    def noted(self) -> Iterator[_Signals]:
+        with handle_signals(self.note, (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)):
+            yield self
 
 
 class Demo:
@@ -90,6 +111,7 @@ class Demo:
         self._t0 = time.monotonic()
         self._live: Live | None = None
         self._stopped: list[int] | None = None
+        self.signals = _Signals()
 
     # --- phases -----------------------------------------------------------------------------
 
@@ -109,6 +131,7 @@ class Demo:
         """Wait for ``cond`` while checking children and refreshing the table."""
         deadline = time.monotonic() + timeout
         while not cond():
+            self.signals.check()
             self.sup.check()
             if time.monotonic() > deadline:
                 raise KinesphereError("unavailable", f"timed out after {timeout:.0f} s: {what}")
@@ -228,15 +251,11 @@ class Demo:
     def shutdown(self) -> list[int]:
         """Stop children, then the hub; returns PIDs that survived (should be none).
 
-        A second Ctrl-C is ignored meanwhile: cleaning up takes at most the grace period.
+        A second Ctrl-C meanwhile is only noted: cleaning up takes at most the grace period.
         """
         if self._stopped is not None:
             return self._stopped
-        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
-        try:
-            codes = self.sup.stop_all()
-        finally:
-            signal.signal(signal.SIGINT, previous)
+        codes = self.sup.stop_all()
         undeclare(*getattr(self, "_subs", []))
         self.recorder.close()
         close_session(getattr(self, "_session", None))
@@ -254,7 +273,7 @@ class Demo:
         o.out.mkdir(parents=True, exist_ok=True)
         left: list[int] = []
         with ExitStack() as stack:
-            stack.enter_context(_signals_raise())
+            stack.enter_context(self.signals.noted())
             try:
                 self.start()
                 if not o.headless and self.console.is_terminal:
@@ -266,6 +285,7 @@ class Demo:
                     if self._live is None:
                         self.console.print(self._table())
                 self.settle()
+                self.signals.check()
                 if self._live is not None:
                     self._live.stop()
                     self._live = None
@@ -273,6 +293,7 @@ class Demo:
                 if not o.keep_running:
                     self.shutdown()  # the states are recorded: render on a quiet machine
                 self.pictures()
+                self.signals.check()
                 for rid, seen in self.recorder.problems().items():
                     for status, detail in seen.items():
                         self.console.log(f"[yellow]warning: {rid} reported {status}: {detail}")
