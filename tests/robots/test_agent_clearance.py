@@ -16,7 +16,7 @@ from kinesphere.platforms.clearance import PATH_STEP, Clearance, Touch
 from kinesphere.platforms.mjcf import platform_model, robot_contacts
 from kinesphere.protocol import SpatialCommand
 from kinesphere.robots.agent.controller import Controller
-from kinesphere.robots.agent.guard import CHECK_GAP_S, CHECKING, Guard, make_guard
+from kinesphere.robots.agent.guard import CHECK_GAP_S, CHECKING, UNCHECKED_S, Guard, make_guard
 from kinesphere.robots.agent.mujoco_body import MujocoBody
 from kinesphere.services.ecl.ecl import Ecl
 from support.agents import (
@@ -409,3 +409,32 @@ def test_a_move_braked_for_a_late_check_is_not_reached_until_the_check_is_in(
         assert there.status == "idle", there.detail
         op.close()
     acks.close()
+
+
+def test_a_late_check_never_lets_the_joints_run_into_a_touch_near_the_start() -> None:
+    """Back to neutral from the right upper arm Left-Middle and the forearm Left-Forward-Low,
+    the straight way touches 2 % along (the right wrist meets the left forearm). When the
+    finding comes within milliseconds the arm brakes before that; here it comes after the
+    joints' unchecked stretch (UNCHECKED_S of robot time, as on a loaded host), and still
+    they touch nothing on the way back and arrive."""
+    bent = ecl("baxter").compound([
+        SpatialCommand("right_upper_arm", "right_shoulder", "left-middle", 3),
+        SpatialCommand("right_forearm", "right_elbow", "left-forward-low", 3)], last_wins=True)
+    neutral = ecl("baxter").query("right_arm", "right_shoulder", "place-middle", 3)
+    ctrl, guard = baxter()
+    try:
+        ctrl.move(bent.joints)
+        seen, _ = run(ctrl, guard)
+        assert seen == set() and ctrl.fault() == ""
+        touch = guard.clearance.leg(ctrl.reading().q, goal_of(ctrl, neutral.joints))
+        assert isinstance(touch, Touch) and touch.at < 0.05, touch
+        with CHECKING:  # the worker waits for it: the finding comes after the stretch
+            ctrl.move(neutral.joints)
+            for _ in range(round(UNCHECKED_S / DT) + 500):
+                ctrl.step()
+                seen |= set(ctrl.body.contacts())
+        more, _ = run(ctrl, guard)
+        assert seen | more == set() and ctrl.fault() == "" and ctrl.blocked() == ""
+        assert_at(ctrl, neutral.joints)
+    finally:
+        guard.close()

@@ -96,6 +96,28 @@ def test_straight_moves_one_after_another_each_keep_to_their_line() -> None:
         assert off_the_line(pos, start, end) < 1e-9, goal
 
 
+@pytest.mark.parametrize("brake_after", [0.1, 0.5, 5.0])
+def test_the_course_ahead_is_where_the_steps_go_when_they_brake_then(brake_after: float) -> None:
+    """What the guard checks before a move's first step: the positions the joints take if
+    they brake ``brake_after`` s from now, as the steps then take them (to rest where the
+    brake ends; past the plan's end, the plan's end), mid-motion too."""
+    traj = JointTrajectory(LIMITS, ACC, JERK, DT, [0.0, 0.0, 0.0])
+    traj.retarget({"a": 0.9, "b": -1.5, "c": 2.0})
+    run(traj, 100)
+    traj.retarget({"a": -0.6, "b": 1.0})
+    course = traj.course(brake_after, 0.02)
+    steps = round(brake_after / DT)
+    pos, _, _ = run(traj, steps)
+    for k, q in enumerate(course[:-1]):  # every 0.02 s, as the steps went (up to the brake)
+        if 0 < k * 0.02 <= brake_after + 1e-9 and round(k * 0.02 / DT) <= len(pos):
+            np.testing.assert_allclose(q, pos[round(k * 0.02 / DT) - 1], atol=1e-9)
+    if traj.moving:
+        traj.stop()
+        while traj.moving:
+            traj.step()
+    np.testing.assert_allclose(course[-1], traj.position, atol=1e-9)
+
+
 def test_targets_are_clamped_with_margin_and_reported() -> None:
     traj = JointTrajectory(LIMITS, ACC, JERK, DT, [0.0, 0.0, 0.0])
     clamps = traj.retarget({"a": 1.7, "b": 0.5})

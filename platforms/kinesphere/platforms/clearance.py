@@ -106,6 +106,29 @@ class Clearance:
                 return Touch(pair[0], pair[1], t)
         return None
 
+    def path(self, points: np.ndarray, allowed: frozenset[tuple[str, str]] = frozenset()
+             ) -> Touch | None:
+        """Where the path through ``points`` (rows of joint vectors, joined by straight
+        pieces) first touches, or None: checked every PATH_STEP of the largest joint motion
+        along it and at its end, as :meth:`leg` checks one straight way (``at``: the share of
+        that motion gone)."""
+        if len(points) < 2:  # it stays where it starts
+            return None
+        along = np.concatenate(([0.0], np.cumsum(np.max(np.abs(np.diff(points, axis=0)),
+                                                         axis=1, initial=0.0))))
+        total = float(along[-1])
+        steps = max(1, int(np.ceil(total / PATH_STEP)))
+        marks = np.linspace(0.0, total, steps + 1)[1:]
+        piece = np.clip(np.searchsorted(along, marks, side="right") - 1, 0, len(points) - 2)
+        span = along[piece + 1] - along[piece]
+        share = np.divide(marks - along[piece], span, out=np.ones_like(span), where=span > 0)
+        samples = points[piece] + share[:, None] * (points[piece + 1] - points[piece])
+        for k, q in enumerate(samples, start=1):
+            pair = self.touching(q, allowed)
+            if pair is not None:
+                return Touch(pair[0], pair[1], k / steps)
+        return None
+
     def route(self, a: np.ndarray, b: np.ndarray) -> list[np.ndarray] | Touch:
         """Waypoints from ``a`` to ``b`` (the last is ``b``), each leg clear; or the touch that
         blocks the direct way when no route is found (see the module)."""

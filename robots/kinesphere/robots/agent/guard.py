@@ -5,7 +5,11 @@ floor) while a worker thread checks that way against the robot's collision geome
 finding comes a few milliseconds later, long before the limb is anywhere near the touch it
 predicts. On a loaded machine it may come later: the joints never run more than
 :data:`UNCHECKED_S` of robot time on an unchecked way, they brake and wait for the finding
-there (and go on once it is clear). A clear way goes on. A touching one is braked; where the
+there (and go on once it is clear). What they would run meanwhile, the plan for that long and
+then the brake to rest, is checked on the control thread before the first step (a course of a
+few dozen positions Ruckig computes ahead, a few collision checks): when it touches, they do
+not set out along it and the route is planned from where they rest, so how late the finding
+comes never decides whether they touch. A clear way goes on. A touching one is braked; where the
 joints come to rest the planner's waypoints start (planned from there, not from where the move
 began: the brake took them some way along), each leg followed from rest with
 phase-synchronised Ruckig, so the joints travel the straight lines that were checked, still
@@ -55,6 +59,10 @@ UNCHECKED_S = 0.1
 """s of robot time: how long the joints may move along a straight way still being checked
 before they brake for its finding (the check takes milliseconds on an idle machine; how late
 it comes under load must not decide how far the limb goes unchecked)."""
+COURSE_EVERY_S = 0.02
+"""s of robot time between two positions of a move's course ahead (:meth:`Guard.move`): the
+path between them is taken as straight (off the curve by ~0.2 mrad at the acceleration limit)
+and checked every PATH_STEP along it."""
 ON_WAY_TOL = 1e-6
 """rad (m): how far from a way found clear a new start or goal may lie and still be on it."""
 
@@ -88,6 +96,8 @@ class Guard:
 
     def __init__(self, clearance: Clearance, body: Body) -> None:
         self.clearance = clearance
+        self._near = Clearance(clearance.pm)
+        """The control thread's own checks (:meth:`move`; the worker's MjData is the worker's)."""
         self.body = body
         self.fault = ""
         """Why the joints were halted or refused ("" when they were not)."""
@@ -173,6 +183,15 @@ class Guard:
         # Only this thread writes the generation; the worker reads it under the lock and a
         # finding on an older one is dropped either way (_post, _take).
         self._generation += 1
+        near = self._near
+        if near.path(joints.course(self._unchecked * joints.dt, COURSE_EVERY_S),
+                     near.contacts(start)) is not None:
+            # what the joints would run before a late finding touches: no step along it, the
+            # route from where they rest (as if the finding had come before the first step)
+            joints.stop()
+            self._braked = self._replan = True
+            self._unchecked = 0
+            return clamps
         self._ask = Ask(self._generation, start, self._goal)  # handed over after the step
         return clamps
 

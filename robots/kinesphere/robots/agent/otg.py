@@ -31,6 +31,7 @@ from ruckig import (
     Result,
     Ruckig,
     Synchronization,
+    Trajectory,
 )
 
 if TYPE_CHECKING:
@@ -67,6 +68,15 @@ def _reason(failure: object) -> str:
     if not text:
         return repr(failure)
     return text[0].removeprefix("[ruckig]").strip().removesuffix("input:").strip(" ,:")
+
+
+def _calculated(ruckig: Ruckig, inp: InputParameter, trajectory: Trajectory) -> bool:
+    """Whether Ruckig calculated ``trajectory`` for ``inp`` (offline; it may raise, as
+    ``update`` may)."""
+    try:
+        return ruckig.calculate(inp, trajectory) in _WORKING
+    except Exception:  # RuckigError, or ValueError for codes the binding lacks
+        return False
 
 
 class Otg:
@@ -227,6 +237,56 @@ class Otg:
         self.active = self.n > 0  # Ruckig cannot step zero DoFs
         self.braking = False
         self.fault = ""
+
+    def course(self, brake_after: float, every: float) -> np.ndarray:
+        """Where the motion just planned takes the DoFs if it brakes ``brake_after`` s from
+        now: positions every ``every`` s along the plan up to then, then along the brake to
+        rest, the last where it ends (what the online steps will command, bit for bit at those
+        times: the same Ruckig input, calculated ahead). A plan Ruckig refuses is braked now,
+        as :meth:`step` would. Why: the guard checks this stretch before the first step of a
+        move whose way is still being checked (``guard.py``)."""
+        now = (self.position.tolist(), self.velocity.tolist(), self.acceleration.tolist())
+        ruckig, plan = Ruckig(self.n), Trajectory(self.n)
+        ahead = self._input(*now)
+        planned = False
+        if self.active and not self.braking:
+            planned = _calculated(ruckig, ahead, plan)
+            if not planned:  # as _recover: without synchronisation
+                ahead.synchronization = Synchronization.No
+                planned = _calculated(ruckig, ahead, plan)
+        if planned:
+            until = min(brake_after, plan.duration)
+            times = [*np.arange(0.0, until, every).tolist(), until]
+            points = [plan.at_time(t)[0] for t in times]
+            if until >= plan.duration:  # arrives before it would brake
+                return np.array(points)
+            now = plan.at_time(until)
+        else:
+            points = [now[0]]
+        brake = self._input(*now)
+        brake.control_interface = ControlInterface.Velocity
+        brake.synchronization = Synchronization.No
+        brake.minimum_duration = None
+        brake.target_velocity = [0.0] * self.n
+        if not _calculated(ruckig, brake, plan):
+            return np.array(points)
+        points += [plan.at_time(t)[0] for t in [*np.arange(every, plan.duration, every).tolist(),
+                                                 plan.duration]]
+        return np.array(points)
+
+    def _input(self, position: list[float], velocity: list[float],
+               acceleration: list[float]) -> InputParameter:
+        """A copy of the generator's input (its target, interface, limits) from the state
+        given (the binding copies none)."""
+        inp, out = self._inp, InputParameter(self.n)
+        for name in ("control_interface", "synchronization", "minimum_duration",
+                     "target_position", "target_velocity", "target_acceleration",
+                     "max_velocity", "max_acceleration", "max_jerk", "min_position",
+                     "max_position"):
+            setattr(out, name, getattr(inp, name))
+        out.current_position, out.current_velocity = position, velocity
+        out.current_acceleration = acceleration
+        return out
 
     @property
     def cruising(self) -> bool:

@@ -218,6 +218,11 @@ class JointTrajectory:
         if self.dof:
             self.generator.go_to(q, Synchronization.Phase)
 
+    def course(self, brake_after: float, every: float) -> np.ndarray:
+        """Where the motion just planned takes the joints if it brakes ``brake_after`` s from
+        now: positions every ``every`` s, the last where they come to rest (``Otg.course``)."""
+        return self.generator.course(brake_after, every)
+
     def reset(self, q: Values) -> None:
         """At rest at ``q`` (where the body was found), held there."""
         if self.dof:
