@@ -35,7 +35,7 @@ def test_a_flood_of_distinct_keys_is_bounded_per_identity() -> None:
     for i in range(3000):
         deny(f, "abc1", "nao-1", f"kinesphere/robot/x{i}/state")
     assert len(lines) == dn.BURST and f.denials == 3000
-    assert len(f._last) <= dn.MAX_ENTRIES
+    assert len(f._repeats) <= dn.MAX_ENTRIES
     deny(f, "abc2", "operator", "kinesphere/ecl/x/record")  # another identity is not muted
     assert lines[-1].startswith("access denied: Put (ingress) on kinesphere/ecl/x/record by "
                                 "CN=operator")

@@ -100,7 +100,6 @@ class DenialFilter:
     ) -> None:
         self.report = report
         self.passthrough = passthrough
-        self.clock = clock
         self._claim = claim
         self._background = background
         self._queue: queue.Queue[tuple[str, float]] = queue.Queue(MAX_QUEUED)
@@ -108,7 +107,9 @@ class DenialFilter:
         self._lock = threading.Lock()
         self._pending: Lru[str, str] = Lru(MAX_ENTRIES)
         """thread -> its last 'unauthorized' line, until Zenoh says the message was dropped"""
-        self._last: Lru[tuple[str, str, str], tuple[float, int]] = Lru(MAX_ENTRIES)
+        self._repeats = RateLog(logging.getLogger(__name__), every=SUPPRESS_S,
+                                max_keys=MAX_ENTRIES, clock=clock)
+        """Counts repeats of one (subject, action, key) denial; only its allow() is used."""
         self._subjects: Lru[str, str] = Lru(MAX_ENTRIES)
         """zid -> ACL subject; Zenoh names the subject only when it first evaluates a key."""
         # only its allow() is used: it counts, report() writes
@@ -174,14 +175,10 @@ class DenialFilter:
             subject = d["subject"] or self._subjects.peek(zid) or ""
             who = describe_subject(subject, zid) if subject else f"session {zid}"
             action, key = d["action"], d["key"]
-        ident = (subject, action, key)
-        now = self.clock()
-        last, suppressed = self._last.peek(ident) or (-1e18, 0)
-        if now - last < SUPPRESS_S:
-            self._last.put(ident, (last, suppressed + 1))
+        ok, suppressed = self._repeats.allow((subject, action, key))
+        if not ok:
             return
         more = f" (+{suppressed} more)" if suppressed else ""
-        self._last.put(ident, (now, 0))
         self._emit(_identity(who), f"access denied: {action} on {key} by {who}{more}")
 
     def _tls_refused(self, reason: str) -> None:
