@@ -17,7 +17,7 @@ import json
 import socket
 import threading
 import time
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Collection, Iterator, Mapping, Sequence
 from contextlib import AbstractContextManager, contextmanager
 from pathlib import Path
 from typing import Any, ParamSpec, Protocol
@@ -382,3 +382,34 @@ def unmatched(entities: Mapping[str, zenoh.Publisher | zenoh.Querier], timeout: 
     deadline = time.monotonic() + timeout
     return [name for name, entity in entities.items()
             if not wait_matching(entity, max(0.0, deadline - time.monotonic()))]
+
+
+def unseen(session: zenoh.Session, pattern: str, tokens: Collection[str],
+           timeout: float) -> list[str]:
+    """The liveliness ``tokens`` (keys within ``pattern``) not seen from ``session`` within
+    ``timeout`` seconds, sorted.
+
+    A publisher's match says only that *some* subscriber of its key is known here: with a peer
+    hub (which routes for nobody) that may be a recorder or a view on the hub while the link to
+    the robot is still being opened, so a put goes to them alone. A peer's token reaches this
+    session on the same path, after the declarations the peer made before it: seeing it means
+    its subscribers are known here too."""
+    wanted = set(tokens)
+    if not wanted:
+        return []
+    seen: set[str] = set()
+    changed = threading.Condition()
+
+    def on_token(sample: zenoh.Sample) -> None:
+        if sample.kind == zenoh.SampleKind.PUT:
+            with changed:
+                seen.add(str(sample.key_expr))
+                changed.notify_all()
+
+    sub = session.liveliness().declare_subscriber(pattern, on_token, history=True)
+    try:
+        with changed:
+            changed.wait_for(lambda: wanted <= seen, timeout)
+            return sorted(wanted - seen)
+    finally:
+        undeclare(sub)

@@ -71,7 +71,8 @@ def test_a_replay_every_robot_dropped_as_stale_says_so_and_names_restamp(
 def test_a_replay_nobody_answers_exits_1(hub: Hub, tmp_path: Path,
                                          capsys: pytest.CaptureFixture[str]) -> None:
     """A subscriber heard the commands (the replay's wait for listeners passes), but no robot
-    acknowledged any."""
+    acknowledged any: the replay waited for the robot's liveliness token too, and says it
+    never came."""
     path = recording(tmp_path / "session.mcap", "rp-none", 2, 0.02)
     with zconfig.session(config=zconfig.loopback_config(hub.endpoint)) as s:
         sub = s.declare_subscriber(KEYS.command("rp-none"), lambda sample: None)
@@ -80,7 +81,9 @@ def test_a_replay_nobody_answers_exits_1(hub: Hub, tmp_path: Path,
             assert main(["replay", str(path), "--connect", hub.endpoint]) == 1
         finally:
             zconfig.undeclare(sub)
-    assert "no robot answered any of the 2 command(s)" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "no robot answered any of the 2 command(s)" in err, err
+    assert "not seen alive within --wait 5 s: robot(s) rp-none" in err, err
 
 
 def test_an_interrupted_replay_says_so_and_exits_130(hub: Hub, tmp_path: Path) -> None:

@@ -49,7 +49,8 @@ def register(sub: Subcommands) -> None:
     p.add_argument("--max-gap", type=float, default=d.max_gap_s, metavar="S",
                    help="shorten a silence in the recording longer than S seconds to S "
                    f"(default {d.max_gap_s:g})")
-    add_wait(p, d.wait_s, "a subscriber on each recorded key before the first put")
+    add_wait(p, d.wait_s, "a subscriber on each recorded key, and each robot the commands "
+             "name to be seen alive, before the first put")
     add_identity(p)
     add_zenoh_arguments(p, OPERATOR)
 
@@ -95,7 +96,8 @@ def replay(args: argparse.Namespace) -> int:
     new, as yours (--sender). Only command and state keys under --prefix are replayed (another key
     refuses the whole file before anything is put), silences longer than --max-gap are shortened,
     and the file is read a chunk at a time, with every size bounded. Waits first for a subscriber on
-    each recorded key (--wait); fails when nobody listens on any. Then says what the robots answered
+    each recorded key and for each robot the commands name to be seen alive (--wait); fails
+    when nobody listens on any key. Then says what the robots answered
     to the commands put: exits 0 only when they acted on them and dropped or refused none (130 when
     stopped by Ctrl-C).
     """
@@ -114,6 +116,9 @@ def replay(args: argparse.Namespace) -> int:
     if done.unheard:
         print(f"nobody listened on {len(done.unheard)} recorded key(s): "
               f"{few(done.unheard, 10)}", file=sys.stderr)
+    if done.unseen:
+        print(f"not seen alive within --wait {args.wait:g} s: robot(s) "
+              f"{few(done.unseen, 10)}", file=sys.stderr)
     if done.interrupted:
         print(f"replay interrupted: {done.sent} {args.what} message(s) from {args.recording} "
               "put before it was stopped", file=sys.stderr)

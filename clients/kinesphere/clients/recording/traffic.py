@@ -20,10 +20,13 @@ streams the messages, so memory stays bounded whatever their number, and a silen
 recording longer than ``max_gap`` is shortened to it. It declares a publisher per key and
 waits until each has a subscriber before the first put: a put made before the subscribers'
 declarations reached this session goes nowhere, so the first messages of a replay would be
-lost. Commands go out as recorded, with their sender, session, ``seq`` and ``sent_ns``, on
-their recorded key: a robot that already heard that session drops them as stale (that is its
-ordering rule, not a fault), and behind the deploy's access control only the recorded sender
-may put them. ``restamp`` makes them the replaying operator's: sent now by ``sender`` on keys
+lost. A match may be any subscriber (a recorder, a view on a peer hub, which routes for
+nobody) while the link to the robot is still opening, so for a key naming a robot it also
+waits for that robot's liveliness token (:func:`kinesphere.zconfig.unseen`). Commands go
+out as recorded, with their sender, session, ``seq`` and ``sent_ns``, on their recorded
+key: a robot that already heard that session drops them as stale (that is its ordering
+rule, not a fault), and behind the deploy's access control only the recorded sender may put
+them. ``restamp`` makes them the replaying operator's: sent now by ``sender`` on keys
 signed with that name, each recorded session replaced by a fresh one (``seq`` kept, so the
 order within a session holds), which every robot takes as a new order.
 
@@ -72,7 +75,7 @@ from kinesphere.protocol import (
     decode_any,
     encode,
 )
-from kinesphere.zconfig import undeclare, unmatched
+from kinesphere.zconfig import undeclare, unmatched, unseen
 
 log = logging.getLogger(__name__)
 MAX_BYTES: Final = int(TrafficOptions.max_mb * 1e6)
@@ -265,6 +268,8 @@ class Replayed:
     commands: int = 0
     answers: Answers = field(default_factory=Answers)
     interrupted: bool = False
+    unseen: list[str] = field(default_factory=list)
+    """The robots its commands name whose liveliness token it had not seen when it began."""
 
 
 def replay_key(keys: Keys, topic: str, kind: type[Message]) -> str:
@@ -327,10 +332,12 @@ def replay(session: zenoh.Session, path: str | Path, kind: str = "commands",
            wait: float = WAIT_S, *, keys: Keys | None = None, sender: str | None = None,
            max_gap: float = MAX_GAP_S, answers_for: float = ANSWERS_MAX_S) -> Replayed:
     """Put the recording's ``kind`` messages back on their keys with the original timing
-    (commands as ``sender``'s new ones with ``restamp``), once each key has a subscriber or
-    ``wait`` seconds have passed; unavailable when no key has one by then. The robots'
+    (commands as ``sender``'s new ones with ``restamp``), once each key has a subscriber and
+    (unless ``answers_for`` is 0) each robot a command key names is seen alive, or ``wait``
+    seconds have passed; unavailable when no key has a subscriber by then. The robots'
     answers to the commands put are counted for at most ``answers_for`` seconds after the
-    last one (0: the caller does not count them)."""
+    last one (0: the caller does not count them, and puts to subscribers that are no
+    robots)."""
     if not speed > 0:
         raise KinesphereError("malformed", f"--speed must be > 0, got {speed}")
     if not wait >= 0:
@@ -362,12 +369,17 @@ def replay(session: zenoh.Session, path: str | Path, kind: str = "commands",
     try:
         if Command in found.topics.values():
             listener = session.declare_subscriber(keys.ack(WILDCARD), answers.on_sample)
+        deadline = time.monotonic() + wait
         for key in dict.fromkeys(put_on.values()):
             publishers[key] = _publisher(session, key)
         unheard = unmatched(publishers, wait)
         if len(unheard) == len(publishers):
             raise KinesphereError("unavailable", f"nobody listens on {few(unheard)} (waited "
                                   f"{wait:g} s): nothing replayed")
+        robots = addressed(keys, found.topics) if answers_for > 0 else []
+        missing = unseen(session, keys.alive_robot(WILDCARD), [keys.alive_robot(r) for r in robots],
+                         max(0.0, deadline - time.monotonic()))
+        not_alive = [keys.robot_id_of(token) for token in missing]
         due, last_ns = time.monotonic(), None
         for raw in messages(path):
             kind_of = found.topics.get(raw.topic)
@@ -381,7 +393,8 @@ def replay(session: zenoh.Session, path: str | Path, kind: str = "commands",
             due += gap / speed
             while (left := due - time.monotonic()) > 0:
                 if should_stop():
-                    return Replayed(sent, unheard, shortened, commands, answers, True)
+                    return Replayed(sent, unheard, shortened, commands, answers, True,
+                                    not_alive)
                 time.sleep(min(left, 0.05))
             if restamp and isinstance(msg, Command):
                 msg = _restamped(msg, me, clock, sessions)
@@ -400,7 +413,19 @@ def replay(session: zenoh.Session, path: str | Path, kind: str = "commands",
             answers.wait(should_stop, answers_for)
     finally:
         undeclare(*publishers.values(), listener)
-    return Replayed(sent, unheard, shortened, commands, answers, should_stop())
+    return Replayed(sent, unheard, shortened, commands, answers, should_stop(), not_alive)
+
+
+def addressed(keys: Keys, topics: dict[str, type[Message]]) -> list[str]:
+    """The robots named by the command keys among ``topics`` (not ``*``, not groups)."""
+    robots: dict[str, None] = {}
+    for topic, kind in topics.items():
+        if kind is Command:
+            try:
+                robots[keys.robot_id_of(topic)] = None
+            except KinesphereError:
+                continue  # every robot's key, or a group's
+    return list(robots)
 
 
 def _publisher(session: zenoh.Session, key: str) -> Any:
