@@ -75,6 +75,7 @@ class SdkPeer(Heard[dict[str, Any]]):
                  distro: str = "jazzy") -> None:
         super().__init__()
         self.events = self.heard
+        self.domain = domain
         env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "VIRTUAL_ENV")}
         env["PYTHONUNBUFFERED"] = "1"
         self._log = tempfile.TemporaryFile(mode="w+")  # the SDK's logging, for failures
@@ -107,6 +108,14 @@ class SdkPeer(Heard[dict[str, Any]]):
     def pub(self, name: str, topic: str, ros_type: str, fields: dict[str, Any],
             every: float | None = None) -> None:
         self.send(op="pub", name=name, topic=topic, type=ros_type, fields=fields, every=every)
+
+    def in_graph(self, pattern: str, pred: Callable[[str], bool], what: str) -> str:
+        """The first graph token under ``pattern`` that satisfies ``pred``, as the peer's own
+        liveliness subscriber (rmw_zenoh's graph cache) sees it: it comes once the peer's link
+        to the token's session is open."""
+        self.send(op="graph", pattern=pattern)
+        e = self.wait(lambda e: e["event"] == "token" and pred(e["key"]), what)
+        return str(e["key"])
 
     def explain(self) -> str:
         return f"from the ROS 2 peer ({len(self.events)} other events); its log: {self._stderr()}"

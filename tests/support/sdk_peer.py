@@ -25,6 +25,9 @@ both ways, Zenoh timestamp), ``sent`` and ``error`` events. In, ``op``:
   ``joint_trajectory_controller/joint_trajectory`` it hears, and with ``base`` integrates the
   ``cmd_vel`` Twist it hears into the pose it publishes on ``odom``; what it hears is emitted
   as ``msg`` events of ``<name>_traj`` and ``<name>_cmd_vel``;
+- ``graph``: ``pattern``: watch the ROS graph as rmw_zenoh's graph cache does, a liveliness
+  subscriber with history on ``pattern``; each token that appears is a ``token`` event (its
+  ``key``);
 - ``stop``: ``name``; ``quit``.
 """
 
@@ -133,6 +136,7 @@ class Peer:
         self.pubs: dict[str, Any] = {}
         self.repeats: dict[str, threading.Event] = {}
         self.robots: dict[str, tuple[list[Any], list[Any]]] = {}
+        self.graphs: list[Any] = []
 
     def _kw(self) -> dict[str, Any]:
         kw: dict[str, Any] = {"domain_id": self.domain, "router_ip": self.router[0],
@@ -280,6 +284,14 @@ class Peer:
         self.robots[name] = (subs, [p for p in (js, odom) if p is not None])
         emit(event="robot", name=name)
 
+    def graph(self, pattern: str) -> None:
+        def on_token(sample: zenoh.Sample) -> None:
+            if sample.kind == zenoh.SampleKind.PUT:
+                emit(event="token", key=str(sample.key_expr))
+
+        self.graphs.append(self.sdk.session.liveliness().declare_subscriber(
+            pattern, on_token, history=True))
+
     def stop(self, name: str) -> None:
         event = self.repeats.pop(name, None)
         if event is not None:
@@ -288,6 +300,8 @@ class Peer:
     def close(self) -> None:
         for name in list(self.repeats):
             self.stop(name)
+        for graph in self.graphs:
+            graph.undeclare()
         for sdk_sub, raw_sub in self.subs.values():
             raw_sub.undeclare()
             sdk_sub.close()
