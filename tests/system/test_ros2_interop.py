@@ -53,6 +53,8 @@ ROBOTS = {"baxter-1": "baxter", "packbot": "packbot"}
 """A fixed arm robot and a tracked base with flippers."""
 NODE = "/NN/%/%/kinesphere_bridge"
 """The end of the bridge node's liveliness token (rmw_zenoh's graph)."""
+JS_TOKEN = "/MP/%/%/kinesphere_bridge/%baxter_1%joint_states/"
+"""Part of the token of the bridge's publisher of baxter-1's joint states."""
 
 pytestmark = pytest.mark.processes
 
@@ -137,8 +139,10 @@ def site() -> Iterator[Site]:
         # every latched topic out before any ROS peer joins: the peers are late joiners
         graph = GraphWatch(watcher, 0)
 
-        def described(ts: set[str]) -> bool:  # the node's own token may come after its topics'
-            return any(t.endswith(NODE) for t in ts) and all(
+        def described(ts: set[str]) -> bool:
+            # every token the tests read from this snapshot: a liveliness subscriber's tokens
+            # trickle in, in no set order (the node's own may come after its topics')
+            return any(t.endswith(NODE) for t in ts) and any(JS_TOKEN in t for t in ts) and all(
                 any(f"%{r}%robot_description/" in t for t in ts) for r in ("baxter_1", "packbot"))
 
         tokens = sorted(graph.wait(described, "the bridge's node describing both robots"))
@@ -257,7 +261,7 @@ def test_ros2_peer_receives_every_robot_from_the_bridge(site: Site,
         sample = peer.sample("js")
         assert sample["attachment_len"] == 33
         assert sample["zenoh_ext"] == [sample["seq"], sample["source_ns"], sample["gid"]]
-        token = next(t for t in site.graph if "/MP/" in t and "%baxter_1%joint_states/" in t)
+        token = next(t for t in site.graph if JS_TOKEN in t)
         digest = xxhash.xxh3_128(token.encode()).digest()  # rmw_zenoh: low 64 bits, then high
         assert sample["gid"] == (digest[8:][::-1] + digest[:8][::-1]).hex()
         assert sample["timestamp_id"] == site.bridge_zid, "timestamped by the bridge's session"
