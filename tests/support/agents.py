@@ -220,11 +220,15 @@ def agent_process(endpoint: str, platform: str, robot_id: str) -> Iterator[subpr
 
 
 @contextmanager
-def running_fleet_host(endpoint: str, robots: list[RobotSpec], speed: float = 2.0
+def running_fleet_host(endpoint: str, robots: list[RobotSpec], speed: float = 2.0,
+                       query_timeout_s: float = AgentOptions.query_timeout_s,
                        ) -> Iterator[tuple[FleetHost, dict[str, StateWatch]]]:
-    """A fleet host in this process on its own session, and each robot's state stream."""
+    """A fleet host in this process on its own session, and each robot's state stream;
+    ``query_timeout_s`` bounds the robots' databank queries (a nested solve waits at least
+    ``SOLVE_TIMEOUT_S``)."""
     with zconfig.session(config=zconfig.loopback_config(endpoint)) as s:
-        fleet = FleetHost(robots, s, AgentOptions(speed=speed), helpers=1)
+        fleet = FleetHost(robots, s, AgentOptions(speed=speed, query_timeout_s=query_timeout_s),
+                          helpers=1)
         watches = {r.robot_id: StateWatch(s, r.robot_id) for r in robots}
         fleet.start()
         try:
