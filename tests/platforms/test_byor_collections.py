@@ -2,7 +2,9 @@
 (example-robot-data, pybullet's pybullet_data with its 1000 random objects, the Robotics
 Toolbox's rtb-data): ``platform new`` -> ``describe`` on every file, none left out by name,
 and ``ecl build`` on one body of each kind (an arm, a quadruped, a wheeled manipulator, a
-humanoid). ``make sweep`` builds every robot and prints the coverage table (docs/byor.md).
+humanoid; TIAGo's and Talos's arms, which tests/system/test_byor_e2e.py builds too, are built
+once per test run and shared). ``make sweep`` builds every robot and prints the coverage table
+(docs/byor.md).
 
 Asserted for every file: no traceback; a file that cannot be imported is refused with one
 error line and leaves nothing behind; a platform made is described; every mend is printed and
@@ -24,14 +26,14 @@ from kinesphere.eurdf import load_eurdf
 from kinesphere.labeller_names import is_finger_name
 from kinesphere.platforms.platform import load_platform
 from kinesphere.services.ecl.ik import LIMIT_MARGIN
-from support.byor import A1, IIWA, LAIKAGO, TIAGO, standing
-from support.sweep import OBJECTS, WRITTEN, Row, made, reason, sweep, urdfs
+from support.byor import A1, IIWA, LAIKAGO, TALOS, TIAGO, built_once, standing
+from support.sweep import OBJECTS, WRITTEN, Row, kept, made, reason, sweep, urdfs
 
 pytestmark = pytest.mark.processes  # a pool of two worker processes
 MIN_PER_LEG = 8
 MIN_ARM = 12  # of 26: a wheeled manipulator's arm keeps at least this many
 MIN_PROPOSED = 18  # of 26: a stretched 6-7 joint arm's proposed neutral keeps at least this
-HUMANOID = "talos_data/robots/talos_reduced.urdf"
+HUMANOID = TALOS
 # One body of each kind, built: (collection, file) -> the word in the alias of the limb to
 # build (its first such chain).
 SAMPLE = {
@@ -42,16 +44,47 @@ SAMPLE = {
 }
 
 
+# Of the sample, the bodies tests/system/test_byor_e2e.py builds too (the same URDF and arm):
+# built once per test run by ``built_once`` (the same commands the sweep runs) and shared;
+# the sweep's own folder for each is checked to be the same platform.
+BUILT_ONCE = {("erd", TIAGO): "tiago", ("erd", HUMANOID): "talos"}
+
+
 def _sample(row: Row) -> list[str]:
     word = SAMPLE.get((row["col"], row["rel"]))
     return [n for n, a in row["chains"].items() if word and word in a][:1]
 
 
+def _built_here(row: Row) -> list[str]:
+    return [] if (row["col"], row["rel"]) in BUILT_ONCE else _sample(row)
+
+
 @pytest.fixture(scope="module")
 def swept(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Path, list[Row]]]:
     parent = tmp_path_factory.mktemp("brought")
-    rows = sweep(urdfs(), parent, _sample)
+    rows = sweep(urdfs(), parent, _built_here)
+    found = by_rel(rows)
+    for key, name in BUILT_ONCE.items():
+        row = found[key]
+        (limb,) = row["limbs"] = _sample(row)
+        built = built_once(tmp_path_factory, name, key[1], row["chains"][limb])
+        _same_platform(parent / row["name"], built)
+        row.update(build=0, build_tb=None, kept=kept(built, [limb]))
     yield parent, rows
+
+
+def _same_platform(swept: Path, built: Path) -> None:
+    """The sweep's folder and the one built once hold the same platform: the same files, the
+    same eURDF, platform.toml and vsam.toml but for the name and the folder they mention."""
+    def text(folder: Path, file: str) -> str:
+        return (folder / file).read_text().replace(str(folder), "<folder>")
+
+    assert sorted(p.relative_to(swept).as_posix() for p in swept.rglob("*")) == sorted(
+        p.relative_to(built).as_posix().replace(built.name, swept.name)
+        for p in built.rglob("*") if p.suffix != ".sqlite")
+    for file in ("{}.eurdf", "platform.toml", "vsam.toml"):
+        mine = text(swept, file.format(swept.name)).replace(swept.name, built.name)
+        assert mine == text(built, file.format(built.name)), (swept, file)
 
 
 def by_rel(rows: list[Row]) -> dict[tuple[str, str], Row]:

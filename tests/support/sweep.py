@@ -109,9 +109,6 @@ def _listed(vsam: str, limb: str) -> bool:
 def build_one(folder: Path, limbs: list[str]) -> Row:
     """``ecl build`` of ``limbs`` (one process), then the pulls of Laban's 26 each (limb,
     origin) pair kept, read back from the databank written."""
-    from kinesphere.laban import Direction
-    from kinesphere.services.ecl.ecl import Ecl
-
     start = time.perf_counter()
     args = ["ecl", "build", str(folder), "--jobs", "1"]
     for limb in limbs:
@@ -120,12 +117,23 @@ def build_one(folder: Path, limbs: list[str]) -> Row:
     row: Row = {"build": code, "build_tb": tb, "build_err": err[-400:],
                 "build_s": time.perf_counter() - start, "kept": {}}
     if code == 0 and tb is None:
-        pulls = set(Direction.pulls())
-        for entry in Ecl.open(str(folder)).catalogue().limbs:
-            if entry.limb in limbs:  # the others are in the catalogue with their neutral only
-                n = sum(Direction.parse(d) in pulls for d in entry.directions)
-                row["kept"][entry.limb] = max(n, row["kept"].get(entry.limb, 0))
+        row["kept"] = kept(folder, limbs)
     return row
+
+
+def kept(folder: Path, limbs: list[str]) -> dict[str, int]:
+    """Per limb of ``limbs`` (labels), the most pulls of Laban's 26 one of its (limb, origin)
+    pairs kept, read back from the folder's databank."""
+    from kinesphere.laban import Direction
+    from kinesphere.services.ecl.ecl import Ecl
+
+    pulls = set(Direction.pulls())
+    found: dict[str, int] = {}
+    for entry in Ecl.open(str(folder)).catalogue().limbs:
+        if entry.limb in limbs:  # the others are in the catalogue with their neutral only
+            n = sum(Direction.parse(d) in pulls for d in entry.directions)
+            found[entry.limb] = max(n, found.get(entry.limb, 0))
+    return found
 
 
 def _import(item: tuple[int, str, str, Path, Path]) -> Row:

@@ -7,6 +7,7 @@ MuJoCo model at the joint values the agent reports)."""
 from __future__ import annotations
 
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -24,7 +25,7 @@ from kinesphere.platforms.mjcf import platform_model
 from kinesphere.platforms.platform import load_platform
 from kinesphere.protocol import SpatialCommand
 from support.agents import DatabankProcess, StateWatch, joints_close
-from support.byor import PANDA, TALOS, TIAGO, UR5, robot_data
+from support.byor import PANDA, TALOS, TIAGO, UR5, built_once, robot_data
 from support.network import Hub
 from support.paths import ROOT
 from support.wait import WAIT_S
@@ -44,11 +45,20 @@ ROBOTS = {
 }
 
 
+# Made and built by ``built_once`` (the same two commands, the build in one process), once per
+# test run: tests/platforms/test_byor_collections.py builds the same arms of the same URDFs.
+BUILT_ONCE = ("tiago", "talos")
+
+
 @pytest.fixture(scope="module")
 def brought(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """One folder of platforms, each made and built once for every test of this module."""
+    """One folder of platforms, each made and built once for every test of this module (two
+    copied from the run's shared builds)."""
     root = tmp_path_factory.mktemp("platforms")
     for name, (urdf, limb, _, _, neutral) in ROBOTS.items():
+        if name in BUILT_ONCE:
+            shutil.copytree(built_once(tmp_path_factory, name, urdf, limb), root / name)
+            continue
         keep = ["--neutral", "zero"] if neutral else []  # the hand-made one replaces it
         assert main(["platform", "new", name, "--urdf", str(robot_data() / urdf),
                      "--dir", str(root), *keep]) == 0
