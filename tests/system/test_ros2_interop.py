@@ -42,6 +42,7 @@ from support.agents import CommandSender, DatabankProcess, StateWatch, joints_cl
 from support.paths import ROOT
 from support.ros2 import GraphWatch, RosTap
 from support.ros2_peer import JAZZY_ZENOH, SdkPeer
+from support.urdf_fk import set_cfg
 from support.wait import WAIT_S, stop_process
 
 JS = "sensor_msgs/msg/JointState"
@@ -195,7 +196,7 @@ def _check_frames(site: Site, rid: str, tf: dict[str, Any], static: list[dict[st
     state = site.state(rid, _stamp(tf["transforms"][0]["header"]))
     urdf = yourdfpy.URDF.load(io.StringIO(urdf_text), build_scene_graph=True,
                               load_meshes=False, build_collision_scene_graph=False)
-    urdf.update_cfg(dict(zip(state.joint_names, state.q, strict=True)))
+    set_cfg(urdf, dict(zip(state.joint_names, state.q, strict=True)))
     root = urdf.base_link
     x, y, yaw = state.base_pose
     base = np.eye(4)
