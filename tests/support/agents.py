@@ -26,6 +26,7 @@ import numpy as np
 import zenoh
 
 from kinesphere import zconfig
+from kinesphere.closing import Closable
 from kinesphere.deploy.watch import Alive
 from kinesphere.laban import Direction
 from kinesphere.protocol import (
@@ -195,14 +196,9 @@ def running_agent(
         agent = Agent(platform, robot_id, s, AgentOptions(speed=speed, **options), body=own_body)
         if trace is not None:
             agent.controller.on_step = trace
-        watch = StateWatch(s, robot_id)
-        agent.start()
-        try:
+        with StateWatch(s, robot_id) as watch, agent:
             watch.wait(lambda st: True, f"first state of {robot_id}")
             yield agent, watch
-        finally:
-            agent.close()
-            watch.close()
 
 
 @contextmanager
@@ -241,10 +237,11 @@ def running_fleet_host(endpoint: str, robots: list[RobotSpec], speed: float = 2.
                 w.close()
 
 
-class CommandSender:
+class CommandSender(Closable):
     """A client putting Commands, as the gamepad client would (``session`` "" is a version-1
     client's): on publishers like ``RobotLink.publisher``'s, never dropped under congestion
-    (BLOCK), express, e-stops at REAL_TIME priority and the rest at INTERACTIVE_HIGH."""
+    (BLOCK), express, e-stops at REAL_TIME priority and the rest at INTERACTIVE_HIGH. Used as
+    ``with``, its publishers are undeclared even when the block fails."""
 
     def __init__(self, session: zenoh.Session, robot_id: str = "*", sender: str = "test",
                  key: str | None = None, client_session: str = "") -> None:
@@ -375,21 +372,16 @@ def held_agent(hub: Hub, databank: DatabankProcess, robot_id: str,
     cat = databank.catalogue("baxter")
     here = far(cat, 0)
     pose = databank.query("baxter", SpatialCommand(*here))
-    watch = StateWatch(session, robot_id)
-    acks = AckWatch(session, robot_id)
-    try:
-        with agent_process(endpoint, "baxter", robot_id) as proc:
-            watch.wait(lambda s: True, "the agent is up")
-            while True:
-                seq = send(here)
-                state = watch.after(seq, lambda s: True, "a state")
-                if "reached" in acks.stages("ann", seq):
-                    break
-            assert joints_close(state, pose.joints, 0.02)
-            yield HeldAgent(proc, watch, acks, state, far(cat, -1))
-    finally:
-        watch.close()
-        acks.close()
+    with (StateWatch(session, robot_id) as watch, AckWatch(session, robot_id) as acks,
+          agent_process(endpoint, "baxter", robot_id) as proc):
+        watch.wait(lambda s: True, "the agent is up")
+        while True:
+            seq = send(here)
+            state = watch.after(seq, lambda s: True, "a state")
+            if "reached" in acks.stages("ann", seq):
+                break
+        assert joints_close(state, pose.joints, 0.02)
+        yield HeldAgent(proc, watch, acks, state, far(cat, -1))
 
 
 def finite_jerk(trace: Trace) -> tuple[np.ndarray, np.ndarray]:

@@ -17,6 +17,7 @@ from typing import Generic, TypeVar
 import zenoh
 
 from kinesphere import zconfig
+from kinesphere.closing import Closable
 from kinesphere.protocol import decode
 from support.wait import WAIT_S
 
@@ -56,8 +57,10 @@ class Heard(Generic[T]):
                     raise AssertionError(f"no {what} within {timeout:g} s; {self.explain()}")
 
 
-class Watch(Heard[T]):
-    """Every message put on ``key`` (may be a wildcard) as :meth:`decoded` makes it."""
+class Watch(Heard[T], Closable):
+    """Every message put on ``key`` (may be a wildcard) as :meth:`decoded` makes it; used as
+    ``with``, its subscriber is undeclared even when the block fails, so a failing test leaves
+    nothing declared on the shared hub."""
 
     def __init__(self, session: zenoh.Session, key: str, kind: type[T]) -> None:
         super().__init__()
