@@ -29,9 +29,9 @@ def test_a_command_is_accepted_moves_and_is_reached_or_superseded(
     cat = databank.catalogue("baxter")
     first, second = far(cat, 0), far(cat, -1)
     target = databank.query("baxter", SpatialCommand(*second))
-    acks = AckWatch(session, "baxter")
-    with running_agent(endpoint, "baxter", speed=2.0) as (agent, watch):
-        op = CommandSender(session, agent.robot_id, sender="ann", client_session="s-1")
+    with (AckWatch(session, "baxter") as acks,
+          running_agent(endpoint, "baxter", speed=2.0) as (agent, watch),
+          CommandSender(session, agent.robot_id, sender="ann", client_session="s-1") as op):
         seq = op.send(first)
         assert acks.of("ann", seq, "accepted").session == "s-1"
         acks.of("ann", seq, "moving")
@@ -50,8 +50,6 @@ def test_a_command_is_accepted_moves_and_is_reached_or_superseded(
         seq = op.send(second)
         state = watch.after(seq, lambda s: s.status == "idle", "at the second pose")
         assert joints_close(state, agent.controller.joints.clamp(target.joints)[0], 5e-3)
-        op.close()
-    acks.close()
 
 
 def test_commands_that_move_nothing_get_one_ack_and_the_state_names_who(
@@ -59,11 +57,11 @@ def test_commands_that_move_nothing_get_one_ack_and_the_state_names_who(
 ) -> None:
     session, endpoint = hub
     cat = databank.catalogue("youbot")
-    acks = AckWatch(session, "yb-acks")
-    with running_agent(endpoint, "youbot", robot_id="yb-acks", speed=2.0,
-                       groups=("field",)) as (agent, watch):
-        op = CommandSender(session, agent.robot_id, sender="ann", client_session="a")
-        panic = CommandSender(session, agent.robot_id, sender="bob", client_session="b")
+    with (AckWatch(session, "yb-acks") as acks,
+          running_agent(endpoint, "youbot", robot_id="yb-acks", speed=2.0,
+                        groups=("field",)) as (agent, watch),
+          CommandSender(session, agent.robot_id, sender="ann", client_session="a") as op,
+          CommandSender(session, agent.robot_id, sender="bob", client_session="b") as panic):
 
         seq = op.send(lease="acquire")
         assert acks.of("ann", seq, "leased").lease_holder == "ann"
@@ -97,9 +95,6 @@ def test_commands_that_move_nothing_get_one_ack_and_the_state_names_who(
 
         seq = op.send(lease="release")
         assert acks.of("ann", seq, "leased").lease_holder == ""
-        op.close()
-        panic.close()
-    acks.close()
 
 
 def test_substitutions_and_databank_errors_are_relayed_as_the_databank_said(
@@ -116,9 +111,9 @@ def test_substitutions_and_databank_errors_are_relayed_as_the_databank_said(
         answer: Pose | KinesphereError = databank.query("baxter", SpatialCommand(*part))
     except KinesphereError as exc:
         answer = exc
-    acks = AckWatch(session, "bx-subs")
-    with running_agent(endpoint, "baxter", robot_id="bx-subs", speed=2.0) as (agent, watch):
-        op = CommandSender(session, agent.robot_id, sender="ann")
+    with (AckWatch(session, "bx-subs") as acks,
+          running_agent(endpoint, "baxter", robot_id="bx-subs", speed=2.0) as (agent, watch),
+          CommandSender(session, agent.robot_id, sender="ann") as op):
         seq = op.send(part)
         first = acks.wait(lambda a: a.seq == seq and a.stage in ("accepted", "rejected"),
                           "the verdict on a missing direction")
@@ -128,8 +123,6 @@ def test_substitutions_and_databank_errors_are_relayed_as_the_databank_said(
             assert first.stage == "accepted" and first.substitutions == answer.substitutions
             state = watch.after(seq, lambda s: True, "state after the substitution")
             assert state.substitutions == answer.substitutions
-        op.close()
-    acks.close()
 
 
 def test_a_translation_beyond_the_robots_maximum_is_refused_and_nothing_moves(
@@ -141,10 +134,10 @@ def test_a_translation_beyond_the_robots_maximum_is_refused_and_nothing_moves(
     cat = databank.catalogue("youbot")
     core = cat.core[0]
     step = cat.translation_step or 0.25
-    acks = AckWatch(session, "yb-far")
-    with running_agent(endpoint, "youbot", robot_id="yb-far", speed=2.0,
-                       max_translation_m=1.0) as (agent, watch):
-        op = CommandSender(session, agent.robot_id, sender="ann")
+    with (AckWatch(session, "yb-far") as acks,
+          running_agent(endpoint, "youbot", robot_id="yb-far", speed=2.0,
+                        max_translation_m=1.0) as (agent, watch),
+          CommandSender(session, agent.robot_id, sender="ann") as op):
         for size in (1e10, 1e7, 1e4, 1.5 / step):
             seq = op.send((core, core, "forward-middle", size), ttl_ms=0)
             refused = acks.of("ann", seq, "rejected", f"size {size:g} refused")
@@ -158,5 +151,3 @@ def test_a_translation_beyond_the_robots_maximum_is_refused_and_nothing_moves(
                     "a modest translation still works")
         acks.of("ann", seq, "reached")
         assert acks.stages("ann", seq) == ["accepted", "moving", "reached"]
-        op.close()
-    acks.close()

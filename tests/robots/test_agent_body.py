@@ -115,12 +115,12 @@ def test_the_watchdog_runs_on_the_wall_clock_through_a_stalled_step(
         watch = StateWatch(s, "stalling")
         agent.start()
         try:
-            op = CommandSender(session, agent.robot_id, sender="ann", client_session="a")
-            seq = op.send(drive=Drive(forward=0.5), ttl_ms=300)
-            watch.after(seq, lambda st: st.base_pose[0] > 0.001, "driving")
-            body.stall_at = body.steps + 2
-            held = watch.after(seq, lambda st: st.status == "holding", "held by the watchdog")
-            op.close()
+            with CommandSender(session, agent.robot_id, sender="ann", client_session="a") as op:
+                seq = op.send(drive=Drive(forward=0.5), ttl_ms=300)
+                watch.after(seq, lambda st: st.base_pose[0] > 0.001, "driving")
+                body.stall_at = body.steps + 2
+                held = watch.after(seq, lambda st: st.status == "holding",
+                                   "held by the watchdog")
         finally:
             agent.close()
             watch.close()
@@ -139,8 +139,8 @@ def test_an_agent_drives_a_kinematic_body_over_the_wire(
     translated = databank.query("youbot", SpatialCommand(*beyond))
     assert translated.translation is not None
     body = KinematicBody("youbot", 1.0 / 500.0)
-    with running_agent(endpoint, "youbot", "kinematic", own_body=body) as (agent, watch):
-        op = CommandSender(session, agent.robot_id)
+    with (running_agent(endpoint, "youbot", "kinematic", own_body=body) as (agent, watch),
+          CommandSender(session, agent.robot_id) as op):
         target, _ = agent.controller.joints.clamp(pose.joints)
         seq = op.send(reach)
         watch.after(seq, lambda st: st.status == "idle" and joints_close(st, target, 1e-9),
@@ -151,7 +151,6 @@ def test_an_agent_drives_a_kinematic_body_over_the_wire(
             st.base_pose[:2], goal[:2]) < 1e-6, "the base translated")
         seq = op.send(estop=True)
         watch.after(seq, lambda st: st.status == "estop", "e-stop obeyed")
-        op.close()
     assert done.robot_id == "kinematic" and done.platform == "youbot"
     q = np.array(body.commands)
     dv = np.abs(np.diff(q, n=2, axis=0)).max() / agent.controller.dt**2

@@ -355,13 +355,13 @@ def test_a_halted_target_sent_again_is_blocked_again_and_nothing_moves(
     part = ("right_arm", "right_shoulder", "left-forward-middle", 3.0)
     block = databank.query("baxter", SpatialCommand("left_arm", "left_shoulder",
                                                      "forward-middle", 3.0))
-    acks = AckWatch(session, "guarded")
-    with running_agent(endpoint, "baxter", robot_id="guarded") as (agent, watch):
+    with (AckWatch(session, "guarded") as acks,
+          running_agent(endpoint, "baxter", robot_id="guarded") as (agent, watch),
+          CommandSender(session, "guarded", sender="op") as op):
         body = agent.controller.body
         assert isinstance(body, MujocoBody)
         hold = HoldOut(body, block.joints)
         agent.controller.on_step = hold
-        op = CommandSender(session, "guarded", sender="op")
         first = op.send(part)
         halted = acks.of("op", first, "blocked").detail
         assert halted.startswith("contact left_") and "during motion; halted" in halted
@@ -379,8 +379,6 @@ def test_a_halted_target_sent_again_is_blocked_again_and_nothing_moves(
         acks.of("op", op.send(deadman=False), "holding")
         retry = op.send(part)
         assert acks.of("op", retry, "reached")
-        op.close()
-    acks.close()
 
 
 def test_a_move_braked_for_a_late_check_is_not_reached_until_the_check_is_in(
@@ -392,9 +390,9 @@ def test_a_move_braked_for_a_late_check_is_not_reached_until_the_check_is_in(
     session, endpoint = hub
     part = ("right_arm", "right_shoulder", "forward-middle", 3.0)
     pose = databank.query("baxter", SpatialCommand(*part))
-    acks = AckWatch(session, "late-check")
-    with running_agent(endpoint, "baxter", robot_id="late-check") as (_agent, watch):
-        op = CommandSender(session, "late-check", sender="op")
+    with (AckWatch(session, "late-check") as acks,
+          running_agent(endpoint, "baxter", robot_id="late-check") as (_agent, watch),
+          CommandSender(session, "late-check", sender="op") as op):
         with CHECKING:  # the worker waits for it: the finding comes when this block ends
             seq = op.send(part)
             acks.of("op", seq, "moving")
@@ -407,8 +405,6 @@ def test_a_move_braked_for_a_late_check_is_not_reached_until_the_check_is_in(
         acks.of("op", seq, "reached")
         there = watch.wait(lambda s: joints_close(s, pose.joints, 0.02), "at the pose", start=-1)
         assert there.status == "idle", there.detail
-        op.close()
-    acks.close()
 
 
 def test_a_late_check_never_lets_the_joints_run_into_a_touch_near_the_start() -> None:

@@ -36,10 +36,10 @@ def test_agent_process_obeys_its_group_and_stops_on_sigterm(
         assert first.last_command_seq == -1
 
         entry = databank.catalogue("youbot").limbs[0]
-        group = CommandSender(session, key=KEYS.group_command("arms"))
-        seq = group.send((entry.limb, entry.origin, entry.directions[-1], 2.0))
-        watch.after(seq, lambda s: s.status in ("moving", "idle", "clamped"), "group command")
-        group.close()
+        with CommandSender(session, key=KEYS.group_command("arms")) as group:
+            seq = group.send((entry.limb, entry.origin, entry.directions[-1], 2.0))
+            watch.after(seq, lambda s: s.status in ("moving", "idle", "clamped"),
+                        "group command")
 
         proc.send_signal(signal.SIGTERM)
         _, err = proc.communicate(timeout=WAIT_S)

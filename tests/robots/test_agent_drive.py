@@ -52,8 +52,8 @@ def test_youbot_turns_in_place_then_drives_diagonally_while_its_arm_moves(
     part = far(databank.catalogue("youbot"), horizontal=True)
     pose = databank.query("youbot", SpatialCommand(*part))
     trace = Trace()
-    with running_agent(endpoint, "youbot", speed=2.0, trace=trace) as (agent, watch):
-        op = CommandSender(session, agent.robot_id)
+    with (running_agent(endpoint, "youbot", speed=2.0, trace=trace) as (agent, watch),
+          CommandSender(session, agent.robot_id) as op):
         turning = stream(op, watch, lambda s: s.base_pose[2] > 1.0, "turned 1 rad",
                          drive=Drive(yaw=0.8))
         assert max(math.hypot(*s.base_pose[:2]) for s in turning) < 2e-3, "turned in place"
@@ -68,7 +68,6 @@ def test_youbot_turns_in_place_then_drives_diagonally_while_its_arm_moves(
             and math.dist(s.base_pose[:2], start) > 0.3, "arm at the pose and base 0.3 m away",
             part, drive=Drive(forward=0.5, left=0.5))
         op.send(stop=True, ttl_ms=TTL_MS)
-        op.close()
     end = diagonal[-1]
     moved_x, moved_y = np.array(end.base_pose[:2]) - start
     dx, dy = rotate(float(moved_x), float(moved_y), -heading)
@@ -87,10 +86,10 @@ def test_packbot_arcs_on_forward_and_yaw_and_never_slides(
 ) -> None:
     session, endpoint = hub
     trace = Trace()
-    with running_agent(endpoint, "packbot", speed=2.0, trace=trace) as (agent, watch):
+    with (running_agent(endpoint, "packbot", speed=2.0, trace=trace) as (agent, watch),
+          CommandSender(session, agent.robot_id) as op,
+          AckWatch(session, agent.robot_id) as acks):
         spec = agent.controller.platform.base
-        op = CommandSender(session, agent.robot_id)
-        acks = AckWatch(session, agent.robot_id)
         arc = Drive(forward=0.4, yaw=0.4)
         states = stream(op, watch, lambda s: s.base_pose[2] > 2.0, "turned 2 rad on the arc",
                         drive=arc)
@@ -98,7 +97,6 @@ def test_packbot_arcs_on_forward_and_yaw_and_never_slides(
         told = acks.of(op.sender, seq, AckStage.ACCEPTED, "the push to the left accepted")
         rest = watch.after(seq, lambda s: not agent.controller.moving,
                            "a push to the left brakes a tracked base")
-        op.close()
     x, y, yaw = states[-1].base_pose
     assert x > 0.5 and y > 0.5 and yaw > 2.0, "forward and round to the left"
     assert "left ignored" in told.detail

@@ -48,30 +48,27 @@ def test_commands_queued_while_the_agent_was_frozen_never_run(
     target while it is frozen, stop streaming, SIGCONT: nothing moves, the commands are
     dropped as expired and counted."""
     session, _ = hub
-    op = CommandSender(session, "frozen", sender="ann", client_session="a")
-    try:
-        with held_agent(hub, databank, "frozen", partial(op.send, ttl_ms=300)) as robot:
-            goal = databank.query("baxter", SpatialCommand(*robot.there)).joints
-            index = [robot.state.joint_names.index(j) for j in goal]
-            before = np.array(robot.state.q)
-            gap = np.abs(before[index] - np.array(list(goal.values()))).max()
-            assert gap > 0.3, "the second target is a real motion away"
-            robot.freeze()
-            frozen = []
-            for _ in range(30):  # a client streaming at 30 Hz
-                time.sleep(1 / 30)
-                frozen.append(op.send(robot.there, ttl_ms=300))
-            time.sleep(1.0)  # the operator stopped: a freeze that outlasts the ttl
-            seen = robot.thaw()
-            for seq in frozen[-3:]:
-                ack = robot.acks.wait(partial(_verdict_on, seq), "a verdict on a frozen command")
-                assert ack.stage != "accepted", ack
-            assert any(a.code == "expired" for a in robot.acks.acks if a.seq in frozen)
-            after, moved = robot.moved_after(seen)
-            assert moved < 5e-3, f"the robot moved {moved:.4f} rad after SIGCONT (of {gap:.2f})"
-            assert after.dropped >= 1 and after.last_command_seq < frozen[0]
-    finally:
-        op.close()
+    with (CommandSender(session, "frozen", sender="ann", client_session="a") as op,
+          held_agent(hub, databank, "frozen", partial(op.send, ttl_ms=300)) as robot):
+        goal = databank.query("baxter", SpatialCommand(*robot.there)).joints
+        index = [robot.state.joint_names.index(j) for j in goal]
+        before = np.array(robot.state.q)
+        gap = np.abs(before[index] - np.array(list(goal.values()))).max()
+        assert gap > 0.3, "the second target is a real motion away"
+        robot.freeze()
+        frozen = []
+        for _ in range(30):  # a client streaming at 30 Hz
+            time.sleep(1 / 30)
+            frozen.append(op.send(robot.there, ttl_ms=300))
+        time.sleep(1.0)  # the operator stopped: a freeze that outlasts the ttl
+        seen = robot.thaw()
+        for seq in frozen[-3:]:
+            ack = robot.acks.wait(partial(_verdict_on, seq), "a verdict on a frozen command")
+            assert ack.stage != "accepted", ack
+        assert any(a.code == "expired" for a in robot.acks.acks if a.seq in frozen)
+        after, moved = robot.moved_after(seen)
+        assert moved < 5e-3, f"the robot moved {moved:.4f} rad after SIGCONT (of {gap:.2f})"
+        assert after.dropped >= 1 and after.last_command_seq < frozen[0]
 
 
 def test_a_flood_cannot_delay_an_estop_and_every_table_stays_bounded(
@@ -80,13 +77,13 @@ def test_a_flood_cannot_delay_an_estop_and_every_table_stays_bounded(
     session, endpoint = hub
     cat = databank.catalogue("youbot")
     parts = [far(cat, k) for k in range(4)]
-    acks = AckWatch(session, "flooded")
-    with running_agent(endpoint, "youbot", robot_id="flooded", speed=1.0) as (agent, watch):
+    with (AckWatch(session, "flooded") as acks,
+          running_agent(endpoint, "youbot", robot_id="flooded", speed=1.0) as (agent, watch),
+          CommandSender(session, "flooded", sender="panic", client_session="p") as estop):
         agent.resolver.cache_bytes = 50_000
         rss = psutil.Process(os.getpid()).memory_info().rss
         flood = session.declare_publisher(KEYS.command("flooded"))
         zconfig.wait_matching(flood)
-        estop = CommandSender(session, "flooded", sender="panic", client_session="p")
         n = 20_000
         done = threading.Event()
 
@@ -123,9 +120,7 @@ def test_a_flood_cannot_delay_an_estop_and_every_table_stays_bounded(
         span = (max(stamps) - min(stamps)) / 1e9  # when the robot decided, first to last
         assert len(flooded_acks) <= ack_rules.TOTAL_BURST + ack_rules.TOTAL_RATE * span + 1
         assert len(flooded_acks) < n / 4, "acks are bounded in rate, not one per command"
-        estop.close()
         zconfig.undeclare(flood)
-    acks.close()
 
 
 def test_garbage_is_malformed_in_one_log_line_and_a_forged_clock_silences_nobody(
@@ -134,12 +129,12 @@ def test_garbage_is_malformed_in_one_log_line_and_a_forged_clock_silences_nobody
 ) -> None:
     session, endpoint = hub
     cat = databank.catalogue("youbot")
-    acks = AckWatch(session, "garbage")
     deep = b"\x91" * 100_000 + b"\xc0"
     oversized = msgspec.msgpack.encode({"type": "command", "pad": "x" * 70_000})
-    with caplog.at_level(logging.WARNING, logger="kinesphere.robots.agent"), \
-            running_agent(endpoint, "youbot", robot_id="garbage", speed=2.0) as (agent, watch):
-        op = CommandSender(session, "garbage", sender="victim")
+    with (AckWatch(session, "garbage") as acks,
+          caplog.at_level(logging.WARNING, logger="kinesphere.robots.agent"),
+          running_agent(endpoint, "youbot", robot_id="garbage", speed=2.0) as (agent, watch),
+          CommandSender(session, "garbage", sender="victim") as op):
         for _ in range(100):
             for payload in (deep, oversized, b"\x93not a command"):
                 op.raw(payload)
@@ -148,8 +143,6 @@ def test_garbage_is_malformed_in_one_log_line_and_a_forged_clock_silences_nobody
         assert acks.of("victim", forged, "rejected").code == "malformed"
         seq = op.send(far(cat, 1), seq=1)
         acks.of("victim", seq, "accepted", "the victim's next command is obeyed")
-        op.close()
-    acks.close()
     refusals = [r for r in caplog.records if "command refused" in r.getMessage()]
     assert 1 <= len(refusals) <= 3, [r.getMessage() for r in refusals]
     assert "Traceback" not in capfd.readouterr().err

@@ -10,6 +10,7 @@ from __future__ import annotations
 import signal
 import subprocess
 import sys
+from contextlib import ExitStack
 from functools import partial
 from pathlib import Path
 
@@ -64,11 +65,11 @@ def test_robots_of_several_platforms_obey_their_own_commands(
              for i, r in enumerate(ROBOTS)}
     targets = {r.robot_id: databank.query(r.platform, SpatialCommand(*poses[r.robot_id])).joints
                for r in ROBOTS}
-    with running_fleet_host(endpoint, ROBOTS) as (fleet, watches):
+    with running_fleet_host(endpoint, ROBOTS) as (fleet, watches), ExitStack() as stack:
         assert fleet.stepper.threads == 2
         start = {rid: w.states[-1] for rid, w in watches.items()}
-        ops = {r.robot_id: CommandSender(session, r.robot_id, sender=f"op-{r.robot_id}")
-               for r in ROBOTS}
+        ops = {r.robot_id: stack.enter_context(
+            CommandSender(session, r.robot_id, sender=f"op-{r.robot_id}")) for r in ROBOTS}
         # one robot moves; the others, stepped by the same loop, do not
         first = ROBOTS[0].robot_id
         seq = ops[first].send(poses[first])
@@ -83,12 +84,11 @@ def test_robots_of_several_platforms_obey_their_own_commands(
             watches[rid].after(seq, partial(joints_close, joints=targets[rid], tol=0.02),
                                f"{rid} at its pose")
         # a group command reaches its member only
-        group = CommandSender(session, key=KEYS.group_command("bases"), sender="grp")
+        group = stack.enter_context(
+            CommandSender(session, key=KEYS.group_command("bases"), sender="grp"))
         seq = group.send(poses[first], stop=True)
         watches["f-youbot"].after(seq, lambda st: st.status == "stopped", "youbot stopped")
         assert watches["f-baxter"].states[-1].status != "stopped"
-        for op in [*ops.values(), group]:
-            op.close()
 
 
 def test_one_robots_estop_does_not_stop_the_others(
@@ -97,11 +97,11 @@ def test_one_robots_estop_does_not_stop_the_others(
     session, endpoint = hub
     robots = ROBOTS[:2]
     cats = {r.robot_id: databank.catalogue(r.platform) for r in robots}
-    acks = AckWatch(session, "*")
-    with running_fleet_host(endpoint, robots) as (_fleet, watches):
-        stopped, other = (r.robot_id for r in robots)
-        op_s = CommandSender(session, stopped, sender="op-s")
-        op_o = CommandSender(session, other, sender="op-o")
+    stopped, other = (r.robot_id for r in robots)
+    with (AckWatch(session, "*") as acks,
+          running_fleet_host(endpoint, robots) as (_fleet, watches),
+          CommandSender(session, stopped, sender="op-s") as op_s,
+          CommandSender(session, other, sender="op-o") as op_o):
         seq = op_s.send(estop=True)
         acks.of("op-s", seq, "estopped")
         watches[stopped].after(seq, lambda st: st.status == "estop" and st.estop_by == "op-s",
@@ -117,9 +117,6 @@ def test_one_robots_estop_does_not_stop_the_others(
         assert ack.code == "estopped"
         assert watches[stopped].states[-1].status == "estop"
         assert watches[other].states[-1].estop_by == ""
-        op_s.close()
-        op_o.close()
-    acks.close()
 
 
 class CrashingMujocoBody(MujocoBody):
@@ -248,8 +245,8 @@ def test_send_all_moves_every_body_exact_or_substituted(
     assert served == {"s-baxter": [], "s-youbot": [], "s-packbot": [],
                       "s-nao": [("left-low", "left-forward-low")]}
     left_low = np.array(Direction.LEFT_LOW.vector) / np.linalg.norm(Direction.LEFT_LOW.vector)
-    acks = AckWatch(session, "*")
-    with running_fleet_host(endpoint, robots) as (_fleet, watches):
+    with (AckWatch(session, "*") as acks,
+          running_fleet_host(endpoint, robots) as (_fleet, watches)):
         assert main(["send", "all", *map(str, pose), "--connect", endpoint,
                      "--prefix", KEYS.prefix, "--wait", str(WAIT_S)]) == 0
         said = {ln.split(":")[0]: ln for ln in capsys.readouterr().out.splitlines()}
@@ -271,4 +268,3 @@ def test_send_all_moves_every_body_exact_or_substituted(
             assert angle_deg(offset, left_low) == pytest.approx(angle, abs=2.0), rid
             pointing = f"pointing {angle:.0f}° from the request (measured)"
             assert (pointing in said[rid]) == bool(want), said[rid]
-    acks.close()

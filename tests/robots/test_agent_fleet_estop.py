@@ -20,8 +20,8 @@ from support.wait import WAIT_S, until
 
 
 def test_a_robot_started_during_a_fleet_estop_comes_up_latched(hub: Hub) -> None:
-    with zconfig.session(config=zconfig.loopback_config(hub.endpoint)) as s:
-        fleet = CommandSender(s, "*", sender="officer")
+    with (zconfig.session(config=zconfig.loopback_config(hub.endpoint)) as s,
+          CommandSender(s, "*", sender="officer") as fleet):
         with running_agent(hub.endpoint, "youbot", "fe-1") as (_, first):
             first.after(fleet.send(estop=True), lambda st: st.status == "estop", "the e-stop")
             with running_agent(hub.endpoint, "khepera", "fe-late") as (_, late):
@@ -36,7 +36,6 @@ def test_a_robot_started_during_a_fleet_estop_comes_up_latched(hub: Hub) -> None
                 first.wait(lambda st: st.status != "estop", "released by the fleet release")
             with running_agent(hub.endpoint, "khepera", "fe-after") as (_, after):
                 assert after.states[0].status != "estop", "released: a new robot starts free"
-        fleet.close()
 
 
 def test_a_robot_that_joins_late_latches_from_the_others(hub: Hub, sup: Supervisor) -> None:
@@ -44,11 +43,11 @@ def test_a_robot_that_joins_late_latches_from_the_others(hub: Hub, sup: Supervis
     up, its board asks at once (a new link) and it latches without any command."""
     port = zconfig.free_port()
     behind = f"tcp/127.0.0.1:{port}"
-    with zconfig.session(config=zconfig.loopback_config(hub.endpoint)) as s, \
-            zconfig.session(config=zconfig.session_config(
-                "peer", listen=[zconfig.LOOPBACK_ANY_PORT], connect=[behind])) as cut:
-        fleet = CommandSender(s, "*", sender="officer")
-        watch = StateWatch(s, "fe-cut")
+    with (zconfig.session(config=zconfig.loopback_config(hub.endpoint)) as s,
+          zconfig.session(config=zconfig.session_config(
+              "peer", listen=[zconfig.LOOPBACK_ANY_PORT], connect=[behind])) as cut,
+          CommandSender(s, "*", sender="officer") as fleet,
+          StateWatch(s, "fe-cut") as watch):
         late = Agent("khepera", "fe-cut", cut, AgentOptions(speed=1.0)).start()
         try:
             with running_agent(hub.endpoint, "youbot", "fe-2") as (_, first):
@@ -65,15 +64,13 @@ def test_a_robot_that_joins_late_latches_from_the_others(hub: Hub, sup: Supervis
                 watch.wait(lambda st: st.status != "estop", "released")
         finally:
             late.close()
-            watch.close()
-            fleet.close()
 
 
 def test_every_robot_process_answers_what_it_knows(hub: Hub) -> None:
     """The board on ``{p}/estop/{holder}``: the e-stop in force, then its release."""
-    with zconfig.session(config=zconfig.loopback_config(hub.endpoint)) as s, \
-            running_agent(hub.endpoint, "khepera", "fe-3") as (agent, watch):
-        officer = CommandSender(s, "*", sender="officer")
+    with (zconfig.session(config=zconfig.loopback_config(hub.endpoint)) as s,
+          running_agent(hub.endpoint, "khepera", "fe-3") as (agent, watch),
+          CommandSender(s, "*", sender="officer") as officer):
         watch.after(officer.send(estop=True), lambda st: st.status == "estop", "the e-stop")
 
         def known() -> dict[str, bool]:
@@ -89,7 +86,6 @@ def test_every_robot_process_answers_what_it_knows(hub: Hub) -> None:
         officer.send(release=True, deadman=True)
         watch.wait(lambda st: st.status != "estop", "released")
         until(lambda: known() == {"officer": False}, WAIT_S, "the release known")
-        officer.close()
 
 
 def test_a_robot_whose_copy_was_lost_latches_within_a_sync(hub: Hub) -> None:
@@ -106,8 +102,8 @@ def test_a_robot_whose_copy_was_lost_latches_within_a_sync(hub: Hub) -> None:
             """fe-5 hears no command at all."""
 
         b.receive = deaf  # type: ignore[method-assign]
-        with zconfig.session(config=zconfig.loopback_config(hub.endpoint)) as s:
-            officer = CommandSender(s, "*", sender="officer")
+        with (zconfig.session(config=zconfig.loopback_config(hub.endpoint)) as s,
+              CommandSender(s, "*", sender="officer") as officer):
             wa.after(officer.send(estop=True), lambda st: st.status == "estop", "fe-4 latched")
             sent = time.monotonic()
             st = wb.wait(lambda st: st.status == "estop", "fe-5 latched from fe-4's board")
@@ -116,4 +112,3 @@ def test_a_robot_whose_copy_was_lost_latches_within_a_sync(hub: Hub) -> None:
             b.receive = b_receive  # type: ignore[method-assign]
             officer.send(release=True, deadman=True)
             wb.wait(lambda st: st.status != "estop", "released")
-            officer.close()

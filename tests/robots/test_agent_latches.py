@@ -11,6 +11,7 @@ import time
 import zenoh
 
 from kinesphere import zconfig
+from kinesphere.closing import Closable
 from kinesphere.protocol import MAX_FLEET_ESTOPS, OVERFLOW, Ack, AckStage, Command, encode
 from kinesphere.robots.agent.safety import MAX_LATCHES, OVERFLOW_WORDS
 from support.agents import AckWatch, running_agent
@@ -20,7 +21,7 @@ from support.wait import WAIT_S, until
 SESSION = "latches"
 
 
-class Senders:
+class Senders(Closable):
     """Many senders' e-stops and releases on one key (one publisher, never dropped)."""
 
     def __init__(self, session: zenoh.Session, key: str, count: int) -> None:
@@ -61,10 +62,10 @@ def answered(acks: AckWatch, names: list[str], seq: int, stage: AckStage) -> Non
 def test_the_senders_past_the_named_latches_hold_one_that_only_a_restart_clears(
         hub: Hub) -> None:
     count = MAX_LATCHES + 2
-    with zconfig.session(config=zconfig.loopback_config(hub.endpoint)) as s:
-        acks = AckWatch(s, "lt-1")
-        with running_agent(hub.endpoint, "khepera", "lt-1") as (_, watch):
-            ops = Senders(s, KEYS.command("lt-1"), count)
+    with (zconfig.session(config=zconfig.loopback_config(hub.endpoint)) as s,
+          AckWatch(s, "lt-1") as acks):
+        with (running_agent(hub.endpoint, "khepera", "lt-1") as (_, watch),
+              Senders(s, KEYS.command("lt-1"), count) as ops):
             ops.estop()
             answered(acks, ops.names, 1, AckStage.ESTOPPED)  # every e-stop latched and said so
             st = watch.wait(lambda st: st.status == "estop" and OVERFLOW_WORDS in st.detail,
@@ -78,20 +79,18 @@ def test_the_senders_past_the_named_latches_hold_one_that_only_a_restart_clears(
             ops.put(OVERFLOW, 2, release=True)  # not a sender anybody can be
             acks.wait(lambda a: a.sender == OVERFLOW and a.stage == AckStage.REJECTED,
                       "a release in the overflow latch's name refused")
-            ops.close()
         with running_agent(hub.endpoint, "khepera", "lt-1") as (_, watch):
             assert watch.states[0].status != "estop", "the restart cleared it"
-        acks.close()
 
 
 def test_a_full_fleet_board_keeps_one_more_estop_in_force(hub: Hub) -> None:
     """As many senders' fleet e-stops as a board keeps, and one more: a robot started then
     comes up latched, named and overflow latches; after every sender released theirs, a robot
     started later still comes up latched by the overflow e-stop."""
-    with zconfig.session(config=zconfig.loopback_config(hub.endpoint)) as s, \
-            running_agent(hub.endpoint, "khepera", "lt-a") as (a, wa):
-        acks = AckWatch(s, "lt-a")
-        ops = Senders(s, KEYS.command("*"), MAX_FLEET_ESTOPS)
+    with (zconfig.session(config=zconfig.loopback_config(hub.endpoint)) as s,
+          running_agent(hub.endpoint, "khepera", "lt-a") as (a, wa),
+          AckWatch(s, "lt-a") as acks,
+          Senders(s, KEYS.command("*"), MAX_FLEET_ESTOPS) as ops):
         ops.estop()
         answered(acks, ops.names, 1, AckStage.ESTOPPED)
         assert a.board is not None
@@ -110,5 +109,3 @@ def test_a_full_fleet_board_keeps_one_more_estop_in_force(hub: Hub) -> None:
             st = wc.states[0]
             assert st.status == "estop" and st.estop_by == OVERFLOW, st
         wa.wait(lambda st: st.estop_by == OVERFLOW, "lt-a: only the overflow latch left")
-        ops.close()
-        acks.close()

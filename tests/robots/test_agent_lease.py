@@ -46,10 +46,10 @@ def test_two_operators_only_the_holder_moves_the_robot(
     hub: Hub, databank: DatabankProcess
 ) -> None:
     session, endpoint = hub
-    acks = AckWatch(session, "yb-lease")
-    with running_agent(endpoint, "youbot", robot_id="yb-lease", speed=1.0) as (agent, watch):
-        ann = CommandSender(session, agent.robot_id, sender="ann", client_session="a1")
-        bob = CommandSender(session, agent.robot_id, sender="bob", client_session="b1")
+    with (AckWatch(session, "yb-lease") as acks,
+          running_agent(endpoint, "youbot", robot_id="yb-lease", speed=1.0) as (agent, watch),
+          CommandSender(session, agent.robot_id, sender="ann", client_session="a1") as ann,
+          CommandSender(session, agent.robot_id, sender="bob", client_session="b1") as bob):
         a_seqs, b_seqs = streams(ann, bob, watch, 40)
         state = watch.after(a_seqs[-1], lambda s: True, "after both streams")
         assert state.lease_holder == "ann" and state.base_pose[0] > 0.02, "Ann drove forward"
@@ -99,6 +99,3 @@ def test_two_operators_only_the_holder_moves_the_robot(
         assert LEASE_TIMEOUT_S - 0.1 <= waited <= LEASE_TIMEOUT_S + 2.0, waited
         assert a.lease_holder == "ann"
         ann.send(stop=True)
-        ann.close()
-        bob.close()
-    acks.close()

@@ -51,10 +51,10 @@ def test_outage_keeps_last_pose_and_recovers_without_restart(
     first = SpatialCommand(entry.limb, entry.origin, pulls[0], 2.0)
     second = SpatialCommand(entry.limb, entry.origin, pulls[-1], 2.0)
     pose1, pose2 = own_databank.query("baxter", first), own_databank.query("baxter", second)
-    with running_agent(endpoint, "baxter", speed=4.0) as (agent, watch):
+    with (running_agent(endpoint, "baxter", speed=4.0) as (agent, watch),
+          CommandSender(session, agent.robot_id) as op):
         target1, _ = agent.controller.joints.clamp(pose1.joints)
         target2, _ = agent.controller.joints.clamp(pose2.joints)
-        op = CommandSender(session, agent.robot_id)
         seq = op.send(first)
         watch.after(seq, lambda s: s.status == "idle" and joints_close(s, target1, 5e-3),
                     "at the first pose")
@@ -76,7 +76,6 @@ def test_outage_keeps_last_pose_and_recovers_without_restart(
         seq = op.send(second)
         watch.after(seq, lambda s: s.status == "idle" and joints_close(s, target2, 5e-3),
                     "the second pose after recovery")
-        op.close()
 
 
 def test_cache_is_per_databank_version(
@@ -93,8 +92,8 @@ def test_cache_is_per_databank_version(
         direction = real_pulls(entry)[0]
         part = (entry.limb, entry.origin, direction, 2.0)
         old = bank.query("youbot", SpatialCommand(*part))
-        with running_agent(endpoint, "youbot", speed=4.0) as (agent, watch):
-            op = CommandSender(session, agent.robot_id)
+        with (running_agent(endpoint, "youbot", speed=4.0) as (agent, watch),
+              CommandSender(session, agent.robot_id) as op):
             for _ in range(3):
                 seq = op.send(part)
                 watch.after(seq, lambda s: s.status == "idle"
@@ -116,6 +115,5 @@ def test_cache_is_per_databank_version(
                         "at the newly recorded pose")
             assert agent.resolver.version != version
             assert agent.resolver.queries == 2
-            op.close()
     finally:
         bank.stop()

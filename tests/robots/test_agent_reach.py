@@ -63,11 +63,10 @@ def test_one_command_reaches_the_ecl_pose(
         part = SpatialCommand(cat.core[0], cat.core[0], cat.directions_for_core[0], 3.0)
     pose = databank.query(platform, part)
     trace = Trace()
-    with running_agent(endpoint, platform, speed=4.0, trace=trace) as (agent, watch):
-        op = CommandSender(session, agent.robot_id)
+    with (running_agent(endpoint, platform, speed=4.0, trace=trace) as (agent, watch),
+          CommandSender(session, agent.robot_id) as op):
         seq = op.send(part)
         state = watch.after(seq, reached(agent, pose), f"{platform} at {pose}")
-        op.close()
     assert state.platform == platform
     assert agent.resolver.queries == 1
     if pose.joints:
@@ -83,15 +82,14 @@ def test_retarget_mid_motion_stays_continuous(
     cat = databank.catalogue("baxter")
     first, second = far(cat, 0), far(cat, -1)
     trace = Trace()
-    with running_agent(endpoint, "baxter", speed=2.0, trace=trace) as (agent, watch):
-        op = CommandSender(session, agent.robot_id)
+    with (running_agent(endpoint, "baxter", speed=2.0, trace=trace) as (agent, watch),
+          CommandSender(session, agent.robot_id) as op):
         seq = op.send(first)
         watch.after(seq, lambda s: max(map(abs, s.qd)) > 0.3, "baxter under way")
         at_retarget = len(trace.t)
         seq = op.send(second)
         pose = databank.query("baxter", SpatialCommand(*second))
         watch.after(seq, reached(agent, pose), "baxter at the second pose")
-        op.close()
     vel = np.array(trace.vel)
     assert np.abs(vel[at_retarget]).max() > 0.1, "the retarget happened mid-motion"
     check_limits(trace, agent)  # includes: no velocity jump at the retarget
@@ -113,10 +111,9 @@ def test_wildcard_command_moves_every_robot_to_its_own_pose(
     poses = {r: databank.query(r, part) for r in robots}
     with ExitStack() as stack:
         running = {r: stack.enter_context(running_agent(endpoint, r, speed=2.0)) for r in robots}
-        op = CommandSender(session, "*")
+        op = stack.enter_context(CommandSender(session, "*"))
         seq = op.send(part)
         for r, (agent, watch) in running.items():
             watch.after(seq, reached(agent, poses[r]), f"{r} at its own pose")
-        op.close()
     names = {r: set(p.joints) for r, p in poses.items()}
     assert not names["baxter"] & names["nao"], "different bodies, different joints"

@@ -62,12 +62,11 @@ def test_the_base_brakes_when_the_operator_lets_go(
     session, endpoint = hub
     trace = Trace()
     with running_agent(endpoint, platform, speed=1.0, trace=trace) as (agent, watch):
-        op = CommandSender(session, agent.robot_id)
-        seq = op.send(drive=("forward", speed), ttl_ms=ttl_ms)
-        watch.after(seq, driving(min_speed), f"{platform} driving")
-        if cause == "deadman":
-            seq = op.send(drive=("forward", speed), deadman=False, ttl_ms=ttl_ms)
-        op.close()
+        with CommandSender(session, agent.robot_id) as op:  # then the client is gone
+            seq = op.send(drive=("forward", speed), ttl_ms=ttl_ms)
+            watch.after(seq, driving(min_speed), f"{platform} driving")
+            if cause == "deadman":
+                seq = op.send(drive=("forward", speed), deadman=False, ttl_ms=ttl_ms)
         held = watch.after(seq, status("holding"), f"holding after the {cause}")
         assert cause in held.detail
         watch.after(seq, lambda s: not agent.controller.moving, "base at rest")
@@ -77,11 +76,10 @@ def test_the_base_brakes_when_the_operator_lets_go(
 
 def test_drive_without_ttl_still_needs_fresh_commands(hub: Hub) -> None:
     session, endpoint = hub
-    with running_agent(endpoint, "youbot", speed=4.0) as (agent, watch):
-        op = CommandSender(session, agent.robot_id)
+    with (running_agent(endpoint, "youbot", speed=4.0) as (agent, watch),
+          CommandSender(session, agent.robot_id) as op):
         seq = op.send(drive=("left", 0.5), ttl_ms=0)
         watch.after(seq, status("holding"), "holding after the default drive watchdog")
-        op.close()
     assert DRIVE_TTL_S > 0
 
 
@@ -96,9 +94,9 @@ def test_estop_halts_every_robot_latches_and_releases(
     with ExitStack() as stack:
         baxter, bw = stack.enter_context(running_agent(endpoint, "baxter", speed=1.0))
         youbot, yw = stack.enter_context(running_agent(endpoint, "youbot", speed=1.0))
-        arm = CommandSender(session, "baxter", sender="arm")
-        base = CommandSender(session, "youbot", sender="base")
-        everyone = CommandSender(session, "*", sender="panic")
+        arm = stack.enter_context(CommandSender(session, "baxter", sender="arm"))
+        base = stack.enter_context(CommandSender(session, "youbot", sender="base"))
+        everyone = stack.enter_context(CommandSender(session, "*", sender="panic"))
         seq = arm.send(reach)
         bw.after(seq, lambda s: max(map(abs, s.qd)) > 0.2, "baxter moving")
         seq = base.send(drive=("forward", 1.0), ttl_ms=10_000)
@@ -121,23 +119,21 @@ def test_estop_halts_every_robot_latches_and_releases(
         seq = base.send(drive=("forward", 1.0), ttl_ms=10_000, release=True)
         yw.after(seq, status("estop"), "youbot still latched: base cannot release panic's")
         # panic's release (to the youBot alone) clears its latch and moves nothing
-        panic = CommandSender(session, "youbot", sender="panic")
+        panic = stack.enter_context(CommandSender(session, "youbot", sender="panic"))
         seq = panic.send(drive=("forward", 1.0), ttl_ms=10_000, release=True, seq=seq + 1)
         yw.after(seq, status("idle"), "youbot released")
         assert not youbot.controller.moving
         seq = base.send(drive=("forward", 1.0), ttl_ms=10_000, seq=seq + 1)
         yw.after(seq, driving(0.05), "youbot drives again after the release")
         bw.wait(status("estop"), "baxter still latched (released separately)")
-        for op in (arm, base, everyone, panic):
-            op.close()
 
 
 def test_bad_commands_are_reported_and_the_loop_goes_on(
     hub: Hub, databank: DatabankProcess
 ) -> None:
     session, endpoint = hub
-    with running_agent(endpoint, "baxter", speed=4.0) as (agent, watch):
-        op = CommandSender(session, agent.robot_id)
+    with (running_agent(endpoint, "baxter", speed=4.0) as (agent, watch),
+          CommandSender(session, agent.robot_id) as op):
         op.raw(b"\x93not a command")
         bad = watch.wait(status("error"), "malformed payload reported")
         assert "malformed" in bad.detail
@@ -157,5 +153,4 @@ def test_bad_commands_are_reported_and_the_loop_goes_on(
         entry = databank.catalogue("baxter").limbs[0]
         seq = op.send((entry.limb, entry.origin, entry.directions[-1], 1.0))
         watch.after(seq, status("moving", "idle", "clamped"), "a good command still works")
-        op.close()
         assert agent.stats.steps > 0 and agent._thread is not None and agent._thread.is_alive()

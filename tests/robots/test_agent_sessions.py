@@ -20,6 +20,7 @@ import zenoh
 
 from kinesphere import zconfig
 from kinesphere.clients.link import RobotLink
+from kinesphere.closing import Closable
 from kinesphere.keyexpr import Keys
 from kinesphere.protocol import (
     ANONYMOUS,
@@ -161,7 +162,7 @@ def test_a_release_clears_only_an_estop_sent_before_it() -> None:
 # --- over the wire -----------------------------------------------------------------------------
 
 
-class Signed:
+class Signed(Closable):
     """Puts commands on a robot's key signed with ``signer`` (``""``: the plain key)."""
 
     def __init__(self, session: zenoh.Session, robot_id: str, signer: str) -> None:
@@ -184,9 +185,10 @@ class Signed:
 
 def test_the_robot_takes_the_sender_from_the_key(hub: Hub) -> None:
     session, endpoint = hub
-    acks = AckWatch(session, "signed")
-    with running_agent(endpoint, "khepera", robot_id="signed", speed=1.0) as (_, watch):
-        alice, bob, plain = (Signed(session, "signed", s) for s in ("alice", "bob", ""))
+    with (AckWatch(session, "signed") as acks,
+          running_agent(endpoint, "khepera", robot_id="signed", speed=1.0) as (_, watch),
+          Signed(session, "signed", "alice") as alice, Signed(session, "signed", "bob") as bob,
+          Signed(session, "signed", "") as plain):
         seq = alice.send("", lease=LeaseAction.ACQUIRE)  # no name in the payload: the key's
         acks.of("alice", seq, "leased")
         watch.after(seq, lambda s: s.lease_holder == "alice", "alice holds the lease")
@@ -203,16 +205,13 @@ def test_the_robot_takes_the_sender_from_the_key(hub: Hub) -> None:
         watch.after(seq, lambda s: s.status == "estop" and s.estop_by == "alice", "latched")
         seq = alice.send("alice", release=True)
         acks.of("alice", seq, "released")
-        for op in (alice, bob, plain):
-            op.close()
-    acks.close()
 
 
 def test_a_late_copy_of_a_release_leaves_the_next_estop_latched(hub: Hub) -> None:
     session, endpoint = hub
-    acks = AckWatch(session, "late-copy")
-    with running_agent(endpoint, "khepera", robot_id="late-copy", speed=1.0) as (_, watch):
-        op = Signed(session, "late-copy", "")
+    with (AckWatch(session, "late-copy") as acks,
+          running_agent(endpoint, "khepera", robot_id="late-copy", speed=1.0) as (_, watch),
+          Signed(session, "late-copy", "") as op):
         before = time.time_ns()  # when the last round's release was sent
         seq = op.send("op", estop=True, stop=True, deadman=False)
         acks.of("op", seq, "estopped")
@@ -225,8 +224,6 @@ def test_a_late_copy_of_a_release_leaves_the_next_estop_latched(hub: Hub) -> Non
                    "still latched after the late copy")
         seq = op.send("op", release=True)
         acks.of("op", seq, "released")
-        op.close()
-    acks.close()
 
 
 def test_a_client_told_stale_starts_a_fresh_session(hub: Hub) -> None:

@@ -29,9 +29,9 @@ def test_translation_and_articulation_overlap_in_time(
     goal = pose.translation
     assert goal is not None and pose.joints
     trace = Trace()
-    with running_agent(endpoint, "youbot", speed=4.0, trace=trace) as (agent, watch):
+    with (running_agent(endpoint, "youbot", speed=4.0, trace=trace) as (agent, watch),
+          CommandSender(session, agent.robot_id) as op):
         target, _ = agent.controller.joints.clamp(pose.joints)
-        op = CommandSender(session, agent.robot_id)
         seq = op.send(part)
         done = watch.after(
             seq,
@@ -39,7 +39,6 @@ def test_translation_and_articulation_overlap_in_time(
             and math.dist(s.base_pose[:2], goal[:2]) < 5e-3,
             "arm at the pose and base translated",
         )
-        op.close()
     assert abs(done.base_pose[2]) < 1e-3, "an omni base translates without turning"
     start, end = overlap(trace)
     assert end - start > 0.2, f"joints and base should move together, overlap {start}..{end}"
@@ -54,8 +53,8 @@ def test_drive_while_the_arm_sweeps(hub: Hub, databank: DatabankProcess) -> None
     assert sweeps, "the packbot cannot sweep low left-right"
     entry, lows = sweeps[0]
     trace = Trace()
-    with running_agent(endpoint, "packbot", speed=2.0, trace=trace) as (agent, watch):
-        op = CommandSender(session, agent.robot_id)
+    with (running_agent(endpoint, "packbot", speed=2.0, trace=trace) as (agent, watch),
+          CommandSender(session, agent.robot_id) as op):
         for d in (lows[0], lows[-1]):
             pose = databank.query("packbot", SpatialCommand(entry.limb, entry.origin, d, 2.0))
             target, _ = agent.controller.joints.clamp(pose.joints)
@@ -67,7 +66,6 @@ def test_drive_while_the_arm_sweeps(hub: Hub, databank: DatabankProcess) -> None
         seq = op.send(stop=True)
         stopped = watch.after(seq, lambda s: s.status == "stopped"
                               and not agent.controller.moving, "stopped")
-        op.close()
     start, end = overlap(trace)
     assert end - start > 0.2
     assert stopped.base_pose[0] > 0.1, "drove forward"
@@ -84,12 +82,11 @@ def test_limbless_robot_follows_a_core_command(
     pose = databank.query("khepera", part)
     goal = pose.translation
     assert goal is not None
-    with running_agent(endpoint, "khepera", speed=4.0) as (agent, watch):
-        op = CommandSender(session, agent.robot_id)
+    with (running_agent(endpoint, "khepera", speed=4.0) as (agent, watch),
+          CommandSender(session, agent.robot_id) as op):
         seq = op.send(part)
         done = watch.after(
             seq, lambda s: s.status == "idle"
             and math.dist(s.base_pose[:2], goal[:2]) < 5e-3,
             "khepera at the translated position")
-        op.close()
     assert abs(done.base_pose[2] - math.pi / 4) < 5e-3, "a diff base turns towards the goal"

@@ -323,8 +323,8 @@ def test_ros2_body_faults_and_stops(hub: Hub, databank: DatabankProcess) -> None
             part = SpatialCommand(LIMB, ORIGIN, "forward-high", 2.0)
             goal = databank.query(PLATFORM, part).joints
             far = databank.query(PLATFORM, SpatialCommand(LIMB, ORIGIN, "right-low", 3.0)).joints
-            with zconfig.session(config=zconfig.loopback_config(endpoint)) as s:
-                operator = CommandSender(s, "baxter-f")
+            with (zconfig.session(config=zconfig.loopback_config(endpoint)) as s,
+                  CommandSender(s, "baxter-f") as operator):
                 operator.send((LIMB, ORIGIN, "forward-high", 2.0))
                 robot.wait(lambda r: at(r, goal), "reached forward-high mid via commands")
                 for how in ({"ttl_ms": 150}, {"estop": True}):
@@ -343,7 +343,6 @@ def test_ros2_body_faults_and_stops(hub: Hub, databank: DatabankProcess) -> None
                     operator.send(release=True)
                     operator.send((LIMB, ORIGIN, "forward-high", 2.0))
                     robot.wait(lambda r: at(r, goal), "back at forward-high")
-                operator.close()
             robot.publishing.clear()  # the driver goes quiet
             err = watch.wait(lambda st: st.status == "error", "an error status")
             assert f"no joint states on {ns}/joint_states" in err.detail, err.detail
