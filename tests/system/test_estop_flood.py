@@ -65,9 +65,11 @@ def estop_round(capsys: pytest.CaptureFixture[str], endpoint: str, obs: Observer
         assert code == 1, out + err
         assert "NOT CONFIRMED" in err and set(ROBOTS) <= named, out + err
         tally.add("exit 1 naming the unconfirmed")
-    assert main(["estop", "--release", "--target", "all", "--mode", "client", "--connect",
-                 endpoint, "--sender", OFFICER]) == 0, capsys.readouterr()
-    capsys.readouterr()
+    released = main(["estop", "--release", "--target", "all", "--mode", "client", "--connect",
+                     endpoint, "--sender", OFFICER])
+    said = capsys.readouterr()
+    assert released == 0, (f"the release (exit {released}):\n{said.out}{said.err}"
+                           f"the e-stop before it (exit {code}):\n{out}{err}{obs.describe()}")
 
 
 def test_estop_lists_every_robot_or_exits_1_under_load(
