@@ -376,7 +376,7 @@ def replay(session: zenoh.Session, path: str | Path, kind: str = "commands",
         if len(unheard) == len(publishers):
             raise KinesphereError("unavailable", f"nobody listens on {few(unheard)} (waited "
                                   f"{wait:g} s): nothing replayed")
-        robots = addressed(keys, found.topics) if answers_for > 0 else []
+        robots = _robots_named(keys, found.topics) if answers_for > 0 else []
         missing = unseen(session, keys.alive_robot(WILDCARD), [keys.alive_robot(r) for r in robots],
                          max(0.0, deadline - time.monotonic()))
         not_alive = [keys.robot_id_of(token) for token in missing]
@@ -416,7 +416,7 @@ def replay(session: zenoh.Session, path: str | Path, kind: str = "commands",
     return Replayed(sent, unheard, shortened, commands, answers, should_stop(), not_alive)
 
 
-def addressed(keys: Keys, topics: dict[str, type[Message]]) -> list[str]:
+def _robots_named(keys: Keys, topics: dict[str, type[Message]]) -> list[str]:
     """The robots named by the command keys among ``topics`` (not ``*``, not groups)."""
     robots: dict[str, None] = {}
     for topic, kind in topics.items():
