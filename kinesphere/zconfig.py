@@ -13,7 +13,9 @@ exits. A peer that vanishes is noticed after the link lease (10 s by default, ``
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
+import os
 import socket
 import threading
 import time
@@ -302,8 +304,53 @@ def session_from_args(args: argparse.Namespace, *, ros2: bool = False) -> zenoh.
     return open_session(config=configs[-1])
 
 
+PROBED_PORTS_FROM = 20_000
+"""Where :func:`free_port` starts looking: below the kernel's ephemeral range."""
+EPHEMERAL_RANGE = Path("/proc/sys/net/ipv4/ip_local_port_range")
+_probes = itertools.count()
+"""How many ports this process has probed: each probe looks at the next port."""
+
+
+def _probed_ports() -> range | None:
+    """The ports :func:`free_port` tries: those below the ephemeral range (Linux's default
+    32768-60999; elsewhere, where that file is missing, the ranges start at 32768 or 49152),
+    or above it when it starts too low; None if neither side has 1,024 ports."""
+    try:
+        low, high = map(int, EPHEMERAL_RANGE.read_text().split())
+    except (OSError, ValueError):
+        low, high = 32_768, 60_999
+    if low - PROBED_PORTS_FROM >= 1024:
+        return range(PROBED_PORTS_FROM, low)
+    if 65_535 - high >= 1024:
+        return range(high + 1, 65_536)
+    return None
+
+
 def free_port(host: str = LOOPBACK_HOST) -> int:
-    """A TCP port free right now on ``host``; another process may still take it first."""
+    """A TCP port free right now on ``host``; another process may still take it first.
+
+    Not one the kernel picks (port 0): those come from the ephemeral range, where every
+    outgoing connection takes its local port, so one opened between the probe and the
+    listener's bind could take it (a full test run saw a router's "Address already in use").
+    Outside that range only listeners compete: each process starts at its own place (from
+    its pid) and moves one port on per probe, and a port bound now is passed over.
+    """
+    ports = _probed_ports()
+    if ports is None:
+        return _kernel_port(host)
+    start = os.getpid() * 7919  # a prime: neighbouring pids start far apart
+    for _ in range(len(ports)):
+        port = ports[(start + next(_probes)) % len(ports)]
+        with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
+            try:
+                sock.bind((host, port))
+            except OSError:
+                continue
+            return port
+    return _kernel_port(host)
+
+
+def _kernel_port(host: str) -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
         sock.bind((host, 0))
         return int(sock.getsockname()[1])

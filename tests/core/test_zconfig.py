@@ -85,6 +85,34 @@ def test_free_port_is_bindable() -> None:
     assert zc.loopback_endpoint(port) == f"tcp/127.0.0.1:{port}"
 
 
+def test_free_ports_lie_outside_the_ephemeral_range_and_pass_over_bound_ones() -> None:
+    low, high = map(int, zc.EPHEMERAL_RANGE.read_text().split())
+    held = []
+    try:
+        for _ in range(20):  # each listening, as a router on it would be
+            port = zc.free_port()
+            assert not low <= port <= high, (port, low, high)
+            sock = socket.socket()
+            held.append(sock)
+            sock.bind((zc.LOOPBACK_HOST, port))
+            sock.listen()
+        assert len({s.getsockname()[1] for s in held}) == len(held)
+    finally:
+        for sock in held:
+            sock.close()
+
+
+def test_a_probe_passes_over_a_port_another_process_listens_on() -> None:
+    first = zc.free_port()
+    ports = zc._probed_ports()
+    assert ports is not None
+    following = ports[(ports.index(first) + 1) % len(ports)]
+    with socket.socket() as sock:  # the next port this process would probe, taken
+        sock.bind((zc.LOOPBACK_HOST, following))
+        sock.listen()
+        assert zc.free_port() not in (first, following)
+
+
 def test_taken_port_is_unavailable() -> None:
     with zc.loopback_hub() as (_hub, endpoint):
         with pytest.raises(KinesphereError) as info:
