@@ -24,6 +24,7 @@ from kinesphere.robots.agent.options import Ros2BodyOptions
 from kinesphere.robots.agent.ros2_body import Ros2Body
 from support.clock import ManualClock
 from support.ros2 import JAZZY, RosPublisher, RosTap
+from support.wait import until
 
 NS = "/pk"
 
@@ -93,6 +94,10 @@ def test_mobile_base_over_ros2() -> None:
             # odometry stops: a fault naming it, and the base is sent a zero Twist
             odom_thread_stop.set()
             ot.join(timeout=5)
+            # a last odometry of its own pose: once the body has it, none is still on its way
+            # (one would be stamped after the clock moves, and be fresh)
+            odom.put(_odometry(1.25, -0.5, 3.0))
+            until(lambda: body.read().base_pose[0] == 1.25, 30.0, "the last odometry")
             clock.now += options.timeout_s + 0.1
             assert body.wait_states(body.states + 2, 30.0), "joint states go on"
             with pytest.raises(KinesphereError, match=f"no odometry on {NS}/odom for"):
