@@ -64,12 +64,14 @@ def swept(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Path, list
     parent = tmp_path_factory.mktemp("brought")
     rows = sweep(urdfs(), parent, _built_here)
     found = by_rel(rows)
+    limbs = {key: _sample(found[key]) for key in BUILT_ONCE}
+    built = built_once(tmp_path_factory, [(name, key[1], found[key]["chains"][limbs[key][0]])
+                                          for key, name in BUILT_ONCE.items()])
     for key, name in BUILT_ONCE.items():
         row = found[key]
-        (limb,) = row["limbs"] = _sample(row)
-        built = built_once(tmp_path_factory, name, key[1], row["chains"][limb])
-        _same_platform(parent / row["name"], built)
-        row.update(build=0, build_tb=None, kept=kept(built, [limb]))
+        row["limbs"] = limbs[key]
+        _same_platform(parent / row["name"], built[name])
+        row.update(build=0, build_tb=None, kept=kept(built[name], limbs[key]))
     yield parent, rows
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import fcntl
 import os
+from collections.abc import Sequence
 from importlib.metadata import PackageNotFoundError, distribution
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -98,28 +99,48 @@ def standing(folder: Path) -> tuple[float, list[str]]:
     return low, feet
 
 
-def built_once(factory: pytest.TempPathFactory, name: str, urdf: str, limb: str) -> Path:
-    """The folder ``platform new NAME --urdf URDF`` then ``ecl build --limb LIMB --jobs 1``
-    make, made once per test run and shared by the tests that need it (the collections'
-    sample and the end-to-end test build TIAGo's and Talos's right arms: sharing them took
-    the two files' run from 145 to 115 CPU-s).
+def built_once(factory: pytest.TempPathFactory,
+               wanted: Sequence[tuple[str, str, str]]) -> dict[str, Path]:
+    """For each ``(name, urdf, limb)``, the folder ``platform new NAME --urdf URDF`` then
+    ``ecl build --limb LIMB --jobs 1`` make, made once per test run and shared by the tests
+    that need it (the collections' sample and the end-to-end test build TIAGo's and Talos's
+    right arms: sharing them took the two files' run from 145 to 115 CPU-s).
 
-    Under pytest-xdist the folder sits beside the workers' own temporary folders (in the
-    run's), and a lock makes the first worker that asks build it while another waits; a run
-    without workers keeps it in its own temporary folder. Callers copy it or only read it."""
-    from kinesphere.cli import main
-
+    Under pytest-xdist the folders sit beside the workers' own temporary folders (in the
+    run's), and a lock per folder makes one worker build it while another waits. A worker
+    first builds those no other worker is building, so two that ask at once build different
+    robots side by side; it waits only for what is left. A run without workers keeps them in
+    its own temporary folder. Callers copy the folders or only read them."""
     run = factory.getbasetemp()
     shared = (run.parent if os.environ.get("PYTEST_XDIST_WORKER") else run) / "built-once"
     shared.mkdir(exist_ok=True)
-    folder = shared / name
+    pending = list(wanted)
+    while pending:
+        for i, spec in enumerate(pending):  # one nobody is building, if any
+            if _build_locked(shared, *spec, wait=False):
+                del pending[i]
+                break
+        else:  # every one left is being built elsewhere: wait for the first
+            _build_locked(shared, *pending.pop(0), wait=True)
+    return {name: shared / name for name, _, _ in wanted}
+
+
+def _build_locked(shared: Path, name: str, urdf: str, limb: str, wait: bool) -> bool:
+    """Build ``name`` under its lock unless it is built; False if the lock is held elsewhere
+    and ``wait`` is false."""
+    from kinesphere.cli import main
+
     done = shared / f"{name}.done"
     with open(shared / f"{name}.lock", "w") as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes
+        try:  # released when the file closes
+            fcntl.flock(lock, fcntl.LOCK_EX | (0 if wait else fcntl.LOCK_NB))
+        except BlockingIOError:
+            return False
         if not done.exists():
             assert main(["platform", "new", name, "--urdf", str(robot_data() / urdf),
                          "--dir", str(shared)]) == 0
-            assert main(["ecl", "build", str(folder), "--limb", limb, "--jobs", "1"]) == 0
+            assert main(["ecl", "build", str(shared / name), "--limb", limb,
+                         "--jobs", "1"]) == 0
             done.write_text(f"{urdf} {limb}\n")
     assert done.read_text() == f"{urdf} {limb}\n", (name, done.read_text())
-    return folder
+    return True

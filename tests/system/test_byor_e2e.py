@@ -57,7 +57,6 @@ def brought(tmp_path_factory: pytest.TempPathFactory) -> Path:
     root = tmp_path_factory.mktemp("platforms")
     for name, (urdf, limb, _, _, neutral) in ROBOTS.items():
         if name in BUILT_ONCE:
-            shutil.copytree(built_once(tmp_path_factory, name, urdf, limb), root / name)
             continue
         keep = ["--neutral", "zero"] if neutral else []  # the hand-made one replaces it
         assert main(["platform", "new", name, "--urdf", str(robot_data() / urdf),
@@ -66,6 +65,10 @@ def brought(tmp_path_factory: pytest.TempPathFactory) -> Path:
             with open(root / name / "platform.toml", "a") as fh:
                 fh.write(neutral)
         assert main(["ecl", "build", str(root / name), "--limb", limb]) == 0
+    # the shared ones last: another worker building one of them meanwhile is not waited for
+    built = built_once(tmp_path_factory, [(n, ROBOTS[n][0], ROBOTS[n][1]) for n in BUILT_ONCE])
+    for name, folder in built.items():
+        shutil.copytree(folder, root / name)
     return root
 
 
