@@ -54,13 +54,14 @@ def peer_python(zenoh: str | None = None) -> str:
         return str(python)
     env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "VIRTUAL_ENV")}
     env["PIP_DISABLE_PIP_VERSION_CHECK"] = "1"
-    subprocess.run([sys.executable, "-m", "venv", "--clear", str(venv)], check=True, env=env,
-                   timeout=INSTALL_TIMEOUT_S)
+    # this venv's pip installs into it (no pip of its own), compiling only what runs
+    subprocess.run([sys.executable, "-m", "venv", "--clear", "--without-pip", str(venv)],
+                   check=True, env=env, timeout=INSTALL_TIMEOUT_S)
     constraints = venv / "constraints.txt"
     constraints.write_text("\n".join(pins[2:]) + "\n")
-    done = subprocess.run([str(python), "-m", "pip", "install", "--quiet", "-c", str(constraints),
-                           pins[0], pins[1]], env=env, capture_output=True, text=True,
-                          timeout=INSTALL_TIMEOUT_S)
+    done = subprocess.run([sys.executable, "-m", "pip", "--python", str(python), "install",
+                           "--quiet", "--no-compile", "-c", str(constraints), pins[0], pins[1]],
+                          env=env, capture_output=True, text=True, timeout=INSTALL_TIMEOUT_S)
     if done.returncode != 0:
         raise RuntimeError(f"installing the ROS 2 peer with eclipse-zenoh {zenoh} failed:\n"
                            f"{done.stdout}\n{done.stderr}")
