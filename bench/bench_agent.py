@@ -96,7 +96,7 @@ def step_cost(endpoint: str) -> None:
                 agent.receive(command(i + 1, p))
                 while agent.resolver.queries < i + 1:
                     agent.tick()
-            pm = platform_model(name)
+            pm = platform_model(name, visuals=False)  # the model the agent steps
             bare = pm.make_data()
             tick_costs, bare_costs = [], []
             clock = time.perf_counter

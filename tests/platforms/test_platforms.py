@@ -168,3 +168,43 @@ def test_joint_limits_hold_when_the_arms_push_into_each_other() -> None:
             worst = max(worst, lo - q, q - hi)
     assert touched, "the arms were meant to collide"
     assert worst < 0.01  # the agent keeps targets 0.01 rad inside the limits
+
+
+@pytest.mark.parametrize("name", PLATFORMS)
+def test_the_model_a_robot_steps_moves_as_the_full_model_bit_for_bit(name: str) -> None:
+    """The agent's model leaves out the visual geometry (a camera's only): every joint, limit,
+    gain, collision geom and exclusion stays, and the same servo targets give the same motion
+    to the last bit, contacts included (Baxter's arms swung into each other)."""
+    full, lean = platform_model(name), platform_model(name, visuals=False)
+    fm, lm = full.model, lean.model
+    assert not any(lm.geom_group == 1) and any(fm.geom_group == 1)  # the visual geoms go
+
+    def collision_geoms(m: mujoco.MjModel) -> list[str]:
+        return [m.geom(i).name for i in range(m.ngeom) if m.geom_contype[i] or
+                m.geom_conaffinity[i]]
+
+    assert collision_geoms(lm) == collision_geoms(fm)
+    assert lean.excluded_pairs == full.excluded_pairs
+    assert (lean.qpos_index, lean.dof_index, lean.actuator_index) == \
+        (full.qpos_index, full.dof_index, full.actuator_index)
+    for field in ("jnt_range", "actuator_gainprm", "actuator_biasprm", "body_mass",
+                  "body_inertia", "dof_damping", "dof_armature"):
+        assert np.array_equal(getattr(lm, field), getattr(fm, field)), field
+    fd, ld = full.make_data(), lean.make_data()
+    rng = np.random.default_rng(7)
+    acts = [full.actuator_index[j] for j in full.platform.joint_names]
+    ranges = fm.jnt_range[[fm.joint(j).id for j in full.platform.joint_names]]
+    lo, hi = np.where(ranges[:, 0] < ranges[:, 1], ranges.T, [[-1.0], [1.0]])  # continuous
+    contacts = 0
+    for k in range(1500):
+        if k % 250 == 0:  # a new target for every joint, anywhere in its range
+            target = rng.uniform(lo, hi) if k else \
+                np.where(np.arange(len(acts)) % 2 == 0, lo + 0.01, hi - 0.01)
+            fd.ctrl[acts] = ld.ctrl[acts] = target
+        mujoco.mj_step(fm, fd)
+        mujoco.mj_step(lm, ld)
+        contacts += fd.ncon
+        assert fd.ncon == ld.ncon
+        assert np.array_equal(fd.qpos, ld.qpos) and np.array_equal(fd.qvel, ld.qvel), k
+    if name == "baxter":
+        assert contacts > 0, "the targets were meant to bring limbs into contact"

@@ -22,7 +22,7 @@ def _mujoco(platform: str, dt: float, **_context: object) -> Body:
     from kinesphere.platforms.mjcf import platform_model
     from kinesphere.robots.agent.mujoco_body import MujocoBody  # MuJoCo loads only when chosen
 
-    return MujocoBody(platform_model(platform), dt)
+    return MujocoBody(platform_model(platform, visuals=False), dt)
 
 
 def _ros2(platform: str, dt: float, *, session: Any = None, options: Any = None,

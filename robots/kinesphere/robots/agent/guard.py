@@ -342,7 +342,7 @@ def make_guard(body: Body, platform: str) -> Guard:
     it is simulated, else compiled once for the checks)."""
     from kinesphere.platforms.mjcf import platform_model
 
-    pm = getattr(body, "pm", None) or platform_model(platform)
+    pm = getattr(body, "pm", None) or platform_model(platform, visuals=False)
     return Guard(Clearance(pm), body)
 
 
