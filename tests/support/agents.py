@@ -240,8 +240,10 @@ def running_fleet_host(endpoint: str, robots: list[RobotSpec], speed: float = 2.
 class CommandSender(Closable):
     """A client putting Commands, as the gamepad client would (``session`` "" is a version-1
     client's): on publishers like ``RobotLink.publisher``'s, never dropped under congestion
-    (BLOCK), express, e-stops at REAL_TIME priority and the rest at INTERACTIVE_HIGH. Used as
-    ``with``, its publishers are undeclared even when the block fails."""
+    (BLOCK), express, e-stops at REAL_TIME priority and the rest at INTERACTIVE_HIGH. Its first
+    put waits for a subscriber to match (up to 5 s): made before its robot starts, it waits
+    for that robot there, not for nobody when made. Used as ``with``, its publishers are
+    undeclared even when the block fails."""
 
     def __init__(self, session: zenoh.Session, robot_id: str = "*", sender: str = "test",
                  key: str | None = None, client_session: str = "") -> None:
@@ -253,7 +255,7 @@ class CommandSender(Closable):
         self.sender = sender
         self.session = client_session
         self.seq = 0
-        zconfig.wait_matching(self.pub)
+        self._matched = False
 
     def send(self, *parts: Part | SpatialCommand,
              drive: tuple[str, float] | Drive | None = None,
@@ -263,6 +265,7 @@ class CommandSender(Closable):
         self.seq = self.seq + 1 if seq is None else seq
         if isinstance(drive, tuple):
             drive = Drive(*drive)
+        self._match()
         (self.urgent if estop else self.pub).put(encode(Command(
             seq=self.seq, sent_ns=time.time_ns() if sent_ns is None else sent_ns,
             parts=[p if isinstance(p, SpatialCommand) else SpatialCommand(*p) for p in parts],
@@ -272,7 +275,13 @@ class CommandSender(Closable):
         return self.seq
 
     def raw(self, payload: bytes) -> None:
+        self._match()
         self.pub.put(payload)
+
+    def _match(self) -> None:
+        if not self._matched:
+            self._matched = True
+            zconfig.wait_matching(self.pub)
 
     def close(self) -> None:
         zconfig.undeclare(self.pub, self.urgent)
