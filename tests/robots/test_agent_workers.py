@@ -131,8 +131,8 @@ def test_workers_run_robots_of_their_own_and_one_killed_takes_only_its_robots(
             one, two = (sorted(s & set(poses))[0] for s in shares)
             idle = next(rid for rid in poses if rid not in (one, two))
             before = watches[idle].wait(lambda st: True, f"a state of {idle}")
-            for rid in (one, two):
-                seq = ops[rid].send(poses[rid])
+            sent = {rid: ops[rid].send(poses[rid]) for rid in (one, two)}  # both at once
+            for rid, seq in sent.items():
                 watches[rid].after(seq, partial(joints_close, joints=targets[rid], tol=0.02),
                                    f"{rid} at its pose")
                 acks.of(f"op-{rid}", seq, "reached")
