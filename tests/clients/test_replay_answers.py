@@ -77,13 +77,13 @@ def test_a_replay_nobody_answers_exits_1(hub: Hub, tmp_path: Path,
     with zconfig.session(config=zconfig.loopback_config(hub.endpoint)) as s:
         sub = s.declare_subscriber(KEYS.command("rp-none"), lambda sample: None)
         try:
-            capsys.readouterr()
-            assert main(["replay", str(path), "--connect", hub.endpoint]) == 1
+            capsys.readouterr()  # --wait: room for the subscriber's match (gossip, ~0.5 s)
+            assert main(["replay", str(path), "--connect", hub.endpoint, "--wait", "2"]) == 1
         finally:
             zconfig.undeclare(sub)
     err = capsys.readouterr().err
     assert "no robot answered any of the 2 command(s)" in err, err
-    assert "not seen alive within --wait 5 s: robot(s) rp-none" in err, err
+    assert "not seen alive within --wait 2 s: robot(s) rp-none" in err, err
 
 
 def test_an_interrupted_replay_says_so_and_exits_130(hub: Hub, tmp_path: Path) -> None:
