@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import time
 
+import zenoh
+
 from kinesphere import zconfig
 from kinesphere.procs import Supervisor
 from kinesphere.protocol import FleetEstops, decode
@@ -17,6 +19,16 @@ from support.agents import CommandSender, StateWatch, running_agent
 from support.network import KEYS, Hub
 from support.system import port_open
 from support.wait import WAIT_S, until
+
+
+def knows(s: zenoh.Session, robot_id: str) -> None:
+    """Wait until ``s`` knows ``robot_id``'s command subscriber, so a fleet command put from
+    ``s`` reaches that robot (its own session hearing its first state says nothing of ``s``)."""
+    probe = s.declare_publisher(KEYS.command(robot_id))
+    try:
+        assert zconfig.wait_matching(probe, WAIT_S), f"{robot_id} unknown to the sender"
+    finally:
+        zconfig.undeclare(probe)
 
 
 def test_a_robot_started_during_a_fleet_estop_comes_up_latched(hub: Hub) -> None:
@@ -31,6 +43,7 @@ def test_a_robot_started_during_a_fleet_estop_comes_up_latched(hub: Hub) -> None
                 assert "fleet e-stop in force" in st.detail
                 assert "'kinesphere estop --release --target all --sender officer'" in st.detail
                 assert all(s.last_command_seq < 0 for s in late.states), "it obeyed nothing"
+                knows(s, "fe-late")
                 fleet.send(release=True, deadman=True)
                 late.wait(lambda st: st.status != "estop", "released by the fleet release")
                 first.wait(lambda st: st.status != "estop", "released by the fleet release")
@@ -40,12 +53,15 @@ def test_a_robot_started_during_a_fleet_estop_comes_up_latched(hub: Hub) -> None
 
 def test_a_robot_that_joins_late_latches_from_the_others(hub: Hub, sup: Supervisor) -> None:
     """It runs behind a router that is down when the e-stop goes out; when the router comes
-    up, its board asks at once (a new link) and it latches without any command."""
+    up, its board asks at once (a new link) and it latches without any command. Its session
+    retries the router every 0.1 s (Zenoh's default backs off to 4 s: the link would form up
+    to 4 s after the router is up, and only the board's ask on the new link is the claim)."""
     port = zconfig.free_port()
     behind = f"tcp/127.0.0.1:{port}"
+    config = zconfig.session_config("peer", listen=[zconfig.LOOPBACK_ANY_PORT], connect=[behind])
+    config.insert_json5("connect/retry", '{"period_init_ms": 100, "period_max_ms": 100}')
     with (zconfig.session(config=zconfig.loopback_config(hub.endpoint)) as s,
-          zconfig.session(config=zconfig.session_config(
-              "peer", listen=[zconfig.LOOPBACK_ANY_PORT], connect=[behind])) as cut,
+          zconfig.session(config=config) as cut,
           CommandSender(s, "*", sender="officer") as fleet,
           StateWatch(s, "fe-cut") as watch):
         late = Agent("khepera", "fe-cut", cut, AgentOptions(speed=1.0)).start()
@@ -60,6 +76,7 @@ def test_a_robot_that_joins_late_latches_from_the_others(hub: Hub, sup: Supervis
                 st = watch.wait(lambda st: st.status == "estop", "the late robot latched")
                 assert st.estop_by == "officer"
                 assert time.monotonic() - joined < WAIT_S
+                knows(s, "fe-cut")
                 fleet.send(release=True, deadman=True)
                 watch.wait(lambda st: st.status != "estop", "released")
         finally:
