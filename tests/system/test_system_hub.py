@@ -11,12 +11,18 @@ README's five-minute tour (the same shape by hand) is run as written and checked
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 import re
+import sys
+import threading
 import time
 import urllib.request
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
+from typing import TextIO
 
 import pytest
 import zenoh
@@ -81,19 +87,50 @@ def statuses(demo: Demo) -> dict[str, str]:
     return {r: s.status for r, s in demo.recorder.snapshot().items()}
 
 
-def status_lists(endpoint: str, mode: str, capsys: pytest.CaptureFixture[str]) -> set[str]:
-    """Robots ``kinesphere status`` lists as alive with a state (run in-process)."""
-    main(["status", "--json", "--connect", endpoint, "--mode", mode, "--timeout", "10"])
-    info = json.loads(capsys.readouterr().out)
-    return {r for r, v in info["robots"].items() if v["alive"] and v["state"]}
+class _ThreadsOwnStdout(io.TextIOBase):
+    """``sys.stdout`` for commands run at once in threads: each thread's own buffer (a thread
+    that is not running one writes where ``sys.stdout`` wrote before)."""
+
+    def __init__(self) -> None:
+        self._local = threading.local()
+        self._before = sys.stdout
+
+    def _out(self) -> TextIO:
+        out: TextIO = getattr(self._local, "buf", None) or self._before
+        return out
+
+    def writable(self) -> bool:
+        return True
+
+    def write(self, text: str) -> int:
+        return self._out().write(text)
+
+    def run(self, func: Callable[[], object]) -> str:
+        """``func()`` in this thread; what it printed."""
+        buf = self._local.buf = io.StringIO()
+        try:
+            func()
+        finally:
+            del self._local.buf
+        return buf.getvalue()
 
 
-def test_kill_any_service_and_the_rest_keep_talking(
-    demo: Demo, capsys: pytest.CaptureFixture[str]
-) -> None:
+def status_lists(endpoint: str, mode: str, runs: int = 1) -> list[set[str]]:
+    """Robots each of ``runs`` ``kinesphere status`` (in-process, all at once, each on a
+    session of its own) lists as alive with a state."""
+    own = _ThreadsOwnStdout()
+    argv = ["status", "--json", "--connect", endpoint, "--mode", mode, "--timeout", "10"]
+    with ThreadPoolExecutor(runs) as pool, contextlib.redirect_stdout(own):
+        printed = list(pool.map(lambda _i: own.run(lambda: main(argv)), range(runs)))
+    infos = [json.loads(out) for out in printed]
+    return [{r for r, v in info["robots"].items() if v["alive"] and v["state"]}
+            for info in infos]
+
+
+def test_kill_any_service_and_the_rest_keep_talking(demo: Demo) -> None:
     sup, ep, tokens = demo.sup, demo.endpoint, demo.alive
     assert tokens is not None
-    runs = [status_lists(ep, "client", capsys) for _ in range(10)]
+    runs = status_lists(ep, "client", runs=10)
     assert all(r == set(ROBOTS) for r in runs), runs
 
     # the databank dies: robots keep running, the hub keeps routing
@@ -128,7 +165,7 @@ def test_kill_any_service_and_the_rest_keep_talking(
               explain=lambda: acks.seen)
     finally:
         acks.close()
-    assert status_lists(ep, "client", capsys) == alive
+    assert status_lists(ep, "client") == [alive]
 
 
 SETUP = (["make", "install"], [".", ".venv/bin/activate"])
@@ -164,14 +201,13 @@ def wait_printed(sup: Supervisor, child: Child, shown: list[str], since: int = 0
           explain=lambda: (unprinted(shown, log(child, since)), child.tail()))
 
 
-def test_the_readme_tour_runs_as_written(
-    sup: Supervisor, capsys: pytest.CaptureFixture[str]
-) -> None:
+def test_the_readme_tour_runs_as_written(sup: Supervisor) -> None:
     """The README's five-minute tour, command by command as processes, each printing what the
     README shows (the router and the view on free ports instead of 7447 and 8080, which other
     suites on this machine may hold); then, in that topology, ``status`` lists every live robot
-    every time, as a peer and as a client (before the router: 5 of 10 as a peer), and with the
-    databank killed a new ``estop`` process still reaches every robot."""
+    every time, as a peer and as a client (ten runs of each at once, each on a session of its
+    own; before the router: 5 of 10 as a peer), and with the databank killed a new ``estop``
+    process still reaches every robot."""
     steps, sender = tour()
     sup.env["KINESPHERE_SENDER"] = sender
     port, view_port = free_port(), free_port()
@@ -207,7 +243,7 @@ def test_the_readme_tour_runs_as_written(
     try:
         obs.wait_alive(robots, databank=True, sup=sup)
         for mode in ("peer", "client"):
-            runs = [status_lists(ep, mode, capsys) for _ in range(10)]
+            runs = status_lists(ep, mode, runs=10)
             assert all(r == robots for r in runs), f"{mode}: {runs}"
         sup.kill("databank")
         until(lambda: not obs.alive.databanks, WAIT_S, "the databank's token to go")
