@@ -21,6 +21,7 @@ import zenoh
 from kinesphere.clients.link import operator_id
 from kinesphere.errors import KinesphereError
 from kinesphere.keyexpr import Keys
+from kinesphere.procs import Child
 from kinesphere.protocol import (
     Ack,
     AckStage,
@@ -82,16 +83,28 @@ def test_only_the_router_listens(secured: Secured) -> None:
     assert found["databank"] == [] and found["agent"] == [], found
 
 
-def _send(s: Secured, role: str, pose: tuple[str, str, str, int],
-          operator: str = "") -> tuple[int, str]:
+DENIED_TIMEOUT_S = 1.0
+"""``send --timeout`` where the router drops the command: an admitted command is acked within
+milliseconds, and what proves the drop is the router's log and the robot's own state, not
+how long the client waited (its 5 s default would only be idle time)."""
+
+
+def _spawn_send(s: Secured, role: str, pose: tuple[str, str, str, int],
+                operator: str = "", timeout: float | None = None) -> Child:
     """``kinesphere send`` with a role's deploy config (and an operator's own certificate
-    and name), as an operator would run it: its exit status and output."""
+    and name), as an operator would run it (``--timeout`` if given), started."""
     name = f"send-{role}-{operator}-{pose[2]}"
     own = [*robot_cert(s.certs, operator, "operators"), "--sender", operator] if operator \
         else []
-    child = s.sup.spawn(name, ["send", ROBOT, *map(str, pose), "--zenoh-config",
-                               str(s.configs[role]), *own, "--wait", "20"], expect_exit=True)
-    return s.sup.wait(name, WAIT_S), child.tail()
+    answers = ["--timeout", f"{timeout:g}"] if timeout is not None else []
+    return s.sup.spawn(name, ["send", ROBOT, *map(str, pose), "--zenoh-config",
+                              str(s.configs[role]), *own, "--wait", "20", *answers],
+                       expect_exit=True)
+
+
+def _ended(s: Secured, child: Child) -> tuple[int, str]:
+    """A started ``send``'s exit status and output."""
+    return s.sup.wait(child.name, WAIT_S), child.tail()
 
 
 def test_only_the_operator_moves_robots(secured: Secured) -> None:
@@ -100,14 +113,16 @@ def test_only_the_operator_moves_robots(secured: Secured) -> None:
     s, obs = secured, secured.obs
     a = query_pose(obs.session, "youbot", *POSE_A).joints
     b = query_pose(obs.session, "youbot", *POSE_B).joints
-    code, out = _send(s, "operator", POSE_A, operator="alice")
+    code, out = _ended(s, _spawn_send(s, "operator", POSE_A, operator="alice"))
     assert code == 0 and f"{ROBOT}: reached" in out, out
     until(lambda: at_pose(obs.states.last(ROBOT), a), WAIT_S, "the operator's pose")
     before = obs.states.last(ROBOT)
     assert before is not None
 
-    for role in ("superuser", "operator"):  # the router drops it: the client must say so
-        code, out = _send(s, role, POSE_B)
+    # the router drops these: each client must say so (both run at once: they wait alike)
+    for child in [_spawn_send(s, role, POSE_B, timeout=DENIED_TIMEOUT_S)
+                  for role in ("superuser", "operator")]:
+        code, out = _ended(s, child)
         assert code == 1 and f"{ROBOT}: NO ACKNOWLEDGEMENT" in out, out
     for role, config in (("robot", s.robot_config(ROBOT)),
                          ("databank", session_config(config_file=s.configs["databank"]))):
