@@ -86,9 +86,14 @@ def test_an_operator_speaks_only_under_its_own_name(secured: Secured) -> None:
     assert after is not None and after.lease_holder == "alice"
     assert at_pose(after, dict(zip(before.joint_names, before.q, strict=True)), tol=1e-3)
     # `send` with bob's certificate and alice's name: the router drops it, the client says so
+    # (within 1 s: an admitted command is acked within milliseconds; that it was dropped is
+    # proven by the robot, which, heard afterwards, has not moved)
     code, out = _cli(s, "send-bob-as-alice", "bob", "send", ROBOT, *map(str, POSE), "--wait",
-                     "20", sender="alice")
+                     "20", "--timeout", "1", sender="alice")
     assert code == 1 and f"{ROBOT}: NO ACKNOWLEDGEMENT" in out, out
+    assert obs.states.wait_fresh([ROBOT], time.time_ns() + 300_000_000, WAIT_S)
+    assert at_pose(obs.states.last(ROBOT), dict(zip(before.joint_names, before.q, strict=True)),
+                   tol=1e-3)
     _put(alice, mine, sender="alice", lease=LeaseAction.RELEASE, seq=3)
 
 
