@@ -6,12 +6,14 @@ e-stop from the operator without the lease stops the robot at once."""
 
 from __future__ import annotations
 
+import re
 import signal
 import subprocess
 import sys
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
+from importlib import resources
 from pathlib import Path
 
 import pytest
@@ -126,12 +128,26 @@ def test_a_phrase_a_body_cannot_play_fails_before_anything_moves(
                for h in free.track.since(r, start))
 
 
+QUICK = (1.0, 0.2)
+"""left_high's step durations in the quick copy: its last step ends long before the youBot
+can be back at neutral (its written 2.5 s might not)."""
+
+
 def test_a_phrase_ends_with_its_robots_where_it_says(
-    free: ClientFleet, capsys: pytest.CaptureFixture[str]
+    free: ClientFleet, capsys: pytest.CaptureFixture[str], tmp_path: Path
 ) -> None:
     """left_high ends 'back to neutral': play goes on until the youBot is there, then says it
-    reached it (not 'holding: deadman released'); the robot is at rest at its neutral pose."""
-    code = main(["play", "left_high", "--target", YB, "--connect", free.endpoint])
+    reached it (not 'holding: deadman released'); the robot is at rest at its neutral pose.
+    Played as a copy with shorter steps (:data:`QUICK`), so the robot is still on its way
+    when the last step's time runs out: play has to go on after it."""
+    shipped = resources.files("kinesphere.clients.orders").joinpath("phrases/left_high.toml")
+    durations = iter(QUICK)
+    quick = re.sub(r"(?m)^duration = .*$", lambda _m: f"duration = {next(durations)}",
+                   shipped.read_text(encoding="utf-8"))
+    assert next(durations, None) is None, "left_high no longer has two steps"
+    phrase = tmp_path / "left_high.toml"
+    phrase.write_text(quick, encoding="utf-8")
+    code = main(["play", str(phrase), "--target", YB, "--connect", free.endpoint])
     out, err = capsys.readouterr()
     assert code == 0, err
     assert out.startswith(f"{YB}: reached") and len(out.splitlines()) == 1, out
