@@ -401,24 +401,30 @@ def loopback_pair() -> Iterator[tuple[zenoh.Session, zenoh.Session]]:
         yield hub, peer
 
 
-def wait_matching(entity: zenoh.Publisher | zenoh.Querier, timeout: float = 5.0) -> bool:
+def wait_matching(entity: zenoh.Publisher | zenoh.Querier, timeout: float = 5.0,
+                  wake: threading.Event | None = None) -> bool:
     """Wait until a subscriber (publisher) or queryable (querier) matches; False on timeout.
 
     Declarations travel asynchronously, so a put right after a remote subscribe may be lost;
-    tests and start-up code wait here rather than sleeping.
+    tests and start-up code wait here rather than sleeping. ``wake`` is the event the wait
+    blocks on (a match sets it): its owner may set it to end the wait early (a component
+    closing), and the answer is then whether a match is known.
     """
-    matched = threading.Event()
+    matched = threading.Event() if wake is None else wake
 
     def on_status(status: zenoh.MatchingStatus) -> None:
         if status.matching:
             matched.set()
 
+    def matching() -> bool:
+        status: Any = entity.matching_status
+        return getattr(status, "matching", status) is True
+
     listener = entity.declare_matching_listener(on_status)
     try:
-        status: Any = entity.matching_status
-        if getattr(status, "matching", status) is True:
+        if matching():
             return True
-        return matched.wait(timeout)
+        return matched.wait(timeout) and (wake is None or matching())
     finally:
         undeclare(listener)
 

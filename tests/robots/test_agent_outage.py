@@ -7,6 +7,7 @@ write to it.
 from __future__ import annotations
 
 import shutil
+import threading
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -14,6 +15,7 @@ import pytest
 
 from kinesphere import zconfig
 from kinesphere.protocol import RecordRequest, SpatialCommand, encode
+from kinesphere.robots.agent.resolver import Resolver
 from kinesphere.services.ecl.store import DATA_DIR
 from support.agents import (
     CommandSender,
@@ -117,3 +119,15 @@ def test_cache_is_per_databank_version(
             assert agent.resolver.queries == 2
     finally:
         bank.stop()
+
+
+def test_a_robot_stopped_while_no_databank_answers_stops_at_once(own_hub: Hub) -> None:
+    """Its resolver waits for a databank to turn up (``ready_s``); closing it ends that wait,
+    so its worker has ended when ``close`` returns (it used to run out ``ready_s`` while close
+    gave up joining it)."""
+    with zconfig.session(config=zconfig.loopback_config(own_hub.endpoint)) as s:
+        resolver = Resolver(s, "limbo", KEYS, ready_s=WAIT_S)
+        resolver.start()
+        resolver.close()
+        assert "resolver-limbo" not in [t.name for t in threading.enumerate()]
+        assert resolver.reachable is None, "it never asked a databank"

@@ -147,6 +147,8 @@ class Resolver:
         self._pending: _Request | None = None
         self._stale = False
         self._closing = False
+        self._woken = threading.Event()
+        """Set by a catalogue match, or by :meth:`close`: what ends :meth:`wait_ready`."""
         self._changed: Any = None
         self._catalogue: zenoh.Querier | None = None
         self._thread = threading.Thread(target=self._run, name=f"resolver-{platform}", daemon=True)
@@ -158,17 +160,19 @@ class Resolver:
         self._thread.start()
 
     def wait_ready(self, timeout_s: float) -> bool:
-        """Wait until a databank queryable for this platform is known to the session.
+        """Wait until a databank queryable for this platform is known to the session, or the
+        resolver closes (False then, unless one is known).
 
         Declarations travel asynchronously: a ``get`` right after joining finds no route and
-        ends at once without replies, which would read as an outage.
+        ends at once without replies, which would read as an outage. A robot stopped while it
+        waits (no databank up) stops at once, not at the end of ``ready_s``.
         """
         if self._catalogue is None:
             self._catalogue = self.session.declare_querier(
                 self.keys.catalogue(self.platform), timeout=self.timeout_s,
                 consolidation=zenoh.ConsolidationMode.NONE,
             )
-        return wait_matching(self._catalogue, timeout_s)
+        return wait_matching(self._catalogue, timeout_s, wake=self._woken)
 
     def _on_changed(self, sample: zenoh.Sample) -> None:
         """A record happened: forget now (a command right behind must miss the cache), and let
@@ -183,6 +187,7 @@ class Resolver:
         with self._wake:
             self._closing = True
             self._wake.notify()
+        self._woken.set()
         if self._thread.is_alive():
             self._thread.join(timeout=self.timeout_s + 1.0)
         undeclare(self._changed, self._catalogue)
