@@ -14,7 +14,10 @@ export SDL_VIDEODRIVER ?= dummy
 export SDL_AUDIODRIVER ?= dummy
 # Bytecode is cached in __pycache__ (git ignores it; hatchling leaves it out of the wheels):
 # without it every process the tests start compiles the tree again (~0.2 CPU-s for an agent's
-# imports, measured 0.74 -> 0.56 CPU-s).
+# imports, measured 0.74 -> 0.56 CPU-s), and, as the install compiles nothing ahead, the
+# libraries it imports too. A PYTHONDONTWRITEBYTECODE in the environment (this machine's has
+# one) would forbid the cache, so make does not pass it on.
+unexport PYTHONDONTWRITEBYTECODE
 
 .PHONY: install demo test lint typecheck layers browser xserver bench soak sweep lock clean
 
