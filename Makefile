@@ -43,12 +43,14 @@ demo: $(STAMP)
 # The tests run on every core (pytest-xdist, a file's tests on one worker, so its fixtures are
 # made once); those marked `realtime` (they judge robots against the clock, and a neighbour
 # taking the other core makes them late) then run alone. Each run ends with its ten slowest tests.
-# WORKERS: one per core. Two cores stay about a third idle (tests waiting on the processes they
-# start and on robots moving in real time), but a third worker on two cores, with a neighbour's
-# load on top (load average 8), made agents fall ~0.9 s behind real time and a ROS 2 peer miss
-# the latched /tf_static: `make test WORKERS=3` is for an otherwise idle machine.
+# WORKERS: one per core and one more. With one per core the cores stayed about a third idle
+# (tests waiting on the processes they start and on robots moving in real time); on this 2-core
+# machine a fresh clone's non-realtime part took 6 min 49 s with two workers, 4 min 43 s with
+# three (6 December 2026, idle). Earlier, a third worker under a neighbour's load (load average
+# 8) made agents fall ~0.9 s behind real time; what judges that is marked `realtime` and runs
+# alone. `make test WORKERS=2` on a shared machine.
 PYTEST := $(BIN)/python -m pytest -q --durations=10
-WORKERS ?= $(shell nproc)
+WORKERS ?= $(shell echo $$(( $$(nproc) + 1 )))
 test: lint typecheck layers browser xserver
 	$(PYTEST) -m "not realtime" -n $(WORKERS) --dist loadfile
 	$(PYTEST) -m realtime
