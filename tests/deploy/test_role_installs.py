@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import subprocess
 import sys
 import tomllib
@@ -22,6 +21,7 @@ import pytest
 
 from kinesphere.cli import ROLE_COMMANDS, _command_word, build_parser, commands, missing_role
 from support.paths import ROOT
+from support.venvs import clean_env, fresh_venv, pip_install
 
 pytestmark = pytest.mark.processes
 
@@ -76,25 +76,18 @@ HOSTS = {
 }
 
 
-def _clean_env() -> dict[str, str]:
-    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "VIRTUAL_ENV")}
-    env["PIP_DISABLE_PIP_VERSION_CHECK"] = "1"
-    return env
-
-
 def _run(cmd: list[str], cwd: Path, timeout: float = 120) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(cmd, cwd=cwd, env=_clean_env(), capture_output=True, text=True,
+    return subprocess.run(cmd, cwd=cwd, env=clean_env(), capture_output=True, text=True,
                           timeout=timeout)
 
 
 def _install(name: str, host: Host, wheels: dict[str, Path], base: Path) -> Path:
     venv = base / name
-    made = _run([sys.executable, "-m", "venv", "--without-pip", str(venv)], base)
-    assert made.returncode == 0, made.stderr
-    pip = [sys.executable, "-m", "pip", "--python", str(venv / "bin" / "python"), "install",
-           "--quiet", "--no-compile", "-c", str(ROOT / "constraints.txt"), "--no-index",
-           "--find-links", str(base / "wheels")]
-    done = _run([*pip, *(str(wheels[DISTS[p]]) for p in host.parts)], base, INSTALL_TIMEOUT_S)
+    python = fresh_venv(venv, INSTALL_TIMEOUT_S)
+    done = pip_install(python, ["-c", str(ROOT / "constraints.txt"), "--no-index",
+                                "--find-links", str(base / "wheels"),
+                                *(str(wheels[DISTS[p]]) for p in host.parts)],
+                       base, INSTALL_TIMEOUT_S)
     assert done.returncode == 0, f"{name} host: pip failed:\n{done.stdout}\n{done.stderr}"
     return venv
 
@@ -107,11 +100,8 @@ def _build_env(venv: Path) -> Path:
     for part in DISTS:
         with open(ROOT / part / "pyproject.toml", "rb") as fh:
             requires.update(tomllib.load(fh)["build-system"]["requires"])
-    made = _run([sys.executable, "-m", "venv", "--without-pip", str(venv)], venv.parent)
-    assert made.returncode == 0, made.stderr
-    python = venv / "bin" / "python"
-    done = _run([sys.executable, "-m", "pip", "--python", str(python), "install", "--quiet",
-                 *sorted(requires)], venv.parent, INSTALL_TIMEOUT_S)
+    python = fresh_venv(venv, INSTALL_TIMEOUT_S)
+    done = pip_install(python, sorted(requires), venv.parent, INSTALL_TIMEOUT_S)
     assert done.returncode == 0, f"pip could not install {sorted(requires)}:\n{done.stderr}"
     return python
 

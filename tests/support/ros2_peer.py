@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
 import subprocess
 import sys
 import tempfile
@@ -21,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from support.paths import ROOT
+from support.venvs import clean_env, fresh_venv, pip_install
 from support.wait import WAIT_S
 from support.watch import Heard
 
@@ -52,16 +52,11 @@ def peer_python(zenoh: str | None = None) -> str:
     stamp = venv / ".installed"
     if stamp.is_file() and stamp.read_text() == stamp_text and python.is_file():
         return str(python)
-    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "VIRTUAL_ENV")}
-    env["PIP_DISABLE_PIP_VERSION_CHECK"] = "1"
-    # this venv's pip installs into it (no pip of its own), compiling only what runs
-    subprocess.run([sys.executable, "-m", "venv", "--clear", "--without-pip", str(venv)],
-                   check=True, env=env, timeout=INSTALL_TIMEOUT_S)
+    python = fresh_venv(venv, INSTALL_TIMEOUT_S)
     constraints = venv / "constraints.txt"
     constraints.write_text("\n".join(pins[2:]) + "\n")
-    done = subprocess.run([sys.executable, "-m", "pip", "--python", str(python), "install",
-                           "--quiet", "--no-compile", "-c", str(constraints), pins[0], pins[1]],
-                          env=env, capture_output=True, text=True, timeout=INSTALL_TIMEOUT_S)
+    done = pip_install(python, ["-c", str(constraints), pins[0], pins[1]], venv,
+                       INSTALL_TIMEOUT_S)
     if done.returncode != 0:
         raise RuntimeError(f"installing the ROS 2 peer with eclipse-zenoh {zenoh} failed:\n"
                            f"{done.stdout}\n{done.stderr}")
@@ -77,7 +72,7 @@ class SdkPeer(Heard[dict[str, Any]]):
         super().__init__()
         self.events = self.heard
         self.domain = domain
-        env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "VIRTUAL_ENV")}
+        env = clean_env()
         env["PYTHONUNBUFFERED"] = "1"
         self._log = tempfile.TemporaryFile(mode="w+")  # the SDK's logging, for failures
         self.proc = subprocess.Popen(
