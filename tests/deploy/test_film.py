@@ -27,6 +27,7 @@ from kinesphere.deploy.film import (
 )
 from kinesphere.errors import KinesphereError
 from support.paths import ROOT
+from support.system import ctrl_c_reaches_it
 from support.wait import WAIT_S
 
 PHRASE = ROOT / "clients" / "phrases" / "left_high.toml"
@@ -93,7 +94,8 @@ def test_an_interrupted_film_leaves_no_partial_file(tmp_path: Path) -> None:
     proc = subprocess.Popen(
         [sys.executable, "-m", "kinesphere.cli", "film", str(PHRASE), "-o", str(out),
          "--width", "96", "--height", "80", "--fps", "10", "--bodies", "youbot"],
-        cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        preexec_fn=ctrl_c_reaches_it)
     said: list[str] = []
     try:
         assert proc.stderr is not None

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import signal
 import socket
 import subprocess
 from collections.abc import Iterator, Sequence
@@ -33,7 +34,15 @@ from support.paths import DEPLOY
 from support.wait import WAIT_S, until
 
 SHIPPED_DBS = DATA_DIR
-"""Upper bound for start-up events on a loaded 2-core machine; healthy runs take seconds."""
+"""The databanks shipped with the platforms."""
+
+
+def ctrl_c_reaches_it() -> None:
+    """A ``preexec_fn``: undo an inherited SIG_IGN for SIGINT, so that the command starts with
+    Python's Ctrl-C handler as it would in a terminal. A job started with ``&`` by a
+    non-interactive shell ignores SIGINT, and so does every process it starts: a ``make test``
+    run that way sent its Ctrl-Cs to commands that never heard them."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 def databank_args(platforms: list[str]) -> list[str]:

@@ -26,7 +26,7 @@ from kinesphere.deploy.plan import (
 from kinesphere.deploy.up import SETTLED_QD
 from kinesphere.errors import KinesphereError
 from support.paths import ROOT
-from support.system import SHIPPED_DBS
+from support.system import SHIPPED_DBS, ctrl_c_reaches_it
 from support.wait import WAIT_S, until
 
 pytestmark = pytest.mark.processes
@@ -44,12 +44,6 @@ def _db_args() -> list[str]:
         return ["--db", f"youbot={Path(dev) / 'youbot.sqlite'}"]
     pytest.fail(f"no youbot databank in {SHIPPED_DBS} (or $KINESPHERE_TEST_DBS): "
                 "run `kinesphere ecl build --all` or restore it with git")
-
-
-def _ctrl_c_reaches_it() -> None:
-    """Undo an inherited SIG_IGN for SIGINT (any job started with ``&`` by a non-interactive
-    shell has one), so ``up`` starts with Python's Ctrl-C handler as it would in a terminal."""
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 SIGINT_AT_FORK = """\
@@ -86,7 +80,7 @@ def _up(tmp_path: Path, *extra: str, seconds: float = 1.5,
             [sys.executable, "-m", "kinesphere.cli", "up", "--headless", "--robots", "youbot",
              "--phrase", str(phrase), "--out", str(out), *_db_args(), *extra],
             stdout=f, stderr=subprocess.STDOUT, cwd=ROOT, env=env,
-            preexec_fn=_ctrl_c_reaches_it,
+            preexec_fn=ctrl_c_reaches_it,
         )
     return proc, log
 
