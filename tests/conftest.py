@@ -10,7 +10,8 @@ A test that starts processes (the databank, agents, routers, ``kinesphere`` comm
 marked ``processes`` (``pytest -m "not processes"`` runs the quick rest). Using a fixture that
 starts one marks a test; a test that starts one itself is marked in its module. A test that
 judges robots against the clock (keyframes on time, a gamepad's ticks) is marked ``realtime``:
-``make test`` runs every other test on all cores, then these alone.
+``make test`` runs every other test on all cores, then these two at a time, the longest
+(``realtime(longest=True)``) beside all the others.
 """
 
 from __future__ import annotations
@@ -41,10 +42,29 @@ def pytest_configure(config: pytest.Config) -> None:
         os.environ.pop(name, None)
 
 
+def pytest_itemcollected(item: pytest.Item) -> None:
+    if PROCESS_FIXTURES & set(getattr(item, "fixturenames", ())):
+        item.add_marker(pytest.mark.processes)
+
+
+@pytest.hookimpl(trylast=True)  # after ``-m`` has deselected
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """Files in the order pytest-xdist is to hand them out (``--no-loadscope-reorder``): one
+    with a test marked ``realtime(longest=True)`` first, then by how many tests they hold, most
+    first (pytest-xdist's own order). A worker holding two tests or fewer takes the next file:
+    the one that starts the longest test takes the second largest file behind it, and the
+    other worker starts the largest file and takes every file after it."""
+    files: dict[str, list[pytest.Item]] = {}
     for item in items:
-        if PROCESS_FIXTURES & set(getattr(item, "fixturenames", ())):
-            item.add_marker(pytest.mark.processes)
+        files.setdefault(item.nodeid.split("::")[0], []).append(item)
+    order = sorted(files.values(), key=lambda tests: (not any(map(_longest, tests)),
+                                                      -len(tests)))
+    items[:] = [item for tests in order for item in tests]
+
+
+def _longest(item: pytest.Item) -> bool:
+    mark = item.get_closest_marker("realtime")
+    return mark is not None and bool(mark.kwargs.get("longest"))
 
 
 @pytest.fixture(scope="session")

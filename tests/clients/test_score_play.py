@@ -50,7 +50,7 @@ def shipped_score(name: str) -> dict[str, dict[str, dict[str, list[str]]]]:
     return data
 
 
-@pytest.mark.realtime
+@pytest.mark.realtime(longest=True)  # a minute, most of it robots moving: the others run beside
 def test_play_scores_on_four_bodies_notated_back_by_labaneditor(
     hub: Hub, databank: DatabankProcess, tmp_path: Path,
     capsys: pytest.CaptureFixture[str], laban_editor: ModuleType,
