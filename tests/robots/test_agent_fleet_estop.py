@@ -8,27 +8,15 @@ from __future__ import annotations
 
 import time
 
-import zenoh
-
 from kinesphere import zconfig
 from kinesphere.procs import Supervisor
 from kinesphere.protocol import FleetEstops, decode
 from kinesphere.robots.agent.estops import SYNC_S
 from kinesphere.robots.agent.runtime import Agent, AgentOptions
-from support.agents import CommandSender, StateWatch, running_agent
+from support.agents import CommandSender, StateWatch, knows, running_agent
 from support.network import KEYS, Hub
 from support.system import port_open
 from support.wait import WAIT_S, until
-
-
-def knows(s: zenoh.Session, robot_id: str) -> None:
-    """Wait until ``s`` knows ``robot_id``'s command subscriber, so a fleet command put from
-    ``s`` reaches that robot (its own session hearing its first state says nothing of ``s``)."""
-    probe = s.declare_publisher(KEYS.command(robot_id))
-    try:
-        assert zconfig.wait_matching(probe, WAIT_S), f"{robot_id} unknown to the sender"
-    finally:
-        zconfig.undeclare(probe)
 
 
 def test_a_robot_started_during_a_fleet_estop_comes_up_latched(hub: Hub) -> None:
@@ -121,6 +109,7 @@ def test_a_robot_whose_copy_was_lost_latches_within_a_sync(hub: Hub) -> None:
         b.receive = deaf  # type: ignore[method-assign]
         with (zconfig.session(config=zconfig.loopback_config(hub.endpoint)) as s,
               CommandSender(s, "*", sender="officer") as officer):
+            knows(s, "fe-4")  # fe-5's subscriber alone would match the officer's first put
             wa.after(officer.send(estop=True), lambda st: st.status == "estop", "fe-4 latched")
             sent = time.monotonic()
             st = wb.wait(lambda st: st.status == "estop", "fe-5 latched from fe-4's board")

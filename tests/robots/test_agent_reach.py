@@ -19,6 +19,7 @@ from support.agents import (
     far,
     finite_jerk,
     joints_close,
+    knows,
     real_pulls,
     running_agent,
 )
@@ -112,6 +113,8 @@ def test_wildcard_command_moves_every_robot_to_its_own_pose(
     with ExitStack() as stack:
         running = {r: stack.enter_context(running_agent(endpoint, r, speed=2.0)) for r in robots}
         op = stack.enter_context(CommandSender(session, "*"))
+        for r in robots:
+            knows(session, r)
         seq = op.send(part)
         for r, (agent, watch) in running.items():
             watch.after(seq, reached(agent, poses[r]), f"{r} at its own pose")

@@ -237,13 +237,25 @@ def running_fleet_host(endpoint: str, robots: list[RobotSpec], speed: float = 2.
                 w.close()
 
 
+def knows(s: zenoh.Session, robot_id: str) -> None:
+    """Wait until ``s`` knows ``robot_id``'s command subscriber, so a fleet command put from
+    ``s`` reaches that robot (its own session hearing its first state says nothing of ``s``)."""
+    probe = s.declare_publisher(KEYS.command(robot_id))
+    try:
+        assert zconfig.wait_matching(probe, WAIT_S), f"{robot_id} unknown to the sender"
+    finally:
+        zconfig.undeclare(probe)
+
+
 class CommandSender(Closable):
     """A client putting Commands, as the gamepad client would (``session`` "" is a version-1
     client's): on publishers like ``RobotLink.publisher``'s, never dropped under congestion
     (BLOCK), express, e-stops at REAL_TIME priority and the rest at INTERACTIVE_HIGH. Its first
     put waits for a subscriber to match (up to 5 s): made before its robot starts, it waits
-    for that robot there, not for nobody when made. Used as ``with``, its publishers are
-    undeclared even when the block fails."""
+    for that robot there, not for nobody when made. A sender to ``*`` matches as soon as one
+    robot's subscriber is known: a test whose first put must reach several waits with
+    :func:`knows` for each. Used as ``with``, its publishers are undeclared even when the block
+    fails."""
 
     def __init__(self, session: zenoh.Session, robot_id: str = "*", sender: str = "test",
                  key: str | None = None, client_session: str = "") -> None:
