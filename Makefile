@@ -45,13 +45,14 @@ demo: $(STAMP)
 # taking the other core makes them late) then run on two workers, file by file: the score played
 # on eight robots at a tenth of its speed (a minute, the cores ~90 % idle; marked
 # `realtime(longest=True)`, so tests/conftest.py hands its file out first) beside the other 15,
-# which run one after another as before. One after another the 16 took 2 min, so 63-67 s; the
-# score's tally (cells as written, late keyframes) is the same as alone (6 December 2026). Each
-# run ends with its ten slowest tests.
+# which run one after another as before. One after another the 16 took 2 min, now 67-73 s in
+# fresh clones' runs; the score's tally (cells as written, late keyframes) is the same as alone
+# (6 December 2026). Each run ends with its ten slowest tests.
 # WORKERS: one per core and one more. With one per core the cores stayed about a third idle
 # (tests waiting on the processes they start and on robots moving in real time); on this 2-core
 # machine a fresh clone's non-realtime part took 6 min 49 s with two workers, 4 min 43 s with
-# three (6 December 2026, idle). Earlier, a third worker under a neighbour's load (load average
+# three (6 December 2026, idle), and 4 min 54 s with four against 4 min 58 s with three in the
+# same sitting (the cores are busy now). Earlier, a third worker under a neighbour's load (load average
 # 8) made agents fall ~0.9 s behind real time; what judges that is marked `realtime` and runs
 # apart. `make test WORKERS=2` on a shared machine.
 PYTEST := $(BIN)/python -m pytest -q --durations=10
