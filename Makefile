@@ -52,9 +52,9 @@ demo: $(STAMP)
 # (tests waiting on the processes they start and on robots moving in real time); on this 2-core
 # machine a fresh clone's non-realtime part took 6 min 49 s with two workers, 4 min 43 s with
 # three (6 December 2026, idle), and 4 min 54 s with four against 4 min 58 s with three in the
-# same sitting (the cores are busy now). Earlier, a third worker under a neighbour's load (load average
-# 8) made agents fall ~0.9 s behind real time; what judges that is marked `realtime` and runs
-# apart. `make test WORKERS=2` on a shared machine.
+# same sitting (the cores are busy now). Earlier, a third worker under a neighbour's load (load
+# average 8) made agents fall ~0.9 s behind real time; what judges that is marked `realtime` and
+# runs apart. `make test WORKERS=2` on a shared machine.
 PYTEST := $(BIN)/python -m pytest -q --durations=10
 WORKERS ?= $(shell echo $$(( $$(nproc) + 1 )))
 test: lint typecheck layers browser xserver

@@ -51,9 +51,9 @@ def pytest_itemcollected(item: pytest.Item) -> None:
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     """Files in the order pytest-xdist is to hand them out (``--no-loadscope-reorder``): one
     with a test marked ``realtime(longest=True)`` first, then by how many tests they hold, most
-    first (pytest-xdist's own order). A worker holding two tests or fewer takes the next file:
-    the one that starts the longest test takes the second largest file behind it, and the
-    other worker starts the largest file and takes every file after it."""
+    first (pytest-xdist's own order). A worker holding two tests or fewer is handed the next
+    file: the one that starts the longest test is handed the second largest file behind it at
+    once, and the other, busy with the largest file, takes the rest as it gets through it."""
     files: dict[str, list[pytest.Item]] = {}
     for item in items:
         files.setdefault(item.nodeid.split("::")[0], []).append(item)
