@@ -14,6 +14,7 @@ import numpy as np
 
 from kinesphere.protocol import AckStage, Drive, RobotState, SpatialCommand, Status
 from kinesphere.robots.agent.base import rotate
+from kinesphere.robots.agent.runtime import Agent
 from support.agents import (
     AckWatch,
     CommandSender,
@@ -45,6 +46,12 @@ def stream(op: CommandSender, watch: StateWatch, until: Callable[[RobotState], b
     raise AssertionError(f"{what}: not after {limit} commands; last state {seen[-1]}")
 
 
+def at_rest(agent: Agent) -> Callable[[RobotState], bool]:
+    """A state published at rest: its controller has stopped and the state says so (a state
+    put while it braked can arrive after it stopped; its pose and status are the brake's)."""
+    return lambda s: s.status != Status.MOVING and not agent.controller.moving
+
+
 def test_youbot_turns_in_place_then_drives_diagonally_while_its_arm_moves(
     hub: Hub, databank: DatabankProcess
 ) -> None:
@@ -60,7 +67,7 @@ def test_youbot_turns_in_place_then_drives_diagonally_while_its_arm_moves(
         assert "yaw +0.80" in turning[-1].detail
 
         seq = op.send(ttl_ms=TTL_MS)  # no drive: the base brakes
-        rest = watch.after(seq, lambda s: not agent.controller.moving, "at rest after turning")
+        rest = watch.after(seq, at_rest(agent), "at rest after turning")
         heading, start = rest.base_pose[2], np.array(rest.base_pose[:2])
         target, _ = agent.controller.joints.clamp(pose.joints)
         diagonal = stream(
@@ -95,8 +102,7 @@ def test_packbot_arcs_on_forward_and_yaw_and_never_slides(
                         drive=arc)
         seq = op.send(drive=Drive(left=1.0), ttl_ms=TTL_MS)
         told = acks.of(op.sender, seq, AckStage.ACCEPTED, "the push to the left accepted")
-        rest = watch.after(seq, lambda s: not agent.controller.moving,
-                           "a push to the left brakes a tracked base")
+        rest = watch.after(seq, at_rest(agent), "a push to the left brakes a tracked base")
     x, y, yaw = states[-1].base_pose
     assert x > 0.5 and y > 0.5 and yaw > 2.0, "forward and round to the left"
     assert "left ignored" in told.detail
