@@ -339,7 +339,8 @@ class Command(Message, tag="command", kw_only=True):
     """When the parts' pose is to be reached: ``arrive_ms`` after ``sent_ns`` (a score's
     keyframe time). The robot plans its trajectory to arrive then, or as soon after as its
     limits allow, and says how late in its acks (``Ack.late_ms``); copies of a streamed
-    command count down to the same moment. 0: as fast as the limits allow."""
+    command count down to the same moment, and the same pose due more than 50 ms later is
+    the next motion (the one before acks how late it was). 0: as fast as the limits allow."""
     heading: Annotated[float, msgspec.Meta(ge=-MAX_HEADING, le=MAX_HEADING)] | None = None
     """Turn a mobile base to this yaw (rad, the odometry frame of ``RobotState.base_pose``),
     arriving with the parts; a fixed base refuses it (``cannot_translate``). None: keep it."""

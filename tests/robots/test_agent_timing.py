@@ -174,3 +174,34 @@ def test_a_loop_behind_real_time_arrives_late_by_the_hosts_clock(
         agent.tick()
     late = stages(said, 1)["reached"].late_ms
     assert 9900 < late < 10100, late  # the robot's clock alone says on time
+
+
+def test_the_next_keyframe_holding_the_pose_takes_over_and_the_one_before_says_it_was_late(
+        youbot: tuple[Agent, list[Ack]]) -> None:
+    """A score's keyframe that holds the pose of the one before (the same target, due later)
+    is a new motion: a body that had not arrived by the first keyframe's time says so in the
+    first one's acks, not in the next's (where a late first keyframe went unsaid)."""
+    agent, said = youbot
+    ctrl = agent.controller
+    turn = math.radians(30)
+    agent.receive(command(1, turn, 3000))
+    while ctrl.time < 1.0:
+        agent.tick()
+    agent.receive(command(2, turn, round(1e3 * (3.0 - ctrl.time))))  # a copy: the same moment
+    agent.tick()
+    assert "superseded" not in stages(said, 1)
+    host = agent.conduct.wall
+    agent.conduct.wall = lambda: host() + 0.5  # the loop fell 0.5 s behind the host's clock
+    while ctrl.time < 2.9:
+        agent.tick()
+    assert ctrl.moving
+    agent.receive(command(3, turn, 3000))  # the next keyframe, the same pose 3 s later
+    agent.tick()
+    replaced = stages(said, 2)["superseded"]
+    assert abs(replaced.late_ms - 500) <= 2 * 1e3 * ctrl.dt, replaced
+    while ctrl.moving:
+        agent.tick()
+    for _ in range(200):
+        agent.tick()
+    assert ctrl.base_pose()[2] == pytest.approx(turn, abs=2e-3)
+    assert stages(said, 3)["reached"].late_ms == 0

@@ -46,6 +46,10 @@ MAX_BUCKETS = 256
 """Senders whose buckets are remembered (least recently acknowledged forgotten first)."""
 URGENT = frozenset({AckStage.ESTOPPED, AckStage.RELEASED})
 """Acks never held back by the rate limit."""
+SAME_MOMENT_S = 0.05
+"""How far apart (s, the host's clock) the due times of one streamed command's copies may lie
+(the network's jitter between them): a command for the same target due later than that is
+another motion (``Acks.follow``)."""
 
 
 class AckLimiter:
@@ -200,11 +204,14 @@ class Acks:
     def follow(self, cmd: Command, target: Hashable, meaning: Meaning = PLAIN,
                due: Due | None = None) -> None:
         """``cmd`` is now followed (to arrive at ``due``); another motion it replaced is
-        ``superseded``. A stream of one target keeps the arrival time of its first command
-        (its copies count down to the same moment)."""
+        ``superseded``, saying how late it was. A stream of one target keeps the arrival time
+        of its first command (its copies count down to the same moment); the same target due
+        at a later moment (a score's next keyframe holding the pose) is a new motion, so the
+        lateness of the one before is told to the command it belongs to."""
         old = self.motion
         if old is not None and old.target == target and (
-                old.cmd.sender, old.cmd.session) == (cmd.sender, cmd.session):
+                old.cmd.sender, old.cmd.session) == (cmd.sender, cmd.session) and not (
+                due is not None and (old.due is None or due.wall - old.due.wall > SAME_MOMENT_S)):
             old.cmd = cmd  # the same stream: the last command gets the final stage
             old.meaning = meaning
             return
