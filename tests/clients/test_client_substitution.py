@@ -12,14 +12,7 @@ import math
 
 import pytest
 
-from kinesphere.clients.gamepad.limbs import (
-    available_directions,
-    direction_sets,
-    pairs_of,
-    servable,
-    served,
-    tips_of,
-)
+from kinesphere.clients.gamepad import limbs
 from kinesphere.clients.gamepad.mapping import MapperState, map_controls
 from kinesphere.clients.gamepad.state import ControllerState
 from kinesphere.clients.gamepad.sticks import Tuning
@@ -36,16 +29,17 @@ TRIGGERS = {Level.LOW: (1.0, 0.0), Level.MIDDLE: (0.0, 0.0), Level.HIGH: (0.0, 1
 """The (left, right) trigger that asks for each level."""
 
 
-def limbs() -> list[tuple[str, Catalogue, str, str]]:
+def every_limb() -> list[tuple[str, Catalogue, str, str]]:
+    """Each platform's (limb, origin) pairs its catalogue lists, named for the test ids."""
     return [
         (f"{p}/{limb}/{origin}", cat, limb, origin)
         for p, cat in CATALOGUES.items()
-        for limb, origin in pairs_of([cat])
+        for limb, origin in limbs.pairs_of([cat])
         if any((e.limb, e.origin) == (limb, origin) for e in cat.limbs)
     ]
 
 
-LIMBS = limbs()
+LIMBS = every_limb()
 
 
 def pushed(heading_deg: float, level: Level) -> Direction:
@@ -68,15 +62,15 @@ def test_every_articulated_platform_is_covered() -> None:
 def test_stick_headings_keep_their_side_on_every_shipped_limb(
     name: str, cat: Catalogue, limb: str, origin: str
 ) -> None:
-    available = available_directions(direction_sets([cat], limb, origin))
-    tips = tips_of([cat], limb, origin)
+    available = limbs.available_directions(limbs.direction_sets([cat], limb, origin))
+    tips = limbs.tips_of([cat], limb, origin)
     assert available, name
     signs = {forward_sign(d) for d in available if d is not Direction.PLACE_MIDDLE}
     for k, horizontal in enumerate(RING):
         for level in Level:
             asked = pushed(k * 45.0, level)
             assert asked == Direction((horizontal.value, level.value)), "the mapping itself"
-            got = served(asked, available, tips)
+            got = limbs.served(asked, available, tips)
             where = (name, asked.slug, got.slug)
             if asked in available:
                 assert got is asked, where
@@ -99,8 +93,8 @@ def test_the_client_drops_a_part_exactly_when_the_databank_would_refuse_it(
     answer ``direction_unavailable``, never when it would serve it or a substitute; and what
     the client sends instead is what the databank would serve (both judge by the catalogue's
     measured tips)."""
-    sets = direction_sets([cat], limb, origin)
-    tips = tips_of([cat], limb, origin)
+    sets = limbs.direction_sets([cat], limb, origin)
+    tips = limbs.tips_of([cat], limb, origin)
     ecl = ECLS[cat.platform]
     for k in range(len(RING)):
         for level in Level:
@@ -111,9 +105,9 @@ def test_the_client_drops_a_part_exactly_when_the_databank_would_refuse_it(
             except KinesphereError as exc:
                 assert exc.code == "direction_unavailable", (name, asked.slug, exc)
                 answered = False
-            assert servable(asked, sets, tips) is answered, (name, asked.slug)
+            assert limbs.servable(asked, sets, tips) is answered, (name, asked.slug)
             if answered:
-                got = served(asked, available_directions(sets), tips)
+                got = limbs.served(asked, limbs.available_directions(sets), tips)
                 assert got.slug == pose.direction, (name, asked.slug)
 
 
@@ -121,11 +115,11 @@ def test_the_packbot_sweep_is_served_as_asked() -> None:
     """The headline gesture: low + stick left/right on the PackBot arm, which reaches low to
     either side: sent as asked, no substitute."""
     pb = [CATALOGUES["packbot"]]
-    arm = available_directions(direction_sets(pb, "limb_11", "distal_11"))
-    tips = tips_of(pb, "limb_11", "distal_11")
+    arm = limbs.available_directions(limbs.direction_sets(pb, "limb_11", "distal_11"))
+    tips = limbs.tips_of(pb, "limb_11", "distal_11")
     assert arm is not None and Direction.LEFT_LOW in arm
-    assert served(pushed(90, Level.LOW), arm, tips) is Direction.LEFT_LOW
-    assert served(pushed(-90, Level.LOW), arm, tips) is Direction.RIGHT_LOW
+    assert limbs.served(pushed(90, Level.LOW), arm, tips) is Direction.LEFT_LOW
+    assert limbs.served(pushed(-90, Level.LOW), arm, tips) is Direction.RIGHT_LOW
 
 
 def test_a_neighbour_that_points_elsewhere_is_no_substitute() -> None:
@@ -133,23 +127,23 @@ def test_a_neighbour_that_points_elsewhere_is_no_substitute() -> None:
     38.5 degrees only: its poses look 51 degrees away from straight up, so the client, like
     the databank, does not send it for place-high."""
     nao = [CATALOGUES["nao"]]
-    head = direction_sets(nao, "limb_51", "distal_51")
-    tips = tips_of(nao, "limb_51", "distal_51")
-    available = available_directions(head)
+    head = limbs.direction_sets(nao, "limb_51", "distal_51")
+    tips = limbs.tips_of(nao, "limb_51", "distal_51")
+    available = limbs.available_directions(head)
     assert available is not None and Direction.FORWARD_HIGH in available
-    assert served(Direction.PLACE_HIGH, available) is Direction.FORWARD_HIGH  # by label
-    assert served(Direction.PLACE_HIGH, available, tips) is Direction.PLACE_HIGH  # as asked
-    assert not servable(Direction.PLACE_HIGH, head, tips)
+    assert limbs.served(Direction.PLACE_HIGH, available) is Direction.FORWARD_HIGH  # by label
+    assert limbs.served(Direction.PLACE_HIGH, available, tips) is Direction.PLACE_HIGH  # as asked
+    assert not limbs.servable(Direction.PLACE_HIGH, head, tips)
 
 
 def test_without_a_catalogue_the_stick_goes_out_as_asked() -> None:
-    assert served(Direction.LEFT_LOW, None) is Direction.LEFT_LOW
-    assert served(Direction.PLACE_MIDDLE, frozenset({Direction.PLACE_HIGH})) is (
+    assert limbs.served(Direction.LEFT_LOW, None) is Direction.LEFT_LOW
+    assert limbs.served(Direction.PLACE_MIDDLE, frozenset({Direction.PLACE_HIGH})) is (
         Direction.PLACE_MIDDLE
     ), "neutral is never replaced"
     up = frozenset({Direction.PLACE_HIGH, Direction.FORWARD_HIGH})
-    assert served(Direction.PLACE_LOW, up) is Direction.PLACE_LOW, "nothing honest: as asked"
-    assert served(Direction.LEFT_MIDDLE, frozenset({Direction.FORWARD_MIDDLE})) is (
+    assert limbs.served(Direction.PLACE_LOW, up) is Direction.PLACE_LOW, "nothing honest: as asked"
+    assert limbs.served(Direction.LEFT_MIDDLE, frozenset({Direction.FORWARD_MIDDLE})) is (
         Direction.LEFT_MIDDLE
     ), "a right angle is another movement, not a substitute"
 
@@ -157,10 +151,10 @@ def test_without_a_catalogue_the_stick_goes_out_as_asked() -> None:
 def test_a_group_is_served_what_every_member_has() -> None:
     """Mixed platforms: the group moves together, on a direction all of them store."""
     cats = [CATALOGUES["packbot"], CATALOGUES["youbot"]]
-    both = available_directions(direction_sets(cats, "limb_11", "distal_11"))
+    both = limbs.available_directions(limbs.direction_sets(cats, "limb_11", "distal_11"))
     assert both is not None
     for cat in cats:
-        own = available_directions(direction_sets([cat], "limb_11", "distal_11"))
+        own = limbs.available_directions(limbs.direction_sets([cat], "limb_11", "distal_11"))
         assert own is not None and both <= own
-    got = served(Direction.LEFT_LOW, both)
+    got = limbs.served(Direction.LEFT_LOW, both)
     assert got in both and forward_sign(got) >= 0
