@@ -8,9 +8,12 @@ scene, and 500 bare TCP connections wrote 879 KB of tracebacks.
 
 from __future__ import annotations
 
+import importlib
 import logging
 import socket
 import time
+import typing
+import warnings
 from collections.abc import Iterator
 
 import msgspec
@@ -21,6 +24,7 @@ from websockets.sync.client import connect
 from websockets.typing import Origin, Subprotocol
 
 from kinesphere import zconfig
+from kinesphere.clients.view import gate
 from kinesphere.clients.view.app import FleetView
 from support.network import OWN_KEYS, Hub
 
@@ -112,14 +116,18 @@ def test_bare_connections_and_bad_frames_log_one_line_per_peer(
         msgspec.msgpack.encode({"type": "GuiUpdateMessage", "id": "nope", "updates": 7}),
         bytes(range(256)) * 64,
     ]
-    for frame in frames:  # ten kinds of malformed frames, each on its own connection
-        try:
-            with connect(f"ws://127.0.0.1:{port}", origin=Origin(f"http://127.0.0.1:{port}"),
-                         subprotocols=[PROTOCOL], open_timeout=5) as ws:
-                ws.send(frame)
-                ws.recv(timeout=1.0)
-        except (websockets.exceptions.ConnectionClosed, TimeoutError):
-            pass
+    with warnings.catch_warnings(record=True) as heard:
+        gate.ignore_peer_values()  # as the view did: pytest set its filters anew for the test
+        for frame in frames:  # ten kinds of malformed frames, each on its own connection
+            try:
+                with connect(f"ws://127.0.0.1:{port}",
+                             origin=Origin(f"http://127.0.0.1:{port}"),
+                             subprotocols=[PROTOCOL], open_timeout=5) as ws:
+                    ws.send(frame)
+                    ws.recv(timeout=1.0)
+            except (websockets.exceptions.ConnectionClosed, TimeoutError):
+                pass
+    assert not [w for w in heard if "[viser]" in str(w.message)], heard[:1]
     # the view still serves its own page afterwards
     assert _scene(port, f"http://127.0.0.1:{port}") > 0
     lines = _quiet_lines(caplog)
@@ -129,3 +137,28 @@ def test_bare_connections_and_bad_frames_log_one_line_per_peer(
                  r.getMessage()]
     assert len(from_peer) <= 2, text[:2000]  # one per 10 s interval: the test takes a few s
     assert len(text) < 2000, len(text)
+
+
+def test_a_peers_values_viser_warns_about_are_neither_kept_nor_printed() -> None:
+    """viser's reader of a peer's message warns with the whole value it could not fit
+    (``gate`` module text): ignored while the view serves, so a peer sending ever other
+    values grows no registry and writes nothing. Called as viser's server calls it, on values
+    a peer chose, before and after :func:`gate.ignore_peer_values`."""
+    messages = importlib.import_module(gate.PEER_VALUES)
+    shape = typing.Tuple[float, float, float, float]  # noqa: UP006 (viser's own annotation)
+
+    def read(values: int) -> tuple[int, int]:
+        """Warnings heard and registry entries kept for ``values`` distinct values."""
+        registry = messages.__dict__.setdefault("__warningregistry__", {})
+        with warnings.catch_warnings(record=True) as heard:
+            for i in range(values):
+                messages._prepare_for_deserialization([i, "y" * 1000], shape)
+        kept = [k for k in registry if isinstance(k, tuple) and "[viser]" in str(k[0])]
+        return len([w for w in heard if "[viser]" in str(w.message)]), len(kept)
+
+    with warnings.catch_warnings():  # pytest keeps its own filters: this test's are its own
+        warnings.simplefilter("default")
+        assert read(50) == (50, 50)  # each value heard and kept
+        gate.ignore_peer_values()
+        messages.__dict__["__warningregistry__"].clear()
+        assert read(200) == (0, 0)
