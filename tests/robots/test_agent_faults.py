@@ -83,7 +83,7 @@ def test_a_flood_cannot_delay_an_estop_and_every_table_stays_bounded(
         agent.resolver.cache_bytes = 50_000
         rss = psutil.Process(os.getpid()).memory_info().rss
         flood = session.declare_publisher(KEYS.command("flooded"))
-        zconfig.wait_matching(flood)
+        assert zconfig.wait_matching(flood, WAIT_S), "the robot never subscribed"
         n = 20_000
         done = threading.Event()
 

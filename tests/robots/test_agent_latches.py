@@ -27,7 +27,7 @@ class Senders(Closable):
     def __init__(self, session: zenoh.Session, key: str, count: int) -> None:
         self.pub = session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK,
                                              express=True)
-        zconfig.wait_matching(self.pub)
+        assert zconfig.wait_matching(self.pub, WAIT_S), "the robot never subscribed"
         self.names = [f"op-{i}" for i in range(count)]
 
     def put(self, name: str, seq: int, estop: bool = False, release: bool = False) -> None:

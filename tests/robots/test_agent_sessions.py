@@ -169,7 +169,7 @@ class Signed(Closable):
         key = KEYS.command(robot_id)
         self.pub = session.declare_publisher(Keys.signed(key, signer) if signer else key,
                                              congestion_control=zenoh.CongestionControl.BLOCK)
-        zconfig.wait_matching(self.pub)
+        assert zconfig.wait_matching(self.pub, WAIT_S), "the robot never subscribed"
         self.seq = 0
 
     def send(self, sender: str, **kw: object) -> int:
@@ -287,8 +287,8 @@ def test_a_new_sessions_command_queued_while_the_robot_was_frozen_never_runs(
         """Session "one" takes the robot to the first target."""
         nonlocal sent
         if not sent:
-            zconfig.wait_matching(pub)
-            zconfig.wait_matching(stranger)
+            assert zconfig.wait_matching(pub, WAIT_S), "the robot never subscribed"
+            assert zconfig.wait_matching(stranger, WAIT_S), "the robot never subscribed"
         sent += 1
         pub.put(encode(cmd(sent, time.time_ns(), session="one", clock="ann-host", ttl_ms=300,
                            drive=None, parts=[SpatialCommand(*part)])))

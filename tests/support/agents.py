@@ -293,7 +293,7 @@ class CommandSender(Closable):
     def _match(self) -> None:
         if not self._matched:
             self._matched = True
-            zconfig.wait_matching(self.pub)
+            assert zconfig.wait_matching(self.pub, WAIT_S), "no robot subscribes to the key"
 
     def close(self) -> None:
         zconfig.undeclare(self.pub, self.urgent)
