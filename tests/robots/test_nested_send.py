@@ -51,7 +51,7 @@ def test_send_points_the_upper_arm_and_the_forearm_each_where_told(
                   "--timeout", str(WAIT_S)]
     # every pair is a new nested solve for the databank, which under a loaded host's share
     # of two cores can take longer than the robots' own bound (5 s): they wait as the client does
-    with running_fleet_host(endpoint, ROBOTS, speed=4.0, query_timeout_s=WAIT_S) as (
+    with running_fleet_host(endpoint, ROBOTS, speed=8.0, query_timeout_s=WAIT_S) as (
             _fleet, watches):
         for d1, d2 in PAIRS:
             # from neutral every time, so that no pair depends on the way from the one before
