@@ -248,7 +248,9 @@ def test_deadman_release_stops_within_the_ttl(fleet: ClientFleet, pygame_up: Non
 def gesture(fleet: ClientFleet, robot: str, press: Callable[[Pad], object], ticks: int
             ) -> tuple[list[Heard], Heard]:
     """Hold the deadman and ``press`` for ``ticks`` at 30 Hz, let go; the robot's states from
-    the first tick to rest, and the state at rest."""
+    the first tick to rest, and the state at rest. The stop is the first after the robot was
+    heard moving: a robot still holding from the gesture before says so in the states that
+    reach us before it acts on the first tick (it then measured nothing)."""
     p = Pad()
     with operator(fleet, tg.robot(robot)) as (op, inp):
         t0 = time.monotonic()
@@ -265,8 +267,9 @@ def gesture(fleet: ClientFleet, robot: str, press: Callable[[Pad], object], tick
 
         script = Script(inp, {0: start, ticks: let_go, ticks + 1: lambda: None})
         run(op, script, finished=lambda: script.finished)
+    moved = fleet.track.wait(robot, lambda h: h.state.status == "moving", "the gesture", after=t0)
     halted = fleet.track.wait(robot, lambda h: h.state.status in ("stopped", "holding"),
-                              "the stop", after=t0)
+                              "the stop", after=moved.at)
     rest = at_rest(robot, fleet.track, halted.at)
     return [h for h in fleet.track.since(robot, t0) if h.at <= rest.at], rest
 
