@@ -20,12 +20,14 @@ the node keeps one /tf_static message holding every fixed transform it knows, se
 robot comes or goes, so a late joiner's one cached sample describes the whole fleet. Names are
 relative to ``--namespace`` (``/`` by default, so ``/baxter_1/joint_states`` and ``/tf``). A
 robot appears when its first state arrives and disappears (publishers and graph tokens
-undeclared) when its liveliness token goes. Bodies are fetched on a worker thread, never in
-a Zenoh callback; until a platform's body arrives its robots publish joint states only (frames
-and the URDF come from the body). Bounded: at most ``max_robots`` robots, states with more
-than ``MAX_SEQUENCE`` joints and URDFs larger than ``max_urdf_bytes`` are refused with one log
-line, and so is a body that fails the eURDF's checks (its robots keep their joint states; the
-other platforms are not held up).
+undeclared) when its liveliness token goes; a state of it that arrives after that (states and
+tokens travel apart) is ignored until its token is back, so a robot that left is never bridged
+again by its last state (``left``, bounded like the robots). Bodies are fetched on a worker
+thread, never in a Zenoh callback; until a platform's body arrives its robots publish joint
+states only (frames and the URDF come from the body). Bounded: at most ``max_robots`` robots,
+states with more than ``MAX_SEQUENCE`` joints and URDFs larger than ``max_urdf_bytes`` are
+refused with one log line, and so is a body that fails the eURDF's checks (its robots keep
+their joint states; the other platforms are not held up).
 """
 
 from __future__ import annotations
@@ -46,6 +48,7 @@ from kinesphere.clients.options import BridgeOptions
 from kinesphere.errors import KinesphereError
 from kinesphere.joint_frames import JointFrames
 from kinesphere.keyexpr import Keys
+from kinesphere.lru import Lru
 from kinesphere.protocol import BodyModel, RobotState, decode
 from kinesphere.query import get_one
 from kinesphere.rmw_zenoh import LATCHED, MAX_SEQUENCE, ros_name
@@ -101,6 +104,8 @@ class _Robot:
 class BridgeStats:
     robots: int = 0
     states: int = 0
+    late: int = 0
+    """States of robots that had left, ignored."""
     refused: dict[str, int] = field(default_factory=dict)
 
 
@@ -122,6 +127,8 @@ class Bridge:
         self._bodies: dict[str, _Body] = {}
         self._wanted: queue.Queue[str | None] = queue.Queue()
         self._asked: set[str] = set()
+        self._left: Lru[str, bool] = Lru(self.options.max_robots)
+        """Robots whose liveliness token went, until it is back (module text)."""
         self._lock = threading.Lock()
         self._closed = threading.Event()
         self._worker = threading.Thread(target=self._fetch_bodies, name="ros2-bridge-bodies",
@@ -150,6 +157,9 @@ class Bridge:
             robot = self._robots.get(state.robot_id)
             if robot is not None or self._closed.is_set():
                 return robot
+            if state.robot_id in self._left:
+                self.stats.late += 1
+                return None
             if len(self._robots) >= self.options.max_robots:
                 self._refuse("max_robots", f"robot {state.robot_id!r} not bridged: "
                              f"already {self.options.max_robots} robots")
@@ -273,13 +283,16 @@ class Bridge:
         self.stats.states += 1
 
     def _on_alive(self, sample: zenoh.Sample) -> None:
-        if sample.kind != zenoh.SampleKind.DELETE:
-            return
         try:
             robot_id = self.keys.robot_id_of(str(sample.key_expr))
         except KinesphereError:
             return
+        if sample.kind != zenoh.SampleKind.DELETE:
+            with self._lock:
+                self._left.pop(robot_id)
+            return
         with self._lock:
+            self._left.put(robot_id, True)
             robot = self._robots.pop(robot_id, None)
             self.stats.robots = len(self._robots)
             if self._static.pop(robot_id, None) is not None and not self._closed.is_set():
