@@ -251,11 +251,11 @@ class CommandSender(Closable):
     """A client putting Commands, as the gamepad client would (``session`` "" is a version-1
     client's): on publishers like ``RobotLink.publisher``'s, never dropped under congestion
     (BLOCK), express, e-stops at REAL_TIME priority and the rest at INTERACTIVE_HIGH. Its first
-    put waits for a subscriber to match (up to 5 s): made before its robot starts, it waits
-    for that robot there, not for nobody when made. A sender to ``*`` matches as soon as one
-    robot's subscriber is known: a test whose first put must reach several waits with
-    :func:`knows` for each. Used as ``with``, its publishers are undeclared even when the block
-    fails."""
+    put waits for a subscriber to match (up to ``WAIT_S``, else the test fails): made before
+    its robot starts, it waits for that robot there, not for nobody when made. A sender to
+    ``*`` matches as soon as one robot's subscriber is known: a test whose first put must reach
+    several waits with :func:`knows` for each. Used as ``with``, its publishers are undeclared
+    even when the block fails."""
 
     def __init__(self, session: zenoh.Session, robot_id: str = "*", sender: str = "test",
                  key: str | None = None, client_session: str = "") -> None:

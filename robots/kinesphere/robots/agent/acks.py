@@ -210,8 +210,8 @@ class Acks:
         lateness of the one before is told to the command it belongs to."""
         old = self.motion
         if old is not None and old.target == target and (
-                old.cmd.sender, old.cmd.session) == (cmd.sender, cmd.session) and not (
-                due is not None and (old.due is None or due.wall - old.due.wall > SAME_MOMENT_S)):
+                old.cmd.sender, old.cmd.session) == (cmd.sender, cmd.session) and _same_moment(
+                due, old.due):
             old.cmd = cmd  # the same stream: the last command gets the final stage
             old.meaning = meaning
             return
@@ -242,6 +242,12 @@ class Acks:
         m, self.motion = self.motion, None
         if m is not None:
             self.send(m.cmd, stage, detail, meaning=m.meaning, late_ms=self._late(m, False))
+
+
+def _same_moment(due: Due | None, followed: Due | None) -> bool:
+    """Whether a command due at ``due`` counts down to the ``followed`` motion's moment: it
+    sets no time of its own, or one within :data:`SAME_MOMENT_S` of that motion's."""
+    return due is None or (followed is not None and due.wall - followed.wall <= SAME_MOMENT_S)
 
 
 class UrgentOut:
